@@ -1,0 +1,13 @@
+//! mbtap — a Modbus RTU/ASCII bus analyzer and TCP bridge.
+//!
+//! Module map (dependencies point down, never up):
+//! - [`proto`] — the pure protocol core: frames and PDUs of every function code, parse and encode.
+//! - [`report`] — rendering decoded frames and transactions as text and JSON lines.
+//! - [`decode_cmd`] — the `mbtap decode` command: frames given by a user, explained.
+//! - [`hexinput`] — reading the hex and ASCII frames users paste.
+
+pub mod cli;
+pub mod decode_cmd;
+pub mod hexinput;
+pub mod proto;
+pub mod report;

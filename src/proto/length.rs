@@ -1,0 +1,178 @@
+//! How long a PDU is, from its first bytes: the structure the RTU framer uses to find where a
+//! frame ends when timing cannot tell, and what a truncation error reports as "needed".
+//!
+//! Lengths are whole-PDU lengths (function code included) and come from the layouts of
+//! MAP v1.1b3 §6. Every sum is checked; nothing here can panic on any input.
+
+use super::function::{EXCEPTION_FLAG, FunctionCode as F};
+
+/// What the first bytes of a PDU say about its total length.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PduLength {
+    /// The PDU is exactly this many bytes.
+    Exact(usize),
+    /// At least this many bytes are needed before the length can be known.
+    AtLeast(usize),
+    /// The structure does not determine the length (unknown or user-defined function,
+    /// Diagnostics "Return Query Data", a MEI type without a fixed layout).
+    Unknown,
+}
+
+impl PduLength {
+    /// The number of bytes known to be required (for error messages), or `None`.
+    #[must_use]
+    pub const fn needed(self) -> Option<usize> {
+        match self {
+            Self::Exact(n) | Self::AtLeast(n) => Some(n),
+            Self::Unknown => None,
+        }
+    }
+}
+
+/// `fixed + prefix[at]`, or "need `at + 1` bytes" while the count byte is missing.
+fn counted_u8(prefix: &[u8], at: usize, fixed: usize) -> PduLength {
+    match prefix.get(at) {
+        Some(&n) => PduLength::Exact(fixed + usize::from(n)),
+        None => PduLength::AtLeast(at + 1),
+    }
+}
+
+/// Length of a request PDU that starts with `prefix`.
+#[must_use]
+pub fn request_len(prefix: &[u8]) -> PduLength {
+    let Some(&fc) = prefix.first() else {
+        return PduLength::AtLeast(1);
+    };
+    match F::from(fc) {
+        F::ReadCoils
+        | F::ReadDiscreteInputs
+        | F::ReadHoldingRegisters
+        | F::ReadInputRegisters
+        | F::WriteSingleCoil
+        | F::WriteSingleRegister => PduLength::Exact(5),
+        F::ReadExceptionStatus | F::GetCommEventCounter | F::GetCommEventLog | F::ReportServerId => PduLength::Exact(1),
+        F::Diagnostics => diagnostics_len(prefix),
+        // fc, address, quantity, byte count, values.
+        F::WriteMultipleCoils | F::WriteMultipleRegisters => counted_u8(prefix, 5, 6),
+        // fc, byte count, sub-requests.
+        F::ReadFileRecord | F::WriteFileRecord => counted_u8(prefix, 1, 2),
+        F::MaskWriteRegister => PduLength::Exact(7),
+        // fc, read addr, read qty, write addr, write qty, byte count, values.
+        F::ReadWriteMultipleRegisters => counted_u8(prefix, 9, 10),
+        F::ReadFifoQueue => PduLength::Exact(3),
+        F::EncapsulatedInterface => match prefix.get(1) {
+            // fc, MEI type, read device id code, object id.
+            Some(0x0E) => PduLength::Exact(4),
+            Some(_) => PduLength::Unknown,
+            None => PduLength::AtLeast(2),
+        },
+        F::Other(_) => PduLength::Unknown,
+    }
+}
+
+/// Sub-function 0x0000 echoes any number of bytes; the others carry one 16-bit data field
+/// (MAP v1.1b3 §6.8.1).
+fn diagnostics_len(prefix: &[u8]) -> PduLength {
+    match (prefix.get(1), prefix.get(2)) {
+        (Some(&hi), Some(&lo)) if u16::from_be_bytes([hi, lo]) == 0 => PduLength::Unknown,
+        (Some(_), Some(_)) => PduLength::Exact(5),
+        _ => PduLength::AtLeast(3),
+    }
+}
+
+/// Length of a response PDU that starts with `prefix`.
+#[must_use]
+pub fn response_len(prefix: &[u8]) -> PduLength {
+    let Some(&fc) = prefix.first() else {
+        return PduLength::AtLeast(1);
+    };
+    if fc & EXCEPTION_FLAG != 0 {
+        // Function | 0x80, exception code (MAP v1.1b3 §7).
+        return PduLength::Exact(2);
+    }
+    match F::from(fc) {
+        F::ReadCoils
+        | F::ReadDiscreteInputs
+        | F::ReadHoldingRegisters
+        | F::ReadInputRegisters
+        | F::GetCommEventLog
+        | F::ReportServerId
+        | F::ReadFileRecord
+        | F::WriteFileRecord
+        | F::ReadWriteMultipleRegisters => counted_u8(prefix, 1, 2),
+        F::WriteSingleCoil | F::WriteSingleRegister | F::WriteMultipleCoils | F::WriteMultipleRegisters => {
+            PduLength::Exact(5)
+        }
+        F::ReadExceptionStatus => PduLength::Exact(2),
+        F::Diagnostics => diagnostics_len(prefix),
+        F::GetCommEventCounter => PduLength::Exact(5),
+        F::MaskWriteRegister => PduLength::Exact(7),
+        // fc, byte count (u16), then byte count bytes (FIFO count + values).
+        F::ReadFifoQueue => match (prefix.get(1), prefix.get(2)) {
+            (Some(&hi), Some(&lo)) => PduLength::Exact(3 + usize::from(u16::from_be_bytes([hi, lo]))),
+            _ => PduLength::AtLeast(3),
+        },
+        F::EncapsulatedInterface => match prefix.get(1) {
+            Some(0x0E) => device_id_response_len(prefix),
+            Some(_) => PduLength::Unknown,
+            None => PduLength::AtLeast(2),
+        },
+        F::Other(_) => PduLength::Unknown,
+    }
+}
+
+/// fc, MEI, read code, conformity, more follows, next object id, object count, then per object:
+/// id, length, value (MAP v1.1b3 §6.21).
+fn device_id_response_len(prefix: &[u8]) -> PduLength {
+    const HEADER: usize = 7;
+    let Some(&count) = prefix.get(HEADER - 1) else {
+        return PduLength::AtLeast(HEADER);
+    };
+    let mut at = HEADER;
+    for _ in 0..count {
+        match prefix.get(at + 1) {
+            Some(&len) => at += 2 + usize::from(len),
+            None => return PduLength::AtLeast(at + 2),
+        }
+    }
+    PduLength::Exact(at)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fixed_requests() {
+        assert_eq!(request_len(&[0x03]), PduLength::Exact(5));
+        assert_eq!(request_len(&[0x11]), PduLength::Exact(1));
+        assert_eq!(request_len(&[0x2B, 0x0E]), PduLength::Exact(4));
+        assert_eq!(request_len(&[0x2B]), PduLength::AtLeast(2));
+        assert_eq!(request_len(&[0x41]), PduLength::Unknown);
+        assert_eq!(request_len(&[]), PduLength::AtLeast(1));
+    }
+
+    #[test]
+    fn counted_requests_need_their_count_byte() {
+        assert_eq!(request_len(&[0x10, 0, 0x65, 0, 5]), PduLength::AtLeast(6));
+        assert_eq!(request_len(&[0x10, 0, 0x65, 0, 5, 10]), PduLength::Exact(16));
+        assert_eq!(request_len(&[0x17, 0, 0, 0, 1, 0, 0, 0, 1, 2]), PduLength::Exact(12));
+    }
+
+    #[test]
+    fn responses() {
+        assert_eq!(response_len(&[0x83]), PduLength::Exact(2));
+        assert_eq!(response_len(&[0x03, 6]), PduLength::Exact(8));
+        assert_eq!(response_len(&[0x18, 0, 6]), PduLength::Exact(9));
+        assert_eq!(response_len(&[0x08, 0, 0]), PduLength::Unknown);
+        assert_eq!(response_len(&[0x08, 0, 0x0B]), PduLength::Exact(5));
+    }
+
+    #[test]
+    fn device_id_response_walks_objects() {
+        // fc, MEI, code, conformity, more, next, count=2, (0, len 1, 'A'), (1, len 2, 'B','C')
+        let pdu = [0x2B, 0x0E, 1, 1, 0, 0, 2, 0, 1, b'A', 1, 2, b'B', b'C'];
+        assert_eq!(response_len(&pdu), PduLength::Exact(pdu.len()));
+        assert_eq!(response_len(&pdu[..8]), PduLength::AtLeast(9));
+    }
+}

@@ -1,0 +1,37 @@
+//! The protocol core: parsers and encoders for Modbus RTU, ASCII and TCP frames and the PDU of
+//! every public function code, both directions. Pure: no I/O, no clock, no async.
+//!
+//! Specs cited throughout: *MODBUS Application Protocol Specification v1.1b3* (MAP),
+//! *MODBUS over Serial Line Specification and Implementation Guide v1.02*, and
+//! *MODBUS Messaging on TCP/IP Implementation Guide v1.0b*.
+//!
+//! Layers: [`checksum`] (CRC-16, LRC) → [`rtu`] / [`ascii`] / [`tcp`] (ADU) →
+//! [`request`] / [`response`] (PDU) → [`decode`] (direction hint) and [`findings`].
+
+pub mod adu;
+pub mod ascii;
+pub mod checksum;
+pub mod data;
+pub mod decode;
+pub mod error;
+pub mod findings;
+pub mod function;
+pub mod length;
+pub mod request;
+pub mod response;
+pub mod rtu;
+pub mod tcp;
+
+pub use adu::{Adu, Check, Mode, detect_mode, parse_adu};
+pub use ascii::{AsciiFrame, encode_ascii, parse_ascii};
+pub use checksum::{crc16, lrc};
+pub use data::{Bits, DeviceObjects, FileRecords, FileSubRequests, Registers};
+pub use decode::{DecodedPdu, DirectionHint, Pdu, PduDecode, decode_pdu, pair_findings};
+pub use error::{AduError, EncodeError, PduError};
+pub use findings::{Finding, Severity};
+pub use function::{DiagnosticSubFunction, ExceptionCode, FunctionCode, MeiType};
+pub use length::{PduLength, request_len, response_len};
+pub use request::{Request, parse_request};
+pub use response::{Response, parse_response};
+pub use rtu::{RtuFrame, encode_rtu, parse_rtu};
+pub use tcp::{MbapHeader, Streaming, TcpFrame, encode_tcp, parse_mbap, parse_tcp, parse_tcp_frame};
