@@ -1,0 +1,117 @@
+//! The real `mbtap decode` binary: the three examples, transactions, stdin, JSON lines,
+//! unreadable input and `--help`, snapshot-tested with insta.
+
+use std::io::Write;
+use std::process::{Command, Output, Stdio};
+
+fn mbtap(args: &[&str], stdin: Option<&str>) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    if let Some(s) = stdin {
+        child.stdin.take().unwrap().write_all(s.as_bytes()).unwrap();
+    }
+    drop(child.stdin.take());
+    child.wait_with_output().unwrap()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8(o.stdout.clone()).unwrap()
+}
+
+#[test]
+fn read_holding_registers_response() {
+    let o = mbtap(&["decode", "01 03 06 00 00 00 00 01 90 20 89"], None);
+    assert_eq!(o.status.code(), Some(0));
+    let s = stdout(&o);
+    assert!(s.contains("unit 1"), "{s}");
+    assert!(s.contains("Read Holding Registers"), "{s}");
+    assert!(s.contains("3 register(s)"), "{s}");
+    assert!(s.contains("CRC ok"), "{s}");
+    insta::assert_snapshot!(s);
+}
+
+#[test]
+fn ascii_read_request() {
+    let o = mbtap(&["decode", ":01030065000394"], None);
+    assert_eq!(o.status.code(), Some(0));
+    let s = stdout(&o);
+    assert!(s.contains("address: 101") && s.contains("quantity: 3") && s.contains("LRC ok"), "{s}");
+    insta::assert_snapshot!(s);
+}
+
+#[test]
+fn exception_response() {
+    let o = mbtap(&["decode", "0183030131"], None);
+    assert_eq!(o.status.code(), Some(0));
+    let s = stdout(&o);
+    assert!(s.contains("Illegal Data Value") && s.contains("Exception to Read Holding Registers"), "{s}");
+    insta::assert_snapshot!(s);
+}
+
+#[test]
+fn request_then_response_is_one_transaction_with_addresses() {
+    let o = mbtap(&["decode", "01 03 00 65 00 03 15 D4", "0103060000000001902089"], None);
+    let s = stdout(&o);
+    assert!(s.starts_with("transaction: unit 1"), "{s}");
+    assert!(s.contains("103 = 400"), "{s}");
+    insta::assert_snapshot!(s);
+}
+
+#[test]
+fn jsonl_carries_the_contract_keys() {
+    let o = mbtap(&["decode", "--format", "jsonl"], Some("0183030131\n# a comment\n\n:01030065000394\n"));
+    assert_eq!(o.status.code(), Some(0));
+    let lines: Vec<serde_json::Value> = stdout(&o).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 2);
+    assert_eq!(lines[0]["event"], "frame");
+    assert_eq!(lines[0]["hex"], "0183030131");
+    assert_eq!(lines[0]["check_ok"], true);
+    assert_eq!(lines[0]["unit"], 1);
+    assert_eq!(lines[0]["function"], 131);
+    assert_eq!(lines[0]["fields"]["exception_code"], 3);
+    assert_eq!(lines[1]["fields"]["address"], 101);
+    assert_eq!(lines[1]["hex"], ":01030065000394\r\n");
+}
+
+#[test]
+fn jsonl_transaction_has_both_frames() {
+    let o = mbtap(&["decode", "--format", "jsonl", "01 03 00 65 00 03 15 D4", "0103060000000001902089"], None);
+    let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(j["event"], "transaction");
+    assert_eq!(j["response"]["fields"]["registers"], serde_json::json!([0, 0, 400]));
+    assert_eq!(j["response"]["fields"]["registers_start_address"], 101);
+}
+
+#[test]
+fn unreadable_input_gets_one_line_and_exit_2() {
+    let o = mbtap(&["decode", "01 0G 00"], None);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("'G' at column 5"), "{err}");
+}
+
+#[test]
+fn bad_crc_exits_1_and_says_so() {
+    let o = mbtap(&["decode", "01 03 06 00 00 00 00 01 90 20 88"], None);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stdout(&o).contains("CRC FAILED: received 0x8820, computed 0x8920"));
+}
+
+#[test]
+fn mode_can_be_forced() {
+    let o = mbtap(&["decode", "--mode", "tcp", "00 01 00 00 00 06 11 03 00 6B 00 03"], None);
+    assert_eq!(o.status.code(), Some(0));
+    assert!(stdout(&o).starts_with("TCP tid 1 unit 17"));
+}
+
+#[test]
+fn help_is_stable() {
+    let o = mbtap(&["decode", "--help"], None);
+    insta::assert_snapshot!(stdout(&o));
+}
