@@ -37,7 +37,9 @@ pub enum Command {
     ///
     /// Exit status: 0 every frame decoded and passed its check; 1 a check failed or a PDU does
     /// not fit its function code; 2 some input is not a frame at all.
-    #[command(after_help = "Examples:\n  mbtap decode \"01 03 06 00 00 00 00 01 90 20 89\"\n  mbtap decode ':01030065000394'\n  mbtap decode 010300650003 15D4 0103060000000001902089\n  echo 0183030131 | mbtap decode --format jsonl")]
+    #[command(
+        after_help = "Examples:\n  mbtap decode \"01 03 06 00 00 00 00 01 90 20 89\"\n  mbtap decode ':01030065000394'\n  mbtap decode 010300650003 15D4 0103060000000001902089\n  echo 0183030131 | mbtap decode --format jsonl"
+    )]
     Decode {
         /// Frames, one per argument (read from stdin, one per line, when none are given).
         frames: Vec<String>,

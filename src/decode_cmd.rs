@@ -43,7 +43,13 @@ struct Input {
 ///
 /// # Errors
 /// Only I/O errors writing the output.
-pub fn run(lines: &[String], mode: Option<Mode>, format: Format, out: &mut dyn Write, err: &mut dyn Write) -> io::Result<Outcome> {
+pub fn run(
+    lines: &[String],
+    mode: Option<Mode>,
+    format: Format,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> io::Result<Outcome> {
     let mut outcome = Outcome::Clean;
     // Unreadable lines stay in the sequence (as `Err`) so output keeps the input's order.
     let mut entries: Vec<Result<Input, (usize, String)>> = Vec::with_capacity(lines.len());
@@ -54,10 +60,8 @@ pub fn run(lines: &[String], mode: Option<Mode>, format: Format, out: &mut dyn W
             .and_then(|wire| parse_adu(&wire, mode).map(|adu| (wire, adu)).map_err(|e| e.to_string()));
         entries.push(parsed.map(|(wire, adu)| Input { number, wire, adu }).map_err(|reason| (number, reason)));
     }
-    let decodes: Vec<Option<PduDecode<'_>>> = entries
-        .iter()
-        .map(|e| e.as_ref().ok().map(|i| decode_pdu(&i.adu.pdu, DirectionHint::Unknown)))
-        .collect();
+    let decodes: Vec<Option<PduDecode<'_>>> =
+        entries.iter().map(|e| e.as_ref().ok().map(|i| decode_pdu(&i.adu.pdu, DirectionHint::Unknown))).collect();
     let mut i = 0;
     while i < entries.len() {
         let (this, decode) = match (&entries[i], &decodes[i]) {
@@ -68,7 +72,11 @@ pub fn run(lines: &[String], mode: Option<Mode>, format: Format, out: &mut dyn W
                 match format {
                     Format::Text => writeln!(err, "mbtap: input {number} ({shown:?}) is not a frame: {reason}")?,
                     Format::Jsonl => {
-                        writeln!(out, "{}", json!({"event": "error", "input": number, "text": shown, "message": reason}))?;
+                        writeln!(
+                            out,
+                            "{}",
+                            json!({"event": "error", "input": number, "text": shown, "message": reason})
+                        )?;
                     }
                 }
                 i += 1;
@@ -137,7 +145,7 @@ fn answers(req_adu: &Adu, req: &Request<'_>, resp: &Adu) -> bool {
         && req_adu.unit == resp.unit
         && req_adu.transaction_id == resp.transaction_id
         && fc & 0x7F == req.function_byte()
-        && matches!(decode_pdu(&resp.pdu, DirectionHint::Response), PduDecode::One(DecodedPdu { ref trailing, .. }) if trailing.is_empty())
+        && matches!(decode_pdu(&resp.pdu, DirectionHint::Response), PduDecode::One(DecodedPdu { trailing: [], .. }))
 }
 
 fn transaction(

@@ -6,7 +6,9 @@ use thiserror::Error;
 /// Why a line of input is not a frame.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum HexInputError {
-    #[error("empty input: give a frame as hex bytes (e.g. \"01 03 00 65 00 03 15 D4\") or ASCII (\":010300650003 94\")")]
+    #[error(
+        "empty input: give a frame as hex bytes (e.g. \"01 03 00 65 00 03 15 D4\") or ASCII (\":010300650003 94\")"
+    )]
     Empty,
     #[error("'{found}' at column {column} is not a hex digit")]
     BadDigit { column: usize, found: char },
@@ -44,7 +46,10 @@ pub fn parse_frame_text(line: &str) -> Result<Vec<u8>, HexInputError> {
             None => (token, 0),
         };
         if let Some((i, c)) = digits.char_indices().find(|(_, c)| !c.is_ascii_hexdigit()) {
-            return Err(HexInputError::BadDigit { column: token_column + offset + digits[..i].chars().count(), found: c });
+            return Err(HexInputError::BadDigit {
+                column: token_column + offset + digits[..i].chars().count(),
+                found: c,
+            });
         }
         match digits.len() {
             0 => return Err(HexInputError::OddDigits { column: token_column, token: token.to_owned() }),
@@ -85,7 +90,14 @@ mod tests {
     #[test]
     fn accepts_the_usual_spellings() {
         let want = vec![0x01, 0x83, 0x03, 0x01, 0x31];
-        for s in ["0183030131", "01 83 03 01 31", "0x01 0x83 0x03 0x01 0x31", "01,83,03,01,31", "01-83-03-01-31", "[01 83 03 01 31]"] {
+        for s in [
+            "0183030131",
+            "01 83 03 01 31",
+            "0x01 0x83 0x03 0x01 0x31",
+            "01,83,03,01,31",
+            "01-83-03-01-31",
+            "[01 83 03 01 31]",
+        ] {
             assert_eq!(parse_frame_text(s).unwrap(), want, "{s}");
         }
     }

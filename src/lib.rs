@@ -8,6 +8,7 @@
 
 pub mod cli;
 pub mod decode_cmd;
+pub mod fuzzing;
 pub mod hexinput;
 pub mod proto;
 pub mod report;

@@ -1,5 +1,6 @@
 //! The real `mbtap decode` binary: the three examples, transactions, stdin, JSON lines,
 //! unreadable input and `--help`, snapshot-tested with insta.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::io::Write;
 use std::process::{Command, Output, Stdio};

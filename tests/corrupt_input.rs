@@ -1,5 +1,6 @@
 //! Corrupt input: truncated frames, bad CRC, bad LRC, bad hex, frames of 256+ bytes, and
 //! length fields that lie. Each must give a precise error or a finding — never a panic.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use mbtap::proto::{
     AduError, DecodedPdu, DirectionHint, Finding, Mode, PduDecode, PduError, decode_pdu, parse_adu, parse_ascii,
@@ -110,11 +111,14 @@ fn write_quantity_limits_include_0x17() {
     // 0x17 read 126, write 122 registers, byte count 0.
     let pdu = [0x17, 0, 0, 0, 126, 0, 0, 0, 122, 0];
     let PduDecode::One(DecodedPdu { findings, .. }) = decode_pdu(&pdu, DirectionHint::Request) else { panic!() };
-    assert_eq!(findings, vec![
-        Finding::QuantityOutOfRange { field: "quantity", value: 126, min: 1, max: 125 },
-        Finding::QuantityOutOfRange { field: "quantity", value: 122, min: 1, max: 121 },
-        Finding::ByteCountMismatch { field: "register", byte_count: 0, expected: 244 },
-    ]);
+    assert_eq!(
+        findings,
+        vec![
+            Finding::QuantityOutOfRange { field: "quantity", value: 126, min: 1, max: 125 },
+            Finding::QuantityOutOfRange { field: "quantity", value: 122, min: 1, max: 121 },
+            Finding::ByteCountMismatch { field: "register", byte_count: 0, expected: 244 },
+        ]
+    );
 }
 
 #[test]
@@ -134,5 +138,8 @@ fn reserved_and_broadcast_addresses_are_findings() {
     mbtap::proto::findings::check_unit(248, false, &mut out);
     mbtap::proto::findings::check_unit(0, true, &mut out);
     mbtap::proto::findings::check_unit(247, false, &mut out);
-    assert_eq!(out, vec![Finding::BroadcastAddress, Finding::ReservedAddress { unit: 248 }, Finding::ResponseFromBroadcastAddress]);
+    assert_eq!(
+        out,
+        vec![Finding::BroadcastAddress, Finding::ReservedAddress { unit: 248 }, Finding::ResponseFromBroadcastAddress]
+    );
 }

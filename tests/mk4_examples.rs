@@ -6,6 +6,7 @@
 //! The document leaves the check of three examples as "xx xx" (§3.4 read of input registers
 //! 400–402, and the §4 exception response); those constants carry the CRC/LRC we computed,
 //! marked `computed, document says xx xx`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use mbtap::proto::{
     Bits, DecodedPdu, DirectionHint, ExceptionCode, Pdu, PduDecode, Request, Response, decode_pdu, encode_ascii,
@@ -277,7 +278,8 @@ fn write_coil_3_on_echoes() {
 
 #[test]
 fn read_discrete_inputs() {
-    let cases: [(&[u8], &[u8], u16, u16, &[u8]); 6] = [
+    type Case<'a> = (&'a [u8], &'a [u8], u16, u16, &'a [u8]);
+    let cases: [Case<'_>; 6] = [
         (RTU_READ_INPUTS_3_FROM_53_REQ, RTU_READ_INPUTS_3_FROM_53_RESP, 53, 3, &[0x02]),
         (ASCII_READ_INPUTS_3_FROM_53_REQ, ASCII_READ_INPUTS_3_FROM_53_RESP, 53, 3, &[0x02]),
         (RTU_READ_INPUTS_8_FROM_50_REQ, RTU_READ_INPUTS_8_FROM_50_RESP, 50, 8, &[0x10]),
@@ -317,9 +319,10 @@ fn write_register_108_echoes() {
 
 #[test]
 fn write_5_from_101() {
-    for (req, resp) in
-        [(RTU_WRITE_5_FROM_101_REQ, RTU_WRITE_5_FROM_101_RESP), (ASCII_WRITE_5_FROM_101_REQ, ASCII_WRITE_5_FROM_101_RESP)]
-    {
+    for (req, resp) in [
+        (RTU_WRITE_5_FROM_101_REQ, RTU_WRITE_5_FROM_101_RESP),
+        (ASCII_WRITE_5_FROM_101_REQ, ASCII_WRITE_5_FROM_101_RESP),
+    ] {
         let (_, pdu) = frame(req);
         let Request::WriteMultipleRegisters { address: 101, quantity: 5, values } = request(&pdu) else { panic!() };
         assert_eq!(values.iter().collect::<Vec<_>>(), [0, 0, 400, 300, 10]);
@@ -347,7 +350,10 @@ fn exception_illegal_data_value() {
     assert_eq!(request(&pdu), Request::ReadHoldingRegisters { address: 18, quantity: 6 });
     let (_, pdu) = frame(RTU_EXCEPTION_RESP);
     assert_eq!(response(&pdu), Response::Exception { function: 3, code: ExceptionCode::IllegalDataValue });
-    assert!(matches!(decode_pdu(&pdu, DirectionHint::Unknown), PduDecode::One(DecodedPdu { pdu: Pdu::Response(_), .. })));
+    assert!(matches!(
+        decode_pdu(&pdu, DirectionHint::Unknown),
+        PduDecode::One(DecodedPdu { pdu: Pdu::Response(_), .. })
+    ));
 }
 
 /// A single flipped bit anywhere in any example must fail its check.

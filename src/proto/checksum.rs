@@ -114,7 +114,7 @@ mod tests {
 
     #[test]
     fn crc16_table_agrees_with_bitwise_on_every_length_up_to_300() {
-        let data: Vec<u8> = (0..300u32).map(|i| (i.wrapping_mul(151) ^ 0x5A) as u8).collect();
+        let data: Vec<u8> = (0..300u32).map(|i| (i.wrapping_mul(151) ^ 0x5A).to_le_bytes()[0]).collect();
         for len in 0..data.len() {
             assert_eq!(crc16(&data[..len]), crc16_bitwise(&data[..len]), "length {len}");
         }

@@ -115,10 +115,9 @@ pub fn decode_pdu<'a>(pdu: &'a [u8], hint: DirectionHint) -> PduDecode<'a> {
         DirectionHint::Unknown => match (as_request(pdu), as_response(pdu)) {
             (Ok(request), Ok(response)) => match (request.trailing.is_empty(), response.trailing.is_empty()) {
                 (true, true) => PduDecode::Either { request, response },
-                (true, false) => PduDecode::One(request),
                 (false, true) => PduDecode::One(response),
                 (false, false) if response.trailing.len() < request.trailing.len() => PduDecode::One(response),
-                (false, false) => PduDecode::One(request),
+                (true | false, false) => PduDecode::One(request),
             },
             (Ok(d), Err(_)) | (Err(_), Ok(d)) => PduDecode::One(d),
             (Err(error), Err(_)) => PduDecode::Malformed { function, error },

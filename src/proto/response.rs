@@ -290,8 +290,8 @@ mod tests {
 
     #[test]
     fn parses_register_values() {
-        let (rest, resp) = parse_response(READ_101_X3_RESPONSE).unwrap();
-        assert!(rest.is_empty());
+        let (trailing, resp) = parse_response(READ_101_X3_RESPONSE).unwrap();
+        assert!(trailing.is_empty());
         let Response::ReadHoldingRegisters { values } = resp else { panic!("{resp:?}") };
         assert_eq!(values.iter().collect::<Vec<_>>(), vec![0, 0, 400]);
     }

@@ -13,9 +13,16 @@ pub enum Value<'a> {
     Name(&'static str),
     Bytes(&'a [u8]),
     /// Registers, with their addresses when the request is known.
-    Registers { start: Option<u16>, values: Registers<'a> },
+    Registers {
+        start: Option<u16>,
+        values: Registers<'a>,
+    },
     /// Bits, with their addresses and how many count when the request is known.
-    Bits { start: Option<u16>, count: Option<u16>, bits: Bits<'a> },
+    Bits {
+        start: Option<u16>,
+        count: Option<u16>,
+        bits: Bits<'a>,
+    },
     /// A list of records, each a list of fields.
     Records(Vec<Vec<Field<'a>>>),
     Text(String),
@@ -223,11 +230,16 @@ pub fn response_fields<'a>(resp: &Response<'a>, request: Option<&Request<'_>>) -
         Response::MaskWriteRegister { address, and_mask, or_mask } => {
             vec![num("address", address), f("and_mask", Value::Hex(and_mask)), f("or_mask", Value::Hex(or_mask))]
         }
-        Response::ReadFifoQueue { fifo_count, values } => vec![
-            num("fifo_count", fifo_count),
-            f("registers", Value::Registers { start: None, values }),
-        ],
-        Response::ReadDeviceIdentification { read_code, conformity_level, more_follows, next_object_id, objects: o } => {
+        Response::ReadFifoQueue { fifo_count, values } => {
+            vec![num("fifo_count", fifo_count), f("registers", Value::Registers { start: None, values })]
+        }
+        Response::ReadDeviceIdentification {
+            read_code,
+            conformity_level,
+            more_follows,
+            next_object_id,
+            objects: o,
+        } => {
             vec![
                 num("mei_type", 0x0E_u8),
                 num("read_code", read_code),
@@ -240,7 +252,10 @@ pub fn response_fields<'a>(resp: &Response<'a>, request: Option<&Request<'_>>) -
         }
         Response::Encapsulated { mei_type, data } => encapsulated(mei_type, data),
         Response::Exception { code, .. } => {
-            vec![num("exception_code", code.value()), f("exception", Value::Name(code.name().unwrap_or("Unknown exception")))]
+            vec![
+                num("exception_code", code.value()),
+                f("exception", Value::Name(code.name().unwrap_or("Unknown exception"))),
+            ]
         }
         Response::Other { data, .. } => vec![f("data", Value::Bytes(data))],
     }

@@ -51,7 +51,13 @@ pub fn frame(view: &FrameView<'_>, indent: &str) -> String {
     };
     let fc = view.function_byte().map_or_else(|| "no function".to_owned(), function_text);
     let tid = adu.transaction_id.map(|t| format!(" tid {t}")).unwrap_or_default();
-    let _ = writeln!(out, "{indent}{}{tid} unit {} · {fc} · {direction} · {}", adu.mode.name(), adu.unit, check_text(adu.check));
+    let _ = writeln!(
+        out,
+        "{indent}{}{tid} unit {} · {fc} · {direction} · {}",
+        adu.mode.name(),
+        adu.unit,
+        check_text(adu.check)
+    );
     let shown = if adu.mode == crate::proto::Mode::Ascii {
         String::from_utf8_lossy(view.wire).trim_end().to_owned()
     } else {
@@ -115,7 +121,7 @@ fn write_field(out: &mut String, indent: &str, field: &Field<'_>) {
         Value::Text(s) => {
             let _ = writeln!(out, "{indent}{key}: {s:?}");
         }
-        Value::Bytes(b) if b.is_empty() => {
+        Value::Bytes([]) => {
             let _ = writeln!(out, "{indent}{key}: (none)");
         }
         Value::Bytes(b) => {

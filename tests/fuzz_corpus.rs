@@ -1,0 +1,38 @@
+//! Every fuzz seed and every saved crash input (`fuzz/seeds/*`, `fuzz/regressions/*`) through
+//! the same harness bodies the fuzzers run, so `cargo test` keeps them green without cargo-fuzz.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::fs;
+use std::path::Path;
+
+fn run_dir(dir: &Path) -> usize {
+    let Ok(targets) = fs::read_dir(dir) else { return 0 };
+    let mut n = 0;
+    for target in targets {
+        let target = target.unwrap().path();
+        let name = target.file_name().unwrap().to_string_lossy().into_owned();
+        let body: fn(&[u8]) = match name.as_str() {
+            "rtu" => mbtap::fuzzing::rtu,
+            "ascii" => mbtap::fuzzing::ascii,
+            "tcp" => mbtap::fuzzing::tcp_stream,
+            "pdu_request" => mbtap::fuzzing::pdu_request,
+            "pdu_response" => mbtap::fuzzing::pdu_response,
+            "roundtrip" => mbtap::fuzzing::roundtrip,
+            "decode_text" => mbtap::fuzzing::decode_text,
+            other => panic!("{} names no fuzz target ({other})", target.display()),
+        };
+        for file in fs::read_dir(&target).unwrap() {
+            body(&fs::read(file.unwrap().path()).unwrap());
+            n += 1;
+        }
+    }
+    n
+}
+
+#[test]
+fn seeds_and_regressions_pass_every_harness() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz");
+    let seeds = run_dir(&root.join("seeds"));
+    run_dir(&root.join("regressions"));
+    assert!(seeds >= 7, "fuzz seeds missing: ran {seeds}");
+}
