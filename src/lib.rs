@@ -6,9 +6,12 @@
 //! - [`decode_cmd`] — the `mbtap decode` command: frames given by a user, explained.
 //! - [`hexinput`] — reading the hex and ASCII frames users paste.
 
+pub mod chunk;
 pub mod cli;
 pub mod decode_cmd;
+pub mod framer;
 pub mod fuzzing;
 pub mod hexinput;
 pub mod proto;
 pub mod report;
+pub mod traffic;

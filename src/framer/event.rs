@@ -1,0 +1,51 @@
+//! What the framers produce: frames (good or failed check, with their timing) and noise.
+
+use crate::chunk::{PortId, Timestamp};
+
+/// A frame as it was on the wire, borrowed from the framer's buffer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Frame<'a> {
+    pub port: PortId,
+    /// The bytes exactly as on the wire (RTU with its CRC; ASCII as its characters).
+    pub bytes: &'a [u8],
+    /// Estimated start of the first character.
+    pub t_start: Timestamp,
+    /// Estimated end of the last character.
+    pub t_end: Timestamp,
+    /// CRC / LRC valid.
+    pub check_ok: bool,
+    /// The longest silence inside the frame known to exceed t1.5 (RTU) or the 1 s
+    /// inter-character timeout (ASCII), in ns; `None` when none is known.
+    pub gap_violation_ns: Option<u64>,
+    /// The silence before this frame, known to be shorter than t3.5 after the previous frame, in ns.
+    pub short_gap_before_ns: Option<u64>,
+    /// ASCII only: characters that are not hex digits where digits belong.
+    pub bad_chars: bool,
+}
+
+/// Bytes that belong to no frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Noise<'a> {
+    pub port: PortId,
+    pub bytes: &'a [u8],
+    pub t_start: Timestamp,
+    pub t_end: Timestamp,
+}
+
+/// One framer output.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameEvent<'a> {
+    Frame(Frame<'a>),
+    Noise(Noise<'a>),
+}
+
+impl FrameEvent<'_> {
+    /// The bytes of the event.
+    #[must_use]
+    pub const fn bytes(&self) -> &[u8] {
+        match self {
+            Self::Frame(f) => f.bytes,
+            Self::Noise(n) => n.bytes,
+        }
+    }
+}

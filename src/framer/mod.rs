@@ -1,0 +1,12 @@
+//! Framers: turn [`Chunk`](crate::chunk::Chunk)s — bytes as reads delivered them, with the time
+//! each read returned — into frames and noise. Pure: time is an input, never read.
+
+pub mod ascii;
+pub mod event;
+pub mod rtu;
+pub mod timing;
+
+pub use ascii::AsciiFramer;
+pub use event::{Frame, FrameEvent, Noise};
+pub use rtu::{FramerConfig, RtuFramer};
+pub use timing::{LineSettings, Parity};

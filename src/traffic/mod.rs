@@ -1,0 +1,12 @@
+//! The synthetic traffic generator with ground truth, the observation models of real serial
+//! hardware, and scoring against the truth. Deterministic for a seed; used by tests, benchmarks
+//! and the accuracy report in BENCHMARKS.md.
+
+pub mod generate;
+pub mod observe;
+pub mod rng;
+pub mod score;
+
+pub use generate::{TrafficConfig, Wire, generate};
+pub use observe::{Observation, observe};
+pub use score::{Score, run_framer, run_gap_cutter, score};

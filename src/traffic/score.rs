@@ -1,0 +1,121 @@
+//! Scoring a framer against the generator's ground truth, and the plain gap-cutting baseline
+//! that open sniffers use, for comparison.
+
+use std::collections::HashMap;
+use std::ops::Range;
+
+use super::generate::{TruthKind, Wire};
+use super::observe::ChunkSpan;
+use crate::chunk::{Chunk, PortId, Timestamp};
+use crate::framer::{FrameEvent, FramerConfig, RtuFramer};
+use crate::proto::crc16;
+
+/// One decided stretch: bytes `range` of the wire, a frame (with its check) or noise.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Decided {
+    pub range: Range<usize>,
+    pub frame: bool,
+    pub check_ok: bool,
+}
+
+/// How well a framer did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Score {
+    pub good_total: usize,
+    pub good_recovered: usize,
+    pub false_valid: usize,
+    pub corrupted_total: usize,
+    pub corrupted_exact: usize,
+}
+
+impl Score {
+    /// Share of good frames recovered byte-exact.
+    #[must_use]
+    pub fn good_ratio(&self) -> f64 {
+        ratio(self.good_recovered, self.good_total)
+    }
+
+    /// Share of corrupted frames reported with exact boundaries and a failed check.
+    #[must_use]
+    pub fn corrupted_ratio(&self) -> f64 {
+        ratio(self.corrupted_exact, self.corrupted_total)
+    }
+}
+
+fn ratio(a: usize, b: usize) -> f64 {
+    #[allow(clippy::cast_precision_loss)]
+    if b == 0 { 1.0 } else { a as f64 / b as f64 }
+}
+
+/// Compares decided stretches with the truth.
+#[must_use]
+pub fn score(wire: &Wire, decided: &[Decided]) -> Score {
+    let truth: HashMap<(usize, usize), TruthKind> = wire.truth.iter().map(|t| ((t.start, t.end), t.kind)).collect();
+    let mut s = Score {
+        good_total: wire.truth.iter().filter(|t| t.kind == TruthKind::Good).count(),
+        corrupted_total: wire.truth.iter().filter(|t| t.kind == TruthKind::Corrupted).count(),
+        ..Score::default()
+    };
+    for d in decided.iter().filter(|d| d.frame) {
+        let t = truth.get(&(d.range.start, d.range.end)).copied();
+        match (d.check_ok, t) {
+            (true, Some(TruthKind::Good)) => s.good_recovered += 1,
+            (true, _) => s.false_valid += 1,
+            (false, Some(TruthKind::Corrupted)) => s.corrupted_exact += 1,
+            (false, _) => {}
+        }
+    }
+    s
+}
+
+/// Runs mbtap's RTU framer over the chunks and returns what it decided.
+#[must_use]
+pub fn run_framer(wire: &Wire, chunks: &[ChunkSpan], config: FramerConfig) -> Vec<Decided> {
+    let mut framer = RtuFramer::new(PortId(0), config);
+    let mut out = Vec::new();
+    let mut offset = 0usize;
+    let mut emit = |e: FrameEvent<'_>| {
+        let n = e.bytes().len();
+        let (frame, check_ok) = match e {
+            FrameEvent::Frame(f) => (true, f.check_ok),
+            FrameEvent::Noise(_) => (false, false),
+        };
+        out.push(Decided { range: offset..offset + n, frame, check_ok });
+        offset += n;
+    };
+    for (t, r) in chunks {
+        framer.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes: &wire.bytes[r.clone()] }, &mut emit);
+    }
+    framer.finish(&mut emit);
+    out
+}
+
+/// The baseline: cut a frame wherever the reads suggest a silence of t3.5 or more, as
+/// gap-only sniffers do; a piece is valid when its CRC holds.
+#[must_use]
+pub fn run_gap_cutter(wire: &Wire, chunks: &[ChunkSpan], config: FramerConfig) -> Vec<Decided> {
+    let char_ns = config.line.char_ns();
+    let t35 = config.line.t35_ns();
+    let mut out = Vec::new();
+    let mut start = 0usize;
+    let mut last_t: Option<u64> = None;
+    let close = |start: usize, end: usize, out: &mut Vec<Decided>| {
+        if end > start {
+            let b = &wire.bytes[start..end];
+            let ok = b.len() >= 4 && crc16(&b[..b.len() - 2]) == u16::from_le_bytes([b[b.len() - 2], b[b.len() - 1]]);
+            out.push(Decided { range: start..end, frame: true, check_ok: ok });
+        }
+    };
+    for (t, r) in chunks {
+        let n = (r.end - r.start) as u64;
+        if let Some(prev) = last_t
+            && t.saturating_sub(n * char_ns).saturating_sub(prev) >= t35
+        {
+            close(start, r.start, &mut out);
+            start = r.start;
+        }
+        last_t = Some(*t);
+    }
+    close(start, wire.bytes.len(), &mut out);
+    out
+}
