@@ -97,3 +97,43 @@ pub fn decode_text(data: &[u8]) {
         let _ = decode_cmd::run(&lines, None, format, &mut std::io::sink(), &mut std::io::sink());
     }
 }
+
+/// Arbitrary chunks through the RTU and ASCII framers: the first byte of each 4-byte header
+/// gives a chunk length, the next three a time step; the rest is data. Every byte must come
+/// out in exactly one event.
+///
+/// # Panics
+/// When bytes are lost or duplicated: that is the bug the fuzzer is looking for.
+pub fn framer(data: &[u8]) {
+    use crate::chunk::{Chunk, PortId, Timestamp};
+    use crate::framer::{AsciiFramer, FrameEvent, FramerConfig, LineSettings, RtuFramer};
+    let line = LineSettings {
+        baud: 9600 * (1 + u32::from(data.first().copied().unwrap_or(0) % 12)),
+        ..LineSettings::default()
+    };
+    let mut rtu =
+        RtuFramer::new(PortId(0), FramerConfig::new(line, u64::from(data.get(1).copied().unwrap_or(0)) * 100_000));
+    let mut ascii = AsciiFramer::new(PortId(0), line);
+    let (mut fed, mut out_rtu) = (0usize, 0usize);
+    let mut t = 1_000_000_000u64;
+    let mut rest = data.get(2..).unwrap_or(&[]);
+    while rest.len() >= 4 {
+        let n = usize::from(rest[0] % 64);
+        let step = u64::from(u32::from_le_bytes([rest[1], rest[2], rest[3], 0])) * 10;
+        rest = &rest[4..];
+        let take = n.min(rest.len());
+        let (bytes, after) = rest.split_at(take);
+        rest = after;
+        t = t.wrapping_add(step);
+        let chunk = Chunk { port: PortId(0), t: Timestamp(t), bytes };
+        fed += bytes.len();
+        rtu.push(&chunk, &mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());
+        ascii.push(&chunk, &mut |_e: FrameEvent<'_>| {});
+        if step % 7 == 0 {
+            rtu.tick(Timestamp(t.wrapping_add(step)), &mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());
+        }
+    }
+    rtu.finish(&mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());
+    ascii.finish(&mut |_e: FrameEvent<'_>| {});
+    assert_eq!(fed, out_rtu, "RTU framer lost or duplicated bytes");
+}

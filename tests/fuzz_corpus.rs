@@ -19,6 +19,7 @@ fn run_dir(dir: &Path) -> usize {
             "pdu_response" => mbtap::fuzzing::pdu_response,
             "roundtrip" => mbtap::fuzzing::roundtrip,
             "decode_text" => mbtap::fuzzing::decode_text,
+            "framer" => mbtap::fuzzing::framer,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

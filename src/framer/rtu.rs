@@ -100,6 +100,9 @@ pub struct RtuFramer {
     last_read: u64,
     /// The last event emitted was a frame (for the inter-frame gap check).
     after_frame: bool,
+    /// Addresses seen in frames with a valid CRC: a failed piece that starts with one is a
+    /// corrupted frame even when the corruption hit its function code.
+    known_units: [bool; 256],
 }
 
 impl RtuFramer {
@@ -121,6 +124,7 @@ impl RtuFramer {
             last_end: None,
             last_read: 0,
             after_frame: false,
+            known_units: [false; 256],
         }
     }
 
@@ -224,7 +228,13 @@ impl RtuFramer {
     fn try_frame_at(&self, g: usize, flushing: bool) -> Try {
         let live = &self.buf[self.head..];
         let s = &live[g..];
-        let [_, fc, ..] = *s else { return if flushing { Try::NotHere } else { Try::NeedMore } };
+        let [addr, fc, ..] = *s else { return if flushing { Try::NotHere } else { Try::NeedMore } };
+        // While resynchronising through garbage, a chance CRC match (1 in 65 536 per
+        // candidate) is likelier than the first frame of a never-seen unit with no silence
+        // before it.
+        if g > 0 && !self.known_units[usize::from(addr)] && !self.boundary_at(g) {
+            return Try::NotHere;
+        }
         let pdu = &s[1..];
         let resp = response_len(pdu);
         let req = if fc & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
@@ -288,22 +298,55 @@ impl RtuFramer {
         let live_len = self.buf.len() - self.head;
         let s = &self.buf[self.head + g..];
         let base = FunctionCode::from(s[1]);
-        let lenient = base.name().is_some() || base.is_user_defined();
+        let lenient = (base.name().is_some() || base.is_user_defined()) && self.known_units[usize::from(s[0])];
+        // A code with no public layout from an address never seen before is far more likely
+        // garbage than a vendor frame; such frames are still reported, with their boundaries,
+        // once a silence or a valid frame ends them (`emit_piece`).
+        if s[0] > 247 || !(base.name().is_some() || base.is_user_defined() || self.known_units[usize::from(s[0])]) {
+            return Try::NotHere;
+        }
         let max = s.len().min(RTU_MAX_LEN);
         let mut bounded = false;
         let mut crc = 0;
+        let mut first_match = true;
         for l in RTU_MIN_LEN..=max {
             // `crc` covers the body s[..l - 2], one byte more each step.
             crc = if l == RTU_MIN_LEN { crc16(&s[..2]) } else { crc16_update(crc, &s[l - 3..l - 2]) };
             let received = u16::from_le_bytes([s[l - 2], s[l - 1]]);
-            if crc == received
-                && (self.boundary_at(g + l) || (flushing && g + l == live_len) || self.exact_frame_at(g + l))
-            {
-                return Try::Found(l);
+            if crc == received {
+                let at_end = g + l == live_len;
+                // The first CRC match is taken when a frame plausibly starts right after it
+                // (request and response of the same vendor code follow each other); later
+                // matches need stronger evidence, because over hundreds of lengths a chance
+                // match becomes likely.
+                let next_starts = !at_end && self.looks_like_frame_start(g + l);
+                if self.boundary_at(g + l)
+                    || (flushing && at_end)
+                    || self.exact_frame_at(g + l)
+                    || (first_match && next_starts)
+                {
+                    // CRC shift property: a frame whose CRC high byte is 0x00 also validates
+                    // one byte shorter. When the byte after this match is 0x00 and the longer
+                    // frame validates too, take the longer unless only the shorter is followed
+                    // by something that looks like a frame.
+                    if s.get(l) == Some(&0) && l < RTU_MAX_LEN && s.len() > l && Self::crc_ok(&s[..=l]) {
+                        let longer_ok = g + l + 1 == live_len
+                            || self.boundary_at(g + l + 1)
+                            || self.exact_frame_at(g + l + 1)
+                            || self.looks_like_frame_start(g + l + 1);
+                        let shorter_strong = self.boundary_at(g + l) || self.exact_frame_at(g + l);
+                        if longer_ok && !shorter_strong {
+                            return Try::Found(l + 1);
+                        }
+                    }
+                    return Try::Found(l);
+                }
+                first_match = false;
             }
             if l < s.len() {
                 let gap = self.gap_lb[self.head + g + l];
-                if gap >= self.incomplete_timeout || (!lenient && gap >= self.t35) {
+                // Even a slow slave's frame cannot hold a whole valid frame after a silence.
+                if gap >= self.incomplete_timeout || (gap >= self.t35 && (!lenient || self.exact_frame_at(g + l))) {
                     bounded = true;
                     break;
                 }
@@ -370,22 +413,121 @@ impl RtuFramer {
             while b < stop && self.gap_lb[b] < self.t35 {
                 b += 1;
             }
-            // Every emission below advances `self.head` to `b`.
-            if looks_like_frame(&self.buf[a..b]) {
-                self.emit_frame(b - a, false, emit);
-            } else {
-                emit(FrameEvent::Noise(Noise {
-                    port: self.port,
-                    bytes: &self.buf[a..b],
-                    t_start: Timestamp(self.end[a].saturating_sub(self.char_ns)),
-                    t_end: Timestamp(self.end[b - 1]),
-                }));
-                self.head = b;
-                self.after_frame = false;
+            // A slow slave pauses inside its frame: when the structure says the frame goes on
+            // past this silence, and it ends at a silence or at the end of the garbage, follow it.
+            if let Some(l) = self.structural_len(a, stop)
+                && a + l > b
+                && (a + l == stop || self.gap_lb[a + l] >= self.t35)
+                && self.gap_lb[a + 1..a + l].iter().all(|&g| g < self.incomplete_timeout)
+            {
+                b = a + l;
             }
+            self.emit_piece(a, b, emit);
             a = b;
         }
         self.garbage = self.garbage.saturating_sub(n);
+    }
+
+    /// The exact length the structure gives a frame starting at absolute `a`, if it fits
+    /// before `stop`.
+    fn structural_len(&self, a: usize, stop: usize) -> Option<usize> {
+        let f = &self.buf[a..stop];
+        if !self.looks_like_frame(f) {
+            return None;
+        }
+        let pdu = &f[1..];
+        let req = if f[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
+        [response_len(pdu), req].into_iter().find_map(|c| match c {
+            PduLength::Exact(k) if k + 3 <= f.len() => Some(k + 3),
+            _ => None,
+        })
+    }
+
+    /// A failed-check piece is reported as a frame when it could be one: 4 to 256 bytes
+    /// starting with a unicast or broadcast address and either a public, user-defined or
+    /// exception function code, or an address already seen in valid frames.
+    fn looks_like_frame(&self, piece: &[u8]) -> bool {
+        let [addr, fc, ..] = *piece else { return false };
+        let base = FunctionCode::from(fc & !EXCEPTION_FLAG);
+        (RTU_MIN_LEN..=RTU_MAX_LEN).contains(&piece.len())
+            && addr <= 247
+            && ((fc != 0 && (base.name().is_some() || base.is_user_defined())) || self.known_units[usize::from(addr)])
+    }
+
+    /// Do the two bytes at live index `i` look like the start of a frame: an address already
+    /// seen in valid frames and a public, user-defined or exception function code?
+    fn looks_like_frame_start(&self, i: usize) -> bool {
+        let (Some(&addr), Some(&fc)) = (self.buf.get(self.head + i), self.buf.get(self.head + i + 1)) else {
+            return false;
+        };
+        let base = FunctionCode::from(fc & !EXCEPTION_FLAG);
+        if addr == 0 {
+            // Broadcasts carry writes only (Modbus over Serial Line v1.02 §2.1).
+            return self.known_units[0] && matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16);
+        }
+        self.known_units[usize::from(addr)] && fc != 0 && (base.name().is_some() || base.is_user_defined())
+    }
+
+    /// A whole frame: it looks like one, its CRC holds, and its length is one its structure allows.
+    fn plausible_frame(&self, f: &[u8]) -> bool {
+        if !self.looks_like_frame(f) || !Self::crc_ok(f) {
+            return false;
+        }
+        let pdu = &f[1..];
+        let fits = |c: PduLength| match c {
+            PduLength::Exact(k) => k + 3 == f.len(),
+            PduLength::AtLeast(_) => false,
+            PduLength::Unknown => true,
+        };
+        fits(response_len(pdu)) || (f[1] & EXCEPTION_FLAG == 0 && fits(request_len(pdu)))
+    }
+
+    /// Emits bytes `a..b` (absolute, `a == self.head`) that no silence divides. A frame whose
+    /// end the structure could not confirm in time (a user-defined code followed by another)
+    /// lands here whole, with a valid CRC; a valid frame glued to a corrupted one or to noise
+    /// is split off when its CRC and structure agree. The rest is a failed frame or noise.
+    fn emit_piece<F: FnMut(FrameEvent<'_>)>(&mut self, mut a: usize, b: usize, emit: &mut F) {
+        while a < b {
+            let piece = &self.buf[a..b];
+            if self.plausible_frame(piece) {
+                self.emit_frame(b - a, true, emit);
+                return;
+            }
+            if let Some(e) = (RTU_MIN_LEN..piece.len()).find(|&e| {
+                self.known_units[usize::from(piece[0])]
+                    && self.plausible_frame(&piece[..e])
+                    && self.looks_like_frame(&piece[e..])
+            }) {
+                self.emit_frame(e, true, emit);
+                a += e;
+                continue;
+            }
+            if let Some(s) = (1..piece.len().saturating_sub(RTU_MIN_LEN - 1))
+                .find(|&s| self.known_units[usize::from(piece[s])] && self.plausible_frame(&piece[s..]))
+            {
+                self.emit_unframed(a, a + s, emit);
+                self.emit_frame(b - a - s, true, emit);
+                return;
+            }
+            self.emit_unframed(a, b, emit);
+            return;
+        }
+    }
+
+    /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise.
+    fn emit_unframed<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, b: usize, emit: &mut F) {
+        if self.looks_like_frame(&self.buf[a..b]) {
+            self.emit_frame(b - a, false, emit);
+        } else {
+            emit(FrameEvent::Noise(Noise {
+                port: self.port,
+                bytes: &self.buf[a..b],
+                t_start: Timestamp(self.end[a].saturating_sub(self.char_ns)),
+                t_end: Timestamp(self.end[b - 1]),
+            }));
+            self.head = b;
+            self.after_frame = false;
+        }
     }
 
     /// Emits the first `len` live bytes as a frame.
@@ -405,18 +547,10 @@ impl RtuFramer {
             short_gap_before_ns,
             bad_chars: false,
         }));
+        if check_ok {
+            self.known_units[usize::from(self.buf[a])] = true;
+        }
         self.head = b;
         self.after_frame = true;
     }
-}
-
-/// A failed-check piece is reported as a frame when it could be one: 4 to 256 bytes starting
-/// with a unicast or broadcast address and a public, user-defined or exception function code.
-fn looks_like_frame(piece: &[u8]) -> bool {
-    let [addr, fc, ..] = *piece else { return false };
-    let base = FunctionCode::from(fc & !EXCEPTION_FLAG);
-    (RTU_MIN_LEN..=RTU_MAX_LEN).contains(&piece.len())
-        && addr <= 247
-        && (base.name().is_some() || base.is_user_defined())
-        && fc != 0
 }
