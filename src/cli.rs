@@ -1,6 +1,8 @@
 //! Command-line definitions (clap). Parsing only; `main` dispatches.
 
-use clap::{Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
 
 /// mbtap — a Modbus RTU/ASCII bus analyzer: sniff, decode, record, replay, bridge.
 #[derive(Debug, Parser)]
@@ -27,6 +29,69 @@ pub enum FormatArg {
     Jsonl,
 }
 
+/// Serial mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SerialModeArg {
+    Rtu,
+    Ascii,
+}
+
+/// Parity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ParityArg {
+    None,
+    Even,
+    Odd,
+}
+
+/// Output of analyzer commands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum EventFormatArg {
+    /// One line per frame, noise burst and transaction.
+    Text,
+    /// One JSON object per line (`event`: frame, noise, transaction, warning, summary).
+    Jsonl,
+    /// Only the summary at the end.
+    Summary,
+}
+
+/// Line settings (each one overrides what a capture file stores).
+#[derive(Debug, Clone, Args)]
+pub struct LineArgs {
+    /// RTU or ASCII framing [default: rtu, or what the capture says].
+    #[arg(long, value_enum)]
+    pub mode: Option<SerialModeArg>,
+    /// Baud rate [default: 19200, or what the capture says].
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Parity [default: even, as the serial-line spec says].
+    #[arg(long, value_enum)]
+    pub parity: Option<ParityArg>,
+    /// Stop bits (1 or 2) [default: 1].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub stop_bits: Option<u8>,
+    /// Data bits (7 or 8) [default: 8 for RTU, 7 for ASCII].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(7..=8))]
+    pub data_bits: Option<u8>,
+    /// How late the adapter may deliver a byte, in ms (FTDI default latency timer: 16).
+    /// Timing gaps shorter than this are not trusted. [default: 0, or what the capture says]
+    #[arg(long)]
+    pub latency_ms: Option<f64>,
+}
+
+/// How the generator's bytes reach the reader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ObserveArg {
+    /// One read per byte, exact timestamps.
+    PerByte,
+    /// 16550 UART FIFO: 14-byte trigger, 4-character timeout.
+    Fifo,
+    /// USB adapter, 1 ms latency timer.
+    Usb1,
+    /// USB adapter, 16 ms latency timer (FTDI default).
+    Usb16,
+}
+
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Explain Modbus frames given as hex (RTU, TCP) or ASCII (`:...`).
@@ -49,5 +114,43 @@ pub enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value_t = FormatArg::Text)]
         format: FormatArg,
+    },
+    /// Replay a line capture (pcap/pcapng, link type 147) through the analyzer.
+    ///
+    /// Each packet is one chunk as a serial read delivered it, with its timestamp; frames are
+    /// rebuilt, paired and shown exactly as a live session would have.
+    Replay {
+        /// The capture file.
+        file: PathBuf,
+        #[command(flatten)]
+        line: LineArgs,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
+        format: EventFormatArg,
+    },
+    /// Write a synthetic line capture with known content (for training, tests and benchmarks).
+    Generate {
+        /// Output pcapng file.
+        out: PathBuf,
+        /// Transactions to generate.
+        #[arg(long, default_value_t = 1000)]
+        transactions: usize,
+        /// Random seed (the same seed gives the same file).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[command(flatten)]
+        line: LineArgs,
+        /// How the bytes are read.
+        #[arg(long, value_enum, default_value_t = ObserveArg::PerByte)]
+        observe: ObserveArg,
+        /// Probability of a noise burst before a transaction.
+        #[arg(long, default_value_t = 0.02)]
+        noise: f64,
+        /// Probability that a frame has a corrupted byte.
+        #[arg(long, default_value_t = 0.02)]
+        corrupt: f64,
+        /// Probability that a response pauses inside (a slow slave).
+        #[arg(long, default_value_t = 0.02)]
+        slow: f64,
     },
 }

@@ -6,12 +6,18 @@
 //! - [`decode_cmd`] — the `mbtap decode` command: frames given by a user, explained.
 //! - [`hexinput`] — reading the hex and ASCII frames users paste.
 
+pub mod analyzer;
+pub mod capture;
 pub mod chunk;
 pub mod cli;
 pub mod decode_cmd;
 pub mod framer;
 pub mod fuzzing;
+pub mod generate_cmd;
 pub mod hexinput;
+pub mod line_args;
+pub mod pairing;
 pub mod proto;
+pub mod replay_cmd;
 pub mod report;
 pub mod traffic;

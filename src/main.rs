@@ -5,9 +5,14 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Parser;
-use mbtap::cli::{Cli, Command, FormatArg, ModeArg};
+use mbtap::analyzer::SerialMode;
+use mbtap::cli::{Cli, Command, EventFormatArg, FormatArg, LineArgs, ModeArg, ObserveArg, ParityArg, SerialModeArg};
 use mbtap::decode_cmd::{self, Format};
+use mbtap::framer::{LineSettings, Parity};
+use mbtap::line_args::LineOverrides;
 use mbtap::proto::Mode;
+use mbtap::replay_cmd::{EventFormat, EventWriter};
+use mbtap::traffic::{Observation, TrafficConfig};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -54,5 +59,71 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             out.flush()?;
             Ok(ExitCode::from(outcome as u8))
         }
+        Command::Replay { file, line, format } => {
+            let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+            let stdout = io::stdout();
+            let mut writer =
+                EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
+            mbtap::replay_cmd::replay(
+                io::BufReader::with_capacity(1 << 20, input),
+                overrides(&line),
+                &mut writer,
+                &mut io::stderr(),
+            )
+            .with_context(|| format!("replaying {}", file.display()))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Generate { out, transactions, seed, line, observe, noise, corrupt, slow } => {
+            let (_, settings, _) = overrides(&line).resolve();
+            let cfg =
+                TrafficConfig { seed, line: settings, transactions, noise, corrupt, slow, ..TrafficConfig::default() };
+            let model = match observe {
+                ObserveArg::PerByte => Observation::PerByte,
+                ObserveArg::Fifo => Observation::FIFO_16550,
+                ObserveArg::Usb1 => Observation::USB_1MS,
+                ObserveArg::Usb16 => Observation::USB_16MS,
+            };
+            let file = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
+            let (chunks, bytes) = mbtap::generate_cmd::write_capture(io::BufWriter::new(file), &cfg, model)
+                .with_context(|| format!("writing {}", out.display()))?;
+            eprintln!(
+                "mbtap: wrote {} ({transactions} transactions, {bytes} bytes in {chunks} packets, {settings}, {})",
+                out.display(),
+                model.name()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }
+
+fn event_format(f: EventFormatArg) -> EventFormat {
+    match f {
+        EventFormatArg::Text => EventFormat::Text,
+        EventFormatArg::Jsonl => EventFormat::Jsonl,
+        EventFormatArg::Summary => EventFormat::Summary,
+    }
+}
+
+fn overrides(a: &LineArgs) -> LineOverrides {
+    LineOverrides {
+        mode: a.mode.map(|m| match m {
+            SerialModeArg::Rtu => SerialMode::Rtu,
+            SerialModeArg::Ascii => SerialMode::Ascii,
+        }),
+        baud: a.baud,
+        data_bits: a.data_bits,
+        parity: a.parity.map(|p| match p {
+            ParityArg::None => Parity::None,
+            ParityArg::Even => Parity::Even,
+            ParityArg::Odd => Parity::Odd,
+        }),
+        stop_bits: a.stop_bits,
+        // Milliseconds given by a person; negative or absurd values clamp to 0..=10 s.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
+    }
+}
+
+#[allow(dead_code)]
+fn _unused(_: LineSettings) {}

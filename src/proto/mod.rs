@@ -29,7 +29,7 @@ pub use data::{Bits, DeviceObjects, FileRecords, FileSubRequests, Registers};
 pub use decode::{DecodedPdu, DirectionHint, Pdu, PduDecode, decode_pdu, pair_findings};
 pub use error::{AduError, EncodeError, PduError};
 pub use findings::{Finding, Severity};
-pub use function::{DiagnosticSubFunction, ExceptionCode, FunctionCode, MeiType};
+pub use function::{DiagnosticSubFunction, EXCEPTION_FLAG, ExceptionCode, FunctionCode, MeiType};
 pub use length::{PduLength, request_len, response_len};
 pub use request::{Request, parse_request};
 pub use response::{Response, parse_response};

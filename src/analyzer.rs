@@ -1,0 +1,170 @@
+//! The analyzer: chunks in, frames, noise and transactions out — the one code path shared by
+//! live capture, replay and tests. Pure: time comes in with the chunks.
+
+use crate::chunk::{Chunk, PortId, Timestamp};
+use crate::framer::{AsciiFramer, Frame, FrameEvent, FramerConfig, Noise, RtuFramer};
+use crate::pairing::{Pairing, PairingConfig, Role, Transaction};
+use crate::proto::{parse_ascii, parse_rtu};
+
+/// Serial transmission mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SerialMode {
+    Rtu,
+    Ascii,
+}
+
+impl SerialMode {
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Rtu => "rtu",
+            Self::Ascii => "ascii",
+        }
+    }
+}
+
+/// Analyzer settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AnalyzerConfig {
+    pub mode: SerialMode,
+    pub framer: FramerConfig,
+    pub pairing: PairingConfig,
+}
+
+impl Default for AnalyzerConfig {
+    fn default() -> Self {
+        Self { mode: SerialMode::Rtu, framer: FramerConfig::default(), pairing: PairingConfig::default() }
+    }
+}
+
+/// What the analyzer reports.
+#[derive(Debug, Clone, Copy)]
+pub enum Event<'a> {
+    /// A frame (good or failed check) and the role pairing gave it.
+    Frame {
+        frame: &'a Frame<'a>,
+        role: Role,
+        unit: Option<u8>,
+        pdu: Option<&'a [u8]>,
+    },
+    Noise(&'a Noise<'a>),
+    Transaction(&'a Transaction<'a>),
+}
+
+/// Receives analyzer events.
+pub trait Sink {
+    fn event(&mut self, event: &Event<'_>);
+}
+
+impl<F: FnMut(&Event<'_>)> Sink for F {
+    fn event(&mut self, event: &Event<'_>) {
+        self(event);
+    }
+}
+
+#[derive(Debug)]
+// One per port, a handful per analyzer: boxing the larger variant would buy nothing.
+#[allow(clippy::large_enum_variant)]
+enum PortFramer {
+    Rtu(RtuFramer),
+    Ascii(AsciiFramer),
+}
+
+/// Framers per port and one pairing over the bus.
+#[derive(Debug)]
+pub struct Analyzer {
+    config: AnalyzerConfig,
+    ports: Vec<(PortId, PortFramer)>,
+    pairing: Pairing,
+    /// Decoded ASCII frame bytes (address, PDU, LRC), reused.
+    scratch: Vec<u8>,
+}
+
+impl Analyzer {
+    #[must_use]
+    pub fn new(config: AnalyzerConfig) -> Self {
+        Self { config, ports: Vec::new(), pairing: Pairing::new(config.pairing), scratch: Vec::new() }
+    }
+
+    #[must_use]
+    pub const fn config(&self) -> &AnalyzerConfig {
+        &self.config
+    }
+
+    fn port_index(&mut self, port: PortId) -> usize {
+        if let Some(i) = self.ports.iter().position(|(p, _)| *p == port) {
+            return i;
+        }
+        let framer = match self.config.mode {
+            SerialMode::Rtu => PortFramer::Rtu(RtuFramer::new(port, self.config.framer)),
+            SerialMode::Ascii => PortFramer::Ascii(AsciiFramer::new(port, self.config.framer.line)),
+        };
+        self.ports.push((port, framer));
+        self.ports.len() - 1
+    }
+
+    /// Feeds one chunk.
+    pub fn push<S: Sink>(&mut self, chunk: &Chunk<'_>, sink: &mut S) {
+        let i = self.port_index(chunk.port);
+        let (pairing, scratch) = (&mut self.pairing, &mut self.scratch);
+        let mut emit = |e: FrameEvent<'_>| route(pairing, scratch, e, sink);
+        match &mut self.ports[i].1 {
+            PortFramer::Rtu(f) => f.push(chunk, &mut emit),
+            PortFramer::Ascii(f) => f.push(chunk, &mut emit),
+        }
+    }
+
+    /// The time is `now` and nothing arrived: framers flush what silence decides, pairing
+    /// times out what waited too long.
+    pub fn tick<S: Sink>(&mut self, now: Timestamp, sink: &mut S) {
+        for (_, framer) in &mut self.ports {
+            let (pairing, scratch) = (&mut self.pairing, &mut self.scratch);
+            let mut emit = |e: FrameEvent<'_>| route(pairing, scratch, e, sink);
+            match framer {
+                PortFramer::Rtu(f) => f.tick(now, &mut emit),
+                PortFramer::Ascii(f) => f.tick(now, &mut emit),
+            }
+        }
+        self.pairing.tick(now, &mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
+    }
+
+    /// End of input.
+    pub fn finish<S: Sink>(&mut self, sink: &mut S) {
+        for (_, framer) in &mut self.ports {
+            let (pairing, scratch) = (&mut self.pairing, &mut self.scratch);
+            let mut emit = |e: FrameEvent<'_>| route(pairing, scratch, e, sink);
+            match framer {
+                PortFramer::Rtu(f) => f.finish(&mut emit),
+                PortFramer::Ascii(f) => f.finish(&mut emit),
+            }
+        }
+        self.pairing.finish_all(&mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
+    }
+}
+
+fn route<S: Sink>(pairing: &mut Pairing, scratch: &mut Vec<u8>, e: FrameEvent<'_>, sink: &mut S) {
+    match e {
+        FrameEvent::Noise(n) => sink.event(&Event::Noise(&n)),
+        FrameEvent::Frame(f) => {
+            let decoded: Option<(u8, &[u8])> = if f.bytes.first() == Some(&b':') {
+                match parse_ascii(f.bytes) {
+                    Ok(a) => {
+                        scratch.clear();
+                        scratch.push(a.unit());
+                        scratch.extend_from_slice(a.pdu());
+                        scratch.split_first().map(|(u, p)| (*u, p))
+                    }
+                    Err(_) => None,
+                }
+            } else {
+                parse_rtu(f.bytes).ok().map(|r| (r.unit, r.pdu))
+            };
+            let role = match decoded {
+                Some((unit, pdu)) => pairing.role_of(&f, unit, pdu),
+                None => Role::Unknown,
+            };
+            sink.event(&Event::Frame { frame: &f, role, unit: decoded.map(|d| d.0), pdu: decoded.map(|d| d.1) });
+            pairing.frame(&f, decoded, &mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
+        }
+    }
+}

@@ -1,0 +1,376 @@
+//! Reading line captures (pcap or pcapng, link type 147) as a stream of chunks, with memory
+//! bounded by the largest block, whatever the file's length.
+//!
+//! Bad input never stops a replay early if anything after it can be read: a corrupt block is
+//! reported with its offset and skipped by searching for the next plausible block; a
+//! truncated file ends with a warning; packets of other link types are skipped with one
+//! warning per interface; timestamps that go backwards are reported and held at the last
+//! good value so the framer's time never runs backwards.
+
+use std::io::{self, Read};
+
+use nom::number::Endianness;
+use thiserror::Error;
+
+use super::LINKTYPE_USER0;
+use super::format::{
+    EPB, FileKind, FormatError, IDB, Interface, MAX_BLOCK, SHB, SPB, Step, parse_block, parse_epb, parse_file_kind,
+    parse_idb, parse_pcap_record, parse_shb_endian, parse_spb, ticks_to_ns,
+};
+use crate::chunk::{PortId, Timestamp};
+
+/// Errors that end reading.
+#[derive(Debug, Error)]
+pub enum CaptureError {
+    #[error("reading the capture: {0}")]
+    Io(#[from] io::Error),
+    #[error("{0}")]
+    Format(#[from] FormatError),
+}
+
+/// One thing read from a capture.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Item<'a> {
+    /// A received chunk.
+    Packet { port: PortId, t: Timestamp, data: &'a [u8] },
+    /// An interface (port) was described; its description may carry line settings.
+    Interface { port: PortId, interface: Interface },
+    /// Something was wrong; reading goes on.
+    Warning(String),
+}
+
+const READ_SIZE: usize = 1 << 20;
+/// Backwards-timestamp warnings shown before they are only counted.
+const MAX_TIME_WARNINGS: u32 = 5;
+
+/// A streaming capture reader.
+#[derive(Debug)]
+pub struct CaptureReader<R> {
+    src: R,
+    buf: Vec<u8>,
+    start: usize,
+    end: usize,
+    eof: bool,
+    /// File offset of `buf[start]`.
+    offset: u64,
+    kind: Option<FileKind>,
+    endian: Endianness,
+    interfaces: Vec<Interface>,
+    warned_linktype: Vec<bool>,
+    last_t: Vec<u64>,
+    time_warnings: u32,
+    /// Backwards timestamps seen in total.
+    pub backwards_timestamps: u64,
+    /// A packet to deliver right after the warning about its timestamp.
+    pending_packet: Option<(u32, u64, usize, usize)>,
+}
+
+enum Next {
+    Packet { port: u32, t: u64, at: usize, len: usize },
+    Interface(u32, Interface),
+    Warning(String),
+    Continue,
+    End,
+}
+
+impl<R: Read> CaptureReader<R> {
+    #[must_use]
+    pub fn new(src: R) -> Self {
+        Self {
+            src,
+            buf: vec![0; READ_SIZE],
+            start: 0,
+            end: 0,
+            eof: false,
+            offset: 0,
+            kind: None,
+            endian: Endianness::Little,
+            interfaces: Vec::new(),
+            warned_linktype: Vec::new(),
+            last_t: Vec::new(),
+            time_warnings: 0,
+            backwards_timestamps: 0,
+            pending_packet: None,
+        }
+    }
+
+    /// Makes at least `n` bytes available from `start`, unless the file ends first.
+    fn fill(&mut self, n: usize) -> io::Result<()> {
+        if self.end - self.start >= n || self.eof {
+            return Ok(());
+        }
+        if self.start > 0 {
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+        }
+        if self.buf.len() < n {
+            self.buf.resize(n.max(READ_SIZE), 0);
+        }
+        while self.end < n && !self.eof {
+            let got = self.src.read(&mut self.buf[self.end..])?;
+            if got == 0 {
+                self.eof = true;
+            }
+            self.end += got;
+        }
+        Ok(())
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.start += n;
+        self.offset += n as u64;
+    }
+
+    /// The next item, `None` at the end of the file.
+    ///
+    /// # Errors
+    /// I/O errors, and a file that is neither pcap nor pcapng.
+    pub fn next_item(&mut self) -> Result<Option<Item<'_>>, CaptureError> {
+        loop {
+            match self.step()? {
+                Next::Packet { port, t, at, len } => {
+                    return Ok(Some(Item::Packet {
+                        port: PortId(u8::try_from(port).unwrap_or(u8::MAX)),
+                        t: Timestamp(t),
+                        data: &self.buf[at..at + len],
+                    }));
+                }
+                Next::Interface(id, interface) => {
+                    return Ok(Some(Item::Interface { port: PortId(u8::try_from(id).unwrap_or(u8::MAX)), interface }));
+                }
+                Next::Warning(w) => return Ok(Some(Item::Warning(w))),
+                Next::Continue => {}
+                Next::End => return Ok(None),
+            }
+        }
+    }
+
+    fn step(&mut self) -> Result<Next, CaptureError> {
+        if let Some((port, t, at, len)) = self.pending_packet.take() {
+            return Ok(Next::Packet { port, t, at, len });
+        }
+        let Some(kind) = self.kind else {
+            self.fill(24)?;
+            return match parse_file_kind(&self.buf[self.start..self.end])? {
+                Step::Item(k, used) => {
+                    self.kind = Some(k);
+                    if let FileKind::Pcap { endian, linktype, .. } = k {
+                        self.endian = endian;
+                        self.consume(used);
+                        let iface = Interface {
+                            linktype: u16::try_from(linktype).unwrap_or(0),
+                            ticks_per_sec: 0,
+                            name: None,
+                            description: None,
+                        };
+                        return Ok(self.add_interface(iface));
+                    }
+                    Ok(Next::Continue)
+                }
+                Step::NeedMore(_) => Ok(Next::End),
+            };
+        };
+        let avail = self.end - self.start;
+        if avail == 0 {
+            self.fill(1)?;
+            if self.end == self.start {
+                return Ok(Next::End);
+            }
+        }
+        let parsed = match kind {
+            FileKind::Pcap { endian, nanos, .. } => self.pcap_step(endian, nanos),
+            FileKind::PcapNg => self.pcapng_step(),
+        };
+        match parsed {
+            Ok(n) => Ok(n),
+            Err(e) => Ok(self.resync(&e)),
+        }
+    }
+
+    fn need(&mut self, n: usize) -> Result<bool, CaptureError> {
+        self.fill(n)?;
+        Ok(self.end - self.start >= n)
+    }
+
+    fn truncated(&mut self) -> Next {
+        let left = self.end - self.start;
+        let at = self.offset;
+        self.consume(left);
+        Next::Warning(format!(
+            "the file ends in the middle of a block at offset {at}: its last {left} bytes are ignored"
+        ))
+    }
+
+    fn pcap_step(&mut self, endian: Endianness, nanos: bool) -> Result<Next, FormatError> {
+        loop {
+            match parse_pcap_record(&self.buf[self.start..self.end], endian)? {
+                Step::Item(r, used) => {
+                    let frac = if nanos { u64::from(r.ts_frac) } else { u64::from(r.ts_frac) * 1000 };
+                    let t = u64::from(r.ts_sec) * 1_000_000_000 + frac;
+                    let at = self.start + 16;
+                    let len = r.data.len();
+                    self.consume(used);
+                    return Ok(self.packet(0, t, at, len));
+                }
+                Step::NeedMore(n) => {
+                    if !self.need(n).map_err(|_| FormatError::Short { what: "pcap record" })? {
+                        return Ok(self.truncated());
+                    }
+                }
+            }
+        }
+    }
+
+    fn pcapng_step(&mut self) -> Result<Next, FormatError> {
+        loop {
+            let input = &self.buf[self.start..self.end];
+            // A section header carries its own byte order.
+            if input.len() >= 4 && u32::from_le_bytes([input[0], input[1], input[2], input[3]]) == SHB {
+                match parse_shb_endian(input)? {
+                    Step::Item(e, _) => {
+                        self.endian = e;
+                        self.interfaces.clear();
+                        self.warned_linktype.clear();
+                        self.last_t.clear();
+                    }
+                    Step::NeedMore(n) => {
+                        if !self.need(n).map_err(|_| FormatError::Short { what: "section header" })? {
+                            return Ok(self.truncated());
+                        }
+                        continue;
+                    }
+                }
+            }
+            let input = &self.buf[self.start..self.end];
+            match parse_block(input, self.endian)? {
+                Step::NeedMore(n) => {
+                    if !self.need(n).map_err(|_| FormatError::Short { what: "block" })? {
+                        return Ok(self.truncated());
+                    }
+                }
+                Step::Item(block, used) => {
+                    let body_at = self.start + 8;
+                    let next = match block.block_type {
+                        IDB => {
+                            let iface = parse_idb(block.body, self.endian)?;
+                            self.consume(used);
+                            return Ok(self.add_interface(iface));
+                        }
+                        EPB | SPB => {
+                            let p = if block.block_type == EPB {
+                                parse_epb(block.body, self.endian)?
+                            } else {
+                                parse_spb(block.body, self.endian)?
+                            };
+                            let data_at = body_at + if block.block_type == EPB { 20 } else { 4 };
+                            let len = p.data.len();
+                            let iface = self.interfaces.get(p.interface as usize);
+                            let t = match (p.ticks, iface) {
+                                (Some(ticks), Some(i)) => ticks_to_ns(ticks, i.ticks_per_sec),
+                                _ => self.last_t.get(p.interface as usize).copied().unwrap_or(0),
+                            };
+                            if iface.is_none() {
+                                let id = p.interface;
+                                self.consume(used);
+                                return Ok(Next::Warning(format!(
+                                    "packet at offset {} names interface {id}, which was never described: skipped",
+                                    self.offset - used as u64
+                                )));
+                            }
+                            let interface = p.interface;
+                            self.consume(used);
+                            self.packet(interface, t, data_at, len)
+                        }
+                        // Section headers were handled above; name resolution, statistics,
+                        // custom and unknown blocks carry nothing for us.
+                        _ => {
+                            self.consume(used);
+                            Next::Continue
+                        }
+                    };
+                    return Ok(next);
+                }
+            }
+        }
+    }
+
+    fn add_interface(&mut self, iface: Interface) -> Next {
+        let id = u32::try_from(self.interfaces.len()).unwrap_or(u32::MAX);
+        self.interfaces.push(iface.clone());
+        self.warned_linktype.push(false);
+        self.last_t.push(0);
+        Next::Interface(id, iface)
+    }
+
+    fn packet(&mut self, interface: u32, t: u64, at: usize, len: usize) -> Next {
+        let i = interface as usize;
+        let Some(iface) = self.interfaces.get(i) else { return Next::Continue };
+        if u32::from(iface.linktype) != LINKTYPE_USER0 {
+            if !self.warned_linktype[i] {
+                self.warned_linktype[i] = true;
+                return Next::Warning(format!(
+                    "interface {i} has link type {}, not {LINKTYPE_USER0} (LINKTYPE_USER0, raw serial bytes): its packets are skipped",
+                    iface.linktype
+                ));
+            }
+            return Next::Continue;
+        }
+        let last = self.last_t[i];
+        let t = if t < last {
+            self.backwards_timestamps += 1;
+            self.time_warnings += 1;
+            if self.time_warnings <= MAX_TIME_WARNINGS {
+                let w = format!(
+                    "timestamp goes backwards by {} µs at offset {} (interface {i}); held at the previous value{}",
+                    (last - t) / 1000,
+                    self.offset,
+                    if self.time_warnings == MAX_TIME_WARNINGS { " (further cases are only counted)" } else { "" }
+                );
+                self.last_t[i] = last;
+                // The packet itself is still delivered, on the next call.
+                self.pending_packet = Some((interface, last, at, len));
+                return Next::Warning(w);
+            }
+            last
+        } else {
+            t
+        };
+        self.last_t[i] = t;
+        Next::Packet { port: interface, t, at, len }
+    }
+
+    /// After a format error: report it and look for the next plausible block or record.
+    fn resync(&mut self, e: &FormatError) -> Next {
+        let at = self.offset;
+        let window = &self.buf[self.start..self.end];
+        let found = (1..window.len()).find(|&i| self.plausible_at(&window[i..]));
+        let skip = found.unwrap_or(window.len());
+        self.consume(skip);
+        if found.is_none() && !self.eof {
+            // Nothing plausible in the buffer: the next fill brings more to search.
+            return Next::Warning(format!("corrupt data at offset {at} ({e}): {skip} bytes skipped, still searching"));
+        }
+        Next::Warning(format!("corrupt data at offset {at} ({e}): skipped {skip} bytes to the next readable block"))
+    }
+
+    fn plausible_at(&self, b: &[u8]) -> bool {
+        match self.kind {
+            Some(FileKind::PcapNg) => match parse_block(b, self.endian) {
+                Ok(Step::Item(block, _)) => matches!(block.block_type, IDB | EPB | SPB | SHB | 2 | 4 | 5),
+                _ => false,
+            },
+            Some(FileKind::Pcap { endian, .. }) => match parse_pcap_record(b, endian) {
+                Ok(Step::Item(r, used)) => {
+                    let last_sec = self.last_t.first().copied().unwrap_or(0) / 1_000_000_000;
+                    r.orig_len as usize >= r.data.len()
+                        && r.data.len() <= MAX_BLOCK as usize
+                        && (last_sec == 0 || u64::from(r.ts_sec).abs_diff(last_sec) < 86_400)
+                        && matches!(parse_pcap_record(&b[used..], endian), Ok(Step::Item(..) | Step::NeedMore(_)))
+                }
+                _ => false,
+            },
+            None => false,
+        }
+    }
+}

@@ -1,0 +1,289 @@
+//! Pairing on a half-duplex bus: each request with the response that answers it.
+//!
+//! The bus carries one transaction at a time (Modbus over Serial Line v1.02 §2.1: the master
+//! "initiates only one MODBUS transaction at the same time"), so a frame is a response when it
+//! answers the pending request — same unit, same function or its exception, and a response
+//! structure — and a request otherwise. What does not fit is reported as what it is: an
+//! orphan response, a response from another unit, a request that got no answer.
+
+use crate::chunk::{PortId, Timestamp};
+use crate::framer::Frame;
+use crate::proto::{DecodedPdu, DirectionHint, EXCEPTION_FLAG, Pdu, PduDecode, decode_pdu};
+
+/// How a transaction ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// A normal response.
+    Ok,
+    /// An exception response with this code.
+    Exception(u8),
+    /// No response before the timeout or before the next request.
+    NoResponse,
+    /// A broadcast (unit 0): no response is expected.
+    Broadcast,
+    /// The response failed its CRC check.
+    BadResponse,
+    /// A response with nothing pending that it answers.
+    Orphan,
+    /// A response from a unit other than the one asked.
+    WrongUnit(u8),
+}
+
+impl Outcome {
+    /// A stable snake_case name.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Ok => "ok",
+            Self::Exception(_) => "exception",
+            Self::NoResponse => "no_response",
+            Self::Broadcast => "broadcast",
+            Self::BadResponse => "bad_response",
+            Self::Orphan => "orphan_response",
+            Self::WrongUnit(_) => "wrong_unit",
+        }
+    }
+}
+
+/// Longest frame on the wire (an ASCII frame: 513 characters, Modbus over Serial Line v1.02
+/// §2.5.2.1); request copies are kept in a fixed buffer of this size.
+const MAX: usize = 513;
+
+/// A completed (or abandoned) transaction, borrowing its frames (RTU, as on the wire) for the
+/// duration of the callback: pairing allocates nothing per transaction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Transaction<'a> {
+    pub outcome: Outcome,
+    pub unit: u8,
+    /// The function code of the request (or of the orphan response).
+    pub function: u8,
+    pub request: Option<&'a [u8]>,
+    pub response: Option<&'a [u8]>,
+    /// Start of the first frame.
+    pub t_start: Timestamp,
+    /// End of the request to start of the response.
+    pub latency_ns: Option<u64>,
+}
+
+/// Pairing settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PairingConfig {
+    /// How long after a request its response may start. The serial-line spec leaves the
+    /// response timeout to the implementation (Modbus over Serial Line v1.02 §2.4.1); 1 s is
+    /// the common master default.
+    pub timeout_ns: u64,
+    /// Port that carries only requests (a 4-wire or two-port tap), if any.
+    pub request_port: Option<PortId>,
+    /// Port that carries only responses, if any.
+    pub response_port: Option<PortId>,
+}
+
+impl Default for PairingConfig {
+    fn default() -> Self {
+        Self { timeout_ns: 1_000_000_000, request_port: None, response_port: None }
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Pending {
+    bytes: [u8; MAX],
+    len: usize,
+    unit: u8,
+    function: u8,
+    t_start: Timestamp,
+    t_end: Timestamp,
+}
+
+/// The pairing state machine.
+#[derive(Debug, Clone, Default)]
+pub struct Pairing {
+    config: PairingConfig,
+    pending: Option<Box<Pending>>,
+    spare: Option<Box<Pending>>,
+}
+
+enum Decision {
+    Unknown,
+    Request,
+    Answers(Outcome),
+    Orphan,
+}
+
+impl Pending {
+    const EMPTY: Self =
+        Self { bytes: [0; MAX], len: 0, unit: 0, function: 0, t_start: Timestamp(0), t_end: Timestamp(0) };
+}
+
+/// What pairing decided about one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    Request,
+    Response,
+    /// A failed check or bytes that fit neither reading.
+    Unknown,
+}
+
+impl Pairing {
+    #[must_use]
+    pub fn new(config: PairingConfig) -> Self {
+        Self { config, pending: None, spare: None }
+    }
+
+    fn role_hint(&self, port: PortId) -> DirectionHint {
+        if self.config.request_port == Some(port) {
+            DirectionHint::Request
+        } else if self.config.response_port == Some(port) {
+            DirectionHint::Response
+        } else {
+            DirectionHint::Unknown
+        }
+    }
+
+    /// What a frame is, given the pending request. Pure: `frame` acts on it.
+    fn decide(&self, f: &Frame<'_>, unit: u8, pdu: &[u8]) -> Decision {
+        let hint = self.role_hint(f.port);
+        let Some(&fc) = pdu.first() else { return Decision::Unknown };
+        if !f.check_ok {
+            // A damaged frame right after a request is most likely its response.
+            return if hint != DirectionHint::Request && self.pending.is_some() {
+                Decision::Answers(Outcome::BadResponse)
+            } else {
+                Decision::Unknown
+            };
+        }
+        let base = fc & !EXCEPTION_FLAG;
+        let answers = self
+            .pending
+            .as_ref()
+            .is_some_and(|p| p.unit == unit && p.function == base && hint != DirectionHint::Request)
+            && clean(pdu, DirectionHint::Response);
+        if answers {
+            return Decision::Answers(if fc & EXCEPTION_FLAG != 0 {
+                Outcome::Exception(pdu.get(1).copied().unwrap_or(0))
+            } else {
+                Outcome::Ok
+            });
+        }
+        if hint != DirectionHint::Response && fc & EXCEPTION_FLAG == 0 && clean(pdu, DirectionHint::Request) {
+            return Decision::Request;
+        }
+        match &self.pending {
+            Some(p) if p.unit != unit && p.function == base => Decision::Answers(Outcome::WrongUnit(unit)),
+            _ => Decision::Orphan,
+        }
+    }
+
+    /// The role pairing will give a frame, without changing state (to show the frame before
+    /// the transaction it completes).
+    #[must_use]
+    pub fn role_of(&self, f: &Frame<'_>, unit: u8, pdu: &[u8]) -> Role {
+        match self.decide(f, unit, pdu) {
+            Decision::Unknown => Role::Unknown,
+            Decision::Request => Role::Request,
+            Decision::Answers(_) | Decision::Orphan => Role::Response,
+        }
+    }
+
+    /// Feeds one frame with its unit and PDU (`None` when too short to have them); emits
+    /// finished transactions; returns the role given to the frame.
+    pub fn frame<F: FnMut(Transaction<'_>)>(
+        &mut self,
+        f: &Frame<'_>,
+        decoded: Option<(u8, &[u8])>,
+        emit: &mut F,
+    ) -> Role {
+        self.tick(f.t_start, emit);
+        let Some((unit, pdu)) = decoded else { return Role::Unknown };
+        match self.decide(f, unit, pdu) {
+            Decision::Unknown => Role::Unknown,
+            Decision::Answers(outcome) => {
+                if let Some(p) = self.pending.take() {
+                    emit(Self::finish(&p, outcome, Some(f)));
+                    self.spare = Some(p);
+                }
+                Role::Response
+            }
+            Decision::Request => {
+                if let Some(p) = self.pending.take() {
+                    emit(Self::finish(&p, Outcome::NoResponse, None));
+                    self.spare = Some(p);
+                }
+                let fc = pdu.first().copied().unwrap_or(0);
+                if unit == 0 {
+                    emit(Transaction {
+                        outcome: Outcome::Broadcast,
+                        unit: 0,
+                        function: fc,
+                        request: Some(f.bytes),
+                        response: None,
+                        t_start: f.t_start,
+                        latency_ns: None,
+                    });
+                } else {
+                    // Reuse the pending box's allocation from one request to the next.
+                    let mut p = self.spare.take().unwrap_or_else(|| Box::new(Pending::EMPTY));
+                    let len = f.bytes.len().min(MAX);
+                    p.bytes[..len].copy_from_slice(&f.bytes[..len]);
+                    p.len = len;
+                    p.unit = unit;
+                    p.function = fc;
+                    p.t_start = f.t_start;
+                    p.t_end = f.t_end;
+                    self.pending = Some(p);
+                }
+                Role::Request
+            }
+            Decision::Orphan => {
+                let fc = pdu.first().copied().unwrap_or(0);
+                emit(Transaction {
+                    outcome: Outcome::Orphan,
+                    unit,
+                    function: fc & !EXCEPTION_FLAG,
+                    request: None,
+                    response: Some(f.bytes),
+                    t_start: f.t_start,
+                    latency_ns: None,
+                });
+                Role::Response
+            }
+        }
+    }
+
+    /// The time is `now`: a request pending longer than the timeout got no response.
+    pub fn tick<F: FnMut(Transaction<'_>)>(&mut self, now: Timestamp, emit: &mut F) {
+        if let Some(p) = &self.pending
+            && now.since(p.t_end) > self.config.timeout_ns
+            && let Some(p) = self.pending.take()
+        {
+            emit(Self::finish(&p, Outcome::NoResponse, None));
+            self.spare = Some(p);
+        }
+    }
+
+    /// End of input: a pending request got no response.
+    pub fn finish_all<F: FnMut(Transaction<'_>)>(&mut self, emit: &mut F) {
+        if let Some(p) = self.pending.take() {
+            emit(Self::finish(&p, Outcome::NoResponse, None));
+        }
+    }
+
+    fn finish<'a>(p: &'a Pending, outcome: Outcome, response: Option<&Frame<'a>>) -> Transaction<'a> {
+        Transaction {
+            outcome,
+            unit: p.unit,
+            function: p.function,
+            request: Some(&p.bytes[..p.len]),
+            response: response.map(|f| f.bytes),
+            t_start: p.t_start,
+            latency_ns: response.map(|f| f.t_start.since(p.t_end)),
+        }
+    }
+}
+
+/// Does the PDU read cleanly (no trailing bytes) in this direction?
+fn clean(pdu: &[u8], hint: DirectionHint) -> bool {
+    matches!(
+        decode_pdu(pdu, hint),
+        PduDecode::One(DecodedPdu { pdu: Pdu::Request(_) | Pdu::Response(_), trailing: [], .. })
+    )
+}

@@ -1,0 +1,127 @@
+//! `mbtap replay FILE`: a line capture through the analyzer, exactly as a live session would
+//! have seen it.
+
+use std::io::{self, Read, Write};
+
+use anyhow::Context;
+
+use crate::analyzer::{Analyzer, AnalyzerConfig, Event};
+use crate::capture::{CaptureReader, Item};
+use crate::chunk::Chunk;
+use crate::framer::FramerConfig;
+use crate::line_args::LineOverrides;
+use crate::report::events::{Stats, json, text_line};
+
+/// Output of `replay` and `sniff`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EventFormat {
+    Text,
+    Jsonl,
+    /// Only the summary at the end (fastest: the statistics sink).
+    Summary,
+}
+
+/// Writes events in a format and counts them.
+#[derive(Debug)]
+pub struct EventWriter<W: Write> {
+    pub out: W,
+    pub format: EventFormat,
+    pub stats: Stats,
+    pub error: Option<io::Error>,
+}
+
+impl<W: Write> EventWriter<W> {
+    pub fn new(out: W, format: EventFormat) -> Self {
+        Self { out, format, stats: Stats::default(), error: None }
+    }
+
+    /// Writes one event (errors are kept for the caller; a closed pipe stops output).
+    pub fn write(&mut self, e: &Event<'_>) {
+        self.stats.add(e);
+        if self.error.is_some() {
+            return;
+        }
+        let r = match self.format {
+            EventFormat::Text => writeln!(self.out, "{}", text_line(e)),
+            EventFormat::Jsonl => writeln!(self.out, "{}", json(e)),
+            EventFormat::Summary => Ok(()),
+        };
+        if let Err(err) = r {
+            self.error = Some(err);
+        }
+    }
+
+    /// A warning about the input.
+    pub fn warning(&mut self, err: &mut dyn Write, message: &str) {
+        match self.format {
+            EventFormat::Jsonl => {
+                let _ = writeln!(self.out, "{}", serde_json::json!({"event": "warning", "message": message}));
+            }
+            _ => {
+                let _ = writeln!(err, "mbtap: warning: {message}");
+            }
+        }
+    }
+
+    /// Writes the summary (text and summary formats) and flushes.
+    ///
+    /// # Errors
+    /// The first output error.
+    pub fn finish(mut self) -> io::Result<Stats> {
+        let r = match self.format {
+            EventFormat::Text | EventFormat::Summary => writeln!(self.out, "{}", self.stats.text()),
+            EventFormat::Jsonl => writeln!(self.out, "{}", self.stats.json()),
+        };
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
+        r?;
+        self.out.flush()?;
+        Ok(self.stats)
+    }
+}
+
+/// Replays a capture from `input` into `sink`; `cli` overrides the settings stored in the file.
+///
+/// # Errors
+/// When the file cannot be read at all (not pcap/pcapng, I/O error).
+pub fn replay<R: Read, W: Write>(
+    input: R,
+    cli: LineOverrides,
+    writer: &mut EventWriter<W>,
+    err: &mut dyn Write,
+) -> anyhow::Result<()> {
+    let mut reader = CaptureReader::new(input);
+    let mut analyzer: Option<Analyzer> = None;
+    let mut file_settings = LineOverrides::default();
+    let mut ports = 0usize;
+    loop {
+        let item = reader.next_item().context("reading the capture")?;
+        let Some(item) = item else { break };
+        match item {
+            Item::Interface { interface, .. } => {
+                ports += 1;
+                if ports == 1 {
+                    file_settings =
+                        interface.description.as_deref().map(LineOverrides::from_description).unwrap_or_default();
+                }
+            }
+            Item::Warning(w) => writer.warning(err, &w),
+            Item::Packet { port, t, data } => {
+                let a = analyzer.get_or_insert_with(|| {
+                    let (mode, line, latency_ns) = cli.or(file_settings).resolve();
+                    Analyzer::new(AnalyzerConfig {
+                        mode,
+                        framer: FramerConfig::new(line, latency_ns),
+                        ..AnalyzerConfig::default()
+                    })
+                });
+                a.push(&Chunk { port, t, bytes: data }, &mut |e: &Event<'_>| writer.write(e));
+            }
+        }
+    }
+    if let Some(a) = analyzer.as_mut() {
+        a.finish(&mut |e: &Event<'_>| writer.write(e));
+    }
+    Ok(())
+}

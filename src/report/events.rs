@@ -1,0 +1,350 @@
+//! Rendering analyzer events (frames, noise, transactions) as text lines and JSON lines, and
+//! the statistics sink. JSON keys follow the contract in ARCHITECTURE.md: every frame event
+//! has `event`, `hex`, `check_ok` and `t_ns` (estimated start, ns since the epoch).
+
+use std::fmt::Write as _;
+
+use serde_json::{Map, Value as J, json};
+
+use super::fields::{Field, Value, request_fields, response_fields};
+use crate::analyzer::Event;
+use crate::pairing::{Outcome, Role, Transaction};
+use crate::proto::{DecodedPdu, DirectionHint, FunctionCode, Pdu, PduDecode, decode_pdu};
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().fold(String::with_capacity(bytes.len() * 2), |mut s, b| {
+        let _ = write!(s, "{b:02x}");
+        s
+    })
+}
+
+fn spaced_hex(bytes: &[u8]) -> String {
+    let mut s = String::with_capacity(bytes.len() * 3);
+    for (i, b) in bytes.iter().enumerate() {
+        if i > 0 {
+            s.push(' ');
+        }
+        let _ = write!(s, "{b:02X}");
+    }
+    s
+}
+
+/// Wire text: ASCII frames as their characters (CR LF escaped), RTU as hex.
+fn wire(bytes: &[u8]) -> String {
+    if bytes.first() == Some(&b':') {
+        String::from_utf8_lossy(bytes).replace('\r', "\\r").replace('\n', "\\n")
+    } else {
+        spaced_hex(bytes)
+    }
+}
+
+fn role_name(role: Role) -> &'static str {
+    match role {
+        Role::Request => "request",
+        Role::Response => "response",
+        Role::Unknown => "unknown",
+    }
+}
+
+fn decode(pdu: &[u8], role: Role) -> Option<DecodedPdu<'_>> {
+    let hint = match role {
+        Role::Request => DirectionHint::Request,
+        Role::Response => DirectionHint::Response,
+        Role::Unknown => return None,
+    };
+    match decode_pdu(pdu, hint) {
+        PduDecode::One(d) => Some(d),
+        _ => None,
+    }
+}
+
+fn summary(fields: &[Field<'_>]) -> String {
+    let mut s = String::new();
+    for f in fields {
+        let v = match &f.value {
+            Value::Num(n) => n.to_string(),
+            Value::Hex(h) => format!("0x{h:04X}"),
+            Value::Name(n) => (*n).to_owned(),
+            Value::Text(t) => format!("{t:?}"),
+            Value::Bytes(b) => spaced_hex(b),
+            Value::Registers { values, .. } => {
+                let v: Vec<String> = values.iter().take(16).map(|r| r.to_string()).collect();
+                let more = if values.len() > 16 { ", …" } else { "" };
+                format!("[{}{more}]", v.join(", "))
+            }
+            Value::Bits { count, bits, .. } => {
+                let n = count.map_or(bits.capacity(), usize::from).min(32);
+                bits.iter(n).map(|b| if b { '1' } else { '0' }).collect()
+            }
+            Value::Records(r) => format!("{} record(s)", r.len()),
+        };
+        let _ = write!(s, " {}={v}", f.key);
+    }
+    s
+}
+
+fn time(t_ns: u64) -> String {
+    let secs = t_ns / 1_000_000_000;
+    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
+    format!("{h:02}:{m:02}:{s:02}.{:06}", (t_ns % 1_000_000_000) / 1000)
+}
+
+/// One event as a line of text.
+#[must_use]
+pub fn text_line(e: &Event<'_>) -> String {
+    match *e {
+        Event::Frame { frame, role, unit, pdu } => {
+            let mut line = format!("{} p{} ", time(frame.t_start.0), frame.port.0);
+            let check = if frame.check_ok { "ok " } else { "BAD" };
+            let fc = pdu.and_then(|p| p.first().copied());
+            match (unit, fc) {
+                (Some(u), Some(fc)) => {
+                    let name = if fc & 0x80 != 0 {
+                        format!("exception to {}", FunctionCode::from(fc & 0x7F).label())
+                    } else {
+                        FunctionCode::from(fc).label().to_owned()
+                    };
+                    let _ = write!(line, "{check} unit {u:>3} {:<8} 0x{fc:02X} {name}", role_name(role));
+                    if frame.check_ok
+                        && let Some(pdu) = pdu
+                        && let Some(d) = decode(pdu, role)
+                    {
+                        let fields = match d.pdu {
+                            Pdu::Request(r) => request_fields(&r),
+                            Pdu::Response(r) => response_fields(&r, None),
+                        };
+                        line.push_str(&summary(&fields));
+                    }
+                }
+                _ => {
+                    let _ = write!(line, "{check} frame too short to decode");
+                }
+            }
+            if let Some(g) = frame.gap_violation_ns {
+                let _ = write!(line, " [gap {} µs inside]", g / 1000);
+            }
+            if let Some(g) = frame.short_gap_before_ns {
+                let _ = write!(line, " [only {} µs after previous frame]", g / 1000);
+            }
+            let _ = write!(line, "  | {}", wire(frame.bytes));
+            line
+        }
+        Event::Noise(n) => {
+            format!("{} p{} NOISE {} byte(s) | {}", time(n.t_start.0), n.port.0, n.bytes.len(), wire(n.bytes))
+        }
+        Event::Transaction(t) => transaction_text(t),
+    }
+}
+
+fn transaction_text(t: &Transaction<'_>) -> String {
+    let mut line = format!(
+        "{} --> unit {:>3} 0x{:02X} {} {}",
+        time(t.t_start.0),
+        t.unit,
+        t.function,
+        FunctionCode::from(t.function).label(),
+        t.outcome.name()
+    );
+    if let Outcome::Exception(c) = t.outcome {
+        let _ = write!(line, " {}", crate::proto::ExceptionCode::from(c));
+    }
+    if let Outcome::WrongUnit(u) = t.outcome {
+        let _ = write!(line, " (answered by unit {u})");
+    }
+    if let Some(l) = t.latency_ns {
+        let _ = write!(line, " latency {}.{:03} ms", l / 1_000_000, (l / 1000) % 1000);
+    }
+    line
+}
+
+fn fields_json(fields: &[Field<'_>]) -> J {
+    let mut m = Map::new();
+    for f in fields {
+        let v = match &f.value {
+            Value::Num(n) => json!(n),
+            Value::Hex(h) => json!(h),
+            Value::Name(s) => json!(s),
+            Value::Text(s) => json!(s),
+            Value::Bytes(b) => json!(hex(b)),
+            Value::Registers { values, .. } => J::Array(values.iter().map(|v| json!(v)).collect()),
+            Value::Bits { count, bits, .. } => {
+                J::Array(bits.iter(count.map_or(bits.capacity(), usize::from)).map(|b| json!(u8::from(b))).collect())
+            }
+            Value::Records(rs) => J::Array(rs.iter().map(|r| fields_json(r)).collect()),
+        };
+        m.insert(f.key.to_owned(), v);
+    }
+    J::Object(m)
+}
+
+/// One event as a JSON object.
+#[must_use]
+pub fn json(e: &Event<'_>) -> J {
+    match *e {
+        Event::Frame { frame, role, unit, pdu } => {
+            let mut m = Map::new();
+            m.insert("event".into(), json!("frame"));
+            m.insert("t_ns".into(), json!(frame.t_start.0));
+            m.insert("t_end_ns".into(), json!(frame.t_end.0));
+            m.insert("port".into(), json!(frame.port.0));
+            let shown = if frame.bytes.first() == Some(&b':') {
+                String::from_utf8_lossy(frame.bytes).into_owned()
+            } else {
+                hex(frame.bytes)
+            };
+            m.insert("hex".into(), json!(shown));
+            m.insert("check_ok".into(), json!(frame.check_ok));
+            m.insert("len".into(), json!(frame.bytes.len()));
+            m.insert("direction".into(), json!(role_name(role)));
+            if let Some(u) = unit {
+                m.insert("unit".into(), json!(u));
+            }
+            if let Some(&fc) = pdu.and_then(|p| p.first()) {
+                m.insert("function".into(), json!(fc));
+                m.insert("function_name".into(), json!(FunctionCode::from(fc & 0x7F).label()));
+            }
+            if frame.check_ok
+                && let Some(pdu) = pdu
+                && let Some(d) = decode(pdu, role)
+            {
+                let fields = match d.pdu {
+                    Pdu::Request(r) => request_fields(&r),
+                    Pdu::Response(r) => response_fields(&r, None),
+                };
+                m.insert("fields".into(), fields_json(&fields));
+                m.insert("findings".into(), super::jsonl::findings(&d.findings));
+            }
+            if let Some(g) = frame.gap_violation_ns {
+                m.insert("gap_violation_ns".into(), json!(g));
+            }
+            if let Some(g) = frame.short_gap_before_ns {
+                m.insert("short_gap_before_ns".into(), json!(g));
+            }
+            if frame.bad_chars {
+                m.insert("bad_chars".into(), json!(true));
+            }
+            J::Object(m)
+        }
+        Event::Noise(n) => json!({
+            "event": "noise",
+            "t_ns": n.t_start.0,
+            "t_end_ns": n.t_end.0,
+            "port": n.port.0,
+            "hex": hex(n.bytes),
+            "check_ok": false,
+            "len": n.bytes.len(),
+        }),
+        Event::Transaction(t) => {
+            let mut m = Map::new();
+            m.insert("event".into(), json!("transaction"));
+            m.insert("t_ns".into(), json!(t.t_start.0));
+            m.insert("unit".into(), json!(t.unit));
+            m.insert("function".into(), json!(t.function));
+            m.insert("function_name".into(), json!(FunctionCode::from(t.function).label()));
+            m.insert("outcome".into(), json!(t.outcome.name()));
+            match t.outcome {
+                Outcome::Exception(c) => {
+                    m.insert("exception_code".into(), json!(c));
+                }
+                Outcome::WrongUnit(u) => {
+                    m.insert("responder".into(), json!(u));
+                }
+                _ => {}
+            }
+            if let Some(l) = t.latency_ns {
+                m.insert("latency_ns".into(), json!(l));
+            }
+            if let Some(r) = t.request {
+                m.insert("request_hex".into(), json!(hex(r)));
+            }
+            if let Some(r) = t.response {
+                m.insert("response_hex".into(), json!(hex(r)));
+            }
+            J::Object(m)
+        }
+    }
+}
+
+/// Counts of what went by: the statistics sink, and the summary printed after a replay.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    pub frames: u64,
+    pub frame_bytes: u64,
+    pub bad_frames: u64,
+    pub noise_events: u64,
+    pub noise_bytes: u64,
+    pub gap_violations: u64,
+    pub transactions: u64,
+    pub ok: u64,
+    pub exceptions: u64,
+    pub no_response: u64,
+    pub broadcasts: u64,
+    pub bad_responses: u64,
+    pub orphans: u64,
+    pub wrong_unit: u64,
+}
+
+impl Stats {
+    /// Counts one event.
+    pub fn add(&mut self, e: &Event<'_>) {
+        match *e {
+            Event::Frame { frame, .. } => {
+                self.frames += 1;
+                self.frame_bytes += frame.bytes.len() as u64;
+                self.bad_frames += u64::from(!frame.check_ok);
+                self.gap_violations += u64::from(frame.gap_violation_ns.is_some());
+            }
+            Event::Noise(n) => {
+                self.noise_events += 1;
+                self.noise_bytes += n.bytes.len() as u64;
+            }
+            Event::Transaction(t) => {
+                self.transactions += 1;
+                match t.outcome {
+                    Outcome::Ok => self.ok += 1,
+                    Outcome::Exception(_) => self.exceptions += 1,
+                    Outcome::NoResponse => self.no_response += 1,
+                    Outcome::Broadcast => self.broadcasts += 1,
+                    Outcome::BadResponse => self.bad_responses += 1,
+                    Outcome::Orphan => self.orphans += 1,
+                    Outcome::WrongUnit(_) => self.wrong_unit += 1,
+                }
+            }
+        }
+    }
+
+    /// The summary as JSON.
+    #[must_use]
+    pub fn json(&self) -> J {
+        json!({
+            "event": "summary",
+            "frames": self.frames, "frame_bytes": self.frame_bytes, "bad_frames": self.bad_frames,
+            "noise_events": self.noise_events, "noise_bytes": self.noise_bytes, "gap_violations": self.gap_violations,
+            "transactions": self.transactions, "ok": self.ok, "exceptions": self.exceptions,
+            "no_response": self.no_response, "broadcasts": self.broadcasts, "bad_responses": self.bad_responses,
+            "orphan_responses": self.orphans, "wrong_unit": self.wrong_unit,
+        })
+    }
+
+    /// The summary as text.
+    #[must_use]
+    pub fn text(&self) -> String {
+        format!(
+            "summary: {} frames ({} bytes, {} failed check, {} with gaps inside), {} noise bursts ({} bytes); {} transactions: {} ok, {} exceptions, {} no response, {} broadcasts, {} bad responses, {} orphan responses, {} from the wrong unit",
+            self.frames,
+            self.frame_bytes,
+            self.bad_frames,
+            self.gap_violations,
+            self.noise_events,
+            self.noise_bytes,
+            self.transactions,
+            self.ok,
+            self.exceptions,
+            self.no_response,
+            self.broadcasts,
+            self.bad_responses,
+            self.orphans,
+            self.wrong_unit
+        )
+    }
+}
