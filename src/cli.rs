@@ -152,5 +152,9 @@ pub enum Command {
         /// Probability that a response pauses inside (a slow slave).
         #[arg(long, default_value_t = 0.02)]
         slow: f64,
+        /// Instead of random traffic, send these frames (one per line, hex or `:ASCII`, as
+        /// `decode` reads them) back to back with a 5 ms turnaround, one read per byte.
+        #[arg(long)]
+        frames: Option<PathBuf>,
     },
 }

@@ -137,3 +137,14 @@ pub fn framer(data: &[u8]) {
     ascii.finish(&mut |_e: FrameEvent<'_>| {});
     assert_eq!(fed, out_rtu, "RTU framer lost or duplicated bytes");
 }
+
+/// Any bytes as a capture file, replayed through the analyzer in both output formats.
+pub fn capture(data: &[u8]) {
+    use crate::line_args::LineOverrides;
+    use crate::replay_cmd::{EventFormat, EventWriter, replay};
+    for format in [EventFormat::Jsonl, EventFormat::Text] {
+        let mut w = EventWriter::new(std::io::sink(), format);
+        let _ = replay(data, LineOverrides::default(), &mut w, &mut std::io::sink());
+        let _ = w.finish();
+    }
+}

@@ -74,7 +74,38 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Generate { out, transactions, seed, line, observe, noise, corrupt, slow } => {
+        Command::Generate { out, transactions, seed, line, observe, noise, corrupt, slow, frames: Some(list) } => {
+            let _ = (transactions, seed, observe, noise, corrupt, slow);
+            let (mode, settings, _) = overrides(&line).resolve();
+            let text = std::fs::read_to_string(&list).with_context(|| format!("reading {}", list.display()))?;
+            let mut frames = Vec::new();
+            for (i, l) in text.lines().enumerate() {
+                let l = l.trim();
+                if l.is_empty() || l.starts_with('#') {
+                    continue;
+                }
+                let wire = mbtap::hexinput::parse_frame_text(l)
+                    .map_err(|e| anyhow::anyhow!("{}:{}: {e}", list.display(), i + 1))?;
+                frames.push(wire);
+            }
+            let file = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
+            let n = mbtap::generate_cmd::write_frames(
+                io::BufWriter::new(file),
+                &frames,
+                mode,
+                settings,
+                1_700_000_000_000_000_000,
+            )
+            .with_context(|| format!("writing {}", out.display()))?;
+            eprintln!(
+                "mbtap: wrote {} ({} frames, {n} bytes, {settings} {})",
+                out.display(),
+                frames.len(),
+                mode.name()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Generate { out, transactions, seed, line, observe, noise, corrupt, slow, frames: None } => {
             let (_, settings, _) = overrides(&line).resolve();
             let cfg =
                 TrafficConfig { seed, line: settings, transactions, noise, corrupt, slow, ..TrafficConfig::default() };

@@ -20,6 +20,7 @@ fn run_dir(dir: &Path) -> usize {
             "roundtrip" => mbtap::fuzzing::roundtrip,
             "decode_text" => mbtap::fuzzing::decode_text,
             "framer" => mbtap::fuzzing::framer,
+            "capture" => mbtap::fuzzing::capture,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

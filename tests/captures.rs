@@ -1,0 +1,44 @@
+//! The regression corpus: every capture in `captures/` replayed through the analyzer, its text
+//! transcript compared with the golden snapshot (`tests/snapshots/captures__*.snap`). A change
+//! in what mbtap sees on a recorded bus shows up here as a diff to review.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use mbtap::line_args::LineOverrides;
+use mbtap::replay_cmd::{EventFormat, EventWriter, replay};
+
+/// Warnings, then every event, then the summary, as one text.
+fn transcript(path: &std::path::Path, format: EventFormat) -> String {
+    let file = std::fs::File::open(path).unwrap();
+    let mut w = EventWriter::new(Vec::new(), format);
+    let mut warnings = Vec::new();
+    replay(std::io::BufReader::new(file), LineOverrides::default(), &mut w, &mut warnings).unwrap();
+    let mut out = String::from_utf8(warnings).unwrap();
+    out.push_str(&String::from_utf8(std::mem::take(&mut w.out)).unwrap());
+    out.push_str(&w.stats.text());
+    out
+}
+
+#[test]
+fn golden_transcripts() {
+    insta::glob!("../captures", "*.pcap*", |path| {
+        insta::assert_snapshot!(transcript(path, EventFormat::Text));
+    });
+}
+
+/// JSON lines keep the contract of ARCHITECTURE.md on every capture: `event`, `hex`,
+/// `check_ok`, `t_ns` on every frame.
+#[test]
+fn jsonl_contract_on_every_capture() {
+    insta::glob!("../captures", "*.pcap*", |path| {
+        let t = transcript(path, EventFormat::Jsonl);
+        let mut frames = 0;
+        for line in t.lines().filter(|l| l.starts_with('{')) {
+            let j: serde_json::Value = serde_json::from_str(line).unwrap();
+            if j["event"] == "frame" {
+                frames += 1;
+                assert!(j["hex"].is_string() && j["check_ok"].is_boolean() && j["t_ns"].is_u64(), "{line}");
+            }
+        }
+        assert!(frames > 0, "{}", path.display());
+    });
+}
