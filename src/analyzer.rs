@@ -54,6 +54,11 @@ pub enum Event<'a> {
 /// Receives analyzer events.
 pub trait Sink {
     fn event(&mut self, event: &Event<'_>);
+
+    /// Something was wrong with the input (a corrupt capture block, say); the analysis goes on.
+    fn warning(&mut self, message: &str) {
+        let _ = message;
+    }
 }
 
 impl<F: FnMut(&Event<'_>)> Sink for F {

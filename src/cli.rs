@@ -157,4 +157,18 @@ pub enum Command {
         #[arg(long)]
         frames: Option<PathBuf>,
     },
+    /// Export the rebuilt frames for Wireshark (pcapng, link type 252, `mbrtu` dissector).
+    ///
+    /// `tshark -r OUT` decodes every frame as Modbus RTU with no configuration; add
+    /// `-o mbrtu.tcp.port:502` to have echo-shaped frames (05, 06, 08, 16) classified as query
+    /// or response from the direction mbtap worked out.
+    Export {
+        /// The line capture to read.
+        file: PathBuf,
+        /// The Wireshark file to write.
+        #[arg(short, long)]
+        out: PathBuf,
+        #[command(flatten)]
+        line: LineArgs,
+    },
 }

@@ -74,6 +74,21 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Export { file, out, line } => {
+            let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+            let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
+            let export = mbtap::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
+            let mut sink = ExportSink { export, error: None };
+            mbtap::replay_cmd::replay_into(io::BufReader::with_capacity(1 << 20, input), overrides(&line), &mut sink)
+                .with_context(|| format!("reading {}", file.display()))?;
+            if let Some(e) = sink.error {
+                return Err(e).with_context(|| format!("writing {}", out.display()));
+            }
+            let frames = sink.export.frames;
+            sink.export.finish().with_context(|| format!("writing {}", out.display()))?;
+            eprintln!("mbtap: exported {frames} frames to {}", out.display());
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Generate { out, transactions, seed, line, observe, noise, corrupt, slow, frames: Some(list) } => {
             let _ = (transactions, seed, observe, noise, corrupt, slow);
             let (mode, settings, _) = overrides(&line).resolve();
@@ -125,6 +140,27 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
+    }
+}
+
+/// Collects frames for the Wireshark export.
+struct ExportSink<W: Write> {
+    export: mbtap::capture::export::WiresharkExport<W>,
+    error: Option<io::Error>,
+}
+
+impl<W: Write> mbtap::analyzer::Sink for ExportSink<W> {
+    fn event(&mut self, e: &mbtap::analyzer::Event<'_>) {
+        if let mbtap::analyzer::Event::Frame { frame, role, .. } = *e
+            && self.error.is_none()
+            && let Err(err) = self.export.frame(frame.t_start, frame.bytes, role, frame.check_ok)
+        {
+            self.error = Some(err);
+        }
+    }
+
+    fn warning(&mut self, message: &str) {
+        eprintln!("mbtap: warning: {message}");
     }
 }
 

@@ -81,7 +81,7 @@ impl<W: Write> EventWriter<W> {
     }
 }
 
-/// Replays a capture from `input` into `sink`; `cli` overrides the settings stored in the file.
+/// Replays a capture from `input` into `writer`; `cli` overrides the settings stored in the file.
 ///
 /// # Errors
 /// When the file cannot be read at all (not pcap/pcapng, I/O error).
@@ -91,6 +91,30 @@ pub fn replay<R: Read, W: Write>(
     writer: &mut EventWriter<W>,
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
+    replay_into(input, cli, &mut WriterSink { writer, err })
+}
+
+/// An [`EventWriter`] as an analyzer sink, warnings included.
+struct WriterSink<'a, W: Write> {
+    writer: &'a mut EventWriter<W>,
+    err: &'a mut dyn Write,
+}
+
+impl<W: Write> crate::analyzer::Sink for WriterSink<'_, W> {
+    fn event(&mut self, event: &Event<'_>) {
+        self.writer.write(event);
+    }
+
+    fn warning(&mut self, message: &str) {
+        self.writer.warning(self.err, message);
+    }
+}
+
+/// Replays a capture into any sink.
+///
+/// # Errors
+/// When the file cannot be read at all (not pcap/pcapng, I/O error).
+pub fn replay_into<R: Read, S: crate::analyzer::Sink>(input: R, cli: LineOverrides, sink: &mut S) -> anyhow::Result<()> {
     let mut reader = CaptureReader::new(input);
     let mut analyzer: Option<Analyzer> = None;
     let mut file_settings = LineOverrides::default();
@@ -106,7 +130,7 @@ pub fn replay<R: Read, W: Write>(
                         interface.description.as_deref().map(LineOverrides::from_description).unwrap_or_default();
                 }
             }
-            Item::Warning(w) => writer.warning(err, &w),
+            Item::Warning(w) => sink.warning(&w),
             Item::Packet { port, t, data } => {
                 let a = analyzer.get_or_insert_with(|| {
                     let (mode, line, latency_ns) = cli.or(file_settings).resolve();
@@ -116,12 +140,12 @@ pub fn replay<R: Read, W: Write>(
                         ..AnalyzerConfig::default()
                     })
                 });
-                a.push(&Chunk { port, t, bytes: data }, &mut |e: &Event<'_>| writer.write(e));
+                a.push(&Chunk { port, t, bytes: data }, sink);
             }
         }
     }
     if let Some(a) = analyzer.as_mut() {
-        a.finish(&mut |e: &Event<'_>| writer.write(e));
+        a.finish(sink);
     }
     Ok(())
 }
