@@ -171,4 +171,36 @@ pub enum Command {
         #[command(flatten)]
         line: LineArgs,
     },
+    /// Listen to a live serial port: rebuild, pair and show every frame.
+    ///
+    /// Stops on Ctrl-C or SIGTERM (or after --duration) and prints a summary. With --record,
+    /// every read is written to a pcapng line capture (flushed each second) that `replay`
+    /// shows exactly as this session did.
+    Sniff {
+        /// The serial port (e.g. /dev/ttyUSB0).
+        port: String,
+        #[command(flatten)]
+        line: LineArgs,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
+        format: EventFormatArg,
+        /// Record every read to this pcapng file.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+    /// Play a line capture into a serial port with its recorded timing.
+    Play {
+        /// The capture to play.
+        file: PathBuf,
+        /// The serial port to write to.
+        port: String,
+        #[command(flatten)]
+        line: LineArgs,
+        /// Speed factor (2 = twice as fast).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+    },
 }

@@ -74,6 +74,30 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Sniff { port, line, format, record, duration } => {
+            let (mode, settings, latency_ns) = overrides(&line).resolve();
+            let opts = mbtap::sniff_cmd::SniffOptions {
+                port,
+                mode,
+                line: settings,
+                latency_ns,
+                record,
+                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+            };
+            let stdout = io::stdout();
+            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+            let rt =
+                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+            rt.block_on(mbtap::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Play { file, port, line, speed } => {
+            let (_, settings, _) = overrides(&line).resolve();
+            let (packets, bytes) = mbtap::play_cmd::play(&file, &port, settings, speed)?;
+            eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Export { file, out, line } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
             let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;

@@ -114,7 +114,11 @@ impl<W: Write> crate::analyzer::Sink for WriterSink<'_, W> {
 ///
 /// # Errors
 /// When the file cannot be read at all (not pcap/pcapng, I/O error).
-pub fn replay_into<R: Read, S: crate::analyzer::Sink>(input: R, cli: LineOverrides, sink: &mut S) -> anyhow::Result<()> {
+pub fn replay_into<R: Read, S: crate::analyzer::Sink>(
+    input: R,
+    cli: LineOverrides,
+    sink: &mut S,
+) -> anyhow::Result<()> {
     let mut reader = CaptureReader::new(input);
     let mut analyzer: Option<Analyzer> = None;
     let mut file_settings = LineOverrides::default();

@@ -34,7 +34,22 @@ fn tshark_decodes_every_exported_frame() {
             .collect();
         let o = Command::new("tshark")
             .args(["-r", out.to_str().unwrap(), "-o", "mbrtu.tcp.port:502", "-o", "mbrtu.crc_verification:TRUE"])
-            .args(["-T", "fields", "-E", "separator=|", "-e", "mbrtu.unit_id", "-e", "modbus.func_code", "-e", "mbtcp.unit_id", "-e", "mbrtu.crc16.status", "-e", "_ws.col.Info"])
+            .args([
+                "-T",
+                "fields",
+                "-E",
+                "separator=|",
+                "-e",
+                "mbrtu.unit_id",
+                "-e",
+                "modbus.func_code",
+                "-e",
+                "mbtcp.unit_id",
+                "-e",
+                "mbrtu.crc16.status",
+                "-e",
+                "_ws.col.Info",
+            ])
             .output()
             .expect("tshark must be installed for this test (apt-get install tshark)");
         assert!(o.status.success(), "tshark: {}", String::from_utf8_lossy(&o.stderr));
@@ -45,7 +60,12 @@ fn tshark_decodes_every_exported_frame() {
             // the first one is the frame's start.
             let mut f: Vec<&str> = t.split('|').map(|v| v.split(',').next().unwrap_or("")).collect();
             // Broadcasts and 4-byte frames are exported as Modbus/TCP (Wireshark's mbrtu refuses them).
-            let unit = if f[0].is_empty() { f.remove(2) } else { f.remove(2); f[0] };
+            let unit = if f[0].is_empty() {
+                f.remove(2)
+            } else {
+                f.remove(2);
+                f[0]
+            };
             let refused_by_mbrtu = j["unit"] == 0 || j["len"].as_u64().unwrap() < 5;
             if refused_by_mbrtu && j["check_ok"] == false {
                 // A damaged frame Wireshark's mbrtu will not take and Modbus/TCP cannot carry
@@ -56,14 +76,22 @@ fn tshark_decodes_every_exported_frame() {
             }
             if refused_by_mbrtu {
                 assert_eq!(unit, j["unit"].to_string(), "{p} frame {i}: unit via mbtcp ({t})");
-                assert_eq!(f[1].parse::<u64>().unwrap(), j["function"].as_u64().unwrap(), "{p} frame {i}: function ({t})");
+                assert_eq!(
+                    f[1].parse::<u64>().unwrap(),
+                    j["function"].as_u64().unwrap(),
+                    "{p} frame {i}: function ({t})"
+                );
                 checked += 1;
                 continue;
             }
             assert_eq!(unit, j["unit"].to_string(), "{p} frame {i}: unit ({t})");
             if j["check_ok"] == true {
                 // tshark shows the function code without the exception bit.
-                assert_eq!(f[1].parse::<u64>().unwrap(), j["function"].as_u64().unwrap() & 0x7F, "{p} frame {i}: function ({t})");
+                assert_eq!(
+                    f[1].parse::<u64>().unwrap(),
+                    j["function"].as_u64().unwrap() & 0x7F,
+                    "{p} frame {i}: function ({t})"
+                );
                 assert_eq!(f[2], "1", "{p} frame {i}: CRC should verify ({t})");
             } else {
                 assert_eq!(f[2], "0", "{p} frame {i}: CRC should fail ({t})");

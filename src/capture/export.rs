@@ -55,7 +55,11 @@ impl<W: Write> WiresharkExport<W> {
     /// I/O errors.
     pub fn new(out: W) -> io::Result<Self> {
         let mut w = PcapNgWriter::new(out)?;
-        w.add_interface(u16::try_from(LINKTYPE_WIRESHARK_UPPER_PDU).unwrap_or(252), "mbtap-export", "Modbus RTU frames rebuilt by mbtap")?;
+        w.add_interface(
+            u16::try_from(LINKTYPE_WIRESHARK_UPPER_PDU).unwrap_or(252),
+            "mbtap-export",
+            "Modbus RTU frames rebuilt by mbtap",
+        )?;
         Ok(Self { w, packet: Vec::with_capacity(300), frames: 0 })
     }
 

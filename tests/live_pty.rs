@@ -1,0 +1,96 @@
+//! The live path end to end on real pseudo-terminals (socat): `mbtap play` writes a capture
+//! into one end with its timing, `mbtap sniff --record` listens on the other; the recording
+//! must replay to the same frames as the original, and the live output must equal the replay
+//! of the recording (identical chunks, identical output). Needs socat: `#[ignore]`d in a plain
+//! `cargo test`, run by `.ci/run` with `--ignored`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
+
+struct Kill(Child);
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn wait_for(path: &std::path::Path) {
+    let start = Instant::now();
+    while !path.exists() {
+        assert!(start.elapsed() < Duration::from_secs(10), "{} never appeared", path.display());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// (hex, check_ok) of every frame a replay reports.
+fn frames(jsonl: &str) -> Vec<(String, bool)> {
+    jsonl
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|j| j["event"] == "frame")
+        .map(|j| (j["hex"].as_str().unwrap().to_owned(), j["check_ok"].as_bool().unwrap()))
+        .collect()
+}
+
+fn replay(path: &std::path::Path) -> String {
+    let o = Command::new(BIN).args(["replay", path.to_str().unwrap(), "--format", "jsonl"]).output().unwrap();
+    assert!(o.status.success());
+    String::from_utf8(o.stdout).unwrap()
+}
+
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn sniff_records_what_play_sends_through_a_pty() {
+    let dir = std::env::temp_dir().join(format!("mbtap-pty-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    let _socat = Kill(
+        Command::new("socat")
+            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
+            .spawn()
+            .expect("socat must be installed for this test"),
+    );
+    wait_for(&a);
+    wait_for(&b);
+    let rec = dir.join("rec.pcapng");
+    let sniff = Command::new(BIN)
+        .args(["sniff", b.to_str().unwrap(), "--format", "jsonl", "--record", rec.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut sniff = Kill(sniff);
+    // Drain the output while it runs, or a full pipe would block the sniffer.
+    let mut out = sniff.0.stdout.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut out, &mut s).unwrap();
+        s
+    });
+    wait_for(&rec);
+    std::thread::sleep(Duration::from_millis(200));
+    let original = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-19200-8e1-per-byte.pcapng");
+    let play = Command::new(BIN).args(["play", original, a.to_str().unwrap()]).output().unwrap();
+    assert!(play.status.success(), "{}", String::from_utf8_lossy(&play.stderr));
+    // Let the last frame's silence pass, then stop the sniffer as a user would (SIGTERM).
+    std::thread::sleep(Duration::from_millis(300));
+    let pid = sniff.0.id().to_string();
+    assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
+    let start = Instant::now();
+    while sniff.0.try_wait().unwrap().is_none() {
+        assert!(start.elapsed() < Duration::from_secs(10), "sniff did not stop on SIGTERM");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let live = reader.join().unwrap();
+
+    let want = frames(&replay(std::path::Path::new(original)));
+    let recorded = replay(&rec);
+    assert_eq!(frames(&recorded), want, "the recording replays to the original's frames");
+    // Live and replayed output agree event for event (the summary line included).
+    assert_eq!(live.lines().count(), recorded.lines().count());
+    assert_eq!(live, recorded);
+}
