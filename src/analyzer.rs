@@ -4,7 +4,7 @@
 use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::{AsciiFramer, Frame, FrameEvent, FramerConfig, Noise, RtuFramer};
 use crate::pairing::{Pairing, PairingConfig, Role, Transaction};
-use crate::proto::{parse_ascii, parse_rtu};
+use crate::proto::parse_ascii;
 
 /// Serial transmission mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -162,14 +162,28 @@ fn route<S: Sink>(pairing: &mut Pairing, scratch: &mut Vec<u8>, e: FrameEvent<'_
                     Err(_) => None,
                 }
             } else {
-                parse_rtu(f.bytes).ok().map(|r| (r.unit, r.pdu))
+                // The framer has checked the CRC already: split without computing it again.
+                match f.bytes {
+                    [unit, pdu @ .., _, _] if !pdu.is_empty() => Some((*unit, pdu)),
+                    _ => None,
+                }
             };
-            let role = match decoded {
-                Some((unit, pdu)) => pairing.role_of(&f, unit, pdu),
-                None => Role::Unknown,
-            };
-            sink.event(&Event::Frame { frame: &f, role, unit: decoded.map(|d| d.0), pdu: decoded.map(|d| d.1) });
-            pairing.frame(&f, decoded, &mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
+            // The frame's event goes out before the transaction it completes; a sink is needed
+            // by both callbacks, so it is shared through a cell for the duration of the call.
+            let cell = std::cell::RefCell::new(sink);
+            pairing.frame_then(
+                &f,
+                decoded,
+                |role: Role| {
+                    cell.borrow_mut().event(&Event::Frame {
+                        frame: &f,
+                        role,
+                        unit: decoded.map(|d| d.0),
+                        pdu: decoded.map(|d| d.1),
+                    });
+                },
+                &mut |t: Transaction<'_>| cell.borrow_mut().event(&Event::Transaction(&t)),
+            );
         }
     }
 }

@@ -84,6 +84,8 @@ pub struct LineArgs {
 pub enum ObserveArg {
     /// One read per byte, exact timestamps.
     PerByte,
+    /// One packet per frame, as gap-cutting sniffers write captures.
+    PerFrame,
     /// 16550 UART FIFO: 14-byte trigger, 4-character timeout.
     Fifo,
     /// USB adapter, 1 ms latency timer.

@@ -9,22 +9,44 @@ use crate::framer::LineSettings;
 use crate::line_args::LineOverrides;
 use crate::traffic::{Observation, TrafficConfig, generate, observe};
 
-/// Writes `cfg`'s traffic as seen through `model` to `out`; returns (chunks, bytes).
+/// Transactions generated at a time: memory stays bounded however long the capture.
+const BATCH: usize = 100_000;
+
+/// Writes `cfg`'s traffic as seen through `model` to `out`; returns (chunks, bytes). Long
+/// captures are generated in batches of [`BATCH`] transactions (batch `i` uses seed `seed + i`
+/// and starts where the previous one ended), so a gigabyte file needs no gigabytes of memory.
 ///
 /// # Errors
 /// I/O errors.
 pub fn write_capture<W: Write>(out: W, cfg: &TrafficConfig, model: Observation) -> std::io::Result<(usize, usize)> {
-    let wire = generate(cfg);
     let line: LineSettings = cfg.line;
-    let chunks = observe(&wire, model, line.char_ns());
     let latency = model.latency_ns(line.char_ns());
     let mut w = PcapNgWriter::new(out)?;
     w.add_serial_interface("generated", &LineOverrides::describe(SerialMode::Rtu, line, latency))?;
-    for (t, r) in &chunks {
-        w.write_packet(0, Timestamp(*t), &wire.bytes[r.clone()])?;
+    let (mut chunks_total, mut bytes_total) = (0, 0);
+    let mut start_ns = cfg.start_ns;
+    let mut left = cfg.transactions;
+    let mut batch = 0u64;
+    while left > 0 || batch == 0 {
+        let n = left.min(BATCH);
+        let bcfg = TrafficConfig { seed: cfg.seed.wrapping_add(batch), transactions: n, start_ns, ..*cfg };
+        let wire = generate(&bcfg);
+        let chunks = observe(&wire, model, line.char_ns());
+        for (t, r) in &chunks {
+            w.write_packet(0, Timestamp(*t), &wire.bytes[r.clone()])?;
+        }
+        chunks_total += chunks.len();
+        bytes_total += wire.bytes.len();
+        // The next batch starts after this one's last read, with an idle gap.
+        start_ns = chunks.last().map_or(start_ns, |(t, _)| *t) + 100_000_000;
+        left -= n;
+        batch += 1;
+        if n == 0 {
+            break;
+        }
     }
     w.flush()?;
-    Ok((chunks.len(), wire.bytes.len()))
+    Ok((chunks_total, bytes_total))
 }
 
 /// Writes `frames` (wire bytes) to `out` as a per-byte capture: each frame sent at the line's

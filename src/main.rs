@@ -103,7 +103,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
             let export = mbtap::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
             let mut sink = ExportSink { export, error: None };
-            mbtap::replay_cmd::replay_into(io::BufReader::with_capacity(1 << 20, input), overrides(&line), &mut sink)
+            mbtap::replay_cmd::replay_into(input, overrides(&line), &mut sink)
                 .with_context(|| format!("reading {}", file.display()))?;
             if let Some(e) = sink.error {
                 return Err(e).with_context(|| format!("writing {}", out.display()));
@@ -150,6 +150,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 TrafficConfig { seed, line: settings, transactions, noise, corrupt, slow, ..TrafficConfig::default() };
             let model = match observe {
                 ObserveArg::PerByte => Observation::PerByte,
+                ObserveArg::PerFrame => Observation::PerFrame,
                 ObserveArg::Fifo => Observation::FIFO_16550,
                 ObserveArg::Usb1 => Observation::USB_1MS,
                 ObserveArg::Usb16 => Observation::USB_16MS,

@@ -8,7 +8,7 @@
 
 use crate::chunk::{PortId, Timestamp};
 use crate::framer::Frame;
-use crate::proto::{DecodedPdu, DirectionHint, EXCEPTION_FLAG, Pdu, PduDecode, decode_pdu};
+use crate::proto::{DirectionHint, EXCEPTION_FLAG, parse_request, parse_response};
 
 /// How a transaction ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -192,9 +192,31 @@ impl Pairing {
         decoded: Option<(u8, &[u8])>,
         emit: &mut F,
     ) -> Role {
+        self.frame_then(f, decoded, |_| {}, emit)
+    }
+
+    /// As [`Self::frame`], calling `on_role` with the frame's role before any transaction the
+    /// frame completes is emitted (so a frame can be shown before its transaction), and after
+    /// transactions that time ran out on.
+    pub fn frame_then<F: FnMut(Transaction<'_>)>(
+        &mut self,
+        f: &Frame<'_>,
+        decoded: Option<(u8, &[u8])>,
+        on_role: impl FnOnce(Role),
+        emit: &mut F,
+    ) -> Role {
         self.tick(f.t_start, emit);
-        let Some((unit, pdu)) = decoded else { return Role::Unknown };
-        match self.decide(f, unit, pdu) {
+        let Some((unit, pdu)) = decoded else {
+            on_role(Role::Unknown);
+            return Role::Unknown;
+        };
+        let decision = self.decide(f, unit, pdu);
+        on_role(match decision {
+            Decision::Unknown => Role::Unknown,
+            Decision::Request => Role::Request,
+            Decision::Answers(_) | Decision::Orphan => Role::Response,
+        });
+        match decision {
             Decision::Unknown => Role::Unknown,
             Decision::Answers(outcome) => {
                 if let Some(p) = self.pending.take() {
@@ -282,8 +304,9 @@ impl Pairing {
 
 /// Does the PDU read cleanly (no trailing bytes) in this direction?
 fn clean(pdu: &[u8], hint: DirectionHint) -> bool {
-    matches!(
-        decode_pdu(pdu, hint),
-        PduDecode::One(DecodedPdu { pdu: Pdu::Request(_) | Pdu::Response(_), trailing: [], .. })
-    )
+    match hint {
+        DirectionHint::Request => matches!(parse_request(pdu), Ok(([], _))),
+        DirectionHint::Response => matches!(parse_response(pdu), Ok(([], _))),
+        DirectionHint::Unknown => clean(pdu, DirectionHint::Request) || clean(pdu, DirectionHint::Response),
+    }
 }

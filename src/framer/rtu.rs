@@ -72,7 +72,8 @@ const MAX_GARBAGE: usize = 2 * RTU_MAX_LEN;
 enum Try {
     Found(usize),
     NotHere,
-    NeedMore,
+    /// Nothing can change until this many bytes (from the candidate start) are buffered.
+    NeedMore(usize),
 }
 
 /// The RTU framer for one port.
@@ -100,6 +101,10 @@ pub struct RtuFramer {
     last_read: u64,
     /// The last event emitted was a frame (for the inter-frame gap check).
     after_frame: bool,
+    /// The candidate start last found waiting (`garbage` then), and how many bytes from it
+    /// must be buffered before trying it again is worth it: skips re-parsing on every byte.
+    wait_at: usize,
+    wait_for: usize,
     /// Addresses seen in frames with a valid CRC: a failed piece that starts with one is a
     /// corrupted frame even when the corruption hit its function code.
     known_units: [bool; 256],
@@ -124,6 +129,8 @@ impl RtuFramer {
             last_end: None,
             last_read: 0,
             after_frame: false,
+            wait_at: usize::MAX,
+            wait_for: 0,
             known_units: [false; 256],
         }
     }
@@ -144,29 +151,31 @@ impl RtuFramer {
         }
         let n = chunk.bytes.len();
         let c = self.char_ns;
-        for (i, &b) in chunk.bytes.iter().enumerate() {
-            let behind = u64::try_from(n - 1 - i).unwrap_or(u64::MAX).saturating_mul(c);
-            let mut e = t.saturating_sub(behind);
+        if n > 0 {
+            // Bytes in one chunk are taken as sent back to back, the last ending when the read
+            // returned; and bytes cannot overlap on the wire, so each ends at least a character
+            // after the one before. Both make the end times a run of step `c` from `e0`.
+            let behind = u64::try_from(n - 1).unwrap_or(u64::MAX).saturating_mul(c);
+            let mut e0 = t.saturating_sub(behind);
             let (lb, ub) = match self.last_end {
-                // Bytes cannot overlap on the wire: a later byte ends at least a character later.
                 Some(prev) => {
-                    e = e.max(prev.saturating_add(c));
-                    if i == 0 {
-                        let start = e - c;
-                        let lb = start.saturating_sub(self.latency).saturating_sub(prev);
-                        let ub = start.saturating_sub(prev.saturating_sub(self.latency));
-                        (lb, ub)
-                    } else {
-                        (0, u64::MAX)
-                    }
+                    e0 = e0.max(prev.saturating_add(c));
+                    let start = e0.saturating_sub(c);
+                    (
+                        start.saturating_sub(self.latency).saturating_sub(prev),
+                        start.saturating_sub(prev.saturating_sub(self.latency)),
+                    )
                 }
                 None => (u64::MAX, u64::MAX),
             };
-            self.buf.push(b);
-            self.end.push(e);
-            self.gap_lb.push(lb);
-            self.gap_ub.push(ub);
-            self.last_end = Some(e);
+            let at = self.buf.len();
+            self.buf.extend_from_slice(chunk.bytes);
+            self.end.extend((0..n as u64).map(|i| e0.saturating_add(i.saturating_mul(c))));
+            self.gap_lb.resize(at + n, 0);
+            self.gap_ub.resize(at + n, u64::MAX);
+            self.gap_lb[at] = lb;
+            self.gap_ub[at] = ub;
+            self.last_end = self.end.last().copied();
         }
         self.last_read = self.last_read.max(t);
         self.process(Flush::No, emit);
@@ -228,7 +237,7 @@ impl RtuFramer {
     fn try_frame_at(&self, g: usize, flushing: bool) -> Try {
         let live = &self.buf[self.head..];
         let s = &live[g..];
-        let [addr, fc, ..] = *s else { return if flushing { Try::NotHere } else { Try::NeedMore } };
+        let [addr, fc, ..] = *s else { return if flushing { Try::NotHere } else { Try::NeedMore(2) } };
         // While resynchronising through garbage, a chance CRC match (1 in 65 536 per
         // candidate) is likelier than the first frame of a never-seen unit with no silence
         // before it.
@@ -239,6 +248,7 @@ impl RtuFramer {
         let resp = response_len(pdu);
         let req = if fc & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
         let mut need_more = false;
+        let mut need = usize::MAX;
         let mut unknown = false;
         // Both readings are tried: a frame whose CRC ends in 0x00 also validates one byte
         // shorter (the CRC's shift property), and a next frame starting with 0x00 validates
@@ -254,27 +264,36 @@ impl RtuFramer {
                     match s.get(..l) {
                         Some(f) if Self::crc_ok(f) => found[slot] = Some((l, is_request)),
                         Some(_) => {}
-                        None => need_more = true,
+                        None => {
+                            need_more = true;
+                            need = need.min(l);
+                        }
                     }
                 }
-                PduLength::AtLeast(_) => need_more = true,
+                PduLength::AtLeast(k) => {
+                    need_more = true;
+                    need = need.min(k + 1);
+                }
                 PduLength::Unknown => unknown = true,
             }
         }
         match found {
             [Some((l, _)), None] | [None, Some((l, _))] if !need_more || flushing => return Try::Found(l),
             [Some(a), Some(b)] => return Try::Found(self.best(g, a, b)),
-            [Some(_), None] | [None, Some(_)] => return Try::NeedMore,
+            [Some(_), None] | [None, Some(_)] => return Try::NeedMore(need),
             [None, None] => {}
         }
         if unknown && fc & EXCEPTION_FLAG == 0 {
             match self.unknown_length_at(g, flushing) {
-                Try::NeedMore => need_more = true,
+                Try::NeedMore(n) => {
+                    need_more = true;
+                    need = need.min(n);
+                }
                 t @ Try::Found(_) => return t,
                 Try::NotHere => {}
             }
         }
-        if need_more && !flushing { Try::NeedMore } else { Try::NotHere }
+        if need_more && !flushing { Try::NeedMore(need.max(s.len() + 1)) } else { Try::NotHere }
     }
 
     /// Two readings with valid CRCs: prefer the one the next bytes confirm, then the one that
@@ -352,7 +371,7 @@ impl RtuFramer {
                 }
             }
         }
-        if !bounded && !flushing && s.len() < RTU_MAX_LEN { Try::NeedMore } else { Try::NotHere }
+        if !bounded && !flushing && s.len() < RTU_MAX_LEN { Try::NeedMore(s.len() + 1) } else { Try::NotHere }
     }
 
     fn process<F: FnMut(FrameEvent<'_>)>(&mut self, flush: Flush, emit: &mut F) {
@@ -360,6 +379,9 @@ impl RtuFramer {
         loop {
             let live_len = self.buf.len() - self.head;
             if self.garbage >= live_len {
+                break;
+            }
+            if !flushing && self.wait_at == self.garbage && live_len - self.garbage < self.wait_for {
                 break;
             }
             match self.try_frame_at(self.garbage, flushing) {
@@ -373,7 +395,11 @@ impl RtuFramer {
                         self.emit_garbage(RTU_MAX_LEN, emit);
                     }
                 }
-                Try::NeedMore => break,
+                Try::NeedMore(n) => {
+                    self.wait_at = self.garbage;
+                    self.wait_for = n;
+                    break;
+                }
             }
         }
         match flush {
@@ -526,6 +552,7 @@ impl RtuFramer {
                 t_end: Timestamp(self.end[b - 1]),
             }));
             self.head = b;
+            self.wait_at = usize::MAX;
             self.after_frame = false;
         }
     }
@@ -551,6 +578,7 @@ impl RtuFramer {
             self.known_units[usize::from(self.buf[a])] = true;
         }
         self.head = b;
+        self.wait_at = usize::MAX;
         self.after_frame = true;
     }
 }

@@ -8,6 +8,8 @@ use super::generate::Wire;
 pub enum Observation {
     /// Every byte its own read, at the time its stop bit ended.
     PerByte,
+    /// One packet per frame (or noise burst), at its end: what gap-cutting sniffers write.
+    PerFrame,
     /// 16550-style FIFO: a read when `trigger` bytes are waiting, or after `timeout_chars`
     /// character times without a new byte.
     Fifo { trigger: usize, timeout_chars: u64 },
@@ -29,6 +31,7 @@ impl Observation {
     pub const fn name(self) -> &'static str {
         match self {
             Self::PerByte => "per-byte timestamps",
+            Self::PerFrame => "one packet per frame",
             Self::Fifo { .. } => "16550 FIFO (14 B / 4 chars)",
             Self::Usb { latency_ns: 1_000_000, .. } => "USB latency 1 ms",
             Self::Usb { latency_ns: 16_000_000, .. } => "USB latency 16 ms",
@@ -40,7 +43,7 @@ impl Observation {
     #[must_use]
     pub const fn latency_ns(self, char_ns: u64) -> u64 {
         match self {
-            Self::PerByte => 0,
+            Self::PerByte | Self::PerFrame => 0,
             Self::Fifo { timeout_chars, .. } => timeout_chars * char_ns,
             Self::Usb { latency_ns, .. } => latency_ns,
         }
@@ -59,6 +62,10 @@ pub fn observe(wire: &Wire, model: Observation, char_ns: u64) -> Vec<ChunkSpan> 
     match model {
         Observation::PerByte => {
             out.extend((0..n).map(|i| (wire.end_ns[i], i..i + 1)));
+        }
+        Observation::PerFrame => {
+            out.extend(wire.truth.iter().map(|t| (wire.end_ns[t.end - 1], t.start..t.end)));
+            let _ = start;
         }
         Observation::Fifo { trigger, timeout_chars } => {
             let timeout = timeout_chars * char_ns;
