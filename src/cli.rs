@@ -205,4 +205,27 @@ pub enum Command {
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
     },
+    /// Tap a port used by an application on this computer: relay through a pseudo-terminal.
+    ///
+    /// mbtap opens PORT and offers a pseudo-terminal at --link for the application (a SCADA,
+    /// a configuration tool) to open instead; bytes are relayed untouched both ways and both
+    /// directions are analysed with the direction known.
+    Tap {
+        /// The real serial port.
+        port: String,
+        /// Where to create the pseudo-terminal link for the application.
+        #[arg(long)]
+        link: PathBuf,
+        #[command(flatten)]
+        line: LineArgs,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
+        format: EventFormatArg,
+        /// Record both directions to this pcapng file.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
 }

@@ -23,4 +23,5 @@ pub mod replay_cmd;
 pub mod report;
 pub mod sniff_cmd;
 pub mod source;
+pub mod tap_cmd;
 pub mod traffic;

@@ -92,6 +92,25 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Tap { port, link, line, format, record, duration } => {
+            let (mode, settings, latency_ns) = overrides(&line).resolve();
+            let opts = mbtap::tap_cmd::TapOptions {
+                port,
+                link,
+                mode,
+                line: settings,
+                latency_ns,
+                record,
+                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+            };
+            let stdout = io::stdout();
+            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+            let rt =
+                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+            rt.block_on(mbtap::tap_cmd::tap(opts, &mut writer, &mut io::stderr()))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Play { file, port, line, speed } => {
             let (_, settings, _) = overrides(&line).resolve();
             let (packets, bytes) = mbtap::play_cmd::play(&file, &port, settings, speed)?;

@@ -7,9 +7,10 @@ use anyhow::Context;
 
 use crate::analyzer::{Analyzer, AnalyzerConfig, Event};
 use crate::capture::{CaptureReader, Item};
-use crate::chunk::Chunk;
+use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::FramerConfig;
 use crate::line_args::LineOverrides;
+use crate::pairing::PairingConfig;
 use crate::report::events::{Stats, json, text_line};
 
 /// Output of `replay` and `sniff`.
@@ -110,7 +111,19 @@ impl<W: Write> crate::analyzer::Sink for WriterSink<'_, W> {
     }
 }
 
+/// A packet held for reordering: (time, arrival order, port, bytes).
+type Held = (u64, u64, u8, Vec<u8>);
+
+/// Packets held to put several ports' packets in time order.
+const REORDER_PACKETS: usize = 4096;
+/// ... or this much time between the oldest and newest held packet.
+const REORDER_NS: u64 = 1_000_000_000;
+
 /// Replays a capture into any sink.
+///
+/// A capture with one port goes straight through. With several ports (a tap with one port per
+/// direction) packets are merged by time through a bounded reorder window, and a port whose
+/// description says `role=requests` or `role=responses` tells pairing the direction.
 ///
 /// # Errors
 /// When the file cannot be read at all (not pcap/pcapng, I/O error).
@@ -119,36 +132,59 @@ pub fn replay_into<R: Read, S: crate::analyzer::Sink>(
     cli: LineOverrides,
     sink: &mut S,
 ) -> anyhow::Result<()> {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
     let mut reader = CaptureReader::new(input);
     let mut analyzer: Option<Analyzer> = None;
     let mut file_settings = LineOverrides::default();
+    let mut pairing = PairingConfig::default();
     let mut ports = 0usize;
+    let mut held: BinaryHeap<Reverse<Held>> = BinaryHeap::new();
+    let mut seq = 0u64;
+    let make = |file: LineOverrides, pairing: PairingConfig| {
+        let (mode, line, latency_ns) = cli.or(file).resolve();
+        Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(line, latency_ns), pairing })
+    };
     loop {
         let item = reader.next_item().context("reading the capture")?;
         let Some(item) = item else { break };
         match item {
-            Item::Interface { interface, .. } => {
+            Item::Interface { port, interface } => {
                 ports += 1;
+                let description = interface.description.unwrap_or_default();
                 if ports == 1 {
-                    file_settings =
-                        interface.description.as_deref().map(LineOverrides::from_description).unwrap_or_default();
+                    file_settings = LineOverrides::from_description(&description);
+                }
+                if description.split_whitespace().any(|w| w == "role=requests") {
+                    pairing.request_port = Some(port);
+                } else if description.split_whitespace().any(|w| w == "role=responses") {
+                    pairing.response_port = Some(port);
                 }
             }
             Item::Warning(w) => sink.warning(&w),
             Item::Packet { port, t, data } => {
-                let a = analyzer.get_or_insert_with(|| {
-                    let (mode, line, latency_ns) = cli.or(file_settings).resolve();
-                    Analyzer::new(AnalyzerConfig {
-                        mode,
-                        framer: FramerConfig::new(line, latency_ns),
-                        ..AnalyzerConfig::default()
-                    })
-                });
-                a.push(&Chunk { port, t, bytes: data }, sink);
+                let a = analyzer.get_or_insert_with(|| make(file_settings, pairing));
+                if ports <= 1 {
+                    a.push(&Chunk { port, t, bytes: data }, sink);
+                    continue;
+                }
+                seq += 1;
+                held.push(Reverse((t.0, seq, port.0, data.to_vec())));
+                while let Some(Reverse((oldest, ..))) = held.peek() {
+                    if held.len() <= REORDER_PACKETS && t.0.saturating_sub(*oldest) <= REORDER_NS {
+                        break;
+                    }
+                    if let Some(Reverse((t, _, p, bytes))) = held.pop() {
+                        a.push(&Chunk { port: PortId(p), t: Timestamp(t), bytes: &bytes }, sink);
+                    }
+                }
             }
         }
     }
     if let Some(a) = analyzer.as_mut() {
+        while let Some(Reverse((t, _, p, bytes))) = held.pop() {
+            a.push(&Chunk { port: PortId(p), t: Timestamp(t), bytes: &bytes }, sink);
+        }
         a.finish(sink);
     }
     Ok(())
