@@ -108,3 +108,74 @@ fn sniff_records_what_play_sends_through_a_pty() {
     assert_eq!(live.lines().count(), recorded.lines().count());
     assert_eq!(live, recorded);
 }
+
+/// The adapter is pulled mid-session (socat killed, its pty gone) and comes back (a new socat
+/// at the same path): sniff says so, reopens it, and the recording goes on with both halves.
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn sniff_survives_the_port_disappearing_and_coming_back() {
+    let dir = std::env::temp_dir().join(format!("mbtap-pty-lost-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (a, b, rec) = (dir.join("a"), dir.join("b"), dir.join("rec.pcapng"));
+    let pair = |a: &std::path::Path, b: &std::path::Path| {
+        let child = Command::new("socat")
+            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
+            .spawn()
+            .expect("socat must be installed for this test");
+        wait_for(a);
+        wait_for(b);
+        Kill(child)
+    };
+    let frames_file = dir.join("frames.txt");
+    std::fs::write(&frames_file, "01 03 00 65 00 03 15 D4\n01 03 06 00 00 00 00 01 90 20 89\n").unwrap();
+    let capture = dir.join("two.pcapng");
+    let g = Command::new(BIN)
+        .args(["generate", capture.to_str().unwrap(), "--frames", frames_file.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(g.status.success());
+
+    let first = pair(&a, &b);
+    let sniff = Command::new(BIN)
+        .args(["sniff", b.to_str().unwrap(), "--format", "jsonl", "--record", rec.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut sniff = Kill(sniff);
+    let mut out = sniff.0.stdout.take().unwrap();
+    let mut err = sniff.0.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut out, &mut s).unwrap();
+        s
+    });
+    let err_reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut err, &mut s).unwrap();
+        s
+    });
+    wait_for(&rec);
+    std::thread::sleep(Duration::from_millis(200));
+    let play = |a: &std::path::Path| {
+        let p = Command::new(BIN).args(["play", capture.to_str().unwrap(), a.to_str().unwrap()]).output().unwrap();
+        assert!(p.status.success(), "{}", String::from_utf8_lossy(&p.stderr));
+    };
+    play(&a);
+    std::thread::sleep(Duration::from_millis(300));
+    drop(first); // the adapter is pulled
+    std::thread::sleep(Duration::from_millis(1500));
+    let _second = pair(&a, &b); // and plugged back in
+    std::thread::sleep(Duration::from_millis(2500)); // sniff retries once a second
+    play(&a);
+    std::thread::sleep(Duration::from_millis(300));
+    let pid = sniff.0.id().to_string();
+    assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
+    let live = reader.join().unwrap();
+    let messages = err_reader.join().unwrap();
+    assert!(messages.contains("lost"), "{messages}");
+    assert!(messages.contains("is back"), "{messages}");
+    let want = ["01030065000315d4", "0103060000000001902089"].repeat(2);
+    assert_eq!(good_frames(&live), want, "live: both halves");
+    assert_eq!(good_frames(&replay(&rec)), want, "the recording went on");
+}
