@@ -254,6 +254,7 @@ impl RtuFramer {
         // shorter (the CRC's shift property), and a next frame starting with 0x00 validates
         // one byte longer; the structure decides between them (see `best`).
         let mut found: [Option<(usize, bool)>; 2] = [None, None];
+        let mut exact: [(usize, usize, bool); 2] = [(usize::MAX, 0, false); 2];
         for (slot, (cand, is_request)) in [(req, true), (resp, false)].into_iter().enumerate() {
             match cand {
                 PduLength::Exact(k) => {
@@ -261,13 +262,11 @@ impl RtuFramer {
                     if l > RTU_MAX_LEN {
                         continue;
                     }
-                    match s.get(..l) {
-                        Some(f) if Self::crc_ok(f) => found[slot] = Some((l, is_request)),
-                        Some(_) => {}
-                        None => {
-                            need_more = true;
-                            need = need.min(l);
-                        }
+                    if l > s.len() {
+                        need_more = true;
+                        need = need.min(l);
+                    } else {
+                        exact[slot] = (l, slot, is_request);
                     }
                 }
                 PduLength::AtLeast(k) => {
@@ -275,6 +274,22 @@ impl RtuFramer {
                     need = need.min(k + 1);
                 }
                 PduLength::Unknown => unknown = true,
+            }
+        }
+        // Shorter candidate first, so one running CRC serves both.
+        exact.sort_unstable_by_key(|e| e.0);
+        let (mut crc, mut done) = (crate::proto::checksum::CRC16_INIT, 0usize);
+        for (l, slot, is_request) in exact {
+            if l == usize::MAX {
+                continue;
+            }
+            if l < RTU_MIN_LEN {
+                continue;
+            }
+            crc = crc16_update(crc, &s[done..l - 2]);
+            done = l - 2;
+            if crc == u16::from_le_bytes([s[l - 2], s[l - 1]]) {
+                found[slot] = Some((l, is_request));
             }
         }
         match found {
