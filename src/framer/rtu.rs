@@ -151,6 +151,10 @@ impl RtuFramer {
         }
         let n = chunk.bytes.len();
         let c = self.char_ns;
+        if self.pending() == 0 && self.whole_frame(chunk.bytes) {
+            self.emit_whole_chunk(chunk, emit);
+            return;
+        }
         if n > 0 {
             // Bytes in one chunk are taken as sent back to back, the last ending when the read
             // returned; and bytes cannot overlap on the wire, so each ends at least a character
@@ -179,6 +183,66 @@ impl RtuFramer {
         }
         self.last_read = self.last_read.max(t);
         self.process(Flush::No, emit);
+    }
+
+    /// Is `bytes` exactly one frame that the general path would accept at once: every reading
+    /// of its structure resolved within it, exactly one with a valid CRC, and that one the
+    /// whole chunk? (Gap-cutting sniffers write one frame per packet; this skips buffering.)
+    fn whole_frame(&self, bytes: &[u8]) -> bool {
+        let [_, fc, ..] = *bytes else { return false };
+        let pdu = &bytes[1..];
+        let req = if fc & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
+        let mut whole = 0;
+        for cand in [req, response_len(pdu)] {
+            match cand {
+                PduLength::Exact(k) if k + 3 <= RTU_MAX_LEN => match bytes.get(..k + 3) {
+                    Some(f) if Self::crc_ok(f) => {
+                        if f.len() != bytes.len() {
+                            return false;
+                        }
+                        whole += 1;
+                    }
+                    Some(_) => {}
+                    None => return false,
+                },
+                PduLength::Exact(_) => {}
+                // An exception's request reading is no reading at all.
+                PduLength::Unknown if fc & EXCEPTION_FLAG != 0 => {}
+                PduLength::AtLeast(_) | PduLength::Unknown => return false,
+            }
+        }
+        whole == 1
+    }
+
+    /// Emits a chunk that [`Self::whole_frame`] accepted, with the same timing the buffered
+    /// path would give it.
+    fn emit_whole_chunk<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
+        let c = self.char_ns;
+        let n = u64::try_from(chunk.bytes.len()).unwrap_or(u64::MAX);
+        let mut e0 = chunk.t.0.saturating_sub((n - 1).saturating_mul(c));
+        let ub = match self.last_end {
+            Some(prev) => {
+                e0 = e0.max(prev.saturating_add(c));
+                e0.saturating_sub(c).saturating_sub(prev.saturating_sub(self.latency))
+            }
+            None => u64::MAX,
+        };
+        let t_end = e0.saturating_add((n - 1).saturating_mul(c));
+        emit(FrameEvent::Frame(Frame {
+            port: self.port,
+            bytes: chunk.bytes,
+            t_start: Timestamp(e0.saturating_sub(c)),
+            t_end: Timestamp(t_end),
+            check_ok: true,
+            gap_violation_ns: None,
+            short_gap_before_ns: (self.after_frame && ub < self.t35).then_some(ub),
+            bad_chars: false,
+        }));
+        self.known_units[usize::from(chunk.bytes[0])] = true;
+        self.last_end = Some(t_end);
+        self.last_read = self.last_read.max(chunk.t.0);
+        self.after_frame = true;
+        self.wait_at = usize::MAX;
     }
 
     fn first_end_estimate(&self, chunk: &Chunk<'_>) -> Option<u64> {
