@@ -151,7 +151,7 @@ impl RtuFramer {
         }
         let n = chunk.bytes.len();
         let c = self.char_ns;
-        if self.pending() == 0 && self.whole_frame(chunk.bytes) {
+        if self.pending() == 0 && Self::whole_frame(chunk.bytes) {
             self.emit_whole_chunk(chunk, emit);
             return;
         }
@@ -188,7 +188,7 @@ impl RtuFramer {
     /// Is `bytes` exactly one frame that the general path would accept at once: every reading
     /// of its structure resolved within it, exactly one with a valid CRC, and that one the
     /// whole chunk? (Gap-cutting sniffers write one frame per packet; this skips buffering.)
-    fn whole_frame(&self, bytes: &[u8]) -> bool {
+    fn whole_frame(bytes: &[u8]) -> bool {
         let [_, fc, ..] = *bytes else { return false };
         let pdu = &bytes[1..];
         let req = if fc & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
