@@ -375,15 +375,16 @@ impl RtuFramer {
         if need_more && !flushing { Try::NeedMore(need.max(s.len() + 1)) } else { Try::NotHere }
     }
 
-    /// Two readings with valid CRCs: prefer the one the next bytes confirm, then the one that
-    /// fits its function's structure without findings, then the shorter.
+    /// Two readings with valid CRCs (the CRC shift property makes a valid frame followed by
+    /// 0x00 validate one byte longer too): prefer the one that fits its function's structure
+    /// without findings, then the one the next bytes confirm, then the shorter.
     fn best(&self, g: usize, a: (usize, bool), b: (usize, bool)) -> usize {
         let score = |(l, is_request): (usize, bool)| {
             let confirmed = self.boundary_at(g + l) || self.exact_frame_at(g + l);
             let s = &self.buf[self.head + g..self.head + g + l];
             let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
             let clean = matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty());
-            (confirmed, clean, std::cmp::Reverse(l))
+            (clean, confirmed, std::cmp::Reverse(l))
         };
         if score(b) > score(a) { b.0 } else { a.0 }
     }
@@ -401,6 +402,11 @@ impl RtuFramer {
         // garbage than a vendor frame; such frames are still reported, with their boundaries,
         // once a silence or a valid frame ends them (`emit_piece`).
         if s[0] > 247 || !(base.name().is_some() || base.is_user_defined() || self.known_units[usize::from(s[0])]) {
+            return Try::NotHere;
+        }
+        // Broadcasts carry writes only (Modbus over Serial Line v1.02 §2.1), and every write has
+        // a fixed layout: address 0 with a length the structure cannot tell is garbage.
+        if s[0] == 0 {
             return Try::NotHere;
         }
         let max = s.len().min(RTU_MAX_LEN);
@@ -440,6 +446,13 @@ impl RtuFramer {
                     return Try::Found(l);
                 }
                 first_match = false;
+            }
+            // A whole valid frame starting inside this one means this one ended before it (or
+            // was never a frame): over hundreds of lengths, running past it invites a chance
+            // CRC match further on.
+            if !lenient && l < s.len() && self.exact_frame_at(g + l) {
+                bounded = true;
+                break;
             }
             if l < s.len() {
                 let gap = self.gap_lb[self.head + g + l];
