@@ -632,8 +632,43 @@ impl RtuFramer {
         }
     }
 
+    /// Where a damaged frame at absolute `a` ends inside `a..b`, if its structure says so and a
+    /// frame of a known unit plausibly starts there.
+    fn split_damaged(&self, a: usize, b: usize) -> Option<usize> {
+        // With timing that can show a t3.5 silence, frames were already cut at their silences;
+        // a damaged byte count would only mislead. This is for adapters whose latency hides them.
+        if self.latency < self.t35 {
+            return None;
+        }
+        let piece = &self.buf[a..b];
+        if !self.looks_like_frame(piece) {
+            return None;
+        }
+        let pdu = &piece[1..];
+        let req = if piece[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
+        let mut cands: Vec<usize> = [req, response_len(pdu)]
+            .into_iter()
+            .filter_map(|c| match c {
+                PduLength::Exact(k) if k + 3 >= RTU_MIN_LEN && k + 3 + 2 <= piece.len() => Some(k + 3),
+                _ => None,
+            })
+            .collect();
+        cands.sort_unstable();
+        // Only when the rest starts like a frame of a known unit: a short rest is as likely the
+        // tail of this frame read with the wrong reading (a request's response reading is 5
+        // bytes) as noise that followed it.
+        cands.into_iter().find(|&l| self.looks_like_frame_start(a - self.head + l))
+    }
+
     /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise.
     fn emit_unframed<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, b: usize, emit: &mut F) {
+        // Two damaged frames back to back (no silence between them to go by): cut the first
+        // at its structural length when what follows starts like a frame of a known unit.
+        if let Some(l) = self.split_damaged(a, b) {
+            self.emit_frame(l, false, emit);
+            self.emit_unframed(a + l, b, emit);
+            return;
+        }
         if self.looks_like_frame(&self.buf[a..b]) {
             self.emit_frame(b - a, false, emit);
         } else {
