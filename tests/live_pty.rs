@@ -5,26 +5,11 @@
 //! `cargo test`, run by `.ci/run` with `--ignored`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
-
-struct Kill(Child);
-impl Drop for Kill {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn wait_for(path: &std::path::Path) {
-    let start = Instant::now();
-    while !path.exists() {
-        assert!(start.elapsed() < Duration::from_secs(10), "{} never appeared", path.display());
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
+mod common;
+use common::{BIN, Kill, wait_for};
 
 /// The hex of every frame with a valid check, in order.
 fn good_frames(jsonl: &str) -> Vec<String> {

@@ -5,32 +5,17 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::io::{Read, Write};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Stdio};
+use std::time::Duration;
 
-const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
+mod common;
+use common::{BIN, Kill, wait_for};
 
 /// MK4 §3.3 read of 3 holding registers from 101, and the answer.
 const READ_REQ: &[u8] = &[0x01, 0x03, 0x00, 0x65, 0x00, 0x03, 0x15, 0xD4];
 const READ_RESP: &[u8] = &[0x01, 0x03, 0x06, 0x00, 0x00, 0x00, 0x00, 0x01, 0x90, 0x20, 0x89];
 /// MK4 §3.3 write of register 108 = 10: the response echoes the request byte for byte.
 const WRITE_108: &[u8] = &[0x01, 0x06, 0x00, 0x6C, 0x00, 0x0A, 0xC9, 0xD0];
-
-struct Kill(Child);
-impl Drop for Kill {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn wait_for(path: &std::path::Path) {
-    let start = Instant::now();
-    while !path.exists() {
-        assert!(start.elapsed() < Duration::from_secs(10), "{} never appeared", path.display());
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
 
 fn open(path: &std::path::Path) -> Box<dyn tokio_serial::SerialPort> {
     tokio_serial::new(path.to_str().unwrap(), 19_200).timeout(Duration::from_secs(5)).open().unwrap()

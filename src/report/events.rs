@@ -58,6 +58,16 @@ fn decode(pdu: &[u8], role: Role) -> Option<DecodedPdu<'_>> {
     }
 }
 
+/// The decoded fields and findings of a frame with a valid check, read in its role.
+fn decoded_fields(frame_ok: bool, pdu: Option<&[u8]>, role: Role) -> Option<(Vec<Field<'_>>, DecodedPdu<'_>)> {
+    let d = decode(pdu.filter(|_| frame_ok)?, role)?;
+    let fields = match d.pdu {
+        Pdu::Request(r) => request_fields(&r),
+        Pdu::Response(r) => response_fields(&r, None),
+    };
+    Some((fields, d))
+}
+
 fn summary(fields: &[Field<'_>]) -> String {
     let mut s = String::new();
     for f in fields {
@@ -105,14 +115,7 @@ pub fn text_line(e: &Event<'_>) -> String {
                         FunctionCode::from(fc).label().to_owned()
                     };
                     let _ = write!(line, "{check} unit {u:>3} {:<8} 0x{fc:02X} {name}", role_name(role));
-                    if frame.check_ok
-                        && let Some(pdu) = pdu
-                        && let Some(d) = decode(pdu, role)
-                    {
-                        let fields = match d.pdu {
-                            Pdu::Request(r) => request_fields(&r),
-                            Pdu::Response(r) => response_fields(&r, None),
-                        };
+                    if let Some((fields, _)) = decoded_fields(frame.check_ok, pdu, role) {
                         line.push_str(&summary(&fields));
                     }
                 }
@@ -157,26 +160,6 @@ fn transaction_text(t: &Transaction<'_>) -> String {
     line
 }
 
-fn fields_json(fields: &[Field<'_>]) -> J {
-    let mut m = Map::new();
-    for f in fields {
-        let v = match &f.value {
-            Value::Num(n) => json!(n),
-            Value::Hex(h) => json!(h),
-            Value::Name(s) => json!(s),
-            Value::Text(s) => json!(s),
-            Value::Bytes(b) => json!(hex(b)),
-            Value::Registers { values, .. } => J::Array(values.iter().map(|v| json!(v)).collect()),
-            Value::Bits { count, bits, .. } => {
-                J::Array(bits.iter(count.map_or(bits.capacity(), usize::from)).map(|b| json!(u8::from(b))).collect())
-            }
-            Value::Records(rs) => J::Array(rs.iter().map(|r| fields_json(r)).collect()),
-        };
-        m.insert(f.key.to_owned(), v);
-    }
-    J::Object(m)
-}
-
 /// One event as a JSON object.
 #[must_use]
 pub fn json(e: &Event<'_>) -> J {
@@ -203,15 +186,8 @@ pub fn json(e: &Event<'_>) -> J {
                 m.insert("function".into(), json!(fc));
                 m.insert("function_name".into(), json!(FunctionCode::from(fc & 0x7F).label()));
             }
-            if frame.check_ok
-                && let Some(pdu) = pdu
-                && let Some(d) = decode(pdu, role)
-            {
-                let fields = match d.pdu {
-                    Pdu::Request(r) => request_fields(&r),
-                    Pdu::Response(r) => response_fields(&r, None),
-                };
-                m.insert("fields".into(), fields_json(&fields));
+            if let Some((fields, d)) = decoded_fields(frame.check_ok, pdu, role) {
+                m.insert("fields".into(), super::jsonl::fields_object(&fields));
                 m.insert("findings".into(), super::jsonl::findings(&d.findings));
             }
             if let Some(g) = frame.gap_violation_ns {

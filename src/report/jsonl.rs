@@ -32,7 +32,9 @@ fn field_value(v: &Value<'_>) -> J {
     }
 }
 
-fn fields_object(fields: &[Field<'_>]) -> J {
+/// Fields as a JSON object (addresses of register and bit lists as `<key>_start_address`).
+#[must_use]
+pub fn fields_object(fields: &[Field<'_>]) -> J {
     let mut m = Map::new();
     for f in fields {
         m.insert(f.key.to_owned(), field_value(&f.value));
