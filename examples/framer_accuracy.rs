@@ -18,14 +18,18 @@ fn main() {
         LineSettings { baud: 115_200, parity: Parity::None, ..LineSettings::default() },
     ];
     let models = [Observation::PerByte, Observation::FIFO_16550, Observation::USB_1MS, Observation::USB_16MS];
+    // Per observation model, summed over the line settings: (good, total, false valid, exact, corrupted).
+    let mut per_model = [(0usize, 0usize, 0usize, 0usize, 0usize); 4];
     for (i, line) in lines.into_iter().enumerate() {
         let cfg = TrafficConfig { seed: 42 + i as u64, line, transactions, ..TrafficConfig::default() };
         let wire = generate(&cfg);
-        for model in models {
+        for (mi, model) in models.into_iter().enumerate() {
             let chunks = observe(&wire, model, line.char_ns());
             let fc = FramerConfig::new(line, model.latency_ns(line.char_ns()));
             let m = score(&wire, &run_framer(&wire, &chunks, fc));
             let g = score(&wire, &run_gap_cutter(&wire, &chunks, fc));
+            let a = &mut per_model[mi];
+            *a = (a.0 + m.good_recovered, a.1 + m.good_total, a.2 + m.false_valid, a.3 + m.corrupted_exact, a.4 + m.corrupted_total);
             println!(
                 "| {line} | {} | {:.3} % ({}/{}) | {} | {:.1} % ({}/{}) | {:.3} % | {} | {:.1} % |",
                 model.name(),
@@ -41,5 +45,13 @@ fn main() {
                 g.corrupted_ratio() * 100.0,
             );
         }
+    }
+    println!();
+    println!("| observation (all line settings) | good | false valid | corrupted exact |");
+    println!("|---|---|---|---|");
+    for (model, (good, total, false_valid, exact, corrupted)) in models.into_iter().zip(per_model) {
+        #[allow(clippy::cast_precision_loss)]
+        let (g, c) = (good as f64 * 100.0 / total.max(1) as f64, exact as f64 * 100.0 / corrupted.max(1) as f64);
+        println!("| {} | {g:.3} % ({good}/{total}) | {false_valid} | {c:.1} % ({exact}/{corrupted}) |", model.name());
     }
 }

@@ -200,7 +200,8 @@ impl RtuFramer {
                         if f.len() != bytes.len() {
                             return false;
                         }
-                        whole += 1;
+                        // An echo shape validates both ways at the same length: still one frame.
+                        whole = 1;
                     }
                     Some(_) => {}
                     None => return false,
@@ -314,6 +315,8 @@ impl RtuFramer {
         let mut need_more = false;
         let mut need = usize::MAX;
         let mut unknown = false;
+        // Whether a reading still waiting for bytes could be a well-formed frame at all.
+        let mut wait_worth = false;
         // Both readings are tried: a frame whose CRC ends in 0x00 also validates one byte
         // shorter (the CRC's shift property), and a next frame starting with 0x00 validates
         // one byte longer; the structure decides between them (see `best`).
@@ -329,6 +332,7 @@ impl RtuFramer {
                     if l > s.len() {
                         need_more = true;
                         need = need.min(l);
+                        wait_worth |= consistent(pdu, is_request);
                     } else {
                         exact[slot] = (l, slot, is_request);
                     }
@@ -336,6 +340,7 @@ impl RtuFramer {
                 PduLength::AtLeast(k) => {
                     need_more = true;
                     need = need.min(k + 1);
+                    wait_worth = true;
                 }
                 PduLength::Unknown => unknown = true,
             }
@@ -357,7 +362,13 @@ impl RtuFramer {
             }
         }
         match found {
-            [Some((l, _)), None] | [None, Some((l, _))] if !need_more || flushing => return Try::Found(l),
+            // A valid reading need not wait for another reading that could only be malformed
+            // (a 0x10 response read as a request: its byte count disagrees with its quantity).
+            [Some((l, _)), None] | [None, Some((l, _))] if !need_more || flushing || !wait_worth => {
+                return Try::Found(l);
+            }
+            // Echo shapes (05, 06, 08, 15, 16) read the same length both ways: one frame.
+            [Some(a), Some(b)] if a.0 == b.0 => return Try::Found(a.0),
             [Some(a), Some(b)] => return Try::Found(self.best(g, a, b)),
             [Some(_), None] | [None, Some(_)] => return Try::NeedMore(need),
             [None, None] => {}
@@ -707,5 +718,29 @@ impl RtuFramer {
         self.head = b;
         self.wait_at = usize::MAX;
         self.after_frame = true;
+    }
+}
+
+/// Could the PDU, read in this direction, be well formed? Only the byte-count fields that a
+/// quantity fixes are checked (MAP v1.1b3 §6): enough to rule out the wrong reading of most
+/// frames without waiting for bytes that would only make a malformed frame.
+fn consistent(pdu: &[u8], is_request: bool) -> bool {
+    let u16_at = |i: usize| pdu.get(i..i + 2).map(|b| usize::from(u16::from_be_bytes([b[0], b[1]])));
+    let byte = |i: usize| pdu.get(i).map(|&b| usize::from(b));
+    let Some(&fc) = pdu.first() else { return true };
+    if is_request {
+        match fc {
+            0x0F => u16_at(3).zip(byte(5)).is_none_or(|(q, bc)| bc == q.div_ceil(8)),
+            0x10 => u16_at(3).zip(byte(5)).is_none_or(|(q, bc)| bc == 2 * q),
+            0x17 => u16_at(7).zip(byte(9)).is_none_or(|(q, bc)| bc == 2 * q),
+            _ => true,
+        }
+    } else {
+        match fc {
+            0x01 | 0x02 => byte(1).is_none_or(|bc| bc >= 1),
+            0x03 | 0x04 | 0x17 => byte(1).is_none_or(|bc| bc >= 2 && bc % 2 == 0),
+            0x0C => byte(1).is_none_or(|bc| bc >= 6),
+            _ => true,
+        }
     }
 }
