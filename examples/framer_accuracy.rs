@@ -29,7 +29,13 @@ fn main() {
             let m = score(&wire, &run_framer(&wire, &chunks, fc));
             let g = score(&wire, &run_gap_cutter(&wire, &chunks, fc));
             let a = &mut per_model[mi];
-            *a = (a.0 + m.good_recovered, a.1 + m.good_total, a.2 + m.false_valid, a.3 + m.corrupted_exact, a.4 + m.corrupted_total);
+            *a = (
+                a.0 + m.good_recovered,
+                a.1 + m.good_total,
+                a.2 + m.false_valid,
+                a.3 + m.corrupted_exact,
+                a.4 + m.corrupted_total,
+            );
             println!(
                 "| {line} | {} | {:.3} % ({}/{}) | {} | {:.1} % ({}/{}) | {:.3} % | {} | {:.1} % |",
                 model.name(),

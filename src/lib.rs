@@ -18,6 +18,7 @@ pub mod hexinput;
 pub mod line_args;
 pub mod pairing;
 pub mod play_cmd;
+pub mod profile;
 pub mod proto;
 pub mod replay_cmd;
 pub mod report;

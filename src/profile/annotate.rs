@@ -1,0 +1,306 @@
+//! Annotating register and bit values with a profile: names, scaled values with units, enum
+//! labels, set bits, strings, 32-bit pairs — and findings: values outside the document's
+//! range, reserved or undocumented addresses, writes to read-only registers, half of a 32-bit
+//! pair read alone, writes the device will clamp.
+
+use std::fmt;
+
+use super::format::{Access, Table, ValueType, WordOrder};
+use super::model::{Def, Profile};
+
+/// How a value reads.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shown {
+    Number {
+        value: f64,
+        unit: Option<String>,
+    },
+    Label(String),
+    /// Labels of the set bits (unnamed ones as `bit N`).
+    Bits(Vec<String>),
+    Text(String),
+    Bool {
+        on: bool,
+        label: Option<String>,
+    },
+    /// Nothing known about it: the raw value only.
+    Raw,
+}
+
+/// Something worth flagging about one value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Note {
+    OutOfRange {
+        min: i64,
+        max: i64,
+    },
+    /// A write out of range that the device clamps to this raw value.
+    WillClamp {
+        to: i64,
+    },
+    Reserved,
+    Undocumented,
+    WriteToReadOnly,
+    /// One register of a two-register value read or written without the other.
+    HalfOfPair,
+    /// A write that is a command.
+    Command(String),
+    /// A value the enumeration does not list.
+    UnknownLabel,
+}
+
+impl Note {
+    /// A stable snake_case name.
+    #[must_use]
+    pub const fn kind(&self) -> &'static str {
+        match self {
+            Self::OutOfRange { .. } => "out_of_range",
+            Self::WillClamp { .. } => "will_clamp",
+            Self::Reserved => "reserved_address",
+            Self::Undocumented => "undocumented_address",
+            Self::WriteToReadOnly => "write_to_read_only",
+            Self::HalfOfPair => "half_of_pair",
+            Self::Command(_) => "command",
+            Self::UnknownLabel => "unknown_label",
+        }
+    }
+}
+
+impl fmt::Display for Note {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::OutOfRange { min, max } => write!(f, "outside the documented range {min}..={max}"),
+            Self::WillClamp { to } => write!(f, "out of range: the device clamps it to {to}"),
+            Self::Reserved => write!(f, "reserved address"),
+            Self::Undocumented => write!(f, "address not in the device's map"),
+            Self::WriteToReadOnly => write!(f, "write to a read-only register"),
+            Self::HalfOfPair => write!(f, "half of a multi-register value, the other half not in this transaction"),
+            Self::Command(c) => write!(f, "command: {c}"),
+            Self::UnknownLabel => write!(f, "value not in the documented list"),
+        }
+    }
+}
+
+/// One annotated value (a register, a register pair or string, or a bit).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Annotation {
+    pub table: Table,
+    pub address: u16,
+    /// Registers covered (2 for a 32-bit pair).
+    pub width: u16,
+    pub name: Option<String>,
+    pub name_ru: Option<String>,
+    /// The raw value (a pair combined in its word order).
+    pub raw: i64,
+    pub shown: Shown,
+    pub notes: Vec<Note>,
+}
+
+impl fmt::Display for Annotation {
+    /// `430 Phase A (L1) voltage = 230.5 V (raw 2305)`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} {}", self.address, self.name.as_deref().unwrap_or("?"))?;
+        match &self.shown {
+            Shown::Number { value, unit } => {
+                write!(f, " = {}", trim(*value))?;
+                if let Some(u) = unit {
+                    write!(f, " {u}")?;
+                }
+            }
+            Shown::Label(l) => write!(f, " = {l}")?,
+            Shown::Bits(b) if b.is_empty() => write!(f, " = (no bits set)")?,
+            Shown::Bits(b) => write!(f, " = {}", b.join(", "))?,
+            Shown::Text(t) => write!(f, " = {t:?}")?,
+            Shown::Bool { on, label } => {
+                write!(f, " = {}", label.clone().unwrap_or_else(|| u8::from(*on).to_string()))?;
+            }
+            Shown::Raw => write!(f, " = {}", self.raw)?,
+        }
+        write!(f, " (raw {})", self.raw)?;
+        for n in &self.notes {
+            write!(f, " [{n}]")?;
+        }
+        Ok(())
+    }
+}
+
+/// A float without noise: 230.5, not 230.50000000000003.
+fn trim(v: f64) -> String {
+    let s = format!("{v:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".to_owned() } else { s.to_owned() }
+}
+
+fn signed16(v: u16) -> i64 {
+    i64::from(i16::from_ne_bytes(v.to_ne_bytes()))
+}
+
+fn shown(def: &Def, raw: i64, bits32: Option<u32>) -> (Shown, Vec<Note>) {
+    let mut notes = Vec::new();
+    let s = match def.value_type {
+        ValueType::Enum => {
+            if let Some(l) = def.labels.get(&raw) {
+                Shown::Label(l.clone())
+            } else {
+                notes.push(Note::UnknownLabel);
+                Shown::Raw
+            }
+        }
+        ValueType::Bits => Shown::Bits(
+            (0..16u8)
+                .filter(|b| (raw >> b) & 1 == 1)
+                .map(|b| def.bits.get(&b).cloned().unwrap_or_else(|| format!("bit {b}")))
+                .collect(),
+        ),
+        ValueType::Bool => Shown::Bool { on: raw != 0, label: None },
+        ValueType::F32 => {
+            Shown::Number { value: f64::from(f32::from_bits(bits32.unwrap_or(0))), unit: def.unit.clone() }
+        }
+        _ => {
+            #[allow(clippy::cast_precision_loss)]
+            let value = raw as f64 * def.scale.unwrap_or(1.0);
+            Shown::Number { value, unit: def.unit.clone() }
+        }
+    };
+    (s, notes)
+}
+
+/// Annotates register values read from (or written to) `table` from `start`.
+#[must_use]
+pub fn annotate_registers(p: &Profile, table: Table, start: u16, values: &[u16], write: bool) -> Vec<Annotation> {
+    let mut out = Vec::new();
+    let mut i = 0usize;
+    while i < values.len() {
+        let Some(address) = u16::try_from(i).ok().and_then(|i| start.checked_add(i)) else { break };
+        let v = values[i];
+        let Some((slot, def)) = p.slot(table, address) else {
+            let note = if p.is_reserved(table, address) { Note::Reserved } else { Note::Undocumented };
+            out.push(Annotation {
+                table,
+                address,
+                width: 1,
+                name: None,
+                name_ru: None,
+                raw: i64::from(v),
+                shown: Shown::Raw,
+                notes: vec![note],
+            });
+            i += 1;
+            continue;
+        };
+        let width = usize::from(def.width);
+        // Every register of the value present, in order, starting at its first?
+        let whole = slot.part == 0 && i + width <= values.len();
+        let (raw, bits32, used, mut notes) = if width == 1 {
+            let raw = if def.value_type == ValueType::I16 { signed16(v) } else { i64::from(v) };
+            (raw, None, 1, Vec::new())
+        } else if !whole {
+            (i64::from(v), None, 1, vec![Note::HalfOfPair])
+        } else if def.value_type == ValueType::String {
+            let text: String = values[i..i + width]
+                .iter()
+                .flat_map(|r| {
+                    let [hi, lo] = r.to_be_bytes();
+                    if def.chars_per_register == 1 { vec![lo] } else { vec![hi, lo] }
+                })
+                .take_while(|&c| c != 0)
+                .map(char::from)
+                .collect();
+            out.push(Annotation {
+                table,
+                address,
+                width: def.width,
+                name: Some(slot.name.clone()),
+                name_ru: def.name_ru.clone(),
+                raw: 0,
+                shown: Shown::Text(text),
+                notes: Vec::new(),
+            });
+            i += width;
+            continue;
+        } else {
+            let (hi, lo) = match def.word_order {
+                WordOrder::HighFirst => (values[i], values[i + 1]),
+                WordOrder::LowFirst => (values[i + 1], values[i]),
+            };
+            let bits = (u32::from(hi) << 16) | u32::from(lo);
+            let raw = if def.value_type == ValueType::I32 {
+                i64::from(i32::from_ne_bytes(bits.to_ne_bytes()))
+            } else {
+                i64::from(bits)
+            };
+            (raw, Some(bits), 2, Vec::new())
+        };
+        let (shown, more) =
+            if notes.contains(&Note::HalfOfPair) { (Shown::Raw, Vec::new()) } else { shown(def, raw, bits32) };
+        notes.extend(more);
+        if let Some((min, max)) = def.range
+            && !notes.contains(&Note::HalfOfPair)
+            && !(min..=max).contains(&raw)
+        {
+            notes.push(if write && p.meta.clamps_writes {
+                Note::WillClamp { to: raw.clamp(min, max) }
+            } else {
+                Note::OutOfRange { min, max }
+            });
+        }
+        if write && def.access == Access::Read {
+            notes.push(Note::WriteToReadOnly);
+        }
+        if write && let Some(c) = def.commands.get(&raw) {
+            notes.push(Note::Command(c.clone()));
+        }
+        out.push(Annotation {
+            table,
+            address: slot.first,
+            width: u16::try_from(used).unwrap_or(1),
+            name: Some(slot.name.clone()),
+            name_ru: def.name_ru.clone(),
+            raw,
+            shown,
+            notes,
+        });
+        i += used;
+    }
+    out
+}
+
+/// Annotates bits (coils or discrete inputs) from `start`.
+#[must_use]
+pub fn annotate_bits(p: &Profile, table: Table, start: u16, bits: &[bool], write: bool) -> Vec<Annotation> {
+    let mut out = Vec::with_capacity(bits.len());
+    for (i, &on) in bits.iter().enumerate() {
+        let Some(address) = u16::try_from(i).ok().and_then(|i| start.checked_add(i)) else { break };
+        let a = match p.slot(table, address) {
+            Some((slot, def)) => {
+                let mut notes = Vec::new();
+                if write && def.access == Access::Read {
+                    notes.push(Note::WriteToReadOnly);
+                }
+                let label = if on { def.on.clone() } else { def.off.clone() };
+                Annotation {
+                    table,
+                    address,
+                    width: 1,
+                    name: Some(slot.name.clone()),
+                    name_ru: def.name_ru.clone(),
+                    raw: i64::from(on),
+                    shown: Shown::Bool { on, label },
+                    notes,
+                }
+            }
+            None => Annotation {
+                table,
+                address,
+                width: 1,
+                name: None,
+                name_ru: None,
+                raw: i64::from(on),
+                shown: Shown::Bool { on, label: None },
+                notes: vec![if p.is_reserved(table, address) { Note::Reserved } else { Note::Undocumented }],
+            },
+        };
+        out.push(a);
+    }
+    out
+}

@@ -1,0 +1,222 @@
+//! The profile file format (TOML), as written by people: device metadata, line defaults, and
+//! per table the points and registers a device has. Documented with a complete example in
+//! `docs/profiles.md`. Unknown keys are errors, so a typo is caught at load time.
+
+use std::collections::BTreeMap;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+/// A whole profile file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileFile {
+    pub profile: Meta,
+    #[serde(default)]
+    pub line: Option<LineDefaults>,
+    #[serde(default)]
+    pub coils: Vec<Spanned<PointDef>>,
+    #[serde(default)]
+    pub discrete_inputs: Vec<Spanned<PointDef>>,
+    #[serde(default)]
+    pub holding_registers: Vec<Spanned<RegisterDef>>,
+    #[serde(default)]
+    pub input_registers: Vec<Spanned<RegisterDef>>,
+    /// Groups of registers that repeat (log records, channels): declared once.
+    #[serde(default)]
+    pub blocks: Vec<Spanned<BlockDef>>,
+    /// Address ranges the document reserves.
+    #[serde(default)]
+    pub reserved: Vec<Spanned<ReservedDef>>,
+}
+
+/// Who the device is and where its map comes from.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Meta {
+    /// Short name used on the command line (`--device 1=NAME`).
+    pub name: String,
+    pub device: String,
+    #[serde(default)]
+    pub vendor: Option<String>,
+    /// The document the map was made from.
+    #[serde(default)]
+    pub document: Option<String>,
+    /// Function codes the device supports.
+    #[serde(default)]
+    pub functions: Vec<u8>,
+    #[serde(default)]
+    pub default_address: Option<u8>,
+    /// Addresses the device also answers (the MKZP answers 247 as well as its own).
+    #[serde(default)]
+    pub also_answers: Vec<u8>,
+    /// Out-of-range writes are clamped by the device rather than refused.
+    #[serde(default)]
+    pub clamps_writes: bool,
+}
+
+/// Serial defaults the document gives.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LineDefaults {
+    #[serde(default)]
+    pub baud: Option<u32>,
+    /// `8E1` style.
+    #[serde(default)]
+    pub framing: Option<String>,
+    #[serde(default)]
+    pub mode: Option<String>,
+}
+
+/// Read/write access.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+pub enum Access {
+    #[serde(rename = "r")]
+    #[default]
+    Read,
+    #[serde(rename = "rw")]
+    ReadWrite,
+    #[serde(rename = "w")]
+    Write,
+}
+
+/// A coil or discrete input, or a run of them sharing one description (`addresses`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointDef {
+    #[serde(default)]
+    pub address: Option<u16>,
+    /// Inclusive range `[first, last]`; `{n}` in names counts from 1.
+    #[serde(default)]
+    pub addresses: Option<[u16; 2]>,
+    pub name: String,
+    #[serde(default)]
+    pub name_ru: Option<String>,
+    #[serde(default)]
+    pub description: Option<String>,
+    #[serde(default)]
+    pub access: Access,
+    /// Labels for 1 and 0.
+    #[serde(default)]
+    pub on: Option<String>,
+    #[serde(default)]
+    pub off: Option<String>,
+}
+
+/// How a register's bits are read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ValueType {
+    #[default]
+    U16,
+    I16,
+    /// Two registers.
+    U32,
+    I32,
+    F32,
+    Bool,
+    /// Named bits (see `bits`).
+    Bits,
+    /// Named values (see `enum`).
+    Enum,
+    /// Characters, `chars_per_register` per register, over `length` registers.
+    String,
+}
+
+/// Word order of 32-bit values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum WordOrder {
+    #[default]
+    HighFirst,
+    LowFirst,
+}
+
+/// A register, a run of registers sharing one description, or a field of a block.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegisterDef {
+    #[serde(default)]
+    pub address: Option<u16>,
+    #[serde(default)]
+    pub addresses: Option<[u16; 2]>,
+    /// Offset inside a block (blocks only).
+    #[serde(default)]
+    pub offset: Option<u16>,
+    pub name: String,
+    #[serde(default)]
+    pub name_ru: Option<String>,
+    #[serde(default)]
+    pub description: Option<String>,
+    #[serde(default)]
+    pub access: Access,
+    #[serde(default, rename = "type")]
+    pub value_type: ValueType,
+    #[serde(default)]
+    pub word_order: WordOrder,
+    /// Multiply the raw value by this (0.1 for tenths).
+    #[serde(default)]
+    pub scale: Option<f64>,
+    #[serde(default)]
+    pub unit: Option<String>,
+    /// Valid raw range, inclusive.
+    #[serde(default)]
+    pub range: Option<[i64; 2]>,
+    /// Value labels (type `enum`), keys are the raw values.
+    #[serde(default, rename = "enum")]
+    pub labels: BTreeMap<String, String>,
+    /// Bit labels (type `bits`), keys are bit numbers 0–15.
+    #[serde(default)]
+    pub bits: BTreeMap<String, String>,
+    /// Registers a string spans (type `string`).
+    #[serde(default)]
+    pub length: Option<u16>,
+    #[serde(default)]
+    pub chars_per_register: Option<u8>,
+    /// Values that are commands (written to act, e.g. `30 = "clear alarm log"`).
+    #[serde(default)]
+    pub commands: BTreeMap<String, String>,
+}
+
+/// Which table a block or reservation belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Table {
+    Coils,
+    DiscreteInputs,
+    HoldingRegisters,
+    InputRegisters,
+}
+
+impl Table {
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Coils => "coils",
+            Self::DiscreteInputs => "discrete_inputs",
+            Self::HoldingRegisters => "holding_registers",
+            Self::InputRegisters => "input_registers",
+        }
+    }
+}
+
+/// A repeated group: `count` copies, `stride` registers apart, from `start`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlockDef {
+    pub table: Table,
+    pub start: u16,
+    pub count: u16,
+    pub stride: u16,
+    /// Title of each copy; `{n}` counts from 1.
+    pub title: String,
+    pub fields: Vec<RegisterDef>,
+}
+
+/// Addresses the document reserves.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReservedDef {
+    pub table: Table,
+    pub addresses: [u16; 2],
+}

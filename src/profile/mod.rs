@@ -1,0 +1,12 @@
+//! Device profiles: register maps in TOML (`format`), loaded with precise errors (`loader`),
+//! resolved per address (`model`), and used to annotate transactions (`annotate`).
+//! Pure: no I/O here; callers read the files.
+
+pub mod annotate;
+pub mod format;
+pub mod loader;
+pub mod model;
+
+pub use format::Table;
+pub use loader::{ProfileError, load};
+pub use model::Profile;
