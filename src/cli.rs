@@ -116,6 +116,9 @@ pub enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value_t = FormatArg::Text)]
         format: FormatArg,
+        /// Annotate unit UNIT's values with a profile: `UNIT=FILE.toml` (repeatable).
+        #[arg(long = "device", value_name = "UNIT=PROFILE")]
+        devices: Vec<String>,
     },
     /// Replay a line capture (pcap/pcapng, link type 147) through the analyzer.
     ///
@@ -228,4 +231,16 @@ pub enum Command {
         #[arg(long)]
         duration: Option<f64>,
     },
+    /// Device profiles: check a profile file, or show what it defines.
+    #[command(subcommand)]
+    Profiles(ProfilesCommand),
+}
+
+/// `mbtap profiles …`
+#[derive(Debug, Subcommand)]
+pub enum ProfilesCommand {
+    /// Load a profile file and report the first problem with file:line:column, or a summary.
+    Check { file: PathBuf },
+    /// Print every address a profile file defines, per table.
+    Show { file: PathBuf },
 }

@@ -50,6 +50,24 @@ pub fn run(
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> io::Result<Outcome> {
+    run_with_profiles(lines, mode, format, &Profiles::new(), out, err)
+}
+
+/// Profiles by unit address, for annotation.
+pub type Profiles = std::collections::BTreeMap<u8, crate::profile::Profile>;
+
+/// As [`run`], annotating the values of transactions of units that have a profile.
+///
+/// # Errors
+/// Only I/O errors writing the output.
+pub fn run_with_profiles(
+    lines: &[String],
+    mode: Option<Mode>,
+    format: Format,
+    profiles: &Profiles,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> io::Result<Outcome> {
     let mut outcome = Outcome::Clean;
     // Unreadable lines stay in the sequence (as `Err`) so output keeps the input's order.
     let mut entries: Vec<Result<Input, (usize, String)>> = Vec::with_capacity(lines.len());
@@ -100,7 +118,13 @@ pub fn run(
             }
             let resp = decode_pdu(&next.adu.pdu, DirectionHint::Response);
             let req_decode = PduDecode::One(req_decoded.clone());
-            transaction(this, &req_decode, &req, next, &resp, format, out)?;
+            let annotations = match (profiles.get(&this.adu.unit), &resp) {
+                (Some(p), PduDecode::One(DecodedPdu { pdu: Pdu::Response(r), .. })) => {
+                    crate::profile::transaction::annotate_transaction(p, &req, Some(r))
+                }
+                _ => Vec::new(),
+            };
+            transaction(this, &req_decode, &req, next, &resp, &annotations, format, out)?;
             i += 2;
             continue;
         }
@@ -148,12 +172,14 @@ fn answers(req_adu: &Adu, req: &Request<'_>, resp: &Adu) -> bool {
         && matches!(decode_pdu(&resp.pdu, DirectionHint::Response), PduDecode::One(DecodedPdu { trailing: [], .. }))
 }
 
+#[allow(clippy::too_many_arguments)]
 fn transaction(
     req_in: &Input,
     req_decode: &PduDecode<'_>,
     req: &Request<'_>,
     resp_in: &Input,
     resp_decode: &PduDecode<'_>,
+    annotations: &[crate::profile::annotate::Annotation],
     format: Format,
     out: &mut dyn Write,
 ) -> io::Result<()> {
@@ -169,6 +195,12 @@ fn transaction(
             write!(out, "{}", text::frame(&req_view, "  "))?;
             write!(out, "{}", text::frame(&resp_view, "  "))?;
             write!(out, "{}", text::pair_findings(&pair, ""))?;
+            if !annotations.is_empty() {
+                writeln!(out, "  values:")?;
+                for a in annotations {
+                    writeln!(out, "    {a}")?;
+                }
+            }
             writeln!(out)?;
         }
         Format::Jsonl => {
@@ -180,6 +212,7 @@ fn transaction(
                 "request": jsonl::frame(&req_view),
                 "response": jsonl::frame(&resp_view),
                 "findings": jsonl::findings(&pair),
+                "annotations": annotations.iter().map(crate::report::annotations::json).collect::<Vec<_>>(),
             });
             writeln!(out, "{j}")?;
         }

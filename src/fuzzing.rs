@@ -148,3 +148,23 @@ pub fn capture(data: &[u8]) {
         let _ = w.finish();
     }
 }
+
+/// Any text as a profile; when it loads, annotate a sweep of values with it.
+pub fn profile(data: &[u8]) {
+    use crate::profile::Table;
+    use crate::profile::annotate::{annotate_bits, annotate_registers};
+    let text = String::from_utf8_lossy(data);
+    if let Ok(p) = crate::profile::load("fuzz.toml", &text) {
+        let values: Vec<u16> =
+            data.chunks(2).map(|c| u16::from_le_bytes([c[0], *c.get(1).unwrap_or(&0)])).take(64).collect();
+        for table in [Table::HoldingRegisters, Table::InputRegisters] {
+            for start in [0u16, 1, 100, 400, 500, 65_500] {
+                let _ = annotate_registers(&p, table, start, &values, false);
+                let _ = annotate_registers(&p, table, start, &values, true);
+            }
+        }
+        let bits: Vec<bool> = data.iter().map(|b| b & 1 == 1).take(64).collect();
+        let _ = annotate_bits(&p, Table::Coils, 0, &bits, true);
+        let _ = annotate_bits(&p, Table::DiscreteInputs, 65_535, &bits, false);
+    }
+}

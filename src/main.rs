@@ -6,7 +6,9 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Parser;
 use mbtap::analyzer::SerialMode;
-use mbtap::cli::{Cli, Command, EventFormatArg, FormatArg, LineArgs, ModeArg, ObserveArg, ParityArg, SerialModeArg};
+use mbtap::cli::{
+    Cli, Command, EventFormatArg, FormatArg, LineArgs, ModeArg, ObserveArg, ParityArg, ProfilesCommand, SerialModeArg,
+};
 use mbtap::decode_cmd::{self, Format};
 use mbtap::framer::{LineSettings, Parity};
 use mbtap::line_args::LineOverrides;
@@ -31,7 +33,8 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Command::Decode { frames, mode, format } => {
+        Command::Decode { frames, mode, format, devices } => {
+            let profiles = load_devices(&devices)?;
             let lines = if frames.is_empty() {
                 io::stdin()
                     .lock()
@@ -55,7 +58,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             };
             let stdout = io::stdout();
             let mut out = io::BufWriter::new(stdout.lock());
-            let outcome = decode_cmd::run(&lines, mode, format, &mut out, &mut io::stderr())?;
+            let outcome = decode_cmd::run_with_profiles(&lines, mode, format, &profiles, &mut out, &mut io::stderr())?;
             out.flush()?;
             Ok(ExitCode::from(outcome as u8))
         }
@@ -115,6 +118,44 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let (_, settings, _) = overrides(&line).resolve();
             let (packets, bytes) = mbtap::play_cmd::play(&file, &port, settings, speed)?;
             eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Profiles(ProfilesCommand::Check { file }) => {
+            let p = load_profile_file(&file)?;
+            let count = |t| p.addresses(t).count();
+            println!(
+                "{}: ok — {} ({}): {} coils, {} discrete inputs, {} holding registers, {} input registers, {} reserved ranges",
+                file.display(),
+                p.meta.name,
+                p.meta.device,
+                count(mbtap::profile::Table::Coils),
+                count(mbtap::profile::Table::DiscreteInputs),
+                count(mbtap::profile::Table::HoldingRegisters),
+                count(mbtap::profile::Table::InputRegisters),
+                p.reserved.len()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Profiles(ProfilesCommand::Show { file }) => {
+            let p = load_profile_file(&file)?;
+            println!("{} — {}", p.meta.name, p.meta.device);
+            for t in [
+                mbtap::profile::Table::Coils,
+                mbtap::profile::Table::DiscreteInputs,
+                mbtap::profile::Table::HoldingRegisters,
+                mbtap::profile::Table::InputRegisters,
+            ] {
+                println!("[{}]", t.name());
+                for a in p.addresses(t) {
+                    if let Some((slot, def)) = p.slot(t, a)
+                        && slot.part == 0
+                    {
+                        let ru = def.name_ru.as_deref().map(|r| format!(" ({r})")).unwrap_or_default();
+                        let unit = def.unit.as_deref().map(|u| format!(" [{u}]")).unwrap_or_default();
+                        println!("  {a:>5} {}{ru}{unit}", slot.name);
+                    }
+                }
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Export { file, out, line } => {
@@ -206,6 +247,30 @@ impl<W: Write> mbtap::analyzer::Sink for ExportSink<W> {
     fn warning(&mut self, message: &str) {
         eprintln!("mbtap: warning: {message}");
     }
+}
+
+fn load_profile_file(path: &std::path::Path) -> anyhow::Result<mbtap::profile::Profile> {
+    let src = std::fs::read_to_string(path).with_context(|| format!("reading profile {}", path.display()))?;
+    Ok(mbtap::profile::load(&path.display().to_string(), &src)?)
+}
+
+/// `--device UNIT=PROFILE` values: a unit address and a profile file.
+fn load_devices(devices: &[String]) -> anyhow::Result<mbtap::decode_cmd::Profiles> {
+    let mut out = mbtap::decode_cmd::Profiles::new();
+    for d in devices {
+        let (unit, profile) = d
+            .split_once('=')
+            .with_context(|| format!("--device {d:?}: expected UNIT=PROFILE, e.g. --device 1=./pump.toml"))?;
+        let unit: u8 = unit.trim().parse().with_context(|| format!("--device {d:?}: unit {unit:?} is not 0..=255"))?;
+        let path = std::path::Path::new(profile.trim());
+        if !path.exists() {
+            anyhow::bail!(
+                "--device {d:?}: no profile file {profile:?} (mbtap has no built-in profiles yet: the MK4, MKZP-0.4 and Display profiles are being written; give the path of a profile file, see docs/profiles.md)"
+            );
+        }
+        out.insert(unit, load_profile_file(path)?);
+    }
+    Ok(out)
 }
 
 fn event_format(f: EventFormatArg) -> EventFormat {

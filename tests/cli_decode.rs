@@ -116,3 +116,47 @@ fn help_is_stable() {
     let o = mbtap(&["decode", "--help"], None);
     insta::assert_snapshot!(stdout(&o));
 }
+
+/// The example with a profile: the phase voltages L1, L2, L3 and their average.
+#[test]
+fn decode_with_a_profile_shows_scaled_values() {
+    let profile = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/example-profile.toml");
+    let o =
+        mbtap(&["decode", "--device", &format!("1={profile}"), "010401AE000491D4", "010408090108FA09060900C836"], None);
+    assert_eq!(o.status.code(), Some(0));
+    let s = stdout(&o);
+    for want in ["230.5 V", "229.8 V", "231 V", "230.4 V", "Phase A (L1) voltage"] {
+        assert!(s.contains(want), "{want} missing from\n{s}");
+    }
+    let o = mbtap(
+        &[
+            "decode",
+            "--format",
+            "jsonl",
+            "--device",
+            &format!("1={profile}"),
+            "010401AE000491D4",
+            "010408090108FA09060900C836",
+        ],
+        None,
+    );
+    let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(j["annotations"][0]["value"], 230.5);
+    assert_eq!(j["annotations"][0]["unit"], "V");
+}
+
+#[test]
+fn a_bad_profile_is_reported_with_its_position() {
+    let dir = std::env::temp_dir().join(format!("mbtap-profile-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[profile]\nname = \"x\"\ndevice = \"y\"\n\n[[input_registers]]\naddress = 430\nname = \"v\"\nscael = 0.1\n",
+    )
+    .unwrap();
+    let o = mbtap(&["profiles", "check", bad.to_str().unwrap()], None);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(err.contains("bad.toml:8:1: unknown field `scael`"), "{err}");
+}

@@ -21,6 +21,7 @@ fn run_dir(dir: &Path) -> usize {
             "decode_text" => mbtap::fuzzing::decode_text,
             "framer" => mbtap::fuzzing::framer,
             "capture" => mbtap::fuzzing::capture,
+            "profile" => mbtap::fuzzing::profile,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

@@ -6,6 +6,7 @@ pub mod annotate;
 pub mod format;
 pub mod loader;
 pub mod model;
+pub mod transaction;
 
 pub use format::Table;
 pub use loader::{ProfileError, load};

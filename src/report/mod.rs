@@ -1,6 +1,7 @@
 //! Rendering decoded frames and transactions for people (text) and programs (JSON lines).
 //! Both renderers read the same [`FrameView`] and the same field list ([`fields`]).
 
+pub mod annotations;
 pub mod events;
 pub mod fields;
 pub mod jsonl;
