@@ -1,15 +1,29 @@
-//! mbtap — a Modbus RTU/ASCII bus analyzer and TCP bridge.
+//! mbtap — a Modbus RTU/ASCII bus analyzer.
 //!
 //! Module map (dependencies point down, never up):
-//! - [`proto`] — the pure protocol core: frames and PDUs of every function code, parse and encode.
-//! - [`report`] — rendering decoded frames and transactions as text and JSON lines.
-//! - [`decode_cmd`] — the `mbtap decode` command: frames given by a user, explained.
-//! - [`hexinput`] — reading the hex and ASCII frames users paste.
+//!
+//! Pure core (no tokio, no terminal, no clock — time is an input):
+//! - [`proto`] — frames and PDUs of every function code: parse, encode, findings.
+//! - [`chunk`] — bytes as a read delivered them, with their [`chunk::Timestamp`].
+//! - [`framer`] — chunks into frames and noise (RTU by structure + CRC + timing; ASCII).
+//! - [`pairing`] — requests with their responses on a half-duplex bus.
+//! - [`analyzer`] — framers + pairing: one path for live capture, replay and tests.
+//! - [`profile`] — device register maps: format, loader, annotation.
+//! - [`traffic`] — synthetic traffic with ground truth and adapter observation models.
+//!
+//! Around it:
+//! - [`capture`] — pcap/pcapng reading and writing, Wireshark export.
+//! - [`report`] — text and JSON-lines rendering.
+//! - [`source`] — live serial ports and the clock (the edge).
+//! - [`cli`], [`commands`] and the `*_cmd` modules — the commands; `hexinput`, `line_args` —
+//!   what users type.
+//! - [`fuzzing`] — the bodies of the fuzz targets, also run over the seeds by `cargo test`.
 
 pub mod analyzer;
 pub mod capture;
 pub mod chunk;
 pub mod cli;
+pub mod commands;
 pub mod decode_cmd;
 pub mod framer;
 pub mod fuzzing;

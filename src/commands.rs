@@ -1,0 +1,287 @@
+//! The commands at the edge: each takes the parsed command line, does its I/O (files,
+//! stdout, serial ports, the runtime) and calls into the library. `main` only dispatches.
+
+use std::io::{self, BufRead, Write};
+use std::process::ExitCode;
+
+use anyhow::Context;
+
+use crate::analyzer::SerialMode;
+use crate::cli::{
+    Command, EventFormatArg, FormatArg, LineArgs, ModeArg, ObserveArg, ParityArg, ProfilesCommand, SerialModeArg,
+};
+use crate::decode_cmd::{self, Format};
+use crate::framer::Parity;
+use crate::line_args::LineOverrides;
+use crate::proto::Mode;
+use crate::replay_cmd::{EventFormat, EventWriter};
+use crate::traffic::{Observation, TrafficConfig};
+
+/// Runs one command; the exit code on success.
+///
+/// # Errors
+/// What went wrong, with context, for `main` to print once.
+pub fn run(command: Command) -> anyhow::Result<ExitCode> {
+    match command {
+        Command::Decode { frames, mode, format, devices } => {
+            let profiles = load_devices(&devices)?;
+            let lines = if frames.is_empty() {
+                io::stdin()
+                    .lock()
+                    .lines()
+                    .collect::<Result<Vec<_>, _>>()
+                    .context("reading frames from stdin")?
+                    .into_iter()
+                    .filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
+                    .collect()
+            } else {
+                frames
+            };
+            let mode = mode.map(|m| match m {
+                ModeArg::Rtu => Mode::Rtu,
+                ModeArg::Ascii => Mode::Ascii,
+                ModeArg::Tcp => Mode::Tcp,
+            });
+            let format = match format {
+                FormatArg::Text => Format::Text,
+                FormatArg::Jsonl => Format::Jsonl,
+            };
+            let stdout = io::stdout();
+            let mut out = io::BufWriter::new(stdout.lock());
+            let outcome = decode_cmd::run_with_profiles(&lines, mode, format, &profiles, &mut out, &mut io::stderr())?;
+            out.flush()?;
+            Ok(ExitCode::from(outcome as u8))
+        }
+        Command::Replay { file, line, format } => {
+            let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+            let stdout = io::stdout();
+            let mut writer =
+                EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
+            crate::replay_cmd::replay(input, overrides(&line), &mut writer, &mut io::stderr())
+                .with_context(|| format!("replaying {}", file.display()))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Sniff { port, line, format, record, duration } => {
+            let (mode, settings, latency_ns) = overrides(&line).resolve();
+            let opts = crate::sniff_cmd::SniffOptions {
+                port,
+                mode,
+                line: settings,
+                latency_ns,
+                record,
+                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+            };
+            let stdout = io::stdout();
+            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+            let rt =
+                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+            rt.block_on(crate::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Tap { port, link, line, format, record, duration } => {
+            let (mode, settings, latency_ns) = overrides(&line).resolve();
+            let opts = crate::tap_cmd::TapOptions {
+                port,
+                link,
+                mode,
+                line: settings,
+                latency_ns,
+                record,
+                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+            };
+            let stdout = io::stdout();
+            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+            let rt =
+                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+            rt.block_on(crate::tap_cmd::tap(opts, &mut writer, &mut io::stderr()))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Play { file, port, line, speed } => {
+            let (_, settings, _) = overrides(&line).resolve();
+            let (packets, bytes) = crate::play_cmd::play(&file, &port, settings, speed)?;
+            eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Profiles(ProfilesCommand::Check { file }) => {
+            let p = load_profile_file(&file)?;
+            let count = |t| p.addresses(t).count();
+            println!(
+                "{}: ok — {} ({}): {} coils, {} discrete inputs, {} holding registers, {} input registers, {} reserved ranges",
+                file.display(),
+                p.meta.name,
+                p.meta.device,
+                count(crate::profile::Table::Coils),
+                count(crate::profile::Table::DiscreteInputs),
+                count(crate::profile::Table::HoldingRegisters),
+                count(crate::profile::Table::InputRegisters),
+                p.reserved.len()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Profiles(ProfilesCommand::Show { file }) => {
+            let p = load_profile_file(&file)?;
+            println!("{} — {}", p.meta.name, p.meta.device);
+            for t in [
+                crate::profile::Table::Coils,
+                crate::profile::Table::DiscreteInputs,
+                crate::profile::Table::HoldingRegisters,
+                crate::profile::Table::InputRegisters,
+            ] {
+                println!("[{}]", t.name());
+                for a in p.addresses(t) {
+                    if let Some((slot, def)) = p.slot(t, a)
+                        && slot.part == 0
+                    {
+                        let ru = def.name_ru.as_deref().map(|r| format!(" ({r})")).unwrap_or_default();
+                        let unit = def.unit.as_deref().map(|u| format!(" [{u}]")).unwrap_or_default();
+                        println!("  {a:>5} {}{ru}{unit}", slot.name);
+                    }
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Export { file, out, line } => {
+            let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+            let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
+            let export = crate::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
+            let mut sink = ExportSink { export, error: None };
+            crate::replay_cmd::replay_into(input, overrides(&line), &mut sink)
+                .with_context(|| format!("reading {}", file.display()))?;
+            if let Some(e) = sink.error {
+                return Err(e).with_context(|| format!("writing {}", out.display()));
+            }
+            let frames = sink.export.frames;
+            sink.export.finish().with_context(|| format!("writing {}", out.display()))?;
+            eprintln!("mbtap: exported {frames} frames to {}", out.display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Generate { out, transactions, seed, line, observe, noise, corrupt, slow, frames: Some(list) } => {
+            let _ = (transactions, seed, observe, noise, corrupt, slow);
+            let (mode, settings, _) = overrides(&line).resolve();
+            let text = std::fs::read_to_string(&list).with_context(|| format!("reading {}", list.display()))?;
+            let mut frames = Vec::new();
+            for (i, l) in text.lines().enumerate() {
+                let l = l.trim();
+                if l.is_empty() || l.starts_with('#') {
+                    continue;
+                }
+                let wire = crate::hexinput::parse_frame_text(l)
+                    .map_err(|e| anyhow::anyhow!("{}:{}: {e}", list.display(), i + 1))?;
+                frames.push(wire);
+            }
+            let file = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
+            let n = crate::generate_cmd::write_frames(
+                io::BufWriter::new(file),
+                &frames,
+                mode,
+                settings,
+                1_700_000_000_000_000_000,
+            )
+            .with_context(|| format!("writing {}", out.display()))?;
+            eprintln!(
+                "mbtap: wrote {} ({} frames, {n} bytes, {settings} {})",
+                out.display(),
+                frames.len(),
+                mode.name()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Generate { out, transactions, seed, line, observe, noise, corrupt, slow, frames: None } => {
+            let (_, settings, _) = overrides(&line).resolve();
+            let cfg =
+                TrafficConfig { seed, line: settings, transactions, noise, corrupt, slow, ..TrafficConfig::default() };
+            let model = match observe {
+                ObserveArg::PerByte => Observation::PerByte,
+                ObserveArg::PerFrame => Observation::PerFrame,
+                ObserveArg::Fifo => Observation::FIFO_16550,
+                ObserveArg::Usb1 => Observation::USB_1MS,
+                ObserveArg::Usb16 => Observation::USB_16MS,
+            };
+            let file = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
+            let (chunks, bytes) = crate::generate_cmd::write_capture(io::BufWriter::new(file), &cfg, model)
+                .with_context(|| format!("writing {}", out.display()))?;
+            eprintln!(
+                "mbtap: wrote {} ({transactions} transactions, {bytes} bytes in {chunks} packets, {settings}, {})",
+                out.display(),
+                model.name()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// Collects frames for the Wireshark export.
+struct ExportSink<W: Write> {
+    export: crate::capture::export::WiresharkExport<W>,
+    error: Option<io::Error>,
+}
+
+impl<W: Write> crate::analyzer::Sink for ExportSink<W> {
+    fn event(&mut self, e: &crate::analyzer::Event<'_>) {
+        if let crate::analyzer::Event::Frame { frame, role, .. } = *e
+            && self.error.is_none()
+            && let Err(err) = self.export.frame(frame.t_start, frame.bytes, role, frame.check_ok)
+        {
+            self.error = Some(err);
+        }
+    }
+
+    fn warning(&mut self, message: &str) {
+        eprintln!("mbtap: warning: {message}");
+    }
+}
+
+fn load_profile_file(path: &std::path::Path) -> anyhow::Result<crate::profile::Profile> {
+    let src = std::fs::read_to_string(path).with_context(|| format!("reading profile {}", path.display()))?;
+    Ok(crate::profile::load(&path.display().to_string(), &src)?)
+}
+
+/// `--device UNIT=PROFILE` values: a unit address and a profile file.
+fn load_devices(devices: &[String]) -> anyhow::Result<crate::decode_cmd::Profiles> {
+    let mut out = crate::decode_cmd::Profiles::new();
+    for d in devices {
+        let (unit, profile) = d
+            .split_once('=')
+            .with_context(|| format!("--device {d:?}: expected UNIT=PROFILE, e.g. --device 1=./pump.toml"))?;
+        let unit: u8 = unit.trim().parse().with_context(|| format!("--device {d:?}: unit {unit:?} is not 0..=255"))?;
+        let path = std::path::Path::new(profile.trim());
+        if !path.exists() {
+            anyhow::bail!(
+                "--device {d:?}: no profile file {profile:?} (mbtap has no built-in profiles yet: the MK4, MKZP-0.4 and Display profiles are being written; give the path of a profile file, see docs/profiles.md)"
+            );
+        }
+        out.insert(unit, load_profile_file(path)?);
+    }
+    Ok(out)
+}
+
+fn event_format(f: EventFormatArg) -> EventFormat {
+    match f {
+        EventFormatArg::Text => EventFormat::Text,
+        EventFormatArg::Jsonl => EventFormat::Jsonl,
+        EventFormatArg::Summary => EventFormat::Summary,
+    }
+}
+
+fn overrides(a: &LineArgs) -> LineOverrides {
+    LineOverrides {
+        mode: a.mode.map(|m| match m {
+            SerialModeArg::Rtu => SerialMode::Rtu,
+            SerialModeArg::Ascii => SerialMode::Ascii,
+        }),
+        baud: a.baud,
+        data_bits: a.data_bits,
+        parity: a.parity.map(|p| match p {
+            ParityArg::None => Parity::None,
+            ParityArg::Even => Parity::Even,
+            ParityArg::Odd => Parity::Odd,
+        }),
+        stop_bits: a.stop_bits,
+        // Milliseconds given by a person; negative or absurd values clamp to 0..=10 s.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
+    }
+}
