@@ -116,7 +116,8 @@ pub enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value_t = FormatArg::Text)]
         format: FormatArg,
-        /// Annotate unit UNIT's values with a profile: `UNIT=FILE.toml` (repeatable).
+        /// Annotate unit UNIT's values with a profile: `UNIT=NAME` (built-in, see `profiles
+        /// list`) or `UNIT=FILE.toml` (repeatable).
         #[arg(long = "device", value_name = "UNIT=PROFILE")]
         devices: Vec<String>,
     },
@@ -239,8 +240,10 @@ pub enum Command {
 /// `mbtap profiles …`
 #[derive(Debug, Subcommand)]
 pub enum ProfilesCommand {
+    /// List the built-in profiles.
+    List,
     /// Load a profile file and report the first problem with file:line:column, or a summary.
     Check { file: PathBuf },
-    /// Print every address a profile file defines, per table.
-    Show { file: PathBuf },
+    /// Print every address a profile (a built-in name or a file) defines, per table.
+    Show { profile: String },
 }

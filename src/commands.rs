@@ -121,8 +121,16 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
-        Command::Profiles(ProfilesCommand::Show { file }) => {
-            let p = load_profile_file(&file)?;
+        Command::Profiles(ProfilesCommand::List) => {
+            for name in crate::profile::builtin::names() {
+                if let Some(Ok(p)) = crate::profile::builtin::get(name) {
+                    println!("{name:<8} {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""));
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Profiles(ProfilesCommand::Show { profile }) => {
+            let p = resolve_profile(&profile)?;
             println!("{} — {}", p.meta.name, p.meta.device);
             for t in [
                 crate::profile::Table::Coils,
@@ -239,21 +247,29 @@ fn load_profile_file(path: &std::path::Path) -> anyhow::Result<crate::profile::P
     Ok(crate::profile::load(&path.display().to_string(), &src)?)
 }
 
-/// `--device UNIT=PROFILE` values: a unit address and a profile file.
+/// A built-in profile by name, or a profile file by path.
+fn resolve_profile(spec: &str) -> anyhow::Result<crate::profile::Profile> {
+    if let Some(p) = crate::profile::builtin::get(spec) {
+        return Ok(p?);
+    }
+    let path = std::path::Path::new(spec);
+    if !path.exists() {
+        anyhow::bail!(
+            "no built-in profile or file named {spec:?}; built-in profiles: {} (or give the path of a profile file, see docs/profiles.md)",
+            crate::profile::builtin::names().join(", ")
+        );
+    }
+    load_profile_file(path)
+}
+
+/// `--device UNIT=PROFILE` values: a unit address and a built-in name or a profile file.
 fn load_devices(devices: &[String]) -> anyhow::Result<crate::decode_cmd::Profiles> {
     let mut out = crate::decode_cmd::Profiles::new();
     for d in devices {
-        let (unit, profile) = d
-            .split_once('=')
-            .with_context(|| format!("--device {d:?}: expected UNIT=PROFILE, e.g. --device 1=./pump.toml"))?;
+        let (unit, profile) =
+            d.split_once('=').with_context(|| format!("--device {d:?}: expected UNIT=PROFILE, e.g. --device 1=mk4"))?;
         let unit: u8 = unit.trim().parse().with_context(|| format!("--device {d:?}: unit {unit:?} is not 0..=255"))?;
-        let path = std::path::Path::new(profile.trim());
-        if !path.exists() {
-            anyhow::bail!(
-                "--device {d:?}: no profile file {profile:?} (mbtap has no built-in profiles yet: the MK4, MKZP-0.4 and Display profiles are being written; give the path of a profile file, see docs/profiles.md)"
-            );
-        }
-        out.insert(unit, load_profile_file(path)?);
+        out.insert(unit, resolve_profile(profile.trim()).with_context(|| format!("--device {d:?}"))?);
     }
     Ok(out)
 }

@@ -3,6 +3,7 @@
 //! Pure: no I/O here; callers read the files.
 
 pub mod annotate;
+pub mod builtin;
 pub mod format;
 pub mod loader;
 pub mod model;

@@ -1,0 +1,117 @@
+//! The built-in profiles against the documents they were made from: every address a
+//! document's register tables list must be in the profile (defined or reserved). The
+//! addresses are read from the document itself (`docs/sources/`), so removing a register
+//! from a profile — or the document gaining one — fails this test.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use mbtap::profile::{Table, builtin};
+
+/// Addresses listed in the tables of a document section: table rows start with a 3-digit
+/// address (`101\t…`) or a range (`019-049`, `244 · · · 255`, `279 – 285`).
+fn listed_addresses(section: &str) -> Vec<u16> {
+    let mut out = Vec::new();
+    for line in section.lines() {
+        let digits: String = line.chars().take_while(char::is_ascii_digit).collect();
+        if digits.len() != 3 {
+            continue;
+        }
+        let Ok(first) = digits.parse::<u16>() else { continue };
+        let rest = &line[3..];
+        // A range: separators then a second 3-digit address right after.
+        let after: String = rest.chars().skip_while(|c| [' ', '-', '–', '·'].contains(c)).collect();
+        let second: String = after.chars().take_while(char::is_ascii_digit).collect();
+        let is_range = second.len() == 3 && rest.trim_start().starts_with(['-', '–', '·']);
+        if is_range {
+            let last: u16 = second.parse().unwrap();
+            out.extend(first..=last);
+        } else {
+            out.push(first);
+        }
+    }
+    out
+}
+
+fn section<'a>(doc: &'a str, from: &str, to: &str) -> &'a str {
+    let a = doc.find(from).unwrap_or_else(|| panic!("{from:?} not in the document"));
+    let b = doc[a..].find(to).map_or(doc.len(), |b| a + b);
+    &doc[a..b]
+}
+
+#[test]
+fn mk4_profile_has_every_address_of_the_document() {
+    let doc = include_str!("../docs/sources/mk4-protocol-v2.00.txt");
+    let p = builtin::get("mk4").unwrap().unwrap();
+    let sections = [
+        (Table::Coils, section(doc, "#### 3.1 Чтение состояния дискретных выходов", "Чтение состояния 8 выходов")),
+        (
+            Table::DiscreteInputs,
+            section(doc, "### 3.2 Чтение состояния дискретных входов", "Чтение 3 входов с адреса 053"),
+        ),
+        (
+            Table::HoldingRegisters,
+            section(doc, "### 3.3 Регистры задания параметров", "Чтение 3 регистров с адреса 101"),
+        ),
+        (
+            Table::InputRegisters,
+            section(doc, "### 3.4 Регистры чтения данных объекта", "Чтение 3 регистров с адреса 400"),
+        ),
+    ];
+    let mut checked = 0;
+    for (table, text) in sections {
+        let listed = listed_addresses(text);
+        assert!(!listed.is_empty(), "no addresses found for {}", table.name());
+        for a in listed {
+            assert!(
+                p.slot(table, a).is_some() || p.is_reserved(table, a),
+                "{} {a} is in the document but not in the mk4 profile",
+                table.name()
+            );
+            checked += 1;
+        }
+    }
+    // Coils 000–049, inputs 050–099, holding 100–399, input 400–499 + log 500–839 + 900–903.
+    assert!(checked >= 50 + 50 + 300 + 100 + 340 + 4, "only {checked} addresses read from the document");
+}
+
+#[test]
+fn mk4_profile_defines_exactly_the_documented_ranges() {
+    let p = builtin::get("mk4").unwrap().unwrap();
+    let count = |t| p.addresses(t).count();
+    assert_eq!(count(Table::Coils), 19, "coils 000–018");
+    assert_eq!(count(Table::DiscreteInputs), 35, "inputs 050–088 less the 4 reserved");
+    assert_eq!(count(Table::HoldingRegisters), 213, "holding 100–312");
+    assert_eq!(count(Table::InputRegisters), 77 + 340 + 4, "input 400–476, log 500–839, firmware 900–903");
+}
+
+/// The example: `--device 1=mk4` shows L1, L2, L3 and their average in volts.
+#[test]
+fn mk4_phase_voltages() {
+    let p = builtin::get("mk4").unwrap().unwrap();
+    let a =
+        mbtap::profile::annotate::annotate_registers(&p, Table::InputRegisters, 430, &[2305, 2298, 2310, 2304], false);
+    let shown: Vec<String> = a.iter().map(ToString::to_string).collect();
+    assert_eq!(
+        shown,
+        [
+            "430 Phase A (L1) voltage = 230.5 V (raw 2305)",
+            "431 Phase B (L2) voltage = 229.8 V (raw 2298)",
+            "432 Phase C (L3) voltage = 231 V (raw 2310)",
+            "433 Average phase voltage = 230.4 V (raw 2304)",
+        ]
+    );
+}
+
+/// The alarm log's combined code: group digit (2 = motor M1) and code (5 = starts per hour).
+#[test]
+fn mk4_alarm_log_code_is_decoded() {
+    let p = builtin::get("mk4").unwrap().unwrap();
+    let a = mbtap::profile::annotate::annotate_registers(&p, Table::InputRegisters, 517, &[25], false);
+    assert_eq!(a[0].to_string(), "517 Alarm log record 2: alarm code = motor M1: starts per hour exceeded (raw 25)");
+}
+
+#[test]
+fn every_builtin_profile_loads() {
+    for name in builtin::names() {
+        builtin::get(name).unwrap().unwrap_or_else(|e| panic!("{e}"));
+    }
+}
