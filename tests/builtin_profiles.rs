@@ -115,3 +115,46 @@ fn every_builtin_profile_loads() {
         builtin::get(name).unwrap().unwrap_or_else(|e| panic!("{e}"));
     }
 }
+
+/// The Display's table 4 rows are `N\tDDDD\t…` with the Modbus address in the second column.
+#[test]
+fn display_profile_has_every_address_of_the_document() {
+    let doc = include_str!("../docs/sources/mechatronics-display-protocol.txt");
+    let p = builtin::get("display").unwrap().unwrap();
+    let mut listed = Vec::new();
+    for line in doc.lines() {
+        let mut cols = line.split('\t');
+        let (Some(n), Some(addr)) = (cols.next(), cols.next()) else { continue };
+        if n.trim_end_matches('*').parse::<u32>().is_ok() && addr.len() == 4 && addr.chars().all(|c| c.is_ascii_digit())
+        {
+            listed.push(addr.parse::<u16>().unwrap());
+        }
+    }
+    assert_eq!(listed.len(), 268, "table 4 lists input registers 0000–0267");
+    for a in listed {
+        assert!(
+            p.slot(Table::InputRegisters, a).is_some(),
+            "input register {a} is in the document but not in the display profile"
+        );
+    }
+    assert_eq!(p.addresses(Table::InputRegisters).count(), 268);
+}
+
+/// A flow meter's status bits and a level sensor's 32-bit volume (high word first).
+#[test]
+fn display_values() {
+    use mbtap::profile::annotate::annotate_registers;
+    let p = builtin::get("display").unwrap().unwrap();
+    let a = annotate_registers(&p, Table::InputRegisters, 65, &[0b10_0010], false);
+    assert_eq!(a[0].to_string(), "65 Flow meter 1: status = mode: nominal, interference (raw 34)");
+    let a = annotate_registers(&p, Table::InputRegisters, 4, &[0x0001, 0x86A0, 5025, 0xFFFB], false);
+    let shown: Vec<String> = a.iter().map(ToString::to_string).collect();
+    assert_eq!(
+        shown,
+        [
+            "4 Level sensor 1: fuel volume = 1000 l (raw 100000)",
+            "6 Level sensor 1: fuel volume, percent = 50.25 % (raw 5025)",
+            "7 Level sensor 1: temperature = -5 °C (raw -5)",
+        ]
+    );
+}

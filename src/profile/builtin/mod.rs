@@ -5,7 +5,10 @@ use super::loader::{ProfileError, load};
 use super::model::Profile;
 
 /// (name, file name, TOML) of every built-in profile.
-const BUILTIN: &[(&str, &str, &str)] = &[("mk4", "builtin/mk4.toml", include_str!("mk4.toml"))];
+const BUILTIN: &[(&str, &str, &str)] = &[
+    ("mk4", "builtin/mk4.toml", include_str!("mk4.toml")),
+    ("display", "builtin/display.toml", include_str!("display.toml")),
+];
 
 /// Names of the built-in profiles.
 #[must_use]
