@@ -158,3 +158,51 @@ fn display_values() {
         ]
     );
 }
+
+/// The MKZP's tables (an OCR'd scan) give addresses as five digits: `Current_Faza_A 00050 | …`.
+#[test]
+fn mkzp_profile_has_every_address_of_the_document() {
+    let doc = include_str!("../docs/sources/mkzp-0.4-protocol-ocr.txt");
+    let p = builtin::get("mkzp").unwrap().unwrap();
+    // Table rows: a parameter name, the five-digit address, then `|` and the description.
+    let mut listed = Vec::new();
+    for line in doc.lines() {
+        let chars: Vec<char> = line.chars().collect();
+        let mut i = 0;
+        while i < chars.len() {
+            if chars[i].is_ascii_digit() {
+                let start = i;
+                while i < chars.len() && chars[i].is_ascii_digit() {
+                    i += 1;
+                }
+                let next = chars[i..].iter().find(|c| **c != ' ');
+                if i - start == 5 && next == Some(&'|') {
+                    listed.push(chars[start..i].iter().collect::<String>().parse::<u16>().unwrap());
+                }
+            } else {
+                i += 1;
+            }
+        }
+    }
+    listed.sort_unstable();
+    listed.dedup();
+    let expected: Vec<u16> = (50..=122).chain(128..=195).collect();
+    assert_eq!(listed, expected, "the document lists 50–122 and 128–195");
+    for a in listed {
+        assert!(
+            p.slot(Table::HoldingRegisters, a).is_some(),
+            "register {a} is in the document but not in the mkzp profile"
+        );
+    }
+    assert!(p.meta.also_answers.contains(&247), "every MKZP also answers address 247");
+}
+
+#[test]
+fn mkzp_status_bits_and_trip_records() {
+    use mbtap::profile::annotate::annotate_registers;
+    let p = builtin::get("mkzp").unwrap().unwrap();
+    let a = annotate_registers(&p, Table::HoldingRegisters, 66, &[0b100_0000_1000], false);
+    assert_eq!(a[0].to_string(), "66 System_Status: status register = overload, motor on (raw 1032)");
+    let a = annotate_registers(&p, Table::HoldingRegisters, 162, &[7], false);
+    assert_eq!(a[0].name.as_deref(), Some("Trip record P3: Month"));
+}

@@ -7,6 +7,7 @@ use super::model::Profile;
 /// (name, file name, TOML) of every built-in profile.
 const BUILTIN: &[(&str, &str, &str)] = &[
     ("mk4", "builtin/mk4.toml", include_str!("mk4.toml")),
+    ("mkzp", "builtin/mkzp.toml", include_str!("mkzp.toml")),
     ("display", "builtin/display.toml", include_str!("display.toml")),
 ];
 
