@@ -133,6 +133,9 @@ pub enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
         format: EventFormatArg,
+        /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
+        #[arg(long = "device", value_name = "UNIT=PROFILE")]
+        devices: Vec<String>,
     },
     /// Write a synthetic line capture with known content (for training, tests and benchmarks).
     Generate {
@@ -190,6 +193,9 @@ pub enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
         format: EventFormatArg,
+        /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
+        #[arg(long = "device", value_name = "UNIT=PROFILE")]
+        devices: Vec<String>,
         /// Record every read to this pcapng file.
         #[arg(long)]
         record: Option<PathBuf>,
@@ -225,6 +231,9 @@ pub enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
         format: EventFormatArg,
+        /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
+        #[arg(long = "device", value_name = "UNIT=PROFILE")]
+        devices: Vec<String>,
         /// Record both directions to this pcapng file.
         #[arg(long)]
         record: Option<PathBuf>,

@@ -52,17 +52,18 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.flush()?;
             Ok(ExitCode::from(outcome as u8))
         }
-        Command::Replay { file, line, format } => {
+        Command::Replay { file, line, format, devices } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
             let stdout = io::stdout();
             let mut writer =
                 EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
+            writer.profiles = load_devices(&devices)?;
             crate::replay_cmd::replay(input, overrides(&line), &mut writer, &mut io::stderr())
                 .with_context(|| format!("replaying {}", file.display()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Sniff { port, line, format, record, duration } => {
+        Command::Sniff { port, line, format, devices, record, duration } => {
             let (mode, settings, latency_ns) = overrides(&line).resolve();
             let opts = crate::sniff_cmd::SniffOptions {
                 port,
@@ -74,13 +75,14 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             };
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+            writer.profiles = load_devices(&devices)?;
             let rt =
                 tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
             rt.block_on(crate::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Tap { port, link, line, format, record, duration } => {
+        Command::Tap { port, link, line, format, devices, record, duration } => {
             let (mode, settings, latency_ns) = overrides(&line).resolve();
             let opts = crate::tap_cmd::TapOptions {
                 port,
@@ -93,6 +95,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             };
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+            writer.profiles = load_devices(&devices)?;
             let rt =
                 tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
             rt.block_on(crate::tap_cmd::tap(opts, &mut writer, &mut io::stderr()))?;

@@ -29,11 +29,13 @@ pub struct EventWriter<W: Write> {
     pub format: EventFormat,
     pub stats: Stats,
     pub error: Option<io::Error>,
+    /// Profiles by unit: transactions of these units get their values annotated.
+    pub profiles: crate::decode_cmd::Profiles,
 }
 
 impl<W: Write> EventWriter<W> {
     pub fn new(out: W, format: EventFormat) -> Self {
-        Self { out, format, stats: Stats::default(), error: None }
+        Self { out, format, stats: Stats::default(), error: None, profiles: crate::decode_cmd::Profiles::new() }
     }
 
     /// Writes one event (errors are kept for the caller; a closed pipe stops output).
@@ -42,9 +44,35 @@ impl<W: Write> EventWriter<W> {
         if self.error.is_some() {
             return;
         }
+        if self.format == EventFormat::Summary {
+            return;
+        }
+        let annotations = match e {
+            Event::Transaction(t) if t.outcome == crate::pairing::Outcome::Ok => {
+                match (self.profiles.get(&t.unit), t.request) {
+                    (Some(p), Some(req)) => crate::profile::transaction::annotate_wire(p, req, t.response),
+                    _ => Vec::new(),
+                }
+            }
+            _ => Vec::new(),
+        };
         let r = match self.format {
-            EventFormat::Text => writeln!(self.out, "{}", text_line(e)),
-            EventFormat::Jsonl => writeln!(self.out, "{}", json(e)),
+            EventFormat::Text => {
+                let mut text = text_line(e);
+                for a in &annotations {
+                    text.push_str("\n      ");
+                    text.push_str(&a.to_string());
+                }
+                writeln!(self.out, "{text}")
+            }
+            EventFormat::Jsonl => {
+                let mut j = json(e);
+                if !annotations.is_empty() {
+                    j["annotations"] =
+                        serde_json::Value::Array(annotations.iter().map(crate::report::annotations::json).collect());
+                }
+                writeln!(self.out, "{j}")
+            }
             EventFormat::Summary => Ok(()),
         };
         if let Err(err) = r {

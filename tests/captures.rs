@@ -6,10 +6,18 @@
 use mbtap::line_args::LineOverrides;
 use mbtap::replay_cmd::{EventFormat, EventWriter, replay};
 
-/// Warnings, then every event, then the summary, as one text.
+/// Warnings, then every event, then the summary, as one text. A capture with a `.devices`
+/// file beside it (`UNIT=PROFILE` per line) is annotated with those built-in profiles.
 fn transcript(path: &std::path::Path, format: EventFormat) -> String {
     let file = std::fs::File::open(path).unwrap();
     let mut w = EventWriter::new(Vec::new(), format);
+    if let Ok(devices) = std::fs::read_to_string(path.with_extension("devices")) {
+        for line in devices.lines().filter(|l| !l.trim().is_empty()) {
+            let (unit, name) = line.split_once('=').unwrap();
+            let profile = mbtap::profile::builtin::get(name.trim()).unwrap().unwrap();
+            w.profiles.insert(unit.trim().parse().unwrap(), profile);
+        }
+    }
     let mut warnings = Vec::new();
     replay(std::io::BufReader::new(file), LineOverrides::default(), &mut w, &mut warnings).unwrap();
     let mut out = String::from_utf8(warnings).unwrap();
