@@ -128,6 +128,10 @@ pub enum Command {
     Replay {
         /// The capture file.
         file: PathBuf,
+        /// Write the register image (latest value of every unit/table/address seen, when, and
+        /// from which transaction) to this file: `.json` for JSON, anything else CSV.
+        #[arg(long)]
+        image: Option<PathBuf>,
         #[command(flatten)]
         line: LineArgs,
         /// Output format.

@@ -52,14 +52,25 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.flush()?;
             Ok(ExitCode::from(outcome as u8))
         }
-        Command::Replay { file, line, format, devices } => {
+        Command::Replay { file, image, line, format, devices } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
             let stdout = io::stdout();
             let mut writer =
                 EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
+            if image.is_some() {
+                writer.image = Some(crate::profile::image::RegisterImage::default());
+            }
             crate::replay_cmd::replay(input, overrides(&line), &mut writer, &mut io::stderr())
                 .with_context(|| format!("replaying {}", file.display()))?;
+            if let (Some(path), Some(img)) = (&image, writer.image.take()) {
+                let text = if path.extension().is_some_and(|e| e == "json") {
+                    serde_json::to_string_pretty(&img.to_json(&writer.profiles))?
+                } else {
+                    img.to_csv(&writer.profiles)
+                };
+                std::fs::write(path, text).with_context(|| format!("writing the register image {}", path.display()))?;
+            }
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }

@@ -31,16 +31,31 @@ pub struct EventWriter<W: Write> {
     pub error: Option<io::Error>,
     /// Profiles by unit: transactions of these units get their values annotated.
     pub profiles: crate::decode_cmd::Profiles,
+    /// The register image, when asked for.
+    pub image: Option<crate::profile::image::RegisterImage>,
 }
 
 impl<W: Write> EventWriter<W> {
     pub fn new(out: W, format: EventFormat) -> Self {
-        Self { out, format, stats: Stats::default(), error: None, profiles: crate::decode_cmd::Profiles::new() }
+        Self {
+            out,
+            format,
+            stats: Stats::default(),
+            error: None,
+            profiles: crate::decode_cmd::Profiles::new(),
+            image: None,
+        }
     }
 
     /// Writes one event (errors are kept for the caller; a closed pipe stops output).
     pub fn write(&mut self, e: &Event<'_>) {
         self.stats.add(e);
+        if let (Some(image), Event::Transaction(t)) = (self.image.as_mut(), e)
+            && let Some(req) = t.request
+        {
+            let resp = if t.outcome == crate::pairing::Outcome::Ok { t.response } else { None };
+            image.update(t.unit, t.t_start.0, req, resp);
+        }
         if self.error.is_some() {
             return;
         }

@@ -5,6 +5,7 @@
 pub mod annotate;
 pub mod builtin;
 pub mod format;
+pub mod image;
 pub mod loader;
 pub mod model;
 pub mod transaction;

@@ -1,0 +1,192 @@
+//! The register image: the latest known value of every (unit, table, address) seen on the
+//! bus — read in a response or written in a request — with when it was seen and which
+//! transaction it came from. Written by `replay --image out.csv|json`.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use super::format::Table;
+use crate::proto::{Request, Response};
+
+/// One known value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Known {
+    pub raw: u16,
+    pub t_ns: u64,
+    /// 1-based number of the transaction (in the order they completed) that carried it.
+    pub transaction: u64,
+}
+
+/// The image.
+#[derive(Debug, Clone, Default)]
+pub struct RegisterImage {
+    pub values: BTreeMap<(u8, Table, u16), Known>,
+    transactions: u64,
+}
+
+fn pdu_of(wire: &[u8]) -> Option<Vec<u8>> {
+    if wire.first() == Some(&b':') {
+        crate::proto::parse_ascii(wire).ok().filter(crate::proto::AsciiFrame::check_ok).map(|f| f.pdu().to_vec())
+    } else {
+        crate::proto::parse_rtu(wire).ok().filter(crate::proto::RtuFrame::check_ok).map(|f| f.pdu.to_vec())
+    }
+}
+
+impl RegisterImage {
+    fn set(&mut self, unit: u8, table: Table, start: u16, values: impl IntoIterator<Item = u16>, t_ns: u64) {
+        for (i, raw) in values.into_iter().enumerate() {
+            let Some(a) = u16::try_from(i).ok().and_then(|i| start.checked_add(i)) else { break };
+            self.values.insert((unit, table, a), Known { raw, t_ns, transaction: self.transactions });
+        }
+    }
+
+    /// Takes in a completed transaction (frames as on the wire).
+    pub fn update(&mut self, unit: u8, t_ns: u64, request: &[u8], response: Option<&[u8]>) {
+        self.transactions += 1;
+        let Some(req_pdu) = pdu_of(request) else { return };
+        let Ok(([], req)) = crate::proto::parse_request(&req_pdu) else { return };
+        let resp_pdu = response.and_then(pdu_of);
+        let resp = match resp_pdu.as_deref().map(crate::proto::parse_response) {
+            Some(Ok(([], r))) => Some(r),
+            _ => None,
+        };
+        let bits = |b: crate::proto::Bits<'_>, n: u16| b.iter(usize::from(n)).map(u16::from).collect::<Vec<_>>();
+        match (req, resp) {
+            (Request::ReadCoils { address, quantity }, Some(Response::ReadCoils { status })) => {
+                self.set(unit, Table::Coils, address, bits(status, quantity), t_ns);
+            }
+            (Request::ReadDiscreteInputs { address, quantity }, Some(Response::ReadDiscreteInputs { status })) => {
+                self.set(unit, Table::DiscreteInputs, address, bits(status, quantity), t_ns);
+            }
+            (Request::ReadHoldingRegisters { address, .. }, Some(Response::ReadHoldingRegisters { values }))
+            | (
+                Request::WriteMultipleRegisters { address, values, .. },
+                Some(Response::WriteMultipleRegisters { .. }),
+            ) => {
+                self.set(unit, Table::HoldingRegisters, address, values.iter(), t_ns);
+            }
+            (Request::ReadInputRegisters { address, .. }, Some(Response::ReadInputRegisters { values })) => {
+                self.set(unit, Table::InputRegisters, address, values.iter(), t_ns);
+            }
+            (Request::WriteSingleCoil { address, value }, Some(Response::WriteSingleCoil { .. })) => {
+                self.set(unit, Table::Coils, address, [u16::from(value == 0xFF00)], t_ns);
+            }
+            (Request::WriteSingleRegister { address, value }, Some(Response::WriteSingleRegister { .. })) => {
+                self.set(unit, Table::HoldingRegisters, address, [value], t_ns);
+            }
+            (Request::WriteMultipleCoils { address, quantity, values }, Some(Response::WriteMultipleCoils { .. })) => {
+                self.set(unit, Table::Coils, address, bits(values, quantity), t_ns);
+            }
+
+            (
+                Request::ReadWriteMultipleRegisters { read_address, write_address, values, .. },
+                Some(Response::ReadWriteMultipleRegisters { values: read }),
+            ) => {
+                self.set(unit, Table::HoldingRegisters, write_address, values.iter(), t_ns);
+                self.set(unit, Table::HoldingRegisters, read_address, read.iter(), t_ns);
+            }
+            _ => {}
+        }
+    }
+
+    /// The image as CSV: `unit,table,address,name,raw,value,unit_of_measure,t_ns,transaction`,
+    /// names and scaled values from the unit's profile when there is one.
+    #[must_use]
+    pub fn to_csv(&self, profiles: &BTreeMap<u8, super::Profile>) -> String {
+        let mut out = String::from("unit,table,address,name,raw,value,unit_of_measure,t_ns,transaction\n");
+        for row in self.rows(profiles) {
+            let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+            let _ = writeln!(
+                out,
+                "{},{},{},{},{},{},{},{},{}",
+                row.unit,
+                row.table.name(),
+                row.address,
+                quote(&row.name),
+                row.raw,
+                quote(&row.value),
+                quote(&row.unit_of_measure),
+                row.t_ns,
+                row.transaction
+            );
+        }
+        out
+    }
+
+    /// The image as a JSON array of the same rows.
+    #[must_use]
+    pub fn to_json(&self, profiles: &BTreeMap<u8, super::Profile>) -> serde_json::Value {
+        serde_json::Value::Array(
+            self.rows(profiles)
+                .into_iter()
+                .map(|r| {
+                    serde_json::json!({
+                        "unit": r.unit, "table": r.table.name(), "address": r.address, "name": r.name,
+                        "raw": r.raw, "value": r.value, "unit_of_measure": r.unit_of_measure,
+                        "t_ns": r.t_ns, "transaction": r.transaction,
+                    })
+                })
+                .collect(),
+        )
+    }
+
+    fn rows(&self, profiles: &BTreeMap<u8, super::Profile>) -> Vec<Row> {
+        self.values
+            .iter()
+            .map(|(&(unit, table, address), k)| {
+                let mut row = Row {
+                    unit,
+                    table,
+                    address,
+                    name: String::new(),
+                    raw: k.raw,
+                    value: k.raw.to_string(),
+                    unit_of_measure: String::new(),
+                    t_ns: k.t_ns,
+                    transaction: k.transaction,
+                };
+                // A 32-bit value is shown at its first address, from both registers when the
+                // image has the second.
+                let next = address.checked_add(1).and_then(|n| self.values.get(&(unit, table, n))).map(|n| n.raw);
+                let regs: Vec<u16> = std::iter::once(k.raw).chain(next).collect();
+                if let Some(p) = profiles.get(&unit)
+                    && let Some(a) = (if matches!(table, Table::Coils | Table::DiscreteInputs) {
+                        super::annotate::annotate_bits(p, table, address, &[k.raw != 0], false)
+                    } else {
+                        super::annotate::annotate_registers(p, table, address, &regs, false)
+                    })
+                    .into_iter()
+                    .next()
+                    .filter(|a| a.address == address)
+                {
+                    row.name = a.name.unwrap_or_default();
+                    match &a.shown {
+                        super::annotate::Shown::Number { value, unit } => {
+                            row.value = format!("{value}");
+                            unit.as_deref().unwrap_or_default().clone_into(&mut row.unit_of_measure);
+                        }
+                        super::annotate::Shown::Label(l) | super::annotate::Shown::Bool { label: Some(l), .. } => {
+                            l.clone_into(&mut row.value);
+                        }
+                        super::annotate::Shown::Bits(b) => row.value = b.join("; "),
+                        super::annotate::Shown::Text(t) => t.clone_into(&mut row.value),
+                        super::annotate::Shown::Bool { label: None, .. } | super::annotate::Shown::Raw => {}
+                    }
+                }
+                row
+            })
+            .collect()
+    }
+}
+
+struct Row {
+    unit: u8,
+    table: Table,
+    address: u16,
+    name: String,
+    raw: u16,
+    value: String,
+    unit_of_measure: String,
+    t_ns: u64,
+    transaction: u64,
+}
