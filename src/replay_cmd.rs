@@ -81,12 +81,19 @@ impl<W: Write> EventWriter<W> {
                 writeln!(self.out, "{text}")
             }
             EventFormat::Jsonl => {
-                let mut j = json(e);
-                if !annotations.is_empty() {
-                    j["annotations"] =
-                        serde_json::Value::Array(annotations.iter().map(crate::report::annotations::json).collect());
+                let mut line = json(e).to_string();
+                if !annotations.is_empty() && line.ends_with('}') {
+                    line.pop();
+                    line.push_str(",\"annotations\":[");
+                    for (i, a) in annotations.iter().enumerate() {
+                        if i > 0 {
+                            line.push(',');
+                        }
+                        crate::report::annotations::write_json(&mut line, a);
+                    }
+                    line.push_str("]}");
                 }
-                writeln!(self.out, "{j}")
+                writeln!(self.out, "{line}")
             }
             EventFormat::Summary => Ok(()),
         };

@@ -124,11 +124,11 @@ impl fmt::Display for Annotation {
     }
 }
 
-/// A float without noise: 230.5, not 230.50000000000003.
-fn trim(v: f64) -> String {
-    let s = format!("{v:.6}");
-    let s = s.trim_end_matches('0').trim_end_matches('.');
-    if s == "-0" { "0".to_owned() } else { s.to_owned() }
+/// A float without noise: 230.5, not 230.50000000000003 (rounded to 6 decimals; `{}` then
+/// prints the shortest form).
+fn trim(v: f64) -> f64 {
+    let r = (v * 1e6).round() / 1e6;
+    if r == 0.0 { 0.0 } else { r }
 }
 
 fn signed16(v: u16) -> i64 {
