@@ -29,6 +29,24 @@ pub enum FormatArg {
     Jsonl,
 }
 
+/// Language of names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LangArg {
+    /// English.
+    En,
+    /// The document's original (Russian) names.
+    Ru,
+}
+
+impl From<LangArg> for crate::profile::annotate::Lang {
+    fn from(l: LangArg) -> Self {
+        match l {
+            LangArg::En => Self::En,
+            LangArg::Ru => Self::Ru,
+        }
+    }
+}
+
 /// Serial mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum SerialModeArg {
@@ -120,6 +138,9 @@ pub enum Command {
         /// list`) or `UNIT=FILE.toml` (repeatable).
         #[arg(long = "device", value_name = "UNIT=PROFILE")]
         devices: Vec<String>,
+        /// Language of register names in annotations.
+        #[arg(long, value_enum, default_value_t = LangArg::En)]
+        lang: LangArg,
     },
     /// Replay a line capture (pcap/pcapng, link type 147) through the analyzer.
     ///
@@ -140,6 +161,9 @@ pub enum Command {
         /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
         #[arg(long = "device", value_name = "UNIT=PROFILE")]
         devices: Vec<String>,
+        /// Language of register names in annotations.
+        #[arg(long, value_enum, default_value_t = LangArg::En)]
+        lang: LangArg,
     },
     /// Write a synthetic line capture with known content (for training, tests and benchmarks).
     Generate {
@@ -200,6 +224,9 @@ pub enum Command {
         /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
         #[arg(long = "device", value_name = "UNIT=PROFILE")]
         devices: Vec<String>,
+        /// Language of register names in annotations.
+        #[arg(long, value_enum, default_value_t = LangArg::En)]
+        lang: LangArg,
         /// Record every read to this pcapng file.
         #[arg(long)]
         record: Option<PathBuf>,
@@ -238,6 +265,9 @@ pub enum Command {
         /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
         #[arg(long = "device", value_name = "UNIT=PROFILE")]
         devices: Vec<String>,
+        /// Language of register names in annotations.
+        #[arg(long, value_enum, default_value_t = LangArg::En)]
+        lang: LangArg,
         /// Record both directions to this pcapng file.
         #[arg(long)]
         record: Option<PathBuf>,

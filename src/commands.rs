@@ -23,7 +23,7 @@ use crate::traffic::{Observation, TrafficConfig};
 /// What went wrong, with context, for `main` to print once.
 pub fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::Decode { frames, mode, format, devices } => {
+        Command::Decode { frames, mode, format, devices, lang } => {
             let profiles = load_devices(&devices)?;
             let lines = if frames.is_empty() {
                 io::stdin()
@@ -48,16 +48,25 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             };
             let stdout = io::stdout();
             let mut out = io::BufWriter::new(stdout.lock());
-            let outcome = decode_cmd::run_with_profiles(&lines, mode, format, &profiles, &mut out, &mut io::stderr())?;
+            let outcome = decode_cmd::run_with_profiles(
+                &lines,
+                mode,
+                format,
+                &profiles,
+                lang.into(),
+                &mut out,
+                &mut io::stderr(),
+            )?;
             out.flush()?;
             Ok(ExitCode::from(outcome as u8))
         }
-        Command::Replay { file, image, line, format, devices } => {
+        Command::Replay { file, image, line, format, devices, lang } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
             let stdout = io::stdout();
             let mut writer =
                 EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
+            writer.lang = lang.into();
             if image.is_some() {
                 writer.image = Some(crate::profile::image::RegisterImage::default());
             }
@@ -74,7 +83,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Sniff { port, line, format, devices, record, duration } => {
+        Command::Sniff { port, line, format, devices, lang, record, duration } => {
             let (mode, settings, latency_ns) = overrides(&line).resolve();
             let opts = crate::sniff_cmd::SniffOptions {
                 port,
@@ -87,13 +96,14 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
+            writer.lang = lang.into();
             let rt =
                 tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
             rt.block_on(crate::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Tap { port, link, line, format, devices, record, duration } => {
+        Command::Tap { port, link, line, format, devices, lang, record, duration } => {
             let (mode, settings, latency_ns) = overrides(&line).resolve();
             let opts = crate::tap_cmd::TapOptions {
                 port,
@@ -107,6 +117,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
+            writer.lang = lang.into();
             let rt =
                 tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
             rt.block_on(crate::tap_cmd::tap(opts, &mut writer, &mut io::stderr()))?;
@@ -138,7 +149,24 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Profiles(ProfilesCommand::List) => {
             for name in crate::profile::builtin::names() {
                 if let Some(Ok(p)) = crate::profile::builtin::get(name) {
-                    println!("{name:<8} {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""));
+                    println!("{name:<8} built-in  {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""));
+                }
+            }
+            if let Some(dir) = user_profile_dir()
+                && let Ok(entries) = std::fs::read_dir(&dir)
+            {
+                let mut files: Vec<_> = entries
+                    .flatten()
+                    .map(|e| e.path())
+                    .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+                    .collect();
+                files.sort();
+                for f in files {
+                    let name = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                    match load_profile_file(&f) {
+                        Ok(p) => println!("{name:<8} user      {} — {}", p.meta.device, f.display()),
+                        Err(e) => println!("{name:<8} user      does not load: {e:#}"),
+                    }
                 }
             }
             Ok(ExitCode::SUCCESS)
@@ -261,19 +289,39 @@ fn load_profile_file(path: &std::path::Path) -> anyhow::Result<crate::profile::P
     Ok(crate::profile::load(&path.display().to_string(), &src)?)
 }
 
-/// A built-in profile by name, or a profile file by path.
+/// Where users keep their own profiles: `$MBTAP_PROFILE_DIR`, else
+/// `$XDG_CONFIG_HOME/mbtap/profiles`, else `~/.config/mbtap/profiles` (the Linux config dir).
+fn user_profile_dir() -> Option<std::path::PathBuf> {
+    if let Some(d) = std::env::var_os("MBTAP_PROFILE_DIR") {
+        return Some(d.into());
+    }
+    let base = std::env::var_os("XDG_CONFIG_HOME")
+        .map(std::path::PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| std::path::PathBuf::from(h).join(".config")))?;
+    Some(base.join("mbtap").join("profiles"))
+}
+
+/// A built-in profile by name, a user profile by name (`NAME.toml` in the user profile
+/// directory), or a profile file by path.
 fn resolve_profile(spec: &str) -> anyhow::Result<crate::profile::Profile> {
     if let Some(p) = crate::profile::builtin::get(spec) {
         return Ok(p?);
     }
     let path = std::path::Path::new(spec);
-    if !path.exists() {
-        anyhow::bail!(
-            "no built-in profile or file named {spec:?}; built-in profiles: {} (or give the path of a profile file, see docs/profiles.md)",
-            crate::profile::builtin::names().join(", ")
-        );
+    if path.exists() {
+        return load_profile_file(path);
     }
-    load_profile_file(path)
+    if let Some(dir) = user_profile_dir() {
+        let user = dir.join(format!("{spec}.toml"));
+        if user.exists() {
+            return load_profile_file(&user);
+        }
+    }
+    let dir = user_profile_dir().map_or_else(|| "(no config directory)".to_owned(), |d| d.display().to_string());
+    anyhow::bail!(
+        "no profile named {spec:?}: built-in profiles are {}; user profiles are NAME.toml files in {dir}; or give the path of a profile file (see docs/profiles.md)",
+        crate::profile::builtin::names().join(", ")
+    )
 }
 
 /// `--device UNIT=PROFILE` values: a unit address and a built-in name or a profile file.

@@ -50,7 +50,7 @@ pub fn run(
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> io::Result<Outcome> {
-    run_with_profiles(lines, mode, format, &Profiles::new(), out, err)
+    run_with_profiles(lines, mode, format, &Profiles::new(), crate::profile::annotate::Lang::En, out, err)
 }
 
 /// Profiles by unit address, for annotation.
@@ -65,6 +65,7 @@ pub fn run_with_profiles(
     mode: Option<Mode>,
     format: Format,
     profiles: &Profiles,
+    lang: crate::profile::annotate::Lang,
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> io::Result<Outcome> {
@@ -124,7 +125,7 @@ pub fn run_with_profiles(
                 }
                 _ => Vec::new(),
             };
-            transaction(this, &req_decode, &req, next, &resp, &annotations, format, out)?;
+            transaction(this, &req_decode, &req, next, &resp, &annotations, lang, format, out)?;
             i += 2;
             continue;
         }
@@ -180,6 +181,7 @@ fn transaction(
     resp_in: &Input,
     resp_decode: &PduDecode<'_>,
     annotations: &[crate::profile::annotate::Annotation],
+    lang: crate::profile::annotate::Lang,
     format: Format,
     out: &mut dyn Write,
 ) -> io::Result<()> {
@@ -198,7 +200,7 @@ fn transaction(
             if !annotations.is_empty() {
                 writeln!(out, "  values:")?;
                 for a in annotations {
-                    writeln!(out, "    {a}")?;
+                    writeln!(out, "    {}", a.line(lang))?;
                 }
             }
             writeln!(out)?;

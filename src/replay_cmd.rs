@@ -33,6 +33,8 @@ pub struct EventWriter<W: Write> {
     pub profiles: crate::decode_cmd::Profiles,
     /// The register image, when asked for.
     pub image: Option<crate::profile::image::RegisterImage>,
+    /// Language of names in text annotations.
+    pub lang: crate::profile::annotate::Lang,
 }
 
 impl<W: Write> EventWriter<W> {
@@ -44,6 +46,7 @@ impl<W: Write> EventWriter<W> {
             error: None,
             profiles: crate::decode_cmd::Profiles::new(),
             image: None,
+            lang: crate::profile::annotate::Lang::En,
         }
     }
 
@@ -76,7 +79,7 @@ impl<W: Write> EventWriter<W> {
                 let mut text = text_line(e);
                 for a in &annotations {
                     text.push_str("\n      ");
-                    text.push_str(&a.to_string());
+                    text.push_str(&a.line(self.lang));
                 }
                 writeln!(self.out, "{text}")
             }

@@ -182,3 +182,35 @@ fn replay_writes_the_register_image() {
     let coil = image.as_array().unwrap().iter().find(|r| r["table"] == "coils" && r["address"] == 3).unwrap();
     assert_eq!(coil["value"], "on", "coil 003 was last written on (05 example)");
 }
+
+#[test]
+fn unknown_device_lists_the_known_profiles_and_lang_ru_shows_document_names() {
+    let o = mbtap(&["decode", "--device", "1=nope", "0183030131"], None);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(err.contains("built-in profiles are mk4, mkzp, display"), "{err}");
+    let o =
+        mbtap(&["decode", "--device", "1=mk4", "--lang", "ru", "010401AE000491D4", "010408090108FA09060900C836"], None);
+    assert!(stdout(&o).contains("430 Напряжение фазы А(L1), В = 230.5 V"), "{}", stdout(&o));
+}
+
+#[test]
+fn user_profiles_are_found_by_name_in_the_profile_directory() {
+    let dir = std::env::temp_dir().join(format!("mbtap-user-profiles-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/example-profile.toml"), dir.join("pump.toml"))
+        .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .env("MBTAP_PROFILE_DIR", &dir)
+        .args(["decode", "--device", "1=pump", "010401AE000491D4", "010408090108FA09060900C836"])
+        .output()
+        .unwrap();
+    assert!(String::from_utf8(o.stdout).unwrap().contains("230.5 V"));
+    let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .env("MBTAP_PROFILE_DIR", &dir)
+        .args(["profiles", "list"])
+        .output()
+        .unwrap();
+    let list = String::from_utf8(o.stdout).unwrap();
+    assert!(list.contains("pump") && list.contains("mk4"), "{list}");
+}

@@ -96,10 +96,46 @@ pub struct Annotation {
     pub notes: Vec<Note>,
 }
 
+/// Which names to show.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Lang {
+    #[default]
+    En,
+    /// The document's original (Russian) names, where the profile has them.
+    Ru,
+}
+
+impl Annotation {
+    /// The annotation as one line with names in `lang`.
+    #[must_use]
+    pub fn line(&self, lang: Lang) -> String {
+        InLang(self, lang).to_string()
+    }
+}
+
+/// An annotation shown in a language.
+struct InLang<'a>(&'a Annotation, Lang);
+
+impl fmt::Display for InLang<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.0.write(f, self.1)
+    }
+}
+
 impl fmt::Display for Annotation {
     /// `430 Phase A (L1) voltage = 230.5 V (raw 2305)`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} {}", self.address, self.name.as_deref().unwrap_or("?"))?;
+        self.write(f, Lang::En)
+    }
+}
+
+impl Annotation {
+    fn write(&self, f: &mut fmt::Formatter<'_>, lang: Lang) -> fmt::Result {
+        let name = match lang {
+            Lang::Ru => self.name_ru.as_deref().or(self.name.as_deref()),
+            Lang::En => self.name.as_deref(),
+        };
+        write!(f, "{} {}", self.address, name.unwrap_or("?"))?;
         match &self.shown {
             Shown::Number { value, unit } => {
                 write!(f, " = {}", trim(*value))?;
