@@ -95,7 +95,7 @@ fn mk4_phase_voltages() {
         [
             "430 Phase A (L1) voltage = 230.5 V (raw 2305)",
             "431 Phase B (L2) voltage = 229.8 V (raw 2298)",
-            "432 Phase C (L3) voltage = 231 V (raw 2310)",
+            "432 Phase C (L3) voltage = 231.0 V (raw 2310)",
             "433 Average phase voltage = 230.4 V (raw 2304)",
         ]
     );
@@ -152,7 +152,7 @@ fn display_values() {
     assert_eq!(
         shown,
         [
-            "4 Level sensor 1: fuel volume = 1000 l (raw 100000)",
+            "4 Level sensor 1: fuel volume = 1000.00 l (raw 100000)",
             "6 Level sensor 1: fuel volume, percent = 50.25 % (raw 5025)",
             "7 Level sensor 1: temperature = -5 °C (raw -5)",
         ]

@@ -21,7 +21,7 @@ fn phase_voltages_are_scaled() {
         [
             "430 Phase A (L1) voltage = 230.5 V (raw 2305)",
             "431 Phase B (L2) voltage = 229.8 V (raw 2298)",
-            "432 Phase C (L3) voltage = 231 V (raw 2310)",
+            "432 Phase C (L3) voltage = 231.0 V (raw 2310)",
             "433 Average phase voltage = 230.4 V (raw 2304)",
         ]
     );

@@ -11,9 +11,12 @@ use super::model::{Def, Profile};
 /// How a value reads.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Shown {
+    /// A number; `decimals` is the precision its scale implies (1 for 0.1), `None` to print
+    /// the shortest form (floats).
     Number {
         value: f64,
         unit: Option<String>,
+        decimals: Option<u8>,
     },
     Label(String),
     /// Labels of the set bits (unnamed ones as `bit N`).
@@ -137,8 +140,11 @@ impl Annotation {
         };
         write!(f, "{} {}", self.address, name.unwrap_or("?"))?;
         match &self.shown {
-            Shown::Number { value, unit } => {
-                write!(f, " = {}", trim(*value))?;
+            Shown::Number { value, unit, decimals } => {
+                match decimals {
+                    Some(d) => write!(f, " = {:.*}", usize::from(*d), value)?,
+                    None => write!(f, " = {}", trim(*value))?,
+                }
                 if let Some(u) = unit {
                     write!(f, " {u}")?;
                 }
@@ -167,6 +173,17 @@ fn trim(v: f64) -> f64 {
     if r == 0.0 { 0.0 } else { r }
 }
 
+/// Decimals a scale implies: 1 → 0, 0.1 → 1, 0.01 → 2, 0.5 → 1.
+fn decimals_of(scale: Option<f64>) -> u8 {
+    let Some(s) = scale.filter(|s| *s > 0.0 && *s < 1.0) else { return 0 };
+    (1..=6u8)
+        .find(|&d| {
+            let scaled = s * 10f64.powi(i32::from(d));
+            (scaled - scaled.round()).abs() < 1e-9
+        })
+        .unwrap_or(6)
+}
+
 fn signed16(v: u16) -> i64 {
     i64::from(i16::from_ne_bytes(v.to_ne_bytes()))
 }
@@ -189,13 +206,15 @@ fn shown(def: &Def, raw: i64, bits32: Option<u32>) -> (Shown, Vec<Note>) {
                 .collect(),
         ),
         ValueType::Bool => Shown::Bool { on: raw != 0, label: None },
-        ValueType::F32 => {
-            Shown::Number { value: f64::from(f32::from_bits(bits32.unwrap_or(0))), unit: def.unit.clone() }
-        }
+        ValueType::F32 => Shown::Number {
+            value: f64::from(f32::from_bits(bits32.unwrap_or(0))),
+            unit: def.unit.clone(),
+            decimals: None,
+        },
         _ => {
             #[allow(clippy::cast_precision_loss)]
             let value = raw as f64 * def.scale.unwrap_or(1.0);
-            Shown::Number { value, unit: def.unit.clone() }
+            Shown::Number { value, unit: def.unit.clone(), decimals: Some(decimals_of(def.scale)) }
         }
     };
     (s, notes)

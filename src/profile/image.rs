@@ -161,8 +161,11 @@ impl RegisterImage {
                 {
                     row.name = a.name.unwrap_or_default();
                     match &a.shown {
-                        super::annotate::Shown::Number { value, unit } => {
-                            row.value = format!("{value}");
+                        super::annotate::Shown::Number { value, unit, decimals } => {
+                            row.value = match decimals {
+                                Some(d) => format!("{value:.*}", usize::from(*d)),
+                                None => format!("{value}"),
+                            };
                             unit.as_deref().unwrap_or_default().clone_into(&mut row.unit_of_measure);
                         }
                         super::annotate::Shown::Label(l) | super::annotate::Shown::Bool { label: Some(l), .. } => {

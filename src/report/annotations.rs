@@ -18,7 +18,7 @@ pub fn json(a: &Annotation) -> J {
         j["name_ru"] = json!(ru);
     }
     match &a.shown {
-        Shown::Number { value, unit } => {
+        Shown::Number { value, unit, .. } => {
             j["value"] = json!(value);
             if let Some(u) = unit {
                 j["unit"] = json!(u);
@@ -59,7 +59,7 @@ pub fn write_json(out: &mut String, a: &Annotation) {
         push_str_json(out, ru);
     }
     match &a.shown {
-        Shown::Number { value, unit } => {
+        Shown::Number { value, unit, .. } => {
             out.push_str(",\"value\":");
             out.push_str(&serde_json::to_string(value).unwrap_or_else(|_| "null".to_owned()));
             if let Some(u) = unit {
@@ -123,7 +123,7 @@ mod tests {
                 name: Some("Phase \"A\"".into()),
                 name_ru: Some("Фаза".into()),
                 raw: 2305,
-                shown: Shown::Number { value: 230.5, unit: Some("V".into()) },
+                shown: Shown::Number { value: 230.5, unit: Some("V".into()), decimals: Some(1) },
                 notes: vec![Note::OutOfRange { min: 0, max: 10 }],
             },
             Annotation {
