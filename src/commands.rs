@@ -325,8 +325,19 @@ fn resolve_profile(spec: &str) -> anyhow::Result<crate::profile::Profile> {
 }
 
 /// `--device UNIT=PROFILE` values: a unit address and a built-in name or a profile file.
+/// The configuration file's `[devices]` come first; `--device` replaces them unit by unit.
 fn load_devices(devices: &[String]) -> anyhow::Result<crate::decode_cmd::Profiles> {
     let mut out = crate::decode_cmd::Profiles::new();
+    if let Some(path) = crate::config::default_path() {
+        let config = crate::config::load(&path)?;
+        for (unit, profile) in &config.devices {
+            let u: u8 = unit.trim().parse().with_context(|| format!("{}: unit {unit:?}", path.display()))?;
+            out.insert(
+                u,
+                resolve_profile(profile).with_context(|| format!("{}: device {unit} = {profile:?}", path.display()))?,
+            );
+        }
+    }
     for d in devices {
         let (unit, profile) =
             d.split_once('=').with_context(|| format!("--device {d:?}: expected UNIT=PROFILE, e.g. --device 1=mk4"))?;

@@ -24,6 +24,7 @@ pub mod capture;
 pub mod chunk;
 pub mod cli;
 pub mod commands;
+pub mod config;
 pub mod decode_cmd;
 pub mod framer;
 pub mod fuzzing;

@@ -7,6 +7,8 @@ use std::process::{Command, Output, Stdio};
 
 fn mbtap(args: &[&str], stdin: Option<&str>) -> Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        // The user's own configuration must not change what the tests see.
+        .env("MBTAP_CONFIG", "/nonexistent/mbtap-config.toml")
         .args(args)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -213,4 +215,46 @@ fn user_profiles_are_found_by_name_in_the_profile_directory() {
         .unwrap();
     let list = String::from_utf8(o.stdout).unwrap();
     assert!(list.contains("pump") && list.contains("mk4"), "{list}");
+}
+
+#[test]
+fn the_config_file_assigns_devices_and_the_command_line_overrides_it() {
+    let dir = std::env::temp_dir().join(format!("mbtap-config-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("config.toml");
+    std::fs::write(&cfg, "[devices]\n1 = \"mk4\"\n").unwrap();
+    let run = |extra: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+            .env("MBTAP_CONFIG", &cfg)
+            .arg("decode")
+            .args(extra)
+            .args(["010401AE000491D4", "010408090108FA09060900C836"])
+            .output()
+            .unwrap();
+        String::from_utf8(o.stdout).unwrap()
+    };
+    assert!(run(&[]).contains("Phase A (L1) voltage = 230.5 V"));
+    let example = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/example-profile.toml");
+    // Registers 465–466: the MK4's water meter, the example profile's 32-bit energy counter.
+    let read_465 = |extra: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+            .env("MBTAP_CONFIG", &cfg)
+            .arg("decode")
+            .args(extra)
+            .args(["010401D10002200E", "010404000100022B85"])
+            .output()
+            .unwrap();
+        String::from_utf8(o.stdout).unwrap()
+    };
+    assert!(read_465(&[]).contains("465 Water meter: thousands of m³"), "{}", read_465(&[]));
+    let overridden = read_465(&["--device", &format!("1={example}")]);
+    assert!(overridden.contains("465 Energy counter = 65538 kWh"), "{overridden}");
+    std::fs::write(&cfg, "[devices]\n1 = \"mk4\"\n999 = \"x\"\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .env("MBTAP_CONFIG", &cfg)
+        .args(["decode", "0183030131"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(err.contains("config.toml:3:1: device unit \"999\""), "{err}");
 }
