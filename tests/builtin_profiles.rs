@@ -203,6 +203,27 @@ fn mkzp_status_bits_and_trip_records() {
     let p = builtin::get("mkzp").unwrap().unwrap();
     let a = annotate_registers(&p, Table::HoldingRegisters, 66, &[0b100_0000_1000], false);
     assert_eq!(a[0].to_string(), "66 System_Status: status register = overload, motor on (raw 1032)");
+    // P3 starts at 128 + 2 × 17 = 162: month, day, hour, minute, second.
     let a = annotate_registers(&p, Table::HoldingRegisters, 162, &[7], false);
-    assert_eq!(a[0].name.as_deref(), Some("Trip record P3: Month"));
+    assert_eq!(a[0].name.as_deref(), Some("Trip record P3: time"));
+    assert_eq!(a[0].notes[0].kind(), "half_of_pair", "one register of a five-register time");
+    let a = annotate_registers(&p, Table::HoldingRegisters, 162, &[7, 14, 9, 5, 30], false);
+    assert_eq!(a[0].to_string(), "162 Trip record P3: time = 07-14 09:05:30");
+}
+
+// Record 1 from 500: code, then day, month, year, hour, minute at 501–505.
+const OCCURRED: [u16; 5] =
+    [/* day */ 22, /* month */ 11, /* year */ 2026, /* hour */ 14, /* minute */ 35];
+
+/// Log timestamps are shown as one date, and an impossible part (minute 75) is flagged.
+#[test]
+fn mk4_alarm_log_time_is_one_date() {
+    let p = builtin::get("mk4").unwrap().unwrap();
+    let a = mbtap::profile::annotate::annotate_registers(&p, Table::InputRegisters, 501, &OCCURRED, false);
+    assert_eq!(a.len(), 1, "five registers, one value: {a:?}");
+    assert_eq!(a[0].to_string(), "501 Alarm log record 1: occurred = 2026-11-22 14:35");
+    assert!(a[0].notes.is_empty());
+    let a =
+        mbtap::profile::annotate::annotate_registers(&p, Table::InputRegisters, 501, &[22, 11, 2026, 14, 75], false);
+    assert_eq!(a[0].notes[0].kind(), "out_of_range", "minute 75");
 }

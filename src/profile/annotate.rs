@@ -22,6 +22,8 @@ pub enum Shown {
     /// Labels of the set bits (unnamed ones as `bit N`).
     Bits(Vec<String>),
     Text(String),
+    /// A date/time group as one value (`2026-11-22 14:35`).
+    Time(String),
     Bool {
         on: bool,
         label: Option<String>,
@@ -153,12 +155,16 @@ impl Annotation {
             Shown::Bits(b) if b.is_empty() => write!(f, " = (no bits set)")?,
             Shown::Bits(b) => write!(f, " = {}", b.join(", "))?,
             Shown::Text(t) => write!(f, " = {t:?}")?,
+            Shown::Time(t) => write!(f, " = {t}")?,
             Shown::Bool { on, label } => {
                 write!(f, " = {}", label.clone().unwrap_or_else(|| u8::from(*on).to_string()))?;
             }
             Shown::Raw => write!(f, " = {}", self.raw)?,
         }
-        write!(f, " (raw {})", self.raw)?;
+        // A text or a time spans several registers: no single raw value to show.
+        if !matches!(self.shown, Shown::Text(_) | Shown::Time(_)) {
+            write!(f, " (raw {})", self.raw)?;
+        }
         for n in &self.notes {
             write!(f, " [{n}]")?;
         }
@@ -182,6 +188,46 @@ fn decimals_of(scale: Option<f64>) -> u8 {
             (scaled - scaled.round()).abs() < 1e-9
         })
         .unwrap_or(6)
+}
+
+/// `2026-11-22 14:35:07` from the parts there are (missing ones left out: `11-22 14:35`).
+fn datetime(parts: &[super::format::DatePart], values: &[u16]) -> String {
+    use super::format::DatePart as P;
+    let get = |p: P| parts.iter().position(|&q| q == p).and_then(|i| values.get(i).copied());
+    let day = match (get(P::Month), get(P::Day)) {
+        (Some(m), Some(d)) => format!("{m:02}-{d:02}"),
+        (Some(m), None) => format!("{m:02}"),
+        (None, Some(d)) => format!("day {d:02}"),
+        (None, None) => String::new(),
+    };
+    let date = match get(P::Year) {
+        Some(y) if day.is_empty() => format!("{y:04}"),
+        Some(y) => format!("{y:04}-{day}"),
+        None => day,
+    };
+    let time = match (get(P::Hour), get(P::Minute), get(P::Second)) {
+        (Some(h), Some(m), Some(s)) => format!("{h:02}:{m:02}:{s:02}"),
+        (Some(h), Some(m), None) => format!("{h:02}:{m:02}"),
+        (Some(h), None, _) => format!("{h:02}h"),
+        _ => String::new(),
+    };
+    [date, time].into_iter().filter(|s| !s.is_empty()).collect::<Vec<_>>().join(" ")
+}
+
+/// The first part outside what a clock can show (month 13, minute 75). Zero is allowed in every
+/// part because the documented devices write all zeros into an empty log record.
+fn impossible_date_part(parts: &[super::format::DatePart], values: &[u16]) -> Option<Note> {
+    use super::format::DatePart as P;
+    parts.iter().zip(values).find_map(|(&p, &v)| {
+        let max = match p {
+            P::Year => return None,
+            P::Month => 12,
+            P::Day => 31,
+            P::Hour => 23,
+            P::Minute | P::Second => 59,
+        };
+        (v > max).then_some(Note::OutOfRange { min: 0, max: max.into() })
+    })
 }
 
 fn signed16(v: u16) -> i64 {
@@ -251,6 +297,19 @@ pub fn annotate_registers(p: &Profile, table: Table, start: u16, values: &[u16],
             (raw, None, 1, Vec::new())
         } else if !whole {
             (i64::from(v), None, 1, vec![Note::HalfOfPair])
+        } else if def.value_type == ValueType::Datetime {
+            out.push(Annotation {
+                table,
+                address,
+                width: def.width,
+                name: Some(slot.name.clone()),
+                name_ru: def.name_ru.clone(),
+                raw: 0,
+                shown: Shown::Time(datetime(&def.parts, &values[i..i + width])),
+                notes: impossible_date_part(&def.parts, &values[i..i + width]).into_iter().collect(),
+            });
+            i += width;
+            continue;
         } else if def.value_type == ValueType::String {
             let text: String = values[i..i + width]
                 .iter()

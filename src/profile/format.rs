@@ -121,6 +121,9 @@ pub enum ValueType {
     Enum,
     /// Characters, `chars_per_register` per register, over `length` registers.
     String,
+    /// A date/time group: one register per part, in the order `parts` gives
+    /// (`year`, `month`, `day`, `hour`, `minute`, `second`).
+    Datetime,
 }
 
 /// Word order of 32-bit values.
@@ -173,9 +176,24 @@ pub struct RegisterDef {
     pub length: Option<u16>,
     #[serde(default)]
     pub chars_per_register: Option<u8>,
+    /// The parts of a `datetime`, one register each, in register order.
+    #[serde(default)]
+    pub parts: Vec<DatePart>,
     /// Values that are commands (written to act, e.g. `30 = "clear alarm log"`).
     #[serde(default)]
     pub commands: BTreeMap<String, String>,
+}
+
+/// One part of a date/time group.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DatePart {
+    Year,
+    Month,
+    Day,
+    Hour,
+    Minute,
+    Second,
 }
 
 /// Which table a block or reservation belongs to.

@@ -172,7 +172,9 @@ impl RegisterImage {
                             l.clone_into(&mut row.value);
                         }
                         super::annotate::Shown::Bits(b) => row.value = b.join("; "),
-                        super::annotate::Shown::Text(t) => t.clone_into(&mut row.value),
+                        super::annotate::Shown::Text(t) | super::annotate::Shown::Time(t) => {
+                            t.clone_into(&mut row.value);
+                        }
                         super::annotate::Shown::Bool { label: None, .. } | super::annotate::Shown::Raw => {}
                     }
                 }

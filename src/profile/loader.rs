@@ -154,6 +154,7 @@ fn add_point(
         bits: BTreeMap::new(),
         width: 1,
         chars_per_register: 2,
+        parts: Vec::new(),
         commands: BTreeMap::new(),
         on: d.on.clone(),
         off: d.off.clone(),
@@ -199,11 +200,17 @@ fn compile(cx: &Ctx<'_>, span: &Range<usize>, r: &RegisterDef) -> Result<Def, Pr
         ValueType::String if r.length.is_none() => {
             return Err(cx.err(span.clone(), "type \"string\" needs `length` (registers it spans)"));
         }
+        ValueType::Datetime if r.parts.is_empty() => {
+            return Err(
+                cx.err(span.clone(), "type \"datetime\" needs `parts = [\"day\", \"month\", ...]` in register order")
+            );
+        }
         _ => {}
     }
     let width = match r.value_type {
         ValueType::U32 | ValueType::I32 | ValueType::F32 => 2,
         ValueType::String => r.length.unwrap_or(1).max(1),
+        ValueType::Datetime => u16::try_from(r.parts.len()).unwrap_or(1).max(1),
         _ => 1,
     };
     let chars_per_register = r.chars_per_register.unwrap_or(2);
@@ -229,6 +236,7 @@ fn compile(cx: &Ctx<'_>, span: &Range<usize>, r: &RegisterDef) -> Result<Def, Pr
         bits,
         width,
         chars_per_register,
+        parts: r.parts.clone(),
         commands: int_keys::<i64>(cx, span, "commands", &r.commands)?,
         on: None,
         off: None,

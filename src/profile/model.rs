@@ -22,6 +22,8 @@ pub struct Def {
     /// Registers the value spans (2 for 32-bit types, `length` for strings, else 1).
     pub width: u16,
     pub chars_per_register: u8,
+    /// Parts of a date/time group, in register order.
+    pub parts: Vec<super::format::DatePart>,
     pub commands: BTreeMap<i64, String>,
     /// Labels of 1 and 0 for points.
     pub on: Option<String>,

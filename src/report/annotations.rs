@@ -27,6 +27,7 @@ pub fn json(a: &Annotation) -> J {
         Shown::Label(l) => j["label"] = json!(l),
         Shown::Bits(b) => j["bits"] = json!(b),
         Shown::Text(t) => j["text"] = json!(t),
+        Shown::Time(t) => j["time"] = json!(t),
         Shown::Bool { on, label } => {
             j["value"] = json!(on);
             if let Some(l) = label {
@@ -83,6 +84,10 @@ pub fn write_json(out: &mut String, a: &Annotation) {
         }
         Shown::Text(t) => {
             out.push_str(",\"text\":");
+            push_str_json(out, t);
+        }
+        Shown::Time(t) => {
+            out.push_str(",\"time\":");
             push_str_json(out, t);
         }
         Shown::Bool { on, label } => {
