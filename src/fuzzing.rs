@@ -168,3 +168,28 @@ pub fn profile(data: &[u8]) {
         let _ = annotate_bits(&p, Table::DiscreteInputs, 65_535, &bits, false);
     }
 }
+
+/// Any request PDU to the simulated built-in devices: an answer or silence, never a panic.
+/// The first byte is the unit address, the rest the PDU.
+///
+/// # Panics
+/// When an answer is not a well-formed response: that is the bug the fuzzer is looking for.
+pub fn sim(data: &[u8]) {
+    use std::sync::{Arc, OnceLock};
+    static SLAVES: OnceLock<Vec<crate::sim::Slave>> = OnceLock::new();
+    let slaves = SLAVES.get_or_init(|| {
+        ["mk4", "mkzp", "display"]
+            .into_iter()
+            .filter_map(|name| crate::profile::builtin::get(name).and_then(Result::ok))
+            .map(|p| crate::sim::Slave::new(Arc::new(p), 1))
+            .collect()
+    });
+    let Some((&unit, pdu)) = data.split_first() else { return };
+    for s in slaves {
+        let mut s = s.clone();
+        if let Some(answer) = s.handle(unit, pdu) {
+            // Whatever the slave says must itself be a well-formed response.
+            assert!(crate::proto::parse_response(&answer).is_ok(), "unparseable answer {answer:02X?} to {pdu:02X?}");
+        }
+    }
+}

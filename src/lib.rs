@@ -37,6 +37,7 @@ pub mod profile;
 pub mod proto;
 pub mod replay_cmd;
 pub mod report;
+pub mod sim;
 pub mod sniff_cmd;
 pub mod source;
 pub mod tap_cmd;

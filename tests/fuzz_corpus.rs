@@ -22,6 +22,7 @@ fn run_dir(dir: &Path) -> usize {
             "framer" => mbtap::fuzzing::framer,
             "capture" => mbtap::fuzzing::capture,
             "profile" => mbtap::fuzzing::profile,
+            "sim" => mbtap::fuzzing::sim,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {
