@@ -275,6 +275,20 @@ pub enum Command {
         #[arg(long)]
         duration: Option<f64>,
     },
+    /// Simulated devices on a pseudo-terminal: point a Modbus master (or mbtap) at --link.
+    Simulate {
+        /// Where to create the pseudo-terminal link for the master.
+        #[arg(long, default_value = "/tmp/mbtap-bus")]
+        link: PathBuf,
+        /// A simulated slave, `NAME@ADDRESS` (repeatable; default: mk4@1 display@5 mkzp@17).
+        #[arg(long = "device", value_name = "NAME@ADDRESS")]
+        devices: Vec<String>,
+        #[command(flatten)]
+        line: LineArgs,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
     /// Device profiles: check a profile file, or show what it defines.
     #[command(subcommand)]
     Profiles(ProfilesCommand),

@@ -130,6 +130,25 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
             Ok(ExitCode::SUCCESS)
         }
+        Command::Simulate { link, devices, line, duration } => {
+            let (mode, settings, _) = overrides(&line).resolve();
+            anyhow::ensure!(mode == SerialMode::Rtu, "simulate speaks RTU only so far; drop --mode ascii");
+            let specs: Vec<String> = if devices.is_empty() {
+                crate::simulate_cmd::DEFAULT_DEVICES.iter().map(|(n, a)| format!("{n}@{a}")).collect()
+            } else {
+                devices
+            };
+            let devices = specs.iter().map(|d| crate::simulate_cmd::parse_device(d)).collect::<anyhow::Result<_>>()?;
+            let opts = crate::simulate_cmd::SimulateOptions {
+                link,
+                devices,
+                line: settings,
+                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+            };
+            let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+            rt.block_on(crate::simulate_cmd::simulate(opts, &mut io::stderr()))?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Profiles(ProfilesCommand::Check { file }) => {
             let p = load_profile_file(&file)?;
             let count = |t| p.addresses(t).count();

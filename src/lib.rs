@@ -38,6 +38,7 @@ pub mod proto;
 pub mod replay_cmd;
 pub mod report;
 pub mod sim;
+pub mod simulate_cmd;
 pub mod sniff_cmd;
 pub mod source;
 pub mod tap_cmd;
