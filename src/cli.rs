@@ -275,6 +275,19 @@ pub enum Command {
         #[arg(long)]
         duration: Option<f64>,
     },
+    /// The whole job with no hardware: simulated MK4, Display and MKZP-0.4 polled on a virtual
+    /// line, heard and shown annotated as `sniff` would.
+    Demo {
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
+        format: EventFormatArg,
+        /// Language of register names in annotations.
+        #[arg(long, value_enum, default_value_t = LangArg::En)]
+        lang: LangArg,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
     /// Simulated devices on a pseudo-terminal: point a Modbus master (or mbtap) at --link.
     Simulate {
         /// Where to create the pseudo-terminal link for the master.

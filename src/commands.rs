@@ -130,6 +130,17 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
             Ok(ExitCode::SUCCESS)
         }
+        Command::Demo { format, lang, duration } => {
+            let stdout = io::stdout();
+            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+            writer.lang = lang.into();
+            let duration = duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)));
+            let rt =
+                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+            rt.block_on(crate::demo_cmd::demo(duration, &mut writer))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Simulate { link, devices, line, duration } => {
             let (mode, settings, _) = overrides(&line).resolve();
             anyhow::ensure!(mode == SerialMode::Rtu, "simulate speaks RTU only so far; drop --mode ascii");

@@ -26,6 +26,7 @@ pub mod cli;
 pub mod commands;
 pub mod config;
 pub mod decode_cmd;
+pub mod demo_cmd;
 pub mod framer;
 pub mod fuzzing;
 pub mod generate_cmd;

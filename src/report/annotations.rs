@@ -7,6 +7,18 @@ use crate::profile::annotate::{Annotation, Shown};
 /// One annotation: `table`, `address`, `name`, `raw`, and `value` (+ `unit`), `label`,
 /// `bits` or `text`, and `notes` (`kind`, `message`).
 #[must_use]
+/// The value at the precision its scale implies, so JSON says 229.2 and not the float noise
+/// 229.20000000000002 that raw × 0.1 leaves.
+fn rounded(value: f64, decimals: Option<u8>) -> f64 {
+    match decimals {
+        Some(d) => {
+            let p = 10f64.powi(i32::from(d));
+            (value * p).round() / p
+        }
+        None => value,
+    }
+}
+
 pub fn json(a: &Annotation) -> J {
     let mut j = json!({
         "table": a.table.name(),
@@ -18,8 +30,8 @@ pub fn json(a: &Annotation) -> J {
         j["name_ru"] = json!(ru);
     }
     match &a.shown {
-        Shown::Number { value, unit, .. } => {
-            j["value"] = json!(value);
+        Shown::Number { value, unit, decimals } => {
+            j["value"] = json!(rounded(*value, *decimals));
             if let Some(u) = unit {
                 j["unit"] = json!(u);
             }
@@ -60,9 +72,9 @@ pub fn write_json(out: &mut String, a: &Annotation) {
         push_str_json(out, ru);
     }
     match &a.shown {
-        Shown::Number { value, unit, .. } => {
+        Shown::Number { value, unit, decimals } => {
             out.push_str(",\"value\":");
-            out.push_str(&serde_json::to_string(value).unwrap_or_else(|_| "null".to_owned()));
+            out.push_str(&serde_json::to_string(&rounded(*value, *decimals)).unwrap_or_else(|_| "null".to_owned()));
             if let Some(u) = unit {
                 out.push_str(",\"unit\":");
                 push_str_json(out, u);

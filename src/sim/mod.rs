@@ -3,6 +3,7 @@
 //! response PDU (or silence) out, time an input; the pseudo-terminal sits at the edge
 //! (`simulate_cmd`).
 
+pub mod bus;
 pub mod rtu_requests;
 pub mod slave;
 pub mod world;
