@@ -7,7 +7,7 @@ use std::process::Command;
 
 #[test]
 fn demo_shows_all_three_devices_annotated() {
-    // One cycle of the poll list (8 transactions, ~100 ms apart) fits in 1.5 s of line time.
+    // One cycle of the poll list (9 transactions, ~100 ms apart) fits in 1.5 s of line time.
     let out = Command::new(env!("CARGO_BIN_EXE_mbtap"))
         .args(["demo", "--format", "jsonl", "--duration", "1.5"])
         .output()

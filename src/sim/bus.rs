@@ -15,8 +15,8 @@ fn poll_list(profile: &str) -> &'static [(u8, u16, u16)] {
         "mk4" => &[(0x04, 430, 4), (0x04, 400, 10), (0x03, 100, 10), (0x01, 0, 19)],
         // Phase currents, then the first trip record (MKZP: holding registers only).
         "mkzp" => &[(0x03, 50, 8), (0x03, 128, 17)],
-        // Totals and the first level-sensor slot.
-        "display" => &[(0x04, 0, 4), (0x04, 4, 4)],
+        // Totals, the first level-sensor slot, the first flow meter.
+        "display" => &[(0x04, 0, 4), (0x04, 4, 4), (0x04, 44, 22)],
         _ => &[],
     }
 }
@@ -113,7 +113,7 @@ mod tests {
     #[test]
     fn every_poll_is_answered_without_an_exception() {
         let mut b = bus();
-        assert_eq!(b.poll_count(), 8);
+        assert_eq!(b.poll_count(), 9);
         for _ in 0..b.poll_count() {
             let frames = b.next_transaction();
             assert_eq!(frames.len(), 2, "{frames:?}");
