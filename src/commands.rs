@@ -143,7 +143,6 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         }
         Command::Simulate { link, devices, line, duration } => {
             let (mode, settings, _) = overrides(&line).resolve();
-            anyhow::ensure!(mode == SerialMode::Rtu, "simulate speaks RTU only so far; drop --mode ascii");
             let specs: Vec<String> = if devices.is_empty() {
                 crate::simulate_cmd::DEFAULT_DEVICES.iter().map(|(n, a)| format!("{n}@{a}")).collect()
             } else {
@@ -154,6 +153,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 link,
                 devices,
                 line: settings,
+                mode,
                 duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
             };
             let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;

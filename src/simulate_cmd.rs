@@ -14,9 +14,39 @@ use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::{SerialPort, SerialStream};
 
+use crate::analyzer::SerialMode;
 use crate::framer::LineSettings;
-use crate::proto::encode_rtu;
-use crate::sim::{RequestAssembler, Slave, world};
+use crate::proto::{encode_ascii, encode_rtu};
+use crate::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame, Slave, world};
+
+/// Frames requests in the line's mode.
+enum Assembler {
+    Rtu(RequestAssembler),
+    Ascii(AsciiRequestAssembler),
+}
+
+impl Assembler {
+    fn push(&mut self, bytes: &[u8], out: &mut Vec<RequestFrame>) {
+        match self {
+            Self::Rtu(a) => {
+                a.push(bytes);
+                out.extend(std::iter::from_fn(|| a.next_request()));
+            }
+            Self::Ascii(a) => {
+                a.push(bytes);
+                out.extend(std::iter::from_fn(|| a.next_request()));
+            }
+        }
+    }
+
+    /// The line went quiet: RTU ends a frame by silence; ASCII waits for CR LF.
+    fn silence(&mut self) -> Option<RequestFrame> {
+        match self {
+            Self::Rtu(a) if a.pending() > 0 => a.silence(),
+            _ => None,
+        }
+    }
+}
 
 /// Simulation settings.
 #[derive(Debug, Clone)]
@@ -25,6 +55,7 @@ pub struct SimulateOptions {
     /// `(profile name, address)` of each slave.
     pub devices: Vec<(crate::profile::Profile, u8)>,
     pub line: LineSettings,
+    pub mode: SerialMode,
     pub duration: Option<Duration>,
 }
 
@@ -74,15 +105,19 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
     }
     let _ = writeln!(
         err,
-        "mbtap: open {} ({slave_path}) at {} as the master's serial port",
+        "mbtap: open {} ({slave_path}) at {} {} as the master's serial port",
         opts.link.display(),
-        opts.line
+        opts.line,
+        opts.mode.name()
     );
 
     let started = Instant::now();
     let deadline = opts.duration.map(|d| started + d);
     let gap = silence(opts.line);
-    let mut assembler = RequestAssembler::default();
+    let mut assembler = match opts.mode {
+        SerialMode::Rtu => Assembler::Rtu(RequestAssembler::default()),
+        SerialMode::Ascii => Assembler::Ascii(AsciiRequestAssembler::default()),
+    };
     let mut buf = [0u8; 512];
     let mut out = Vec::with_capacity(260);
     loop {
@@ -100,19 +135,13 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
                 tokio::time::sleep(Duration::from_millis(20)).await;
                 continue;
             }
-            Ok(Ok(n)) => {
-                assembler.push(buf.get(..n).unwrap_or_default());
-                while let Some(r) = assembler.next_request() {
-                    requests.push(r);
-                }
-            }
+            Ok(Ok(n)) => assembler.push(buf.get(..n).unwrap_or_default(), &mut requests),
             // EIO while no master has the far end open; try again shortly.
             Ok(Err(_)) => {
                 tokio::time::sleep(Duration::from_millis(20)).await;
                 continue;
             }
-            Err(_) if assembler.pending() > 0 => requests.extend(assembler.silence()),
-            Err(_) => {}
+            Err(_) => requests.extend(assembler.silence()),
         }
         let t = started.elapsed().as_secs_f64();
         for request in requests {
@@ -123,7 +152,10 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
                     // a few milliseconds is typical of such controllers).
                     tokio::time::sleep(Duration::from_millis(3)).await;
                     out.clear();
-                    encode_rtu(request.unit, &pdu, &mut out);
+                    match opts.mode {
+                        SerialMode::Rtu => encode_rtu(request.unit, &pdu, &mut out),
+                        SerialMode::Ascii => encode_ascii(request.unit, &pdu, &mut out),
+                    }
                     AsyncWriteExt::write_all(&mut master_side, &out)
                         .await
                         .context("writing a response to the pseudo-terminal")?;

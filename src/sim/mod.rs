@@ -3,10 +3,12 @@
 //! response PDU (or silence) out, time an input; the pseudo-terminal sits at the edge
 //! (`simulate_cmd`).
 
+pub mod ascii_requests;
 pub mod bus;
 pub mod rtu_requests;
 pub mod slave;
 pub mod world;
 
+pub use ascii_requests::AsciiRequestAssembler;
 pub use rtu_requests::{RequestAssembler, RequestFrame};
 pub use slave::Slave;
