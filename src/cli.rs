@@ -284,9 +284,15 @@ pub enum Command {
         /// Language of register names in annotations.
         #[arg(long, value_enum, default_value_t = LangArg::En)]
         lang: LangArg,
-        /// Stop after this many seconds.
+        /// Stop after this many seconds (of line time).
         #[arg(long)]
         duration: Option<f64>,
+        /// Inject a fault into every fourth transaction, faults taking turns (repeatable).
+        #[arg(long = "fault", value_enum)]
+        faults: Vec<FaultArg>,
+        /// Line time per wall-clock time: 1 is real time, 10 ten times faster, 0 as fast as it goes.
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
     },
     /// Simulated devices on a pseudo-terminal: point a Modbus master (or mbtap) at --link.
     Simulate {
@@ -305,6 +311,25 @@ pub enum Command {
     /// Device profiles: check a profile file, or show what it defines.
     #[command(subcommand)]
     Profiles(ProfilesCommand),
+}
+
+/// A fault to inject on the simulated line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FaultArg {
+    /// A flipped bit in a response: bad CRC.
+    Corrupt,
+    /// A burst of random bytes on the idle line.
+    Noise,
+    /// A slave pausing in the middle of its answer (gap inside a frame).
+    SlowSlave,
+    /// A slave that does not answer (the master times out).
+    SilentSlave,
+    /// Two slaves answering on one address at once.
+    Collision,
+    /// A master polling again before t3.5 of silence.
+    FastMaster,
+    /// All of the above, taking turns.
+    All,
 }
 
 /// `mbtap profiles …`

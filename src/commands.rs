@@ -130,14 +130,29 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
             Ok(ExitCode::SUCCESS)
         }
-        Command::Demo { format, lang, duration } => {
+        Command::Demo { format, lang, duration, faults, speed } => {
+            use crate::cli::FaultArg;
+            use crate::sim::bus::Fault;
+            let faults: Vec<Fault> = faults
+                .iter()
+                .flat_map(|f| match f {
+                    FaultArg::Corrupt => vec![Fault::Corrupt],
+                    FaultArg::Noise => vec![Fault::Noise],
+                    FaultArg::SlowSlave => vec![Fault::SlowSlave],
+                    FaultArg::SilentSlave => vec![Fault::SilentSlave],
+                    FaultArg::Collision => vec![Fault::Collision],
+                    FaultArg::FastMaster => vec![Fault::FastMaster],
+                    FaultArg::All => Fault::ALL.to_vec(),
+                })
+                .collect();
+            anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.lang = lang.into();
             let duration = duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)));
             let rt =
                 tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
-            rt.block_on(crate::demo_cmd::demo(duration, &mut writer))?;
+            rt.block_on(crate::demo_cmd::demo(crate::demo_cmd::DemoOptions { duration, faults, speed }, &mut writer))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }

@@ -17,11 +17,22 @@ use crate::source::serial::now;
 /// The devices of the demo line and their addresses.
 pub const DEVICES: [(&str, u8); 3] = [("mk4", 1), ("display", 5), ("mkzp", 17)];
 
-/// Runs the demo until Ctrl-C or `duration`; the writer's profiles are set to the devices.
+/// Demo settings.
+#[derive(Debug, Clone, Default)]
+pub struct DemoOptions {
+    /// Line time to run for.
+    pub duration: Option<Duration>,
+    pub faults: Vec<crate::sim::bus::Fault>,
+    /// Line time per wall-clock time; 0 runs without waiting.
+    pub speed: f64,
+}
+
+/// Runs the demo until Ctrl-C or the duration; the writer's profiles are set to the devices.
 ///
 /// # Errors
 /// When a built-in profile does not load (a build defect) or the output cannot be written.
-pub async fn demo<W: Write>(duration: Option<Duration>, writer: &mut EventWriter<W>) -> anyhow::Result<()> {
+pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> anyhow::Result<()> {
+    let duration = opts.duration;
     let line = LineSettings::default();
     let mut slaves = Vec::new();
     for (name, address) in DEVICES {
@@ -31,6 +42,7 @@ pub async fn demo<W: Write>(duration: Option<Duration>, writer: &mut EventWriter
         slaves.push(Slave::new(Arc::new(profile), address));
     }
     let mut bus = VirtualBus::new(slaves, line);
+    bus.faults = opts.faults;
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
     let start = tokio::time::Instant::now();
@@ -42,9 +54,11 @@ pub async fn demo<W: Write>(duration: Option<Duration>, writer: &mut EventWriter
             if duration.is_some_and(|d| at >= d) {
                 break 'run;
             }
-            tokio::select! {
-                () = &mut stop => break 'run,
-                () = tokio::time::sleep_until(start + at) => {}
+            if opts.speed > 0.0 {
+                tokio::select! {
+                    () = &mut stop => break 'run,
+                    () = tokio::time::sleep_until(start + at.div_f64(opts.speed)) => {}
+                }
             }
             let t = Timestamp(start_t.0.saturating_add(frame.end_ns));
             analyzer.push(&Chunk { port: PortId(0), t, bytes: &frame.bytes }, &mut |e: &Event<'_>| writer.write(e));

@@ -31,3 +31,57 @@ fn demo_shows_all_three_devices_annotated() {
     assert_eq!(summary["gap_violations"], 0, "{summary}");
     assert_eq!(summary["transactions"], summary["ok"], "{summary}");
 }
+
+/// Runs `demo` as fast as it goes for 10 s of line time with one fault, returning the summary.
+fn summary_with_fault(fault: &str) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["demo", "--format", "jsonl", "--speed", "0", "--duration", "10", "--fault", fault])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).unwrap();
+    serde_json::from_str(text.lines().last().unwrap()).unwrap()
+}
+
+/// Each injected fault shows up in the sniffer as what it is, and only as that.
+#[test]
+fn injected_faults_are_seen_as_what_they_are() {
+    let s = summary_with_fault("corrupt");
+    assert!(s["bad_frames"].as_u64().unwrap() > 0 && s["bad_responses"] == s["bad_frames"], "{s}");
+    assert_eq!(s["no_response"], 0, "{s}");
+
+    let s = summary_with_fault("noise");
+    assert!(s["noise_events"].as_u64().unwrap() > 0, "{s}");
+    assert_eq!(s["transactions"], s["ok"], "noise between transactions spoils none: {s}");
+
+    let s = summary_with_fault("slow-slave");
+    assert!(s["gap_violations"].as_u64().unwrap() > 0, "{s}");
+    assert_eq!(s["bad_frames"], 0, "a slow answer is still a good frame: {s}");
+
+    let s = summary_with_fault("silent-slave");
+    assert!(s["no_response"].as_u64().unwrap() > 0, "{s}");
+    assert_eq!(s["bad_frames"], 0, "{s}");
+
+    let s = summary_with_fault("collision");
+    assert!(s["bad_responses"].as_u64().unwrap() > 0, "{s}");
+
+    let s = summary_with_fault("fast-master");
+    assert!(s["short_gaps"].as_u64().unwrap() > 0, "{s}");
+    assert_eq!(s["transactions"], s["ok"], "{s}");
+}
+
+/// Without faults the line is clean: the faults above are the injector's doing, not noise of
+/// the simulation itself.
+#[test]
+fn no_fault_no_finding() {
+    let out = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["demo", "--format", "jsonl", "--speed", "0", "--duration", "10"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    let s: serde_json::Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+    for key in ["bad_frames", "noise_events", "gap_violations", "short_gaps", "no_response", "bad_responses"] {
+        assert_eq!(s[key], 0, "{key}: {s}");
+    }
+    assert!(s["transactions"].as_u64().unwrap() > 50, "{s}");
+}

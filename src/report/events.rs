@@ -250,6 +250,8 @@ pub struct Stats {
     pub noise_events: u64,
     pub noise_bytes: u64,
     pub gap_violations: u64,
+    /// Frames that followed the previous one after less than t3.5 of silence.
+    pub short_gaps: u64,
     pub transactions: u64,
     pub ok: u64,
     pub exceptions: u64,
@@ -269,6 +271,7 @@ impl Stats {
                 self.frame_bytes += frame.bytes.len() as u64;
                 self.bad_frames += u64::from(!frame.check_ok);
                 self.gap_violations += u64::from(frame.gap_violation_ns.is_some());
+                self.short_gaps += u64::from(frame.short_gap_before_ns.is_some());
             }
             Event::Noise(n) => {
                 self.noise_events += 1;
@@ -296,7 +299,7 @@ impl Stats {
             "event": "summary",
             "frames": self.frames, "frame_bytes": self.frame_bytes, "bad_frames": self.bad_frames,
             "noise_events": self.noise_events, "noise_bytes": self.noise_bytes, "gap_violations": self.gap_violations,
-            "transactions": self.transactions, "ok": self.ok, "exceptions": self.exceptions,
+            "short_gaps": self.short_gaps, "transactions": self.transactions, "ok": self.ok, "exceptions": self.exceptions,
             "no_response": self.no_response, "broadcasts": self.broadcasts, "bad_responses": self.bad_responses,
             "orphan_responses": self.orphans, "wrong_unit": self.wrong_unit,
         })
@@ -306,11 +309,12 @@ impl Stats {
     #[must_use]
     pub fn text(&self) -> String {
         format!(
-            "summary: {} frames ({} bytes, {} failed check, {} with gaps inside), {} noise bursts ({} bytes); {} transactions: {} ok, {} exceptions, {} no response, {} broadcasts, {} bad responses, {} orphan responses, {} from the wrong unit",
+            "summary: {} frames ({} bytes, {} failed check, {} with gaps inside, {} after less than t3.5), {} noise bursts ({} bytes); {} transactions: {} ok, {} exceptions, {} no response, {} broadcasts, {} bad responses, {} orphan responses, {} from the wrong unit",
             self.frames,
             self.frame_bytes,
             self.bad_frames,
             self.gap_violations,
+            self.short_gaps,
             self.noise_events,
             self.noise_bytes,
             self.transactions,

@@ -40,6 +40,39 @@ pub struct VirtualBus {
     pub interval_ns: u64,
     /// A slave's time from the end of a request to its answer.
     pub turnaround_ns: u64,
+    /// How long the master waits for an answer before it moves on (Serial Line v1.02 §2.4.1
+    /// leaves it to the implementation; 1 s is the common default).
+    pub master_timeout_ns: u64,
+    /// Faults to inject, each into every `fault_every`-th transaction.
+    pub faults: Vec<Fault>,
+    pub fault_every: u32,
+    count: u32,
+    rng: u64,
+}
+
+/// A fault the line can suffer, for training and tests (issue: fault injection).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Fault {
+    /// One bit of a response flipped on the wire: a bad CRC.
+    Corrupt,
+    /// A burst of random bytes on the idle line before a request.
+    Noise,
+    /// A slave that pauses in the middle of its answer (longer than t1.5, Serial Line v1.02
+    /// §2.5.1.1), as a slow controller servicing an interrupt does.
+    SlowSlave,
+    /// The addressed slave does not answer: the master times out.
+    SilentSlave,
+    /// Two slaves on one address both answer at once; the drivers fight and the line carries
+    /// the wired-AND of both (a dominant 0 wins on RS-485 fail-safe biasing).
+    Collision,
+    /// A master that sends its next request before t3.5 of silence has passed.
+    FastMaster,
+}
+
+impl Fault {
+    /// Every fault, for `--fault all`.
+    pub const ALL: [Self; 6] =
+        [Self::Corrupt, Self::Noise, Self::SlowSlave, Self::SilentSlave, Self::Collision, Self::FastMaster];
 }
 
 impl VirtualBus {
@@ -58,7 +91,20 @@ impl VirtualBus {
         // Start, data, parity and stop bits of one character (Serial Line v1.02 §2.5.1).
         let bits = 1 + u64::from(line.data_bits) + u64::from(line.parity != Parity::None) + u64::from(line.stop_bits);
         let char_ns = bits * 1_000_000_000 / u64::from(line.baud.max(1));
-        Self { slaves, polls, next: 0, now_ns: 0, char_ns, interval_ns: 100_000_000, turnaround_ns: 3_000_000 }
+        Self {
+            slaves,
+            polls,
+            next: 0,
+            now_ns: 0,
+            char_ns,
+            interval_ns: 100_000_000,
+            turnaround_ns: 3_000_000,
+            master_timeout_ns: 1_000_000_000,
+            faults: Vec::new(),
+            fault_every: 4,
+            count: 0,
+            rng: 0x9E37_79B9_7F4A_7C15,
+        }
     }
 
     /// Polls in the list (0: nothing to poll).
@@ -67,29 +113,101 @@ impl VirtualBus {
         self.polls.len()
     }
 
-    /// The next transaction: the request and, when a slave answers, the response.
+    /// The next transaction: the request and, when a slave answers, the response — with this
+    /// transaction's fault, if one is due.
     pub fn next_transaction(&mut self) -> Vec<LineFrame> {
         let Some((unit, pdu)) = self.polls.get(self.next).cloned() else { return Vec::new() };
         self.next = (self.next + 1) % self.polls.len();
-        let mut frames = Vec::with_capacity(2);
+        self.count = self.count.wrapping_add(1);
+        let fault = self.due_fault();
+        let mut frames = Vec::with_capacity(3);
+        if fault == Some(Fault::Noise) {
+            let len = 3 + usize::try_from(self.random() % 5).unwrap_or(0);
+            let noise: Vec<u8> = (0..len).map(|_| self.random().to_le_bytes()[0]).collect();
+            self.now_ns = self.now_ns.saturating_add(self.duration(noise.len()));
+            frames.push(LineFrame { end_ns: self.now_ns, bytes: noise });
+            // Quiet long enough that the request starts a frame of its own.
+            self.now_ns = self.now_ns.saturating_add(self.duration(8));
+        }
         let mut request = Vec::with_capacity(pdu.len() + 3);
         encode_rtu(unit, &pdu, &mut request);
         let request_end = self.now_ns.saturating_add(self.duration(request.len()));
         frames.push(LineFrame { end_ns: request_end, bytes: request });
-        let mut end = request_end;
         let seconds = f64::from(u32::try_from(request_end / 1_000_000).unwrap_or(u32::MAX)) / 1000.0;
+        let mut answers = Vec::new();
         for s in &mut self.slaves {
             world::step(s, seconds);
             if let Some(answer) = s.handle(unit, &pdu) {
-                let mut response = Vec::with_capacity(answer.len() + 3);
-                encode_rtu(unit, &answer, &mut response);
-                end = request_end.saturating_add(self.turnaround_ns).saturating_add(self.duration(response.len()));
-                frames.push(LineFrame { end_ns: end, bytes: response });
-                break;
+                answers.push(answer);
             }
         }
-        self.now_ns = end.saturating_add(self.interval_ns);
+        let end;
+        let answer = answers.first().filter(|_| fault != Some(Fault::SilentSlave));
+        match answer {
+            None => end = request_end.saturating_add(self.master_timeout_ns),
+            Some(answer) => {
+                let mut response = Vec::with_capacity(answer.len() + 3);
+                encode_rtu(unit, answer, &mut response);
+                self.apply_response_fault(fault, &mut response);
+                let start = request_end.saturating_add(self.turnaround_ns);
+                if fault == Some(Fault::SlowSlave) && response.len() > 2 {
+                    let tail = response.split_off(response.len() / 2);
+                    let first_end = start.saturating_add(self.duration(response.len()));
+                    frames.push(LineFrame { end_ns: first_end, bytes: response });
+                    // A pause of five characters: past t1.5 and t3.5 both.
+                    end = first_end.saturating_add(self.duration(5)).saturating_add(self.duration(tail.len()));
+                    frames.push(LineFrame { end_ns: end, bytes: tail });
+                } else {
+                    end = start.saturating_add(self.duration(response.len()));
+                    frames.push(LineFrame { end_ns: end, bytes: response });
+                }
+            }
+        }
+        self.now_ns = if fault == Some(Fault::FastMaster) {
+            // One character of silence instead of at least three and a half.
+            end.saturating_add(self.char_ns)
+        } else {
+            end.saturating_add(self.interval_ns)
+        };
         frames
+    }
+
+    /// The fault of this transaction: faults take turns, one every `fault_every` transactions.
+    fn due_fault(&self) -> Option<Fault> {
+        if self.faults.is_empty() || self.fault_every == 0 || !self.count.is_multiple_of(self.fault_every) {
+            return None;
+        }
+        let turn = usize::try_from(self.count.checked_div(self.fault_every)?).unwrap_or(0);
+        self.faults.get(turn % self.faults.len()).copied()
+    }
+
+    fn apply_response_fault(&mut self, fault: Option<Fault>, response: &mut [u8]) {
+        match fault {
+            Some(Fault::Corrupt) => {
+                let i = usize::try_from(self.random()).unwrap_or(0) % response.len().max(1);
+                let bit = self.random() % 8;
+                if let Some(b) = response.get_mut(i) {
+                    *b ^= 1 << bit;
+                }
+            }
+            Some(Fault::Collision) => {
+                // The other slave's answer: the same frame shape with different data.
+                for b in response.iter_mut().skip(3) {
+                    *b &= self.random().to_le_bytes()[0];
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// xorshift64: deterministic, so a fault run can be replayed exactly.
+    fn random(&mut self) -> u64 {
+        let mut x = self.rng;
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        self.rng = x;
+        x
     }
 
     fn duration(&self, bytes: usize) -> u64 {
@@ -133,5 +251,33 @@ mod tests {
         assert_eq!(frames[1].end_ns, frames[0].end_ns + 3_000_000 + response_chars * (11 * 1_000_000_000 / 19_200));
         let next = b.next_transaction();
         assert!(next[0].end_ns > frames[1].end_ns + 100_000_000);
+    }
+
+    #[test]
+    fn faults_take_turns_and_leave_the_other_transactions_alone() {
+        let mut b = bus();
+        b.faults = vec![Fault::SilentSlave];
+        let answered: Vec<bool> = (0..12).map(|_| b.next_transaction().len() == 2).collect();
+        // Transactions 4, 8 and 12 (counting from 1) are the silent ones.
+        let expected: Vec<bool> = (1..=12).map(|n| n % 4 != 0).collect();
+        assert_eq!(answered, expected);
+    }
+
+    #[test]
+    fn every_fault_keeps_the_bus_going() {
+        for every in [0, 1, 2, 7] {
+            let mut b = bus();
+            b.faults = Fault::ALL.to_vec();
+            b.fault_every = every;
+            let mut last = 0;
+            for _ in 0..200 {
+                let frames = b.next_transaction();
+                assert!(!frames.is_empty());
+                for f in &frames {
+                    assert!(f.end_ns > last, "time moves forward");
+                    last = f.end_ns;
+                }
+            }
+        }
     }
 }
