@@ -91,7 +91,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 line: settings,
                 latency_ns,
                 record,
-                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+                duration: seconds(duration),
             };
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
@@ -112,7 +112,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 line: settings,
                 latency_ns,
                 record,
-                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+                duration: seconds(duration),
             };
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
@@ -149,7 +149,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.lang = lang.into();
-            let duration = duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)));
+            let duration = seconds(duration);
             let rt =
                 tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
             rt.block_on(crate::demo_cmd::demo(crate::demo_cmd::DemoOptions { duration, faults, speed }, &mut writer))?;
@@ -169,7 +169,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 devices,
                 line: settings,
                 mode,
-                duration: duration.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9))),
+                duration: seconds(duration),
             };
             let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
             rt.block_on(crate::simulate_cmd::simulate(opts, &mut io::stderr()))?;
@@ -418,4 +418,9 @@ fn overrides(a: &LineArgs) -> LineOverrides {
         #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
         latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
     }
+}
+
+/// `--duration SECONDS` as a duration (negative as 0, absurdly large capped).
+fn seconds(s: Option<f64>) -> Option<std::time::Duration> {
+    s.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)))
 }

@@ -82,9 +82,7 @@ pub fn parse_device(spec: &str) -> anyhow::Result<(crate::profile::Profile, u8)>
 /// Silence after which buffered bytes end a frame: t3.5, at least 1.75 ms above 19200 baud
 /// (Serial Line v1.02 §2.5.1.1), plus slack for the pseudo-terminal and the timer's 1 ms steps.
 fn silence(line: LineSettings) -> Duration {
-    let bits_per_char = 1 + u64::from(line.data_bits) + u64::from(line.parity != crate::framer::Parity::None) + 1;
-    let t35_us = (35 * bits_per_char * 1_000_000 / 10 / u64::from(line.baud.max(1))).max(1750);
-    Duration::from_micros(t35_us) + Duration::from_millis(2)
+    Duration::from_nanos(line.t35_ns()) + Duration::from_millis(2)
 }
 
 /// Runs until Ctrl-C or the duration ends.

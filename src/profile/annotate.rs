@@ -297,7 +297,23 @@ pub fn annotate_registers(p: &Profile, table: Table, start: u16, values: &[u16],
             (raw, None, 1, Vec::new())
         } else if !whole {
             (i64::from(v), None, 1, vec![Note::HalfOfPair])
-        } else if def.value_type == ValueType::Datetime {
+        } else if matches!(def.value_type, ValueType::Datetime | ValueType::String) {
+            // A value spread over several registers: shown whole, no single raw value.
+            let regs = &values[i..i + width];
+            let (shown, notes) = if def.value_type == ValueType::Datetime {
+                (Shown::Time(datetime(&def.parts, regs)), impossible_date_part(&def.parts, regs).into_iter().collect())
+            } else {
+                let text: String = regs
+                    .iter()
+                    .flat_map(|r| {
+                        let [hi, lo] = r.to_be_bytes();
+                        if def.chars_per_register == 1 { vec![lo] } else { vec![hi, lo] }
+                    })
+                    .take_while(|&c| c != 0)
+                    .map(char::from)
+                    .collect();
+                (Shown::Text(text), Vec::new())
+            };
             out.push(Annotation {
                 table,
                 address,
@@ -305,30 +321,8 @@ pub fn annotate_registers(p: &Profile, table: Table, start: u16, values: &[u16],
                 name: Some(slot.name.clone()),
                 name_ru: def.name_ru.clone(),
                 raw: 0,
-                shown: Shown::Time(datetime(&def.parts, &values[i..i + width])),
-                notes: impossible_date_part(&def.parts, &values[i..i + width]).into_iter().collect(),
-            });
-            i += width;
-            continue;
-        } else if def.value_type == ValueType::String {
-            let text: String = values[i..i + width]
-                .iter()
-                .flat_map(|r| {
-                    let [hi, lo] = r.to_be_bytes();
-                    if def.chars_per_register == 1 { vec![lo] } else { vec![hi, lo] }
-                })
-                .take_while(|&c| c != 0)
-                .map(char::from)
-                .collect();
-            out.push(Annotation {
-                table,
-                address,
-                width: def.width,
-                name: Some(slot.name.clone()),
-                name_ru: def.name_ru.clone(),
-                raw: 0,
-                shown: Shown::Text(text),
-                notes: Vec::new(),
+                shown,
+                notes,
             });
             i += width;
             continue;

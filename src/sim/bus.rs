@@ -3,7 +3,7 @@
 //! (character time from the line settings, a turnaround before each answer). Time is simulated
 //! — nanoseconds since the start — so `demo`, tests and benchmarks share this code.
 
-use crate::framer::{LineSettings, Parity};
+use crate::framer::LineSettings;
 use crate::proto::encode_rtu;
 
 use super::{Slave, world};
@@ -88,9 +88,7 @@ impl VirtualBus {
                 polls.push((s.address(), pdu));
             }
         }
-        // Start, data, parity and stop bits of one character (Serial Line v1.02 §2.5.1).
-        let bits = 1 + u64::from(line.data_bits) + u64::from(line.parity != Parity::None) + u64::from(line.stop_bits);
-        let char_ns = bits * 1_000_000_000 / u64::from(line.baud.max(1));
+        let char_ns = u64::from(line.bits_per_char()) * 1_000_000_000 / u64::from(line.baud.max(1));
         Self {
             slaves,
             polls,
