@@ -4,6 +4,8 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+use crate::framer::LineSettings;
+
 /// mbtap — a Modbus RTU/ASCII bus analyzer: sniff, decode, record, replay, bridge.
 #[derive(Debug, Parser)]
 #[command(name = "mbtap", version, about, long_about = None)]
@@ -293,6 +295,10 @@ pub enum Command {
         /// Line time per wall-clock time: 1 is real time, 10 ten times faster, 0 as fast as it goes.
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
+        /// Listen through a UART at these settings instead of the line's 19200 8E1 ("9600 8N1"):
+        /// what a sniffer set up wrong gets.
+        #[arg(long, value_name = "SETTINGS")]
+        heard_at: Option<LineSettings>,
     },
     /// Simulated devices on a pseudo-terminal: point a Modbus master (or mbtap) at --link.
     Simulate {
@@ -307,6 +313,16 @@ pub enum Command {
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
+        /// Play the master too: poll the devices and put the whole line on the pseudo-terminal,
+        /// paced at the line's character rate, for a listener (`mbtap sniff LINK`).
+        #[arg(long)]
+        poll: bool,
+        /// With --poll: inject a fault into every fourth transaction (repeatable).
+        #[arg(long = "fault", value_enum, requires = "poll")]
+        faults: Vec<FaultArg>,
+        /// With --poll: the listener's UART settings when they are not the line's ("9600 8N1").
+        #[arg(long, value_name = "SETTINGS", requires = "poll")]
+        heard_at: Option<LineSettings>,
     },
     /// Device profiles: check a profile file, or show what it defines.
     #[command(subcommand)]
@@ -328,6 +344,8 @@ pub enum FaultArg {
     Collision,
     /// A master polling again before t3.5 of silence.
     FastMaster,
+    /// The MK4's running pump trips on overcurrent; its alarm log records it.
+    PumpTrip,
     /// All of the above, taking turns.
     All,
 }

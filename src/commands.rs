@@ -130,21 +130,8 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
             Ok(ExitCode::SUCCESS)
         }
-        Command::Demo { format, lang, duration, faults, speed } => {
-            use crate::cli::FaultArg;
-            use crate::sim::bus::Fault;
-            let faults: Vec<Fault> = faults
-                .iter()
-                .flat_map(|f| match f {
-                    FaultArg::Corrupt => vec![Fault::Corrupt],
-                    FaultArg::Noise => vec![Fault::Noise],
-                    FaultArg::SlowSlave => vec![Fault::SlowSlave],
-                    FaultArg::SilentSlave => vec![Fault::SilentSlave],
-                    FaultArg::Collision => vec![Fault::Collision],
-                    FaultArg::FastMaster => vec![Fault::FastMaster],
-                    FaultArg::All => Fault::ALL.to_vec(),
-                })
-                .collect();
+        Command::Demo { format, lang, duration, faults, speed, heard_at } => {
+            let faults = fault_list(&faults);
             anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
@@ -152,11 +139,14 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let duration = seconds(duration);
             let rt =
                 tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
-            rt.block_on(crate::demo_cmd::demo(crate::demo_cmd::DemoOptions { duration, faults, speed }, &mut writer))?;
+            rt.block_on(crate::demo_cmd::demo(
+                crate::demo_cmd::DemoOptions { duration, faults, speed, heard_at },
+                &mut writer,
+            ))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Simulate { link, devices, line, duration } => {
+        Command::Simulate { link, devices, line, duration, poll, faults, heard_at } => {
             let (mode, settings, _) = overrides(&line).resolve();
             let specs: Vec<String> = if devices.is_empty() {
                 crate::simulate_cmd::DEFAULT_DEVICES.iter().map(|(n, a)| format!("{n}@{a}")).collect()
@@ -170,6 +160,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 line: settings,
                 mode,
                 duration: seconds(duration),
+                poll: poll.then(|| crate::simulate_cmd::PollOptions { faults: fault_list(&faults), heard_at }),
             };
             let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
             rt.block_on(crate::simulate_cmd::simulate(opts, &mut io::stderr()))?;
@@ -423,4 +414,22 @@ fn overrides(a: &LineArgs) -> LineOverrides {
 /// `--duration SECONDS` as a duration (negative as 0, absurdly large capped).
 fn seconds(s: Option<f64>) -> Option<std::time::Duration> {
     s.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)))
+}
+
+/// The faults named on the command line (`all`: every one, taking turns).
+fn fault_list(args: &[crate::cli::FaultArg]) -> Vec<crate::sim::bus::Fault> {
+    use crate::cli::FaultArg;
+    use crate::sim::bus::Fault;
+    args.iter()
+        .flat_map(|f| match f {
+            FaultArg::Corrupt => vec![Fault::Corrupt],
+            FaultArg::Noise => vec![Fault::Noise],
+            FaultArg::SlowSlave => vec![Fault::SlowSlave],
+            FaultArg::SilentSlave => vec![Fault::SilentSlave],
+            FaultArg::Collision => vec![Fault::Collision],
+            FaultArg::FastMaster => vec![Fault::FastMaster],
+            FaultArg::PumpTrip => vec![Fault::PumpTrip],
+            FaultArg::All => Fault::ALL.to_vec(),
+        })
+        .collect()
 }

@@ -12,6 +12,7 @@ use crate::framer::{FramerConfig, LineSettings};
 use crate::replay_cmd::EventWriter;
 use crate::sim::Slave;
 use crate::sim::bus::VirtualBus;
+use crate::sim::uart::Listener;
 use crate::source::serial::now;
 
 /// The devices of the demo line and their addresses.
@@ -25,6 +26,8 @@ pub struct DemoOptions {
     pub faults: Vec<crate::sim::bus::Fault>,
     /// Line time per wall-clock time; 0 runs without waiting.
     pub speed: f64,
+    /// The listener's UART settings, when not the line's.
+    pub heard_at: Option<LineSettings>,
 }
 
 /// Runs the demo until Ctrl-C or the duration; the writer's profiles are set to the devices.
@@ -43,8 +46,10 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     }
     let mut bus = VirtualBus::new(slaves, line);
     bus.faults = opts.faults;
+    let heard_at = opts.heard_at.unwrap_or(line);
+    let mut listener = Listener::new(line, heard_at);
     let mut analyzer =
-        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(heard_at, 0), ..AnalyzerConfig::default() });
     let start = tokio::time::Instant::now();
     let start_t = now();
     let mut stop = Box::pin(crate::sniff_cmd::shutdown_signal());
@@ -60,8 +65,9 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
                     () = tokio::time::sleep_until(start + at.div_f64(opts.speed)) => {}
                 }
             }
+            let heard: Vec<u8> = listener.hear(&frame).into_iter().map(|(_, b)| b).collect();
             let t = Timestamp(start_t.0.saturating_add(frame.end_ns));
-            analyzer.push(&Chunk { port: PortId(0), t, bytes: &frame.bytes }, &mut |e: &Event<'_>| writer.write(e));
+            analyzer.push(&Chunk { port: PortId(0), t, bytes: &heard }, &mut |e: &Event<'_>| writer.write(e));
             // The frame's end is only certain after the line stays quiet: let the framer see it.
             analyzer.tick(Timestamp(t.0.saturating_add(2_000_000)), &mut |e: &Event<'_>| writer.write(e));
             let _ = writer.out.flush();

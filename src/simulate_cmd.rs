@@ -17,6 +17,8 @@ use tokio_serial::{SerialPort, SerialStream};
 use crate::analyzer::SerialMode;
 use crate::framer::LineSettings;
 use crate::proto::{encode_ascii, encode_rtu};
+use crate::sim::bus::VirtualBus;
+use crate::sim::uart::Listener;
 use crate::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame, Slave, world};
 
 /// Frames requests in the line's mode.
@@ -57,6 +59,18 @@ pub struct SimulateOptions {
     pub line: LineSettings,
     pub mode: SerialMode,
     pub duration: Option<Duration>,
+    /// Play the master too (`--poll`): the whole line goes out on the pseudo-terminal, for a
+    /// listener (`mbtap sniff`) to hear.
+    pub poll: Option<PollOptions>,
+}
+
+/// The built-in master's settings.
+#[derive(Debug, Clone, Default)]
+pub struct PollOptions {
+    pub faults: Vec<crate::sim::bus::Fault>,
+    /// The listener's UART settings when they differ from the line's (a wrong-baud or
+    /// wrong-parity training line).
+    pub heard_at: Option<LineSettings>,
 }
 
 /// The default line: all three built-in devices at the addresses used throughout the docs.
@@ -109,6 +123,15 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
         opts.mode.name()
     );
 
+    if let Some(poll) = opts.poll {
+        let mut bus = VirtualBus::new(slaves, opts.line);
+        bus.faults = poll.faults;
+        bus.ascii = opts.mode == SerialMode::Ascii;
+        let listener = Listener::new(opts.line, poll.heard_at.unwrap_or(opts.line));
+        let result = drive_line(&mut master_side, bus, listener, opts.duration).await;
+        let _ = std::fs::remove_file(&opts.link);
+        return result;
+    }
     let started = Instant::now();
     let deadline = opts.duration.map(|d| started + d);
     let gap = silence(opts.line);
@@ -167,4 +190,69 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
     let _ = std::fs::remove_file(&opts.link);
     let _ = master_side.clear(tokio_serial::ClearBuffer::All);
     Ok(())
+}
+
+/// How long a write may wait for the far end before we conclude nobody is listening and drop
+/// what is buffered: a listener that opens the line later must hear it live, not seconds late.
+const STALL: Duration = Duration::from_millis(50);
+
+/// Writes the virtual line onto the pseudo-terminal, each byte when the listener would get
+/// it. The timer has 1 ms steps, so bytes leave in 1 ms batches — as a USB adapter delivers
+/// them; the listener sees the line's pauses, not its character spacing within a batch.
+async fn drive_line(
+    port: &mut SerialStream,
+    mut bus: VirtualBus,
+    mut listener: Listener,
+    duration: Option<Duration>,
+) -> anyhow::Result<()> {
+    let mut start = tokio::time::Instant::now();
+    let mut stop = Box::pin(crate::sniff_cmd::shutdown_signal());
+    let mut batch = Vec::with_capacity(64);
+    let began = Instant::now();
+    let mut scratch = [0u8; 256];
+    loop {
+        for frame in bus.next_transaction() {
+            let heard = listener.hear(&frame);
+            let mut i = 0;
+            while let Some(&(t, _)) = heard.get(i) {
+                let due = Duration::from_nanos(t);
+                if duration.is_some_and(|d| began.elapsed() >= d) {
+                    return Ok(());
+                }
+                // Behind (a stalled write while nobody listened): move the line's clock on
+                // rather than rush the backlog out with its timing lost.
+                let late = start.elapsed().saturating_sub(due);
+                if late > STALL {
+                    start += late;
+                }
+                tokio::select! {
+                    () = &mut stop => return Ok(()),
+                    () = tokio::time::sleep_until(start + due) => {}
+                }
+                let now = u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+                batch.clear();
+                while let Some(&(_, b)) = heard.get(i).filter(|(t, _)| *t <= now) {
+                    batch.push(b);
+                    i += 1;
+                }
+                if nobody_listening(port, &mut scratch).await {
+                    // Keep nothing for a listener that opens later: it hears the line live.
+                    let _ = port.clear(tokio_serial::ClearBuffer::All);
+                    continue;
+                }
+                match tokio::time::timeout(STALL, AsyncWriteExt::write_all(port, &batch)).await {
+                    Ok(r) => r.context("writing the line to the pseudo-terminal")?,
+                    Err(_) => {
+                        let _ = port.clear(tokio_serial::ClearBuffer::All);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// True when no one has the far end open: a read then fails at once (EIO) instead of waiting.
+/// Whatever a listener writes is read and dropped here (a sniffer writes nothing).
+async fn nobody_listening(port: &mut SerialStream, scratch: &mut [u8]) -> bool {
+    matches!(tokio::time::timeout(Duration::ZERO, port.read(scratch)).await, Ok(Err(_) | Ok(0)))
 }

@@ -23,6 +23,7 @@ fn run_dir(dir: &Path) -> usize {
             "capture" => mbtap::fuzzing::capture,
             "profile" => mbtap::fuzzing::profile,
             "sim" => mbtap::fuzzing::sim,
+            "uart" => mbtap::fuzzing::uart,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

@@ -4,7 +4,7 @@
 //! — nanoseconds since the start — so `demo`, tests and benchmarks share this code.
 
 use crate::framer::LineSettings;
-use crate::proto::encode_rtu;
+use crate::proto::{encode_ascii, encode_rtu};
 
 use super::{Slave, world};
 
@@ -12,7 +12,8 @@ use super::{Slave, world};
 fn poll_list(profile: &str) -> &'static [(u8, u16, u16)] {
     match profile {
         // Phase voltages and their average; state and alarm words; holding set points; coils.
-        "mk4" => &[(0x04, 430, 4), (0x04, 400, 10), (0x03, 100, 10), (0x01, 0, 19)],
+        // The newest alarm-log record.
+        "mk4" => &[(0x04, 430, 4), (0x04, 400, 10), (0x03, 100, 10), (0x01, 0, 19), (0x04, 500, 17)],
         // Phase currents, then the first trip record (MKZP: holding registers only).
         "mkzp" => &[(0x03, 50, 8), (0x03, 128, 17)],
         // Totals, the first level-sensor slot, the first flow meter.
@@ -46,6 +47,8 @@ pub struct VirtualBus {
     /// Faults to inject, each into every `fault_every`-th transaction.
     pub faults: Vec<Fault>,
     pub fault_every: u32,
+    /// ASCII framing (Serial Line v1.02 §2.5.2) instead of RTU.
+    pub ascii: bool,
     count: u32,
     rng: u64,
 }
@@ -67,12 +70,22 @@ pub enum Fault {
     Collision,
     /// A master that sends its next request before t3.5 of silence has passed.
     FastMaster,
+    /// Not a line fault: the MK4's running pump trips on overcurrent, and the alarm log
+    /// records it ([`world::mk4_pump_trip`]).
+    PumpTrip,
 }
 
 impl Fault {
     /// Every fault, for `--fault all`.
-    pub const ALL: [Self; 6] =
-        [Self::Corrupt, Self::Noise, Self::SlowSlave, Self::SilentSlave, Self::Collision, Self::FastMaster];
+    pub const ALL: [Self; 7] = [
+        Self::Corrupt,
+        Self::Noise,
+        Self::SlowSlave,
+        Self::SilentSlave,
+        Self::Collision,
+        Self::FastMaster,
+        Self::PumpTrip,
+    ];
 }
 
 impl VirtualBus {
@@ -100,6 +113,7 @@ impl VirtualBus {
             master_timeout_ns: 1_000_000_000,
             faults: Vec::new(),
             fault_every: 4,
+            ascii: false,
             count: 0,
             rng: 0x9E37_79B9_7F4A_7C15,
         }
@@ -127,13 +141,16 @@ impl VirtualBus {
             // Quiet long enough that the request starts a frame of its own.
             self.now_ns = self.now_ns.saturating_add(self.duration(8));
         }
-        let mut request = Vec::with_capacity(pdu.len() + 3);
-        encode_rtu(unit, &pdu, &mut request);
+        let mut request = Vec::with_capacity(pdu.len() * 2 + 5);
+        self.encode(unit, &pdu, &mut request);
         let request_end = self.now_ns.saturating_add(self.duration(request.len()));
         frames.push(LineFrame { end_ns: request_end, bytes: request });
         let seconds = f64::from(u32::try_from(request_end / 1_000_000).unwrap_or(u32::MAX)) / 1000.0;
         let mut answers = Vec::new();
         for s in &mut self.slaves {
+            if fault == Some(Fault::PumpTrip) {
+                world::mk4_pump_trip(s, seconds);
+            }
             world::step(s, seconds);
             if let Some(answer) = s.handle(unit, &pdu) {
                 answers.push(answer);
@@ -144,8 +161,8 @@ impl VirtualBus {
         match answer {
             None => end = request_end.saturating_add(self.master_timeout_ns),
             Some(answer) => {
-                let mut response = Vec::with_capacity(answer.len() + 3);
-                encode_rtu(unit, answer, &mut response);
+                let mut response = Vec::with_capacity(answer.len() * 2 + 5);
+                self.encode(unit, answer, &mut response);
                 self.apply_response_fault(fault, &mut response);
                 let start = request_end.saturating_add(self.turnaround_ns);
                 if fault == Some(Fault::SlowSlave) && response.len() > 2 {
@@ -168,6 +185,10 @@ impl VirtualBus {
             end.saturating_add(self.interval_ns)
         };
         frames
+    }
+
+    fn encode(&self, unit: u8, pdu: &[u8], out: &mut Vec<u8>) {
+        if self.ascii { encode_ascii(unit, pdu, out) } else { encode_rtu(unit, pdu, out) }
     }
 
     /// The fault of this transaction: faults take turns, one every `fault_every` transactions.
@@ -229,7 +250,7 @@ mod tests {
     #[test]
     fn every_poll_is_answered_without_an_exception() {
         let mut b = bus();
-        assert_eq!(b.poll_count(), 9);
+        assert_eq!(b.poll_count(), 10);
         for _ in 0..b.poll_count() {
             let frames = b.next_transaction();
             assert_eq!(frames.len(), 2, "{frames:?}");

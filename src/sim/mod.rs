@@ -7,6 +7,7 @@ pub mod ascii_requests;
 pub mod bus;
 pub mod rtu_requests;
 pub mod slave;
+pub mod uart;
 pub mod world;
 
 pub use ascii_requests::AsciiRequestAssembler;

@@ -71,6 +71,59 @@ fn mk4(slave: &mut Slave, t: f64) {
     }
 }
 
+/// MK4 alarm log (input registers 500–839): 20 records of 17 registers, newest first.
+const MK4_ALARM_LOG: u16 = 500;
+const MK4_ALARM_RECORD: u16 = 17;
+const MK4_ALARM_RECORDS: u16 = 20;
+/// MK4 motor M1–M3 alarm codes (415–417; 1 = overcurrent).
+const MK4_MOTOR_ALARM: u16 = 415;
+/// The simulated clock starts at this date and time (day, month, year, hour, minute — the
+/// order of the log's date registers).
+const CLOCK_START: [u16; 5] = [22, 11, 2026, 8, 0];
+
+/// The running MK4 pump trips on overcurrent at time `t`: its alarm code is set (415–417) and a
+/// record goes to the top of the alarm log, older records moving down and the oldest dropped —
+/// with the date, the currents and the voltages at the moment of the alarm (MK4 §3.4).
+/// Returns the log's alarm code (21 = M1 overcurrent, 31 = M2), or none on another device.
+pub fn mk4_pump_trip(slave: &mut Slave, t: f64) -> Option<u16> {
+    if slave.profile().meta.name != "mk4" {
+        return None;
+    }
+    step(slave, t);
+    let motor = (0u16..3).find(|&m| slave.get(Table::InputRegisters, MK4_MOTOR_STATE + m) == Some(3))?;
+    slave.set(Table::InputRegisters, MK4_MOTOR_ALARM + motor, 1);
+    let code = 21 + 10 * motor;
+    let log_end = MK4_ALARM_LOG + MK4_ALARM_RECORD * MK4_ALARM_RECORDS;
+    // Newest first: shift every record one place down, from the bottom up.
+    for a in (MK4_ALARM_LOG + MK4_ALARM_RECORD..log_end).rev() {
+        let older = slave.get(Table::InputRegisters, a - MK4_ALARM_RECORD).unwrap_or(0);
+        slave.set(Table::InputRegisters, a, older);
+    }
+    let ir = |a: u16| slave.get(Table::InputRegisters, a).unwrap_or(0);
+    let currents = [0u16, 1, 2].map(|m| ir(MK4_MOTOR_CURRENTS + m * 4 + 2));
+    let voltages = [0u16, 1, 2].map(|p| ir(MK4_VOLTAGES + p));
+    let mut record = vec![code];
+    record.extend_from_slice(&clock(t));
+    record.extend_from_slice(&currents);
+    record.extend_from_slice(&voltages);
+    // Reset time (12–16): zeros until someone resets the alarm.
+    record.resize(usize::from(MK4_ALARM_RECORD), 0);
+    for (a, v) in (MK4_ALARM_LOG..).zip(record) {
+        slave.set(Table::InputRegisters, a, v);
+    }
+    Some(code)
+}
+
+/// The simulated wall clock at `t` s: day, month, year, hour, minute (within the start day's
+/// month, which is all a demo run needs).
+fn clock(t: f64) -> [u16; 5] {
+    let [day, month, year, hour, minute] = CLOCK_START;
+    let minutes = u64::from(hour) * 60 + u64::from(minute) + u64::from(whole32((t / 60.0).floor()));
+    let days = minutes / (24 * 60);
+    let at = |v: u64| u16::try_from(v).unwrap_or(u16::MAX);
+    [day.saturating_add(at(days)), month, year, at(minutes / 60 % 24), at(minutes % 60)]
+}
+
 /// MKZP-0.4 registers (holding): phase currents in % of nominal (50–52), insulation
 /// resistance in kΩ (53), asymmetry % (54), voltage in V (60), System_Status bits (66).
 const MKZP_CURRENTS: u16 = 50;
@@ -178,6 +231,32 @@ mod tests {
         assert_eq!(s.get(Table::InputRegisters, 403), Some(3), "M1 runs first");
         step(&mut s, 70.0);
         assert_eq!(s.get(Table::InputRegisters, 404), Some(3), "then M2");
+    }
+
+    #[test]
+    fn an_mk4_pump_trip_goes_to_the_top_of_the_alarm_log() {
+        let mut s = slave("mk4");
+        assert_eq!(s.get(Table::InputRegisters, 500), Some(0), "the log starts empty");
+        // M1 runs in the first minute, M2 in the second.
+        assert_eq!(mk4_pump_trip(&mut s, 10.0), Some(21));
+        assert_eq!(s.get(Table::InputRegisters, 415), Some(1), "M1 overcurrent");
+        assert_eq!(mk4_pump_trip(&mut s, 3690.0), Some(31));
+        let record = |s: &Slave, n: u16| {
+            (0..17).map(|i| s.get(Table::InputRegisters, 500 + n * 17 + i).unwrap()).collect::<Vec<_>>()
+        };
+        let newest = record(&s, 0);
+        let older = record(&s, 1);
+        assert_eq!(newest[0], 31);
+        assert_eq!(&newest[1..6], &[22, 11, 2026, 9, 1], "61½ minutes after 08:00");
+        assert!(newest[7] > 0 && newest[6] == 0, "M2's current recorded, M1 stopped: {newest:?}");
+        assert!((2200..2400).contains(&newest[9]), "phase A voltage {}", newest[9]);
+        assert_eq!(older[0], 21);
+        assert_eq!(&older[1..6], &[22, 11, 2026, 8, 0]);
+        for _ in 0..30 {
+            mk4_pump_trip(&mut s, 10.0);
+        }
+        assert_eq!(record(&s, 19)[0], 21, "twenty records kept, the oldest dropped");
+        assert_eq!(mk4_pump_trip(&mut slave("mkzp"), 10.0), None);
     }
 
     #[test]
