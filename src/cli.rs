@@ -73,6 +73,8 @@ pub enum EventFormatArg {
     Jsonl,
     /// Only the summary at the end.
     Summary,
+    /// The terminal UI: traffic, detail, devices and registers views (needs a terminal).
+    Tui,
 }
 
 /// Line settings (each one overrides what a capture file stores).
@@ -280,9 +282,9 @@ pub enum Command {
     /// The whole job with no hardware: simulated MK4, Display and MKZP-0.4 polled on a virtual
     /// line, heard and shown annotated as `sniff` would.
     Demo {
-        /// Output format.
-        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
-        format: EventFormatArg,
+        /// Output format [default: tui on a terminal, text otherwise].
+        #[arg(long, value_enum)]
+        format: Option<EventFormatArg>,
         /// Language of register names in annotations.
         #[arg(long, value_enum, default_value_t = LangArg::En)]
         lang: LangArg,

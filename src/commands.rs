@@ -1,7 +1,7 @@
 //! The commands at the edge: each takes the parsed command line, does its I/O (files,
 //! stdout, serial ports, the runtime) and calls into the library. `main` only dispatches.
 
-use std::io::{self, BufRead, Write};
+use std::io::{self, BufRead, IsTerminal, Write};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -62,6 +62,17 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         }
         Command::Replay { file, image, line, format, devices, lang } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+            if format == EventFormatArg::Tui {
+                let (_, settings, _) = overrides(&line).resolve();
+                let source = file.display().to_string();
+                let ui =
+                    TuiSource { profiles: load_devices(&devices)?, lang: lang.into(), line: settings, pacing: true };
+                return ui.run(&source, move |writer, err| {
+                    writer.pacer = Some(crate::tui::terminal::Pacer::default());
+                    crate::replay_cmd::replay(input, overrides(&line), writer, err)
+                        .with_context(|| format!("replaying {}", file.display()))
+                });
+            }
             let stdout = io::stdout();
             let mut writer =
                 EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
@@ -93,13 +104,18 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 record,
                 duration: seconds(duration),
             };
+            if format == EventFormatArg::Tui {
+                let source = opts.port.clone();
+                let ui =
+                    TuiSource { profiles: load_devices(&devices)?, lang: lang.into(), line: settings, pacing: false };
+                return ui
+                    .run(&source, move |writer, err| runtime()?.block_on(crate::sniff_cmd::sniff(opts, writer, err)));
+            }
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
             writer.lang = lang.into();
-            let rt =
-                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
-            rt.block_on(crate::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
+            runtime()?.block_on(crate::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
@@ -114,13 +130,17 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 record,
                 duration: seconds(duration),
             };
+            if format == EventFormatArg::Tui {
+                let source = format!("{} ⇄ {}", opts.port, opts.link.display());
+                let ui =
+                    TuiSource { profiles: load_devices(&devices)?, lang: lang.into(), line: settings, pacing: false };
+                return ui.run(&source, move |writer, err| runtime()?.block_on(crate::tap_cmd::tap(opts, writer, err)));
+            }
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
             writer.lang = lang.into();
-            let rt =
-                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
-            rt.block_on(crate::tap_cmd::tap(opts, &mut writer, &mut io::stderr()))?;
+            runtime()?.block_on(crate::tap_cmd::tap(opts, &mut writer, &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
@@ -133,16 +153,21 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Demo { format, lang, duration, faults, speed, heard_at } => {
             let faults = fault_list(&faults);
             anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
+            let duration = seconds(duration);
+            let opts = crate::demo_cmd::DemoOptions { duration, faults, speed, heard_at };
+            let format = format
+                .unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });
+            if format == EventFormatArg::Tui {
+                let line = heard_at.unwrap_or_default();
+                let ui = TuiSource { profiles: crate::demo_cmd::profiles()?, lang: lang.into(), line, pacing: true };
+                return ui.run("demo (simulated bus)", move |writer, _| {
+                    runtime()?.block_on(crate::demo_cmd::demo(opts, writer))
+                });
+            }
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.lang = lang.into();
-            let duration = seconds(duration);
-            let rt =
-                tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
-            rt.block_on(crate::demo_cmd::demo(
-                crate::demo_cmd::DemoOptions { duration, faults, speed, heard_at },
-                &mut writer,
-            ))?;
+            runtime()?.block_on(crate::demo_cmd::demo(opts, &mut writer))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
@@ -387,7 +412,50 @@ fn event_format(f: EventFormatArg) -> EventFormat {
     match f {
         EventFormatArg::Text => EventFormat::Text,
         EventFormatArg::Jsonl => EventFormat::Jsonl,
-        EventFormatArg::Summary => EventFormat::Summary,
+        // The UI is set up by the command itself; its writer only counts.
+        EventFormatArg::Summary | EventFormatArg::Tui => EventFormat::Summary,
+    }
+}
+
+/// A single-threaded runtime for one command's I/O.
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")
+}
+
+/// What the terminal UI needs to know about a source.
+struct TuiSource {
+    profiles: decode_cmd::Profiles,
+    lang: crate::profile::annotate::Lang,
+    line: crate::framer::LineSettings,
+    /// Recorded or simulated input the UI may pace; live input it can only freeze.
+    pacing: bool,
+}
+
+impl TuiSource {
+    /// Runs `produce` on its own thread, feeding the UI, until the user quits.
+    fn run<F>(self, source: &str, produce: F) -> anyhow::Result<ExitCode>
+    where
+        F: FnOnce(&mut EventWriter<io::Sink>, &mut dyn Write) -> anyhow::Result<()> + Send + 'static,
+    {
+        use crate::tui::terminal::{NoticeWriter, Shared, run};
+        anyhow::ensure!(
+            io::stdout().is_terminal(),
+            "the terminal UI needs a terminal on stdout; use --format text or jsonl in pipes"
+        );
+        let model =
+            crate::tui::Model::new(self.profiles.clone(), self.lang, self.line, crate::tui::model::DEFAULT_SCROLLBACK);
+        let shared = Shared::new(model);
+        let feeder = std::sync::Arc::clone(&shared);
+        let (profiles, lang) = (self.profiles, self.lang);
+        run(&shared, source, self.pacing, move || {
+            let mut writer = EventWriter::new(io::sink(), EventFormat::Summary);
+            writer.profiles = profiles;
+            writer.lang = lang;
+            writer.tui = Some(std::sync::Arc::clone(&feeder));
+            let mut notices = NoticeWriter(feeder);
+            produce(&mut writer, &mut notices)
+        })?;
+        Ok(ExitCode::SUCCESS)
     }
 }
 

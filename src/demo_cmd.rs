@@ -18,6 +18,20 @@ use crate::source::serial::now;
 /// The devices of the demo line and their addresses.
 pub const DEVICES: [(&str, u8); 3] = [("mk4", 1), ("display", 5), ("mkzp", 17)];
 
+/// The profiles of the demo's devices, by address.
+///
+/// # Errors
+/// When a built-in profile does not load (a build defect).
+pub fn profiles() -> anyhow::Result<crate::decode_cmd::Profiles> {
+    let mut out = crate::decode_cmd::Profiles::new();
+    for (name, address) in DEVICES {
+        let profile =
+            crate::profile::builtin::get(name).ok_or_else(|| anyhow::anyhow!("built-in profile {name} missing"))??;
+        out.insert(address, profile);
+    }
+    Ok(out)
+}
+
 /// Demo settings.
 #[derive(Debug, Clone, Default)]
 pub struct DemoOptions {
@@ -38,9 +52,7 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     let duration = opts.duration;
     let line = LineSettings::default();
     let mut slaves = Vec::new();
-    for (name, address) in DEVICES {
-        let profile =
-            crate::profile::builtin::get(name).ok_or_else(|| anyhow::anyhow!("built-in profile {name} missing"))??;
+    for (address, profile) in profiles()? {
         writer.profiles.insert(address, profile.clone());
         slaves.push(Slave::new(Arc::new(profile), address));
     }
@@ -53,13 +65,22 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     let start = tokio::time::Instant::now();
     let start_t = now();
     let mut stop = Box::pin(crate::sniff_cmd::shutdown_signal());
+    let mut pacer = crate::tui::terminal::Pacer::default();
     'run: loop {
         for frame in bus.next_transaction() {
             let at = Duration::from_nanos(frame.end_ns);
             if duration.is_some_and(|d| at >= d) {
                 break 'run;
             }
-            if opts.speed > 0.0 {
+            if let Some(shared) = writer.tui.clone() {
+                // The UI sets the pace (space pauses, s changes the speed).
+                while let Some(wait) = pacer.delay(frame.end_ns, shared.speed(), std::time::Instant::now()) {
+                    tokio::select! {
+                        () = &mut stop => break 'run,
+                        () = tokio::time::sleep(wait) => {}
+                    }
+                }
+            } else if opts.speed > 0.0 {
                 tokio::select! {
                     () = &mut stop => break 'run,
                     () = tokio::time::sleep_until(start + at.div_f64(opts.speed)) => {}

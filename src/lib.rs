@@ -44,3 +44,4 @@ pub mod sniff_cmd;
 pub mod source;
 pub mod tap_cmd;
 pub mod traffic;
+pub mod tui;

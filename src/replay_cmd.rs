@@ -35,6 +35,10 @@ pub struct EventWriter<W: Write> {
     pub image: Option<crate::profile::image::RegisterImage>,
     /// Language of names in text annotations.
     pub lang: crate::profile::annotate::Lang,
+    /// The terminal UI's model: events go there instead of `out`.
+    pub tui: Option<std::sync::Arc<crate::tui::terminal::Shared>>,
+    /// Recorded input shown in the UI: hold each event until its time at the UI's speed.
+    pub pacer: Option<crate::tui::terminal::Pacer>,
 }
 
 impl<W: Write> EventWriter<W> {
@@ -47,6 +51,8 @@ impl<W: Write> EventWriter<W> {
             profiles: crate::decode_cmd::Profiles::new(),
             image: None,
             lang: crate::profile::annotate::Lang::En,
+            tui: None,
+            pacer: None,
         }
     }
 
@@ -58,6 +64,13 @@ impl<W: Write> EventWriter<W> {
         {
             let resp = if t.outcome == crate::pairing::Outcome::Ok { t.response } else { None };
             image.update(t.unit, t.t_start.0, req, resp);
+        }
+        if let Some(shared) = &self.tui {
+            if let Some(pacer) = self.pacer.as_mut() {
+                pace(pacer, shared, e);
+            }
+            shared.model().event(e);
+            return;
         }
         if self.error.is_some() {
             return;
@@ -132,6 +145,21 @@ impl<W: Write> EventWriter<W> {
         r?;
         self.out.flush()?;
         Ok(self.stats)
+    }
+}
+
+/// Waits (this thread) until `e` is due at the UI's speed; a stop request ends all waiting.
+fn pace(pacer: &mut crate::tui::terminal::Pacer, shared: &crate::tui::terminal::Shared, e: &Event<'_>) {
+    let t = match e {
+        Event::Frame { frame, .. } => frame.t_end.0,
+        Event::Noise(n) => n.t_end.0,
+        Event::Transaction(t) => t.t_start.0,
+    };
+    while !crate::sniff_cmd::stop_requested() {
+        match pacer.delay(t, shared.speed(), std::time::Instant::now()) {
+            None => break,
+            Some(d) => std::thread::sleep(d),
+        }
     }
 }
 

@@ -135,32 +135,50 @@ impl fmt::Display for Annotation {
 }
 
 impl Annotation {
-    fn write(&self, f: &mut fmt::Formatter<'_>, lang: Lang) -> fmt::Result {
-        let name = match lang {
+    /// The name in `lang` (the English one when the profile has no other).
+    #[must_use]
+    pub fn name_in(&self, lang: Lang) -> Option<&str> {
+        match lang {
             Lang::Ru => self.name_ru.as_deref().or(self.name.as_deref()),
             Lang::En => self.name.as_deref(),
-        };
-        write!(f, "{} {}", self.address, name.unwrap_or("?"))?;
+        }
+    }
+
+    /// The value as shown, with its unit: `230.5 V`, `running`, `"MK4"`.
+    #[must_use]
+    pub fn value_text(&self) -> String {
+        let mut s = String::new();
+        let _ = self.write_value(&mut s);
+        s
+    }
+
+    fn write_value(&self, f: &mut dyn fmt::Write) -> fmt::Result {
         match &self.shown {
             Shown::Number { value, unit, decimals } => {
                 match decimals {
-                    Some(d) => write!(f, " = {:.*}", usize::from(*d), value)?,
-                    None => write!(f, " = {}", trim(*value))?,
+                    Some(d) => write!(f, "{:.*}", usize::from(*d), value)?,
+                    None => write!(f, "{}", trim(*value))?,
                 }
                 if let Some(u) = unit {
                     write!(f, " {u}")?;
                 }
             }
-            Shown::Label(l) => write!(f, " = {l}")?,
-            Shown::Bits(b) if b.is_empty() => write!(f, " = (no bits set)")?,
-            Shown::Bits(b) => write!(f, " = {}", b.join(", "))?,
-            Shown::Text(t) => write!(f, " = {t:?}")?,
-            Shown::Time(t) => write!(f, " = {t}")?,
+            Shown::Label(l) => write!(f, "{l}")?,
+            Shown::Bits(b) if b.is_empty() => write!(f, "(no bits set)")?,
+            Shown::Bits(b) => write!(f, "{}", b.join(", "))?,
+            Shown::Text(t) => write!(f, "{t:?}")?,
+            Shown::Time(t) => write!(f, "{t}")?,
             Shown::Bool { on, label } => {
-                write!(f, " = {}", label.clone().unwrap_or_else(|| u8::from(*on).to_string()))?;
+                write!(f, "{}", label.clone().unwrap_or_else(|| u8::from(*on).to_string()))?;
             }
-            Shown::Raw => write!(f, " = {}", self.raw)?,
+            Shown::Raw => write!(f, "{}", self.raw)?,
         }
+        Ok(())
+    }
+
+    fn write(&self, f: &mut fmt::Formatter<'_>, lang: Lang) -> fmt::Result {
+        write!(f, "{} {} = ", self.address, self.name_in(lang).unwrap_or("?"))?;
+        self.write_value(f)?;
         // A text or a time spans several registers: no single raw value to show.
         if !matches!(self.shown, Shown::Text(_) | Shown::Time(_)) {
             write!(f, " (raw {})", self.raw)?;

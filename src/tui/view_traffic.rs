@@ -1,0 +1,90 @@
+//! The traffic view: a row per transaction or noise burst — time, Δt, unit and device,
+//! function, status, latency and the annotated values — coloured by status.
+
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::widgets::{Block, Cell, Row, Table};
+
+use super::app::App;
+use super::model::{Model, RowKind};
+use super::render::{clock, duration, status_style};
+use crate::proto::FunctionCode;
+
+pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
+    let height = usize::from(area.height.saturating_sub(3)).max(1);
+    let selected = app.selected_index();
+    let total = app.visible().len();
+    if let Some(i) = selected {
+        if i < app.traffic_offset {
+            app.traffic_offset = i;
+        } else if i >= app.traffic_offset + height {
+            app.traffic_offset = i + 1 - height;
+        }
+    }
+    app.traffic_offset = app.traffic_offset.min(total.saturating_sub(height));
+    let rows: Vec<Row<'_>> = app
+        .visible()
+        .iter()
+        .enumerate()
+        .skip(app.traffic_offset)
+        .take(height)
+        .filter_map(|(i, &seq)| model.row(seq).map(|r| (i, r)))
+        .map(|(i, r)| {
+            let device = r.unit.map_or_else(String::new, |u| {
+                model.device_name(u).map_or_else(|| format!("{u:>3}"), |d| format!("{u:>3} {d}"))
+            });
+            let function = r.function.map_or_else(String::new, |f| {
+                let name = FunctionCode::from(f & 0x7F).label();
+                format!("{f:02X} {name}")
+            });
+            let mut status = r.status().replace('_', " ");
+            if r.timing.gap_inside {
+                status.push_str(" gap");
+            }
+            if r.timing.short_gap {
+                status.push_str(" <t3.5");
+            }
+            let style =
+                if Some(i) == selected { status_style(r).add_modifier(Modifier::REVERSED) } else { status_style(r) };
+            Row::new(vec![
+                Cell::from(clock(r.t_ns)),
+                Cell::from(r.delta_ns.map(duration).unwrap_or_default()),
+                Cell::from(device),
+                Cell::from(function),
+                Cell::from(status),
+                Cell::from(r.latency_ns.map(duration).unwrap_or_default()),
+                Cell::from(if r.kind == RowKind::Noise {
+                    hex_preview(r.response.as_deref())
+                } else {
+                    r.summary.clone()
+                }),
+            ])
+            .style(style)
+        })
+        .collect();
+    let header = Row::new(["time", "Δt", "unit", "function", "status", "latency", "values"])
+        .style(Style::new().fg(Color::Cyan).add_modifier(Modifier::BOLD));
+    let widths = [
+        Constraint::Length(12),
+        Constraint::Length(7),
+        Constraint::Length(11),
+        Constraint::Length(16),
+        Constraint::Length(12),
+        Constraint::Length(7),
+        Constraint::Min(10),
+    ];
+    let title = if app.follow { " traffic (following) " } else { " traffic " };
+    let table = Table::new(rows, widths).header(header).block(Block::bordered().title(title)).column_spacing(1);
+    frame.render_widget(table, area);
+}
+
+/// Noise in hex, a few bytes of it.
+fn hex_preview(bytes: Option<&[u8]>) -> String {
+    let bytes = bytes.unwrap_or_default();
+    let mut s = super::layout::hex(bytes.get(..24).unwrap_or(bytes), " ");
+    if bytes.len() > 24 {
+        s.push_str(" …");
+    }
+    s
+}
