@@ -78,7 +78,8 @@ impl Filter {
         }
         if !self.text.is_empty() {
             let needle = self.text.to_lowercase();
-            let hay = format!("{} {} {}", device.unwrap_or(""), row.status(), row.summary).to_lowercase();
+            let hay =
+                format!("{} {} {} {}", device.unwrap_or(""), row.status(), row.label(), row.summary).to_lowercase();
             if !hay.contains(&needle) {
                 return false;
             }
@@ -145,6 +146,8 @@ pub struct App {
     pub side: Side,
     /// Selected field in the detail view's hex.
     pub field: usize,
+    /// Lines scrolled in the detail view's decode.
+    pub detail_scroll: u16,
     pub register_unit: Option<u8>,
     pub register_offset: usize,
     pub device_offset: usize,
@@ -182,6 +185,7 @@ impl App {
             pacing,
             side: Side::Response,
             field: 0,
+            detail_scroll: 0,
             register_unit: None,
             register_offset: 0,
             device_offset: 0,
@@ -284,11 +288,18 @@ impl App {
             KeyCode::Enter if self.view == View::Traffic && self.selected.is_some() => {
                 self.view = View::Detail;
                 self.field = 0;
+                self.detail_scroll = 0;
             }
             KeyCode::Esc | KeyCode::Backspace if self.view == View::Detail => self.view = View::Traffic,
             KeyCode::Esc if !self.filter.is_empty() => self.filter = Filter::default(),
             KeyCode::Up | KeyCode::Char('k') => self.up(1, model),
             KeyCode::Down | KeyCode::Char('j') => self.down(1, model),
+            KeyCode::PageUp if self.view == View::Detail => {
+                self.detail_scroll = self.detail_scroll.saturating_sub(u16::try_from(page).unwrap_or(10));
+            }
+            KeyCode::PageDown if self.view == View::Detail => {
+                self.detail_scroll = self.detail_scroll.saturating_add(u16::try_from(page).unwrap_or(10));
+            }
             KeyCode::PageUp => self.up(page, model),
             KeyCode::PageDown => self.down(page, model),
             KeyCode::Home | KeyCode::Char('g') => self.up(isize::MAX / 2, model),

@@ -61,6 +61,22 @@ impl Row {
             || !matches!(self.kind, RowKind::Transaction(Outcome::Ok | Outcome::Broadcast))
     }
 
+    /// Status for a narrow column: `ok`, `exc 0x02`, `timeout`, `bad crc`, `noise`, ….
+    #[must_use]
+    pub fn label(&self) -> String {
+        match self.kind {
+            RowKind::Transaction(Outcome::Ok) => "ok".into(),
+            RowKind::Transaction(Outcome::Exception(code)) => format!("exc 0x{code:02X}"),
+            RowKind::Transaction(Outcome::NoResponse) => "timeout".into(),
+            RowKind::Transaction(Outcome::Broadcast) => "broadcast".into(),
+            // A failed CRC (RTU) or LRC (ASCII).
+            RowKind::Transaction(Outcome::BadResponse) => "bad check".into(),
+            RowKind::Transaction(Outcome::Orphan) => "orphan".into(),
+            RowKind::Transaction(Outcome::WrongUnit(u)) => format!("from {u}"),
+            RowKind::Noise => "noise".into(),
+        }
+    }
+
     /// Status as a word: the outcome's name, or `noise`.
     #[must_use]
     pub fn status(&self) -> &'static str {

@@ -14,7 +14,7 @@ use super::model::Model;
 pub const KEYS: &[(&str, &str)] = &[
     ("1 2 3, Tab", "traffic, devices, registers view"),
     ("↑ ↓ j k", "move (traffic: row; detail: field)"),
-    ("PgUp PgDn", "move a page"),
+    ("PgUp PgDn", "move a page (detail: scroll the decode)"),
     ("g Home / G End", "first / newest row (G follows new rows)"),
     ("Enter", "detail of the selected transaction"),
     ("r", "detail: request / response hex"),
@@ -137,6 +137,30 @@ pub fn duration(ns: u64) -> String {
         1_000_000_000..60_000_000_000 => format!("{}.{:02}s", ns / 1_000_000_000, ns / 10_000_000 % 100),
         _ => format!("{}m{:02}s", ns / 60_000_000_000, ns / 1_000_000_000 % 60),
     }
+}
+
+/// A function's name short enough for a table column.
+#[must_use]
+pub fn short_function(fc: u8) -> String {
+    let base = fc & 0x7F;
+    let name = match base {
+        0x01 => "Read Coils",
+        0x02 => "Read Inputs",
+        0x03 => "Read Holding",
+        0x04 => "Read Input",
+        0x05 => "Write Coil",
+        0x06 => "Write Reg",
+        0x07 => "Exc Status",
+        0x08 => "Diagnostics",
+        0x0F => "Write Coils",
+        0x10 => "Write Regs",
+        0x11 => "Server Id",
+        0x16 => "Mask Write",
+        0x17 => "R/W Regs",
+        0x2B => "Encapsulated",
+        _ => crate::proto::FunctionCode::from(base).label(),
+    };
+    format!("{fc:02X} {name}")
 }
 
 /// The style of a row's status.

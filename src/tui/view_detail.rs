@@ -47,7 +47,10 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
         left,
     );
     frame.render_widget(
-        Paragraph::new(decoded(row, model)).wrap(Wrap { trim: false }).block(Block::bordered().title(" decoded ")),
+        Paragraph::new(decoded(row, model))
+            .wrap(Wrap { trim: false })
+            .scroll((app.detail_scroll, 0))
+            .block(Block::bordered().title(" decoded (PgUp PgDn) ")),
         right,
     );
     let highlight = layout.get(app.field);

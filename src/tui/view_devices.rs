@@ -56,7 +56,7 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &App, model: &Model) {
                 Cell::from(ms(d.latency_percentile(99))),
                 Cell::from(ms((d.max_latency_ns > 0).then_some(d.max_latency_ns))),
                 Cell::from(ms(d.poll_period_ns)),
-                Cell::from(clock(d.last_seen_ns)),
+                Cell::from(clock(d.last_seen_ns).get(..8).unwrap_or_default().to_owned()),
             ])
             .style(style)
         })
@@ -66,17 +66,17 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &App, model: &Model) {
             .style(Style::new().fg(Color::Cyan).add_modifier(Modifier::BOLD));
     let widths = [
         Constraint::Length(4),
-        Constraint::Length(8),
-        Constraint::Length(6),
-        Constraint::Length(6),
         Constraint::Length(7),
+        Constraint::Length(5),
+        Constraint::Length(5),
+        Constraint::Length(6),
         Constraint::Length(4),
         Constraint::Length(4),
         Constraint::Length(6),
         Constraint::Length(6),
         Constraint::Length(6),
         Constraint::Length(6),
-        Constraint::Min(12),
+        Constraint::Min(8),
     ];
     frame.render_widget(
         Table::new(rows, widths).header(header).block(Block::bordered().title(" devices ")).column_spacing(1),

@@ -8,11 +8,12 @@ use ratatui::widgets::{Block, Cell, Row, Table};
 
 use super::app::App;
 use super::model::{Model, RowKind};
-use super::render::{clock, duration, status_style};
-use crate::proto::FunctionCode;
+use super::render::{clock, duration, short_function, status_style};
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
     let height = usize::from(area.height.saturating_sub(3)).max(1);
+    // Below 100 columns the values need the room more than Δt does.
+    let wide = area.width >= 100;
     let selected = app.selected_index();
     let total = app.visible().len();
     if let Some(i) = selected {
@@ -34,11 +35,8 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
             let device = r.unit.map_or_else(String::new, |u| {
                 model.device_name(u).map_or_else(|| format!("{u:>3}"), |d| format!("{u:>3} {d}"))
             });
-            let function = r.function.map_or_else(String::new, |f| {
-                let name = FunctionCode::from(f & 0x7F).label();
-                format!("{f:02X} {name}")
-            });
-            let mut status = r.status().replace('_', " ");
+            let function = r.function.map_or_else(String::new, short_function);
+            let mut status = r.label();
             if r.timing.gap_inside {
                 status.push_str(" gap");
             }
@@ -47,9 +45,11 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
             }
             let style =
                 if Some(i) == selected { status_style(r).add_modifier(Modifier::REVERSED) } else { status_style(r) };
-            Row::new(vec![
-                Cell::from(clock(r.t_ns)),
-                Cell::from(r.delta_ns.map(duration).unwrap_or_default()),
+            let mut cells = vec![Cell::from(clock(r.t_ns))];
+            if wide {
+                cells.push(Cell::from(r.delta_ns.map(duration).unwrap_or_default()));
+            }
+            cells.extend([
                 Cell::from(device),
                 Cell::from(function),
                 Cell::from(status),
@@ -59,21 +59,27 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
                 } else {
                     r.summary.clone()
                 }),
-            ])
-            .style(style)
+            ]);
+            Row::new(cells).style(style)
         })
         .collect();
-    let header = Row::new(["time", "Δt", "unit", "function", "status", "latency", "values"])
-        .style(Style::new().fg(Color::Cyan).add_modifier(Modifier::BOLD));
-    let widths = [
-        Constraint::Length(12),
-        Constraint::Length(7),
+    let names: &[&str] = if wide {
+        &["time", "Δt", "unit", "function", "status", "latency", "values"]
+    } else {
+        &["time", "unit", "function", "status", "latency", "values"]
+    };
+    let header = Row::new(names.to_vec()).style(Style::new().fg(Color::Cyan).add_modifier(Modifier::BOLD));
+    let mut widths = vec![Constraint::Length(12)];
+    if wide {
+        widths.push(Constraint::Length(6));
+    }
+    widths.extend([
         Constraint::Length(11),
-        Constraint::Length(16),
-        Constraint::Length(12),
+        Constraint::Length(15),
+        Constraint::Length(11),
         Constraint::Length(7),
         Constraint::Min(10),
-    ];
+    ]);
     let title = if app.follow { " traffic (following) " } else { " traffic " };
     let table = Table::new(rows, widths).header(header).block(Block::bordered().title(title)).column_spacing(1);
     frame.render_widget(table, area);

@@ -1,0 +1,190 @@
+//! The terminal UI's views rendered on ratatui's `TestBackend` and kept as insta snapshots:
+//! traffic (following, filtered), detail, devices, registers, the help overlay — at 80×24 (the
+//! smallest terminal we support) and 120×30. The model is fed by the virtual bus through the
+//! real analyzer, at fixed times, so the screens are the same on every machine.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::sync::Arc;
+
+use mbtap::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap::chunk::{Chunk, PortId, Timestamp};
+use mbtap::framer::{FramerConfig, LineSettings};
+use mbtap::sim::Slave;
+use mbtap::sim::bus::{Fault, VirtualBus};
+use mbtap::tui::{App, Model};
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+
+/// 10:00:00 UTC on the first day of the epoch: times on screen read 10:00:…
+const START_NS: u64 = 10 * 3600 * 1_000_000_000;
+
+/// The demo's three devices after `transactions` polls, with `faults` injected.
+fn model(transactions: usize, faults: &[Fault]) -> Model {
+    let profiles = mbtap::demo_cmd::profiles().unwrap();
+    let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
+    let line = LineSettings::default();
+    let mut bus = VirtualBus::new(slaves, line);
+    bus.faults = faults.to_vec();
+    let mut model = Model::new(profiles, mbtap::profile::annotate::Lang::En, line, 1000);
+    let mut analyzer =
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
+    for _ in 0..transactions {
+        for frame in bus.next_transaction() {
+            let t = Timestamp(START_NS + frame.end_ns);
+            analyzer.push(&Chunk { port: PortId(0), t, bytes: &frame.bytes }, &mut |e: &Event<'_>| model.event(e));
+            analyzer.tick(Timestamp(t.0 + 2_000_000), &mut |e: &Event<'_>| model.event(e));
+        }
+    }
+    analyzer.finish(&mut |e: &Event<'_>| model.event(e));
+    model
+}
+
+fn key(app: &mut App, model: &Model, code: KeyCode) {
+    app.refresh(model);
+    app.key(KeyEvent::new(code, KeyModifiers::NONE), model);
+}
+
+fn screen(app: &mut App, model: &Model, width: u16, height: u16) -> String {
+    let mut terminal = Terminal::new(TestBackend::new(width, height)).unwrap();
+    terminal.draw(|f| mbtap::tui::render::draw(f, app, model, "demo")).unwrap();
+    terminal.backend().to_string()
+}
+
+#[test]
+fn traffic_follows_the_newest_transaction() {
+    let m = model(30, &[]);
+    let mut app = App::new(true);
+    insta::assert_snapshot!("traffic_80x24", screen(&mut app, &m, 80, 24));
+    insta::assert_snapshot!("traffic_120x30", screen(&mut app, &m, 120, 30));
+}
+
+#[test]
+fn traffic_filtered_to_errors_shows_every_fault_as_what_it_is() {
+    let m = model(60, &[Fault::Corrupt, Fault::Noise, Fault::SilentSlave, Fault::SlowSlave, Fault::FastMaster]);
+    let mut app = App::new(true);
+    key(&mut app, &m, KeyCode::Char('e'));
+    let s = screen(&mut app, &m, 120, 30);
+    for status in ["bad check", "noise", "timeout", "gap", "<t3.5"] {
+        assert!(s.contains(status), "{status} missing:\n{s}");
+    }
+    assert!(s.contains("filter: errors only"));
+    insta::assert_snapshot!("traffic_errors_only", s);
+}
+
+#[test]
+fn a_unit_filter_and_a_search() {
+    let m = model(30, &[]);
+    let mut app = App::new(true);
+    // First unit on the bus: 1 (mk4).
+    key(&mut app, &m, KeyCode::Char('u'));
+    let s = screen(&mut app, &m, 100, 24);
+    assert!(s.contains("filter: unit 1"));
+    assert!(s.contains("mk4") && !s.contains("mkzp") && !s.contains("display"), "{s}");
+    key(&mut app, &m, KeyCode::Char('c'));
+    key(&mut app, &m, KeyCode::Char('/'));
+    for c in "current".chars() {
+        key(&mut app, &m, KeyCode::Char(c));
+    }
+    assert!(screen(&mut app, &m, 100, 24).contains("search: current"));
+    key(&mut app, &m, KeyCode::Enter);
+    let s = screen(&mut app, &m, 100, 24);
+    assert!(s.contains("filter: \"current\""), "{s}");
+    // MKZP phase currents and MK4 motor currents match; the Display's fuel rows do not.
+    assert!(s.contains("mkzp") && !s.contains("display"), "{s}");
+}
+
+#[test]
+fn detail_of_a_transaction_with_the_selected_field_highlighted() {
+    let m = model(30, &[]);
+    let mut app = App::new(true);
+    // Up from the newest row to an MK4 voltage read, then open it.
+    let voltages = (0..m.rows.len()).rev().find(|&i| m.rows[i].summary.contains("Phase A (L1) voltage")).unwrap();
+    for _ in voltages..m.rows.len() - 1 {
+        key(&mut app, &m, KeyCode::Up);
+    }
+    key(&mut app, &m, KeyCode::Enter);
+    key(&mut app, &m, KeyCode::Down);
+    key(&mut app, &m, KeyCode::Down);
+    key(&mut app, &m, KeyCode::Down);
+    let s = screen(&mut app, &m, 100, 30);
+    assert!(s.contains("Phase A (L1) voltage"), "{s}");
+    insta::assert_snapshot!("detail_mk4_voltages", s);
+    // The highlight is on register 0's two bytes of the response (bytes 3 and 4).
+    let mut terminal = Terminal::new(TestBackend::new(100, 30)).unwrap();
+    terminal.draw(|f| mbtap::tui::render::draw(f, &mut app, &m, "demo")).unwrap();
+    let buffer = terminal.backend().buffer();
+    let highlighted: String = (0..30)
+        .flat_map(|y| (0..100).map(move |x| (x, y)))
+        .filter(|&(x, y)| buffer[(x, y)].bg == ratatui::style::Color::Yellow)
+        .map(|(x, y)| buffer[(x, y)].symbol().to_owned())
+        .collect();
+    assert_eq!(highlighted.split_whitespace().count(), 2, "two bytes highlighted: {highlighted:?}");
+    // r shows the request instead.
+    key(&mut app, &m, KeyCode::Char('r'));
+    assert!(screen(&mut app, &m, 100, 30).contains("request fields"));
+}
+
+#[test]
+fn devices_view() {
+    let m = model(60, &[Fault::SilentSlave]);
+    let mut app = App::new(true);
+    key(&mut app, &m, KeyCode::Char('2'));
+    insta::assert_snapshot!("devices_80x24", screen(&mut app, &m, 80, 24));
+    let s = screen(&mut app, &m, 120, 30);
+    for name in ["mk4", "display", "mkzp"] {
+        assert!(s.contains(name), "{name}");
+    }
+}
+
+#[test]
+fn registers_view_and_other_units() {
+    let m = model(30, &[]);
+    let mut app = App::new(true);
+    key(&mut app, &m, KeyCode::Char('3'));
+    let first = screen(&mut app, &m, 100, 30);
+    insta::assert_snapshot!("registers_100x30", first);
+    key(&mut app, &m, KeyCode::Right);
+    let second = screen(&mut app, &m, 100, 30);
+    assert_ne!(first, second, "→ shows another unit");
+}
+
+#[test]
+fn help_overlay_lists_every_key() {
+    let m = model(5, &[]);
+    let mut app = App::new(true);
+    key(&mut app, &m, KeyCode::Char('?'));
+    let s = screen(&mut app, &m, 80, 24);
+    insta::assert_snapshot!("help_80x24", s);
+    for (k, _) in mbtap::tui::render::KEYS {
+        assert!(s.contains(k), "{k} missing from the help");
+    }
+    key(&mut app, &m, KeyCode::Char('x'));
+    assert!(!screen(&mut app, &m, 80, 24).contains("any key closes"), "any key closes the help");
+}
+
+#[test]
+fn scroll_back_is_bounded_and_says_so() {
+    let profiles = mbtap::demo_cmd::profiles().unwrap();
+    let line = LineSettings::default();
+    let mut small = Model::new(profiles, mbtap::profile::annotate::Lang::En, line, 10);
+    let slaves =
+        mbtap::demo_cmd::profiles().unwrap().iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
+    let mut bus = VirtualBus::new(slaves, line);
+    let mut analyzer =
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
+    for _ in 0..40 {
+        for frame in bus.next_transaction() {
+            let t = Timestamp(START_NS + frame.end_ns);
+            analyzer.push(&Chunk { port: PortId(0), t, bytes: &frame.bytes }, &mut |e: &Event<'_>| small.event(e));
+            analyzer.tick(Timestamp(t.0 + 2_000_000), &mut |e: &Event<'_>| small.event(e));
+        }
+    }
+    assert_eq!(small.rows.len(), 10);
+    assert_eq!(small.total_rows(), 40);
+    assert_eq!(small.dropped, 30);
+    let mut app = App::new(false);
+    assert!(screen(&mut app, &small, 100, 24).contains("30 oldest dropped (scroll-back 10)"));
+    // Statistics cover everything seen, not only what is kept.
+    assert_eq!(small.devices.values().map(|d| d.requests).sum::<u64>(), 40);
+}
