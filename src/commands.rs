@@ -171,6 +171,124 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Bridge {
+            serial,
+            line,
+            listen,
+            listen_rtu,
+            routes,
+            timeout_ms,
+            retries,
+            turnaround_ms,
+            broadcast_reply,
+            read_only,
+            allow_functions,
+            allow_ips,
+            max_connections,
+            idle_timeout,
+            rate_limit,
+            queue_per_client,
+            unit_map,
+            metrics,
+            monitor,
+            devices,
+            duration,
+        } => {
+            use crate::bridge::line::LineOptions;
+            let (mode, settings, _) = overrides(&line).resolve();
+            anyhow::ensure!(
+                listen.is_some() || listen_rtu.is_some(),
+                "nothing to listen on: give --listen ADDR:PORT (Modbus TCP) and/or --listen-rtu ADDR:PORT"
+            );
+            anyhow::ensure!(
+                turnaround_ms.is_finite() && turnaround_ms >= 0.0,
+                "--turnaround-ms {turnaround_ms}: expected 0 or more"
+            );
+            anyhow::ensure!(
+                idle_timeout.is_finite() && idle_timeout > 0.0,
+                "--idle-timeout {idle_timeout}: expected seconds above 0"
+            );
+            let line_for = |port: String| LineOptions {
+                port,
+                line: settings,
+                mode,
+                timeout: std::time::Duration::from_millis(timeout_ms),
+                retries,
+                turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
+                broadcast_reply,
+            };
+            let mut lines = Vec::new();
+            for r in &routes {
+                let (units, port) = crate::bridge_cmd::parse_route(r)?;
+                lines.push((units, line_for(port)));
+            }
+            if let Some(port) = serial {
+                // The plain --serial line serves every unit the routes do not.
+                lines.push((1..=247, line_for(port)));
+            }
+            anyhow::ensure!(!lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
+            let allow_functions = if allow_functions.is_empty() {
+                None
+            } else {
+                Some(
+                    allow_functions
+                        .iter()
+                        .map(|f| {
+                            let parsed = match f.strip_prefix("0x").or_else(|| f.strip_prefix("0X")) {
+                                Some(hex) => u8::from_str_radix(hex, 16).ok(),
+                                None => f.parse().ok(),
+                            };
+                            parsed
+                                .with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
+                        })
+                        .collect::<anyhow::Result<Vec<u8>>>()?,
+                )
+            };
+            let allow_ips = allow_ips
+                .iter()
+                .map(|s| s.parse().map_err(|e: String| anyhow::anyhow!("--allow-ip: {e}")))
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let opts = crate::bridge_cmd::BridgeOptions {
+                lines,
+                listen,
+                listen_rtu,
+                server: crate::bridge::server::ServerOptions {
+                    rtu_over_tcp: false,
+                    read_only,
+                    allow_functions,
+                    allow_ips,
+                    max_connections,
+                    idle_timeout: std::time::Duration::from_secs_f64(idle_timeout),
+                    rate_limit,
+                    unit_map: crate::bridge_cmd::parse_unit_map(&unit_map)?,
+                },
+                queue_per_client,
+                metrics,
+                duration: seconds(duration),
+            };
+            let profiles = load_devices(&devices)?;
+            match monitor {
+                Some(EventFormatArg::Tui) => {
+                    let ui =
+                        TuiSource { profiles, lang: crate::profile::annotate::Lang::En, line: settings, pacing: false };
+                    ui.run("bridge", move |writer, err| {
+                        runtime()?.block_on(crate::bridge_cmd::bridge(opts, Some(writer), err))
+                    })
+                }
+                Some(format) => {
+                    let stdout = io::stdout();
+                    let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
+                    writer.profiles = profiles;
+                    runtime()?.block_on(crate::bridge_cmd::bridge(opts, Some(&mut writer), &mut io::stderr()))?;
+                    writer.finish()?;
+                    Ok(ExitCode::SUCCESS)
+                }
+                None => {
+                    runtime()?.block_on(crate::bridge_cmd::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;
+                    Ok(ExitCode::SUCCESS)
+                }
+            }
+        }
         Command::Simulate { link, devices, line, duration, poll, faults, heard_at } => {
             let (mode, settings, _) = overrides(&line).resolve();
             let specs: Vec<String> = if devices.is_empty() {

@@ -20,6 +20,8 @@
 //! - [`fuzzing`] — the bodies of the fuzz targets, also run over the seeds by `cargo test`.
 
 pub mod analyzer;
+pub mod bridge;
+pub mod bridge_cmd;
 pub mod capture;
 pub mod chunk;
 pub mod cli;

@@ -1,0 +1,343 @@
+//! The serial master behind the bridge: one transaction at a time on the line, requests taken
+//! in turn from the clients' queues ([`super::queue::FairQueue`]), each answer found by
+//! [`super::response`] and handed back to its client alone. The port is reopened with backoff
+//! when it goes away (a USB adapter pulled); meanwhile requests get exception 0x0A (Gateway
+//! Path Unavailable, MAP v1.1b3 §7). The line task never exits on its own.
+
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::sync::{Notify, mpsc, oneshot};
+use tokio::time::Instant;
+use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+
+use super::metrics::Metrics;
+use super::queue::{ClientId, FairQueue, Full};
+use super::response::{Verdict, judge_ascii, judge_rtu};
+use crate::analyzer::SerialMode;
+use crate::chunk::{PortId, Timestamp};
+use crate::framer::LineSettings;
+use crate::proto::{encode_ascii, encode_rtu};
+
+/// Exception 0x0A: the gateway has no path to the target (MAP v1.1b3 §7).
+pub const GATEWAY_PATH_UNAVAILABLE: u8 = 0x0A;
+/// Exception 0x0B: the target did not answer (MAP v1.1b3 §7).
+pub const GATEWAY_TARGET_FAILED: u8 = 0x0B;
+/// Exception 0x06: busy — the client's queue is full (MAP v1.1b3 §7).
+pub const SERVER_DEVICE_BUSY: u8 = 0x06;
+
+/// What a client gets back.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Reply {
+    /// The slave's response PDU (normal or exception), unchanged.
+    Pdu(Vec<u8>),
+    /// An exception the gateway answers itself, with this code.
+    Gateway(u8),
+    /// Nothing to send (a broadcast, unless an immediate reply was asked for).
+    Silence,
+}
+
+/// One request waiting for the line.
+#[derive(Debug)]
+pub struct Job {
+    pub unit: u8,
+    pub pdu: Vec<u8>,
+    pub reply: oneshot::Sender<Reply>,
+    pub queued: Instant,
+}
+
+/// Line settings of the bridge.
+#[derive(Debug, Clone)]
+pub struct LineOptions {
+    pub port: String,
+    pub line: LineSettings,
+    pub mode: SerialMode,
+    /// Per-request response timeout.
+    pub timeout: Duration,
+    /// Retries after a timeout or a failed check.
+    pub retries: u32,
+    /// Extra quiet time after t3.5 before the next request (slow slaves need it).
+    pub turnaround: Duration,
+    /// Answer broadcast writes at once (for SCADA that insists on a reply).
+    pub broadcast_reply: bool,
+}
+
+/// What the line task and the connections share.
+#[derive(Debug)]
+pub struct LineShared {
+    queue: Mutex<FairQueue<Job>>,
+    wake: Notify,
+    pub metrics: Metrics,
+}
+
+impl LineShared {
+    #[must_use]
+    pub fn new(per_client: usize) -> Arc<Self> {
+        Arc::new(Self {
+            queue: Mutex::new(FairQueue::new(per_client)),
+            wake: Notify::new(),
+            metrics: Metrics::default(),
+        })
+    }
+
+    fn queue(&self) -> std::sync::MutexGuard<'_, FairQueue<Job>> {
+        self.queue.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Queues a request for the line.
+    ///
+    /// # Errors
+    /// [`Full`] when the client has too many requests waiting.
+    pub fn submit(&self, client: ClientId, job: Job) -> Result<(), Full> {
+        let depth = {
+            let mut q = self.queue();
+            q.push(client, job)?;
+            q.len()
+        };
+        self.metrics.queue_depth(depth);
+        self.wake.notify_one();
+        Ok(())
+    }
+
+    /// The client left: its requests that have not started are dropped.
+    pub fn forget(&self, client: ClientId) -> usize {
+        self.queue().remove_client(client)
+    }
+
+    fn next(&self) -> Option<(ClientId, Job)> {
+        let mut q = self.queue();
+        let job = q.pop();
+        self.metrics.queue_depth(q.len());
+        job
+    }
+}
+
+/// Bytes seen on the line, for `--monitor`: port 0 carries requests, port 1 responses.
+pub type MonitorChunk = (PortId, Timestamp, Vec<u8>);
+
+/// Runs the line forever.
+pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mpsc::UnboundedSender<MonitorChunk>>) {
+    let mut port: Option<SerialStream> = None;
+    let mut backoff = Duration::from_millis(100);
+    let mut next_open = Instant::now();
+    // The line is free for the next request from this time on (t3.5 + turnaround after the
+    // last byte, Serial Line v1.02 §2.5.1.1).
+    let mut free_at = Instant::now();
+    let mut master = Master { opts: &opts, shared: &shared, monitor: monitor.as_ref(), buf: Vec::with_capacity(600) };
+    loop {
+        let Some((_, job)) = shared.next() else {
+            // Wake on a new request, or now and then to retry opening the port.
+            let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
+            if port.is_none() && Instant::now() >= next_open {
+                port = open(&opts);
+            }
+            continue;
+        };
+        if job.reply.is_closed() {
+            // The client left while this request waited: no line time for it.
+            shared.metrics.dropped();
+            continue;
+        }
+        if port.is_none() && Instant::now() >= next_open {
+            port = open(&opts);
+            if port.is_some() {
+                backoff = Duration::from_millis(100);
+                shared.metrics.reopened();
+            } else {
+                next_open = Instant::now() + backoff;
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+            }
+        }
+        let Some(p) = port.as_mut() else {
+            shared.metrics.gateway_exception(job.unit, GATEWAY_PATH_UNAVAILABLE);
+            let _ = job.reply.send(Reply::Gateway(GATEWAY_PATH_UNAVAILABLE));
+            continue;
+        };
+        wait_until(free_at).await;
+        match master.transact(p, &job).await {
+            Ok((reply, last_byte)) => {
+                free_at = last_byte + opts.line_guard();
+                shared.metrics.latency(job.unit, job.queued.elapsed());
+                let _ = job.reply.send(reply);
+            }
+            Err(lost) => {
+                // The port failed under us: answer 0x0A and reopen with backoff.
+                shared.metrics.port_lost(&lost);
+                shared.metrics.gateway_exception(job.unit, GATEWAY_PATH_UNAVAILABLE);
+                let _ = job.reply.send(Reply::Gateway(GATEWAY_PATH_UNAVAILABLE));
+                port = None;
+                next_open = Instant::now() + backoff;
+            }
+        }
+    }
+}
+
+impl LineOptions {
+    /// Quiet time after the last byte before the next request: t3.5 plus the turnaround.
+    fn line_guard(&self) -> Duration {
+        Duration::from_nanos(self.line.t35_ns()) + self.turnaround
+    }
+
+    fn char_time(&self) -> Duration {
+        Duration::from_nanos(self.line.char_ns())
+    }
+}
+
+fn open(opts: &LineOptions) -> Option<SerialStream> {
+    let port = crate::source::serial::builder(&opts.port, opts.line).open_native_async().ok()?;
+    let _ = port.clear(tokio_serial::ClearBuffer::All);
+    Some(port)
+}
+
+/// Sleeps until `at`: the timer for all but the last millisecond (its granularity), then
+/// yields until the moment, so the line's quiet time is t3.5, not t3.5 rounded up to a tick.
+async fn wait_until(at: Instant) {
+    let coarse = at.checked_sub(Duration::from_millis(1)).unwrap_or(at);
+    if Instant::now() < coarse {
+        tokio::time::sleep_until(coarse).await;
+    }
+    while Instant::now() < at {
+        tokio::task::yield_now().await;
+    }
+}
+
+struct Master<'a> {
+    opts: &'a LineOptions,
+    shared: &'a LineShared,
+    monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
+    buf: Vec<u8>,
+}
+
+impl Master<'_> {
+    fn observe(&self, port: u8, bytes: &[u8]) {
+        if let Some(m) = self.monitor {
+            let _ = m.send((PortId(port), crate::source::serial::now(), bytes.to_vec()));
+        }
+    }
+
+    /// One request with its retries; the reply and when the line last carried a byte.
+    async fn transact(&mut self, port: &mut SerialStream, job: &Job) -> std::io::Result<(Reply, Instant)> {
+        let mut adu = Vec::with_capacity(job.pdu.len() * 2 + 5);
+        match self.opts.mode {
+            SerialMode::Rtu => encode_rtu(job.unit, &job.pdu, &mut adu),
+            SerialMode::Ascii => encode_ascii(job.unit, &job.pdu, &mut adu),
+        }
+        let function = job.pdu.first().copied().unwrap_or(0);
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            self.shared.metrics.request(job.unit);
+            // Stale bytes (a late answer to an earlier request, noise) must not be taken for
+            // this request's answer.
+            let _ = port.clear(tokio_serial::ClearBuffer::Input);
+            port.write_all(&adu).await?;
+            self.observe(0, &adu);
+            // The request is on the wire when its last character has left.
+            let sent = Instant::now() + self.opts.char_time() * u32::try_from(adu.len()).unwrap_or(u32::MAX);
+            if job.unit == 0 {
+                // Broadcast (Serial Line v1.02 §2.1): no answer; the turnaround delay follows.
+                let reply = if self.opts.broadcast_reply { echo_reply(&job.pdu) } else { Reply::Silence };
+                return Ok((reply, sent + self.opts.turnaround));
+            }
+            let outcome = self.read_answer(port, job.unit, function, sent).await?;
+            let retry = attempt <= self.opts.retries;
+            match outcome {
+                (Some(pdu), last) => {
+                    self.shared.metrics.response(job.unit, &pdu);
+                    return Ok((Reply::Pdu(pdu), last));
+                }
+                (None, last) if !retry => {
+                    self.shared.metrics.gateway_exception(job.unit, GATEWAY_TARGET_FAILED);
+                    return Ok((Reply::Gateway(GATEWAY_TARGET_FAILED), last));
+                }
+                (None, last) => wait_until(last + self.opts.line_guard()).await,
+            }
+        }
+    }
+
+    /// Reads until an answer, a failed check or the timeout; the answer's PDU (or none) and
+    /// the time of the last byte.
+    async fn read_answer(
+        &mut self,
+        port: &mut SerialStream,
+        unit: u8,
+        function: u8,
+        sent: Instant,
+    ) -> std::io::Result<(Option<Vec<u8>>, Instant)> {
+        let deadline = sent + self.opts.timeout;
+        // RTU: t3.5 of silence ends a frame; ASCII: the 1 s inter-character timeout (Serial
+        // Line v1.02 §2.5.2.1). Plus one timer tick, as reads come in 1 ms steps.
+        let silence = match self.opts.mode {
+            SerialMode::Rtu => Duration::from_nanos(self.opts.line.t35_ns()) + Duration::from_millis(1),
+            SerialMode::Ascii => Duration::from_secs(1),
+        };
+        self.buf.clear();
+        let mut last = sent;
+        let mut chunk = [0u8; 512];
+        loop {
+            let now = Instant::now();
+            if now >= deadline {
+                if !self.buf.is_empty() {
+                    self.shared.metrics.crc_error(unit);
+                }
+                self.shared.metrics.timeout(unit);
+                return Ok((None, last.max(now)));
+            }
+            let quiet_until = if self.buf.is_empty() { deadline } else { (last + silence).min(deadline) };
+            let silent = match tokio::time::timeout_at(quiet_until, port.read(&mut chunk)).await {
+                Ok(Ok(0)) => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
+                Ok(Ok(n)) => {
+                    let got = chunk.get(..n).unwrap_or_default();
+                    self.observe(1, got);
+                    self.buf.extend_from_slice(got);
+                    last = Instant::now();
+                    false
+                }
+                Ok(Err(e)) if e.kind() == std::io::ErrorKind::TimedOut => !self.buf.is_empty(),
+                Ok(Err(e)) => return Err(e),
+                Err(_) => !self.buf.is_empty(),
+            };
+            let verdict = match self.opts.mode {
+                SerialMode::Rtu => judge_rtu(&self.buf, unit, function, silent),
+                SerialMode::Ascii => judge_ascii(&self.buf, unit, silent),
+            };
+            match verdict {
+                Verdict::Pending => {}
+                Verdict::Answer { len } => {
+                    let frame = self.buf.get(..len).unwrap_or_default();
+                    let pdu = match self.opts.mode {
+                        SerialMode::Rtu => frame.get(1..len.saturating_sub(2)).map(<[u8]>::to_vec),
+                        SerialMode::Ascii => {
+                            let start = frame.iter().position(|&b| b == b':').unwrap_or(0);
+                            crate::proto::parse_ascii(frame.get(start..).unwrap_or_default())
+                                .ok()
+                                .map(|f| f.pdu().to_vec())
+                        }
+                    };
+                    return Ok((pdu, last));
+                }
+                Verdict::BadCheck => {
+                    self.shared.metrics.crc_error(unit);
+                    return Ok((None, last));
+                }
+                Verdict::Foreign => self.buf.clear(),
+            }
+        }
+    }
+}
+
+/// The normal response a write would get, for `--broadcast-reply`: 05/06 echo the request,
+/// 0F/10 answer address and quantity (MAP v1.1b3 §6.5, §6.6, §6.11, §6.12).
+fn echo_reply(pdu: &[u8]) -> Reply {
+    match pdu.first() {
+        Some(0x05 | 0x06 | 0x0F | 0x10) if pdu.len() >= 5 => Reply::Pdu(pdu.get(..5).unwrap_or_default().to_vec()),
+        _ => Reply::Silence,
+    }
+}
+
+impl Metrics {
+    fn port_lost(&self, e: &std::io::Error) {
+        self.note(&format!("serial port lost: {e}; reopening"));
+    }
+}

@@ -1,0 +1,244 @@
+//! The bridge's numbers in the Prometheus text format (version 0.0.4): requests, responses,
+//! exceptions by code, timeouts, CRC errors, queue depth and a latency histogram, per unit;
+//! connections and refusals for the server.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
+
+/// Latency histogram bucket bounds, seconds (request queued → answer back).
+const BUCKETS: [f64; 12] = [0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0];
+
+#[derive(Debug, Default, Clone)]
+struct Unit {
+    requests: u64,
+    responses: u64,
+    exceptions: BTreeMap<u8, u64>,
+    gateway_exceptions: BTreeMap<u8, u64>,
+    timeouts: u64,
+    crc_errors: u64,
+    buckets: [u64; BUCKETS.len()],
+    latency_count: u64,
+    latency_sum: f64,
+}
+
+#[derive(Debug, Default)]
+struct Inner {
+    units: BTreeMap<u8, Unit>,
+    queue_depth: usize,
+    dropped: u64,
+    reopened: u64,
+    connections: u64,
+    connections_open: i64,
+    refused: BTreeMap<&'static str, u64>,
+    last_note: Option<String>,
+}
+
+/// Counters shared by the line and the connections.
+#[derive(Debug, Default)]
+pub struct Metrics(Mutex<Inner>);
+
+impl Metrics {
+    fn with<R>(&self, f: impl FnOnce(&mut Inner) -> R) -> R {
+        f(&mut self.0.lock().unwrap_or_else(PoisonError::into_inner))
+    }
+
+    pub fn request(&self, unit: u8) {
+        self.with(|m| m.units.entry(unit).or_default().requests += 1);
+    }
+
+    /// A response from the slave (an exception counted by its code).
+    pub fn response(&self, unit: u8, pdu: &[u8]) {
+        self.with(|m| {
+            let u = m.units.entry(unit).or_default();
+            u.responses += 1;
+            if let [fc, code, ..] = pdu
+                && fc & 0x80 != 0
+            {
+                *u.exceptions.entry(*code).or_default() += 1;
+            }
+        });
+    }
+
+    pub fn gateway_exception(&self, unit: u8, code: u8) {
+        self.with(|m| *m.units.entry(unit).or_default().gateway_exceptions.entry(code).or_default() += 1);
+    }
+
+    pub fn timeout(&self, unit: u8) {
+        self.with(|m| m.units.entry(unit).or_default().timeouts += 1);
+    }
+
+    pub fn crc_error(&self, unit: u8) {
+        self.with(|m| m.units.entry(unit).or_default().crc_errors += 1);
+    }
+
+    pub fn latency(&self, unit: u8, d: Duration) {
+        self.with(|m| {
+            let u = m.units.entry(unit).or_default();
+            let s = d.as_secs_f64();
+            for (b, bound) in u.buckets.iter_mut().zip(BUCKETS) {
+                if s <= bound {
+                    *b += 1;
+                }
+            }
+            u.latency_count += 1;
+            u.latency_sum += s;
+        });
+    }
+
+    pub fn queue_depth(&self, depth: usize) {
+        self.with(|m| m.queue_depth = depth);
+    }
+
+    /// A queued request dropped because its client left.
+    pub fn dropped(&self) {
+        self.with(|m| m.dropped += 1);
+    }
+
+    pub fn reopened(&self) {
+        self.with(|m| m.reopened += 1);
+    }
+
+    pub fn connection_opened(&self) {
+        self.with(|m| {
+            m.connections += 1;
+            m.connections_open += 1;
+        });
+    }
+
+    pub fn connection_closed(&self) {
+        self.with(|m| m.connections_open -= 1);
+    }
+
+    /// Something refused: `reason` is a stable snake_case label.
+    pub fn refused(&self, reason: &'static str) {
+        self.with(|m| *m.refused.entry(reason).or_default() += 1);
+    }
+
+    /// Keeps the latest event worth telling (a port lost).
+    pub fn note(&self, text: &str) {
+        self.with(|m| m.last_note = Some(text.to_owned()));
+    }
+
+    /// Open connections now.
+    #[must_use]
+    pub fn open_connections(&self) -> i64 {
+        self.with(|m| m.connections_open)
+    }
+
+    /// The latest note, taken.
+    pub fn take_note(&self) -> Option<String> {
+        self.with(|m| m.last_note.take())
+    }
+
+    /// Requests sent and responses received on the line, all units.
+    #[must_use]
+    pub fn totals(&self) -> (u64, u64) {
+        self.with(|m| (m.units.values().map(|u| u.requests).sum(), m.units.values().map(|u| u.responses).sum()))
+    }
+
+    /// The Prometheus text exposition.
+    #[must_use]
+    pub fn render(&self) -> String {
+        self.with(|m| {
+            let mut s = String::new();
+            let counter = |s: &mut String, name: &str, help: &str| {
+                let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} counter");
+            };
+            counter(&mut s, "mbtap_bridge_requests_total", "Requests sent on the serial line (retries included).");
+            for (u, v) in &m.units {
+                let _ = writeln!(s, "mbtap_bridge_requests_total{{unit=\"{u}\"}} {}", v.requests);
+            }
+            counter(&mut s, "mbtap_bridge_responses_total", "Responses received from slaves.");
+            for (u, v) in &m.units {
+                let _ = writeln!(s, "mbtap_bridge_responses_total{{unit=\"{u}\"}} {}", v.responses);
+            }
+            counter(&mut s, "mbtap_bridge_exceptions_total", "Exception responses from slaves, by code.");
+            for (u, v) in &m.units {
+                for (c, n) in &v.exceptions {
+                    let _ = writeln!(s, "mbtap_bridge_exceptions_total{{unit=\"{u}\",code=\"{c}\"}} {n}");
+                }
+            }
+            counter(&mut s, "mbtap_bridge_gateway_exceptions_total", "Exceptions the bridge answered itself (0x0A, 0x0B).");
+            for (u, v) in &m.units {
+                for (c, n) in &v.gateway_exceptions {
+                    let _ = writeln!(s, "mbtap_bridge_gateway_exceptions_total{{unit=\"{u}\",code=\"{c}\"}} {n}");
+                }
+            }
+            counter(&mut s, "mbtap_bridge_timeouts_total", "Requests with no answer in time.");
+            for (u, v) in &m.units {
+                let _ = writeln!(s, "mbtap_bridge_timeouts_total{{unit=\"{u}\"}} {}", v.timeouts);
+            }
+            counter(&mut s, "mbtap_bridge_crc_errors_total", "Answers whose CRC or LRC failed.");
+            for (u, v) in &m.units {
+                let _ = writeln!(s, "mbtap_bridge_crc_errors_total{{unit=\"{u}\"}} {}", v.crc_errors);
+            }
+            let _ = writeln!(
+                s,
+                "# HELP mbtap_bridge_latency_seconds Queued to answered.\n# TYPE mbtap_bridge_latency_seconds histogram"
+            );
+            for (u, v) in &m.units {
+                for (b, bound) in v.buckets.iter().zip(BUCKETS) {
+                    let _ = writeln!(s, "mbtap_bridge_latency_seconds_bucket{{unit=\"{u}\",le=\"{bound}\"}} {b}");
+                }
+                let _ = writeln!(s, "mbtap_bridge_latency_seconds_bucket{{unit=\"{u}\",le=\"+Inf\"}} {}", v.latency_count);
+                let _ = writeln!(s, "mbtap_bridge_latency_seconds_sum{{unit=\"{u}\"}} {}", v.latency_sum);
+                let _ = writeln!(s, "mbtap_bridge_latency_seconds_count{{unit=\"{u}\"}} {}", v.latency_count);
+            }
+            let _ = writeln!(
+                s,
+                "# HELP mbtap_bridge_queue_depth Requests waiting for the line.\n# TYPE mbtap_bridge_queue_depth gauge\nmbtap_bridge_queue_depth {}",
+                m.queue_depth
+            );
+            counter(&mut s, "mbtap_bridge_dropped_total", "Queued requests dropped because their client left.");
+            let _ = writeln!(s, "mbtap_bridge_dropped_total {}", m.dropped);
+            counter(&mut s, "mbtap_bridge_port_reopened_total", "Times the serial port was reopened.");
+            let _ = writeln!(s, "mbtap_bridge_port_reopened_total {}", m.reopened);
+            counter(&mut s, "mbtap_bridge_connections_total", "TCP connections accepted.");
+            let _ = writeln!(s, "mbtap_bridge_connections_total {}", m.connections);
+            let _ = writeln!(
+                s,
+                "# HELP mbtap_bridge_connections_open TCP connections open.\n# TYPE mbtap_bridge_connections_open gauge\nmbtap_bridge_connections_open {}",
+                m.connections_open
+            );
+            counter(&mut s, "mbtap_bridge_refused_total", "Connections or requests refused, by reason.");
+            for (r, n) in &m.refused {
+                let _ = writeln!(s, "mbtap_bridge_refused_total{{reason=\"{r}\"}} {n}");
+            }
+            s
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_exposition_carries_every_family_with_labels() {
+        let m = Metrics::default();
+        m.request(1);
+        m.response(1, &[0x83, 0x02]);
+        m.gateway_exception(5, 0x0B);
+        m.timeout(5);
+        m.crc_error(5);
+        m.latency(1, Duration::from_millis(3));
+        m.refused("read_only");
+        let text = m.render();
+        for line in [
+            "mbtap_bridge_requests_total{unit=\"1\"} 1",
+            "mbtap_bridge_exceptions_total{unit=\"1\",code=\"2\"} 1",
+            "mbtap_bridge_gateway_exceptions_total{unit=\"5\",code=\"11\"} 1",
+            "mbtap_bridge_timeouts_total{unit=\"5\"} 1",
+            "mbtap_bridge_crc_errors_total{unit=\"5\"} 1",
+            "mbtap_bridge_latency_seconds_bucket{unit=\"1\",le=\"0.002\"} 0",
+            "mbtap_bridge_latency_seconds_bucket{unit=\"1\",le=\"0.005\"} 1",
+            "mbtap_bridge_latency_seconds_count{unit=\"1\"} 1",
+            "mbtap_bridge_refused_total{reason=\"read_only\"} 1",
+            "mbtap_bridge_queue_depth 0",
+        ] {
+            assert!(text.lines().any(|l| l == line), "{line} missing in\n{text}");
+        }
+    }
+}

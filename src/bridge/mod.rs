@@ -1,0 +1,12 @@
+//! The bridge: Modbus TCP clients (or raw RTU over TCP) reaching devices on serial lines.
+//!
+//! Pure parts: [`queue`] (fair per-client queues) and [`response`] (where a slave's answer
+//! ends). At the edge: [`line`] (the serial master, one transaction at a time, reopening a
+//! lost port), [`server`] (the TCP side, each connection on its own), [`metrics`] (Prometheus
+//! text).
+
+pub mod line;
+pub mod metrics;
+pub mod queue;
+pub mod response;
+pub mod server;

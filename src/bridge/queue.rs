@@ -1,0 +1,118 @@
+//! The fair queue in front of a serial line: each client has its own bounded FIFO (its
+//! pipelined requests answered in order), and the line takes turns between clients
+//! (round-robin), so a client that floods the bridge delays only itself. A client that leaves
+//! takes its waiting requests with it: they never spend line time.
+
+use std::collections::{BTreeMap, VecDeque};
+
+/// A client (one TCP connection).
+pub type ClientId = u64;
+
+/// The client's queue is full: the request is refused (the caller answers exception 06,
+/// Server Device Busy, MAP v1.1b3 §7).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Full;
+
+/// Per-client FIFOs served in turn.
+#[derive(Debug)]
+pub struct FairQueue<T> {
+    queues: BTreeMap<ClientId, VecDeque<T>>,
+    /// The last client served: the next turn goes to the first client after it.
+    last: Option<ClientId>,
+    per_client: usize,
+}
+
+impl<T> FairQueue<T> {
+    #[must_use]
+    pub fn new(per_client: usize) -> Self {
+        Self { queues: BTreeMap::new(), last: None, per_client: per_client.max(1) }
+    }
+
+    /// Queues `item` for `client`.
+    ///
+    /// # Errors
+    /// [`Full`] when the client already has `per_client` requests waiting.
+    pub fn push(&mut self, client: ClientId, item: T) -> Result<(), Full> {
+        let q = self.queues.entry(client).or_default();
+        if q.len() >= self.per_client {
+            return Err(Full);
+        }
+        q.push_back(item);
+        Ok(())
+    }
+
+    /// The next request: the oldest of the next client in turn.
+    pub fn pop(&mut self) -> Option<(ClientId, T)> {
+        let next = match self.last {
+            Some(last) => self.queues.range(last + 1..).next().or_else(|| self.queues.iter().next()),
+            None => self.queues.iter().next(),
+        }
+        .map(|(&c, _)| c)?;
+        let q = self.queues.get_mut(&next)?;
+        let item = q.pop_front()?;
+        if q.is_empty() {
+            self.queues.remove(&next);
+        }
+        self.last = Some(next);
+        Some((next, item))
+    }
+
+    /// Drops everything `client` still has waiting; how many.
+    pub fn remove_client(&mut self, client: ClientId) -> usize {
+        self.queues.remove(&client).map_or(0, |q| q.len())
+    }
+
+    /// Requests waiting, all clients.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.queues.values().map(VecDeque::len).sum()
+    }
+
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.queues.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clients_take_turns_and_each_keeps_its_order() {
+        let mut q = FairQueue::new(10);
+        for i in 0..3 {
+            q.push(7, ("a", i)).unwrap();
+        }
+        q.push(9, ("b", 0)).unwrap();
+        q.push(3, ("c", 0)).unwrap();
+        let order: Vec<_> = std::iter::from_fn(|| q.pop()).map(|(_, v)| v).collect();
+        assert_eq!(order, [("c", 0), ("a", 0), ("b", 0), ("a", 1), ("a", 2)]);
+        assert!(q.is_empty());
+    }
+
+    #[test]
+    fn a_flooding_client_waits_for_its_own_turn() {
+        let mut q = FairQueue::new(1000);
+        for i in 0..100 {
+            q.push(1, i).unwrap();
+        }
+        q.push(2, 1000).unwrap();
+        // The quiet client is served second, not after the flood.
+        assert_eq!(q.pop(), Some((1, 0)));
+        assert_eq!(q.pop(), Some((2, 1000)));
+    }
+
+    #[test]
+    fn a_full_client_is_refused_and_a_leaving_client_takes_its_requests() {
+        let mut q = FairQueue::new(2);
+        q.push(1, 'x').unwrap();
+        q.push(1, 'y').unwrap();
+        assert_eq!(q.push(1, 'z'), Err(Full));
+        q.push(2, 'k').unwrap();
+        assert_eq!(q.remove_client(1), 2);
+        assert_eq!(q.len(), 1);
+        assert_eq!(q.pop(), Some((2, 'k')));
+        assert_eq!(q.pop(), None);
+    }
+}

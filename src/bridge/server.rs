@@ -1,0 +1,319 @@
+//! The TCP side of the bridge: Modbus TCP (MBAP, Messaging on TCP/IP v1.0b §3.1) or raw RTU
+//! frames over TCP, many clients at once. Each connection is on its own: a malformed header,
+//! a flood or a disconnect affects only that connection. Requests go to the line of their unit
+//! ([`Route`]); answers come back in the order the client asked, with its transaction id and
+//! unit id unchanged.
+
+use std::collections::BTreeMap;
+use std::net::{IpAddr, SocketAddr};
+use std::ops::RangeInclusive;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{mpsc, oneshot};
+use tokio::time::Instant;
+
+use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, Job, LineShared, Reply, SERVER_DEVICE_BUSY};
+use super::queue::ClientId;
+use crate::proto::tcp::{Streaming, parse_tcp_frame};
+use crate::proto::{encode_rtu, encode_tcp};
+
+/// A pause that ends an RTU-over-TCP frame of unknown length.
+const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
+
+/// Exception 0x01: the function is not allowed here (MAP v1.1b3 §7).
+const ILLEGAL_FUNCTION: u8 = 0x01;
+
+/// Units served by one serial line.
+#[derive(Debug, Clone)]
+pub struct Route {
+    pub units: RangeInclusive<u8>,
+    pub line: Arc<LineShared>,
+}
+
+/// What the TCP side allows and how it frames.
+#[derive(Debug, Clone)]
+pub struct ServerOptions {
+    /// Raw RTU frames (address, PDU, CRC) over TCP instead of MBAP.
+    pub rtu_over_tcp: bool,
+    /// Writes are answered with exception 01 and never reach the line.
+    pub read_only: bool,
+    /// Only these function codes pass (None: all).
+    pub allow_functions: Option<Vec<u8>>,
+    /// Only these client addresses may connect (empty: all).
+    pub allow_ips: Vec<IpNet>,
+    pub max_connections: usize,
+    /// A connection silent this long is closed.
+    pub idle_timeout: Duration,
+    /// Requests per second per connection (None: no limit); above it: exception 06.
+    pub rate_limit: Option<f64>,
+    /// TCP unit id → serial address.
+    pub unit_map: BTreeMap<u8, u8>,
+}
+
+/// An address or a network (`192.168.1.0/24`, `::1`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct IpNet {
+    pub addr: IpAddr,
+    pub prefix: u8,
+}
+
+impl std::str::FromStr for IpNet {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || format!("{s:?} is not an IP address or network like 192.168.1.0/24");
+        let (a, p) = s.split_once('/').map_or((s, None), |(a, p)| (a, Some(p)));
+        let addr: IpAddr = a.trim().parse().map_err(|_| bad())?;
+        let max = if addr.is_ipv4() { 32 } else { 128 };
+        let prefix = match p {
+            Some(p) => p.trim().parse::<u8>().ok().filter(|&p| p <= max).ok_or_else(bad)?,
+            None => max,
+        };
+        Ok(Self { addr, prefix })
+    }
+}
+
+impl IpNet {
+    #[must_use]
+    pub fn contains(&self, ip: IpAddr) -> bool {
+        let ip = match ip {
+            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
+            v4 @ IpAddr::V4(_) => v4,
+        };
+        match (self.addr, ip) {
+            (IpAddr::V4(net), IpAddr::V4(ip)) => {
+                let mask = u32::MAX.checked_shl(32 - u32::from(self.prefix)).unwrap_or(0);
+                u32::from(net) & mask == u32::from(ip) & mask
+            }
+            (IpAddr::V6(net), IpAddr::V6(ip)) => {
+                let mask = u128::MAX.checked_shl(128 - u32::from(self.prefix)).unwrap_or(0);
+                u128::from(net) & mask == u128::from(ip) & mask
+            }
+            _ => false,
+        }
+    }
+}
+
+/// Function codes that write (MAP v1.1b3 §6): refused in read-only mode.
+fn is_write(fc: u8) -> bool {
+    matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16 | 0x17)
+}
+
+/// Accepts connections forever.
+pub async fn serve(listener: TcpListener, routes: Arc<Vec<Route>>, opts: Arc<ServerOptions>) {
+    static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1);
+    let metrics_line = routes.first().map(|r| Arc::clone(&r.line));
+    loop {
+        let Ok((stream, peer)) = listener.accept().await else {
+            // Out of file descriptors or similar: back off a little, keep serving.
+            tokio::time::sleep(Duration::from_millis(50)).await;
+            continue;
+        };
+        let metrics = metrics_line.as_ref().map(|l| &l.metrics);
+        if !opts.allow_ips.is_empty() && !opts.allow_ips.iter().any(|n| n.contains(peer.ip())) {
+            if let Some(m) = metrics {
+                m.refused("ip_not_allowed");
+            }
+            continue;
+        }
+        if metrics.is_some_and(|m| m.open_connections() >= i64::try_from(opts.max_connections).unwrap_or(i64::MAX)) {
+            if let Some(m) = metrics {
+                m.refused("max_connections");
+            }
+            continue;
+        }
+        if let Some(m) = metrics {
+            m.connection_opened();
+        }
+        let client = NEXT_CLIENT.fetch_add(1, Ordering::Relaxed);
+        let (routes, opts, line) = (Arc::clone(&routes), Arc::clone(&opts), metrics_line.clone());
+        tokio::spawn(async move {
+            let _ = stream.set_nodelay(true);
+            connection(stream, peer, client, &routes, &opts).await;
+            for r in routes.iter() {
+                r.line.forget(client);
+            }
+            if let Some(l) = line {
+                l.metrics.connection_closed();
+            }
+        });
+    }
+}
+
+/// An answer on its way back to the client, in request order.
+struct Pending {
+    transaction_id: u16,
+    unit: u8,
+    function: u8,
+    answer: Answer,
+}
+
+enum Answer {
+    Now(Reply),
+    Later(oneshot::Receiver<Reply>),
+}
+
+async fn connection(stream: TcpStream, peer: SocketAddr, client: ClientId, routes: &[Route], opts: &ServerOptions) {
+    let _ = peer;
+    let (mut rd, mut wr) = stream.into_split();
+    let (tx, mut rx) = mpsc::channel::<Pending>(64);
+    let rtu = opts.rtu_over_tcp;
+    let writer = tokio::spawn(async move {
+        let mut out = Vec::with_capacity(300);
+        while let Some(p) = rx.recv().await {
+            let reply = match p.answer {
+                Answer::Now(r) => r,
+                // The line dropped the job (it never will, but a closed channel must not hang).
+                Answer::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
+            };
+            let pdu = match reply {
+                Reply::Pdu(pdu) => pdu,
+                Reply::Gateway(code) => vec![p.function | 0x80, code],
+                Reply::Silence => continue,
+            };
+            out.clear();
+            if rtu {
+                encode_rtu(p.unit, &pdu, &mut out);
+            } else {
+                encode_tcp(p.transaction_id, p.unit, &pdu, &mut out);
+            }
+            if wr.write_all(&out).await.is_err() {
+                break;
+            }
+        }
+    });
+    let mut buf = Vec::with_capacity(600);
+    let mut chunk = [0u8; 1024];
+    let mut bucket = opts.rate_limit.map(|r| (r.max(1.0), Instant::now()));
+    let mut rtu_frames = crate::sim::RequestAssembler::default();
+    'read: loop {
+        // RTU over TCP: a frame whose function does not fix its length ends when the client
+        // pauses, as on a serial line.
+        let rtu_waiting = rtu && rtu_frames.pending() > 0;
+        let wait = if rtu_waiting { RTU_OVER_TCP_SILENCE } else { opts.idle_timeout };
+        let n = match tokio::time::timeout(wait, rd.read(&mut chunk)).await {
+            Ok(Ok(n)) if n > 0 => n,
+            Err(_) if rtu_waiting => {
+                if let Some(f) = rtu_frames.silence() {
+                    let pending = request(client, 0, f.unit, f.pdu, routes, opts, &mut bucket);
+                    if tx.send(pending).await.is_err() {
+                        break;
+                    }
+                }
+                continue;
+            }
+            // EOF, an error, or idle too long: the connection ends.
+            _ => break,
+        };
+        buf.extend_from_slice(chunk.get(..n).unwrap_or_default());
+        loop {
+            let (transaction_id, unit, pdu) = if rtu {
+                rtu_frames.push(&buf);
+                buf.clear();
+                let Some(f) = rtu_frames.next_request() else { break };
+                (0, f.unit, f.pdu)
+            } else {
+                match parse_tcp_frame(&buf) {
+                    Ok(Streaming::Incomplete(_)) => break,
+                    Ok(Streaming::Complete(f, used)) => {
+                        let r = (f.header.transaction_id, f.header.unit, f.pdu.to_vec());
+                        buf.drain(..used);
+                        r
+                    }
+                    Err(_) => {
+                        // Protocol id ≠ 0, length 0, 1 or > 254: this connection only.
+                        if let Some(r) = routes.first() {
+                            r.line.metrics.refused("malformed_mbap");
+                        }
+                        break 'read;
+                    }
+                }
+            };
+            let pending = request(client, transaction_id, unit, pdu, routes, opts, &mut bucket);
+            if tx.send(pending).await.is_err() {
+                break 'read;
+            }
+        }
+    }
+    drop(tx);
+    // Answers already on their way still go out (the client may only have half-closed);
+    // requests not started were dropped by the caller's `forget`.
+    let _ = writer.await;
+}
+
+/// Checks one request and queues it on its line; what to answer.
+fn request(
+    client: ClientId,
+    transaction_id: u16,
+    unit: u8,
+    pdu: Vec<u8>,
+    routes: &[Route],
+    opts: &ServerOptions,
+    bucket: &mut Option<(f64, Instant)>,
+) -> Pending {
+    let function = pdu.first().copied().unwrap_or(0);
+    let reply = |answer| Pending { transaction_id, unit, function, answer };
+    let metrics = routes.first().map(|r| &r.line.metrics);
+    let refuse = |reason, code| {
+        if let Some(m) = metrics {
+            m.refused(reason);
+        }
+        reply(Answer::Now(Reply::Gateway(code)))
+    };
+    if opts.read_only && is_write(function) {
+        return refuse("read_only", ILLEGAL_FUNCTION);
+    }
+    if opts.allow_functions.as_ref().is_some_and(|a| !a.contains(&function)) {
+        return refuse("function_not_allowed", ILLEGAL_FUNCTION);
+    }
+    if let (Some(rate), Some((tokens, at))) = (opts.rate_limit, bucket.as_mut()) {
+        // Token bucket: `rate` per second, bursts up to one second's worth.
+        let now = Instant::now();
+        *tokens = (*tokens + now.duration_since(*at).as_secs_f64() * rate).min(rate.max(1.0));
+        *at = now;
+        if *tokens < 1.0 {
+            return refuse("rate_limit", SERVER_DEVICE_BUSY);
+        }
+        *tokens -= 1.0;
+    }
+    let target = opts.unit_map.get(&unit).copied().unwrap_or(unit);
+    let Some(route) = routes.iter().find(|r| r.units.contains(&target) || target == 0) else {
+        return refuse("no_route", GATEWAY_PATH_UNAVAILABLE);
+    };
+    let (tx, rx) = oneshot::channel();
+    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now() };
+    match route.line.submit(client, job) {
+        Ok(()) => reply(Answer::Later(rx)),
+        Err(_) => refuse("queue_full", SERVER_DEVICE_BUSY),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ip_networks_match_their_addresses() {
+        let net: IpNet = "192.168.1.0/24".parse().unwrap();
+        assert!(net.contains("192.168.1.77".parse().unwrap()));
+        assert!(!net.contains("192.168.2.1".parse().unwrap()));
+        assert!(net.contains("::ffff:192.168.1.5".parse().unwrap()), "IPv4-mapped IPv6 peers");
+        let one: IpNet = "127.0.0.1".parse().unwrap();
+        assert!(one.contains("127.0.0.1".parse().unwrap()));
+        assert!(!one.contains("127.0.0.2".parse().unwrap()));
+        let all: IpNet = "0.0.0.0/0".parse().unwrap();
+        assert!(all.contains("10.1.2.3".parse().unwrap()));
+        assert!("10.0.0.0/33".parse::<IpNet>().is_err());
+        assert!("nonsense".parse::<IpNet>().is_err());
+    }
+
+    #[test]
+    fn writes_are_the_functions_that_change_a_device() {
+        assert!([0x05, 0x06, 0x0F, 0x10, 0x16, 0x17].into_iter().all(is_write));
+        assert!(![0x01, 0x02, 0x03, 0x04, 0x08, 0x2B].into_iter().any(is_write));
+    }
+}

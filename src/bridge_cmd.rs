@@ -1,0 +1,224 @@
+//! `mbtap bridge`: Modbus TCP (and RTU over TCP) in front of serial lines — the lines'
+//! masters, the TCP listeners, the metrics endpoint and the monitor, running until a signal.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::io::Write;
+use std::ops::RangeInclusive;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpListener;
+use tokio::sync::mpsc;
+
+use crate::analyzer::{Analyzer, AnalyzerConfig, Event};
+use crate::bridge::line::{self, LineOptions, LineShared, MonitorChunk};
+use crate::bridge::server::{self, Route, ServerOptions};
+use crate::chunk::{Chunk, PortId};
+use crate::framer::FramerConfig;
+use crate::pairing::PairingConfig;
+use crate::replay_cmd::EventWriter;
+
+/// Everything the bridge needs.
+#[derive(Debug, Clone)]
+pub struct BridgeOptions {
+    /// Lines and the units each serves (the first also serves unrouted units when it has `1..=247`).
+    pub lines: Vec<(RangeInclusive<u8>, LineOptions)>,
+    pub listen: Option<String>,
+    pub listen_rtu: Option<String>,
+    pub server: ServerOptions,
+    pub queue_per_client: usize,
+    pub metrics: Option<String>,
+    pub duration: Option<Duration>,
+}
+
+/// Parses `FIRST-LAST=PORT` or `UNIT=PORT` (`--route 1-10=/dev/ttyUSB0`).
+///
+/// # Errors
+/// When the form or the unit range (1–247) is wrong, saying which.
+pub fn parse_route(spec: &str) -> anyhow::Result<(RangeInclusive<u8>, String)> {
+    let (units, port) =
+        spec.split_once('=').with_context(|| format!("route {spec:?}: expected UNITS=PORT, e.g. 1-10=/dev/ttyUSB0"))?;
+    let (a, b) = units.split_once('-').unwrap_or((units, units));
+    let unit = |s: &str| {
+        s.trim()
+            .parse::<u8>()
+            .ok()
+            .filter(|u| (1..=247).contains(u))
+            .with_context(|| format!("route {spec:?}: units must be 1–247 (Serial Line v1.02 §2.2)"))
+    };
+    let (a, b) = (unit(a)?, unit(b)?);
+    anyhow::ensure!(a <= b, "route {spec:?}: the range runs backwards");
+    anyhow::ensure!(!port.trim().is_empty(), "route {spec:?}: no port after '='");
+    Ok((a..=b, port.trim().to_owned()))
+}
+
+/// Parses `TCP=SERIAL` unit mappings (`--map-unit 10=1`).
+///
+/// # Errors
+/// When a side is not a unit id.
+pub fn parse_unit_map(specs: &[String]) -> anyhow::Result<BTreeMap<u8, u8>> {
+    specs
+        .iter()
+        .map(|s| {
+            let (a, b) = s.split_once('=').with_context(|| format!("unit map {s:?}: expected TCP_UNIT=SERIAL_UNIT"))?;
+            let a = a.trim().parse::<u8>().with_context(|| format!("unit map {s:?}: {a:?} is not a unit id 0–255"))?;
+            let b = b.trim().parse::<u8>().with_context(|| format!("unit map {s:?}: {b:?} is not a unit id 0–255"))?;
+            Ok((a, b))
+        })
+        .collect()
+}
+
+/// Runs the bridge until Ctrl-C, SIGTERM or the duration; `writer` gets the monitored traffic.
+///
+/// # Errors
+/// When a listening address cannot be bound (the serial side never fails the bridge: a port
+/// that is missing is retried, and clients get exception 0x0A meanwhile).
+pub async fn bridge<W: Write>(
+    opts: BridgeOptions,
+    writer: Option<&mut EventWriter<W>>,
+    err: &mut dyn Write,
+) -> anyhow::Result<()> {
+    let (monitor_tx, mut monitor_rx) = mpsc::unbounded_channel::<MonitorChunk>();
+    let monitoring = writer.is_some();
+    let mut routes = Vec::new();
+    for (units, line_opts) in &opts.lines {
+        let shared = LineShared::new(opts.queue_per_client);
+        let monitor = monitoring.then(|| monitor_tx.clone());
+        tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
+        routes.push(Route { units: units.clone(), line: shared });
+        let _ = writeln!(
+            err,
+            "mbtap: serial line {} at {} {} for units {}–{}",
+            line_opts.port,
+            line_opts.line,
+            line_opts.mode.name(),
+            units.start(),
+            units.end()
+        );
+    }
+    drop(monitor_tx);
+    let routes = Arc::new(routes);
+    for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
+        let Some(addr) = addr else { continue };
+        let listener = TcpListener::bind(addr).await.with_context(|| format!("listening on {addr}"))?;
+        let local = listener.local_addr().with_context(|| format!("listening on {addr}"))?;
+        let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
+        let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
+        let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
+        tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts));
+    }
+    if let Some(addr) = &opts.metrics {
+        let listener = TcpListener::bind(addr).await.with_context(|| format!("metrics: listening on {addr}"))?;
+        let local = listener.local_addr().with_context(|| format!("metrics: listening on {addr}"))?;
+        let _ = writeln!(err, "mbtap: metrics at http://{local}/metrics");
+        tokio::spawn(serve_metrics(listener, Arc::clone(&routes)));
+    }
+    let _ = err.flush();
+    let mut analyzer = writer.is_some().then(|| {
+        let line = opts.lines.first().map(|(_, l)| l.clone());
+        let (mode, settings) = line
+            .map_or((crate::analyzer::SerialMode::Rtu, crate::framer::LineSettings::default()), |l| (l.mode, l.line));
+        Analyzer::new(AnalyzerConfig {
+            mode,
+            framer: FramerConfig::new(settings, 0),
+            // The bridge knows who said what: requests on port 0, responses on port 1.
+            pairing: PairingConfig {
+                request_port: Some(PortId(0)),
+                response_port: Some(PortId(1)),
+                ..Default::default()
+            },
+        })
+    });
+    let mut writer = writer;
+    let stop = crate::sniff_cmd::shutdown_signal();
+    tokio::pin!(stop);
+    let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
+    loop {
+        tokio::select! {
+            () = &mut stop => break,
+            () = async { if let Some(d) = deadline { tokio::time::sleep_until(d).await } else { std::future::pending().await } } => break,
+            Some((port, t, bytes)) = monitor_rx.recv(), if monitoring => {
+                if let (Some(a), Some(w)) = (analyzer.as_mut(), writer.as_deref_mut()) {
+                    a.push(&Chunk { port, t, bytes: &bytes }, &mut |e: &Event<'_>| w.write(e));
+                }
+            }
+            _ = tick.tick() => {
+                if let (Some(a), Some(w)) = (analyzer.as_mut(), writer.as_deref_mut()) {
+                    a.tick(crate::source::serial::now(), &mut |e: &Event<'_>| w.write(e));
+                    let _ = w.out.flush();
+                }
+                for r in routes.iter() {
+                    if let Some(note) = r.line.metrics.take_note() {
+                        let _ = writeln!(err, "mbtap: {note}");
+                    }
+                }
+            }
+        }
+    }
+    if let (Some(a), Some(w)) = (analyzer.as_mut(), writer) {
+        a.finish(&mut |e: &Event<'_>| w.write(e));
+    }
+    Ok(())
+}
+
+/// Serves `GET /metrics` (any path, really) in the Prometheus text format.
+async fn serve_metrics(listener: TcpListener, routes: Arc<Vec<Route>>) {
+    loop {
+        let Ok((mut stream, _)) = listener.accept().await else { continue };
+        let routes = Arc::clone(&routes);
+        tokio::spawn(async move {
+            let mut req = [0u8; 1024];
+            // The request line and headers; the answer does not depend on them.
+            let _ = tokio::time::timeout(Duration::from_secs(2), stream.read(&mut req)).await;
+            let mut body = String::new();
+            for (i, r) in routes.iter().enumerate() {
+                let text = r.line.metrics.render();
+                if routes.len() == 1 {
+                    body.push_str(&text);
+                    continue;
+                }
+                // Several lines: one set of families, each series told apart by a `line` label.
+                for l in text.lines() {
+                    if l.starts_with('#') {
+                        if i == 0 {
+                            body.push_str(l);
+                            body.push('\n');
+                        }
+                    } else if let Some((name, rest)) = l.split_once('{') {
+                        let _ = writeln!(body, "{name}{{line=\"{i}\",{rest}");
+                    } else if let Some((name, value)) = l.split_once(' ') {
+                        let _ = writeln!(body, "{name}{{line=\"{i}\"}} {value}");
+                    }
+                }
+            }
+            let head = format!(
+                "HTTP/1.1 200 OK\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                body.len()
+            );
+            let _ = stream.write_all(head.as_bytes()).await;
+            let _ = stream.write_all(body.as_bytes()).await;
+            let _ = stream.shutdown().await;
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn routes_and_unit_maps_parse_or_say_what_is_wrong() {
+        assert_eq!(parse_route("1-10=/dev/ttyUSB0").unwrap(), (1..=10, "/dev/ttyUSB0".to_owned()));
+        assert_eq!(parse_route("17=/dev/ttyS1").unwrap(), (17..=17, "/dev/ttyS1".to_owned()));
+        for bad in ["1-10", "0-5=/dev/x", "10-1=/dev/x", "1-300=/dev/x", "5="] {
+            let e = parse_route(bad).unwrap_err().to_string();
+            assert!(e.contains(bad), "{e}");
+        }
+        assert_eq!(parse_unit_map(&["10=1".into(), "11=2".into()]).unwrap(), BTreeMap::from([(10, 1), (11, 2)]));
+        assert!(parse_unit_map(&["x=1".into()]).unwrap_err().to_string().contains("x=1"));
+    }
+}
