@@ -315,6 +315,9 @@ pub enum Command {
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
+        /// A slave's time from the end of a request to its answer, ms.
+        #[arg(long, default_value_t = 3.0)]
+        turnaround_ms: f64,
         /// Play the master too: poll the devices and put the whole line on the pseudo-terminal,
         /// paced at the line's character rate, for a listener (`mbtap sniff LINK`).
         #[arg(long)]

@@ -59,6 +59,8 @@ pub struct SimulateOptions {
     pub line: LineSettings,
     pub mode: SerialMode,
     pub duration: Option<Duration>,
+    /// A slave's time from a request to its answer.
+    pub turnaround: Duration,
     /// Play the master too (`--poll`): the whole line goes out on the pseudo-terminal, for a
     /// listener (`mbtap sniff`) to hear.
     pub poll: Option<PollOptions>,
@@ -127,6 +129,7 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
         let mut bus = VirtualBus::new(slaves, opts.line);
         bus.faults = poll.faults;
         bus.ascii = opts.mode == SerialMode::Ascii;
+        bus.turnaround_ns = u64::try_from(opts.turnaround.as_nanos()).unwrap_or(u64::MAX);
         let listener = Listener::new(opts.line, poll.heard_at.unwrap_or(opts.line));
         let result = drive_line(&mut master_side, bus, listener, opts.duration).await;
         let _ = std::fs::remove_file(&opts.link);
@@ -171,7 +174,9 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
                 if let Some(pdu) = s.handle(request.unit, &request.pdu) {
                     // A slave answers after a turnaround (the MK4 document gives no figure;
                     // a few milliseconds is typical of such controllers).
-                    tokio::time::sleep(Duration::from_millis(3)).await;
+                    if !opts.turnaround.is_zero() {
+                        tokio::time::sleep(opts.turnaround).await;
+                    }
                     out.clear();
                     match opts.mode {
                         SerialMode::Rtu => encode_rtu(request.unit, &pdu, &mut out),

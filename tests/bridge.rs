@@ -1,0 +1,310 @@
+//! `mbtap bridge` with real peers: the simulated devices (`mbtap simulate`) on a pseudo-terminal
+//! behind it, and in front of it mbpoll (libmodbus), pymodbus and many raw Modbus TCP clients
+//! at once. Answers are checked by value: every client must get exactly its own answers, with
+//! its transaction ids, in order. Real ptys and peers: `#[ignore]`d in a plain `cargo test`,
+//! run by `.ci/run` with `--ignored`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+mod common;
+use common::{BIN, Kill, wait_for};
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mbtap-bridge-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn simulator(link: &Path, extra: &[&str]) -> Kill {
+    let mut args = vec!["simulate", "--link", link.to_str().unwrap(), "--duration", "300"];
+    args.extend_from_slice(extra);
+    let sim = Kill(Command::new(BIN).args(&args).stderr(Stdio::null()).spawn().unwrap());
+    wait_for(link);
+    sim
+}
+
+/// Starts the bridge (Modbus TCP on a free port, plus `extra`); the process, the TCP address,
+/// and the other addresses it printed (RTU over TCP, metrics).
+fn bridge(serial: &Path, extra: &[&str]) -> (Kill, String, Vec<String>) {
+    let mut args = vec!["bridge", "--serial", serial.to_str().unwrap(), "--listen", "127.0.0.1:0"];
+    args.extend_from_slice(extra);
+    let mut child = Command::new(BIN).args(&args).stderr(Stdio::piped()).spawn().unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let mut lines = BufReader::new(stderr).lines();
+    let mut tcp = None;
+    let mut others = Vec::new();
+    let expected = 1 + extra.iter().filter(|a| a.starts_with("--listen-rtu") || a.starts_with("--metrics")).count();
+    while tcp.is_none() || others.len() + 1 < expected {
+        let line = lines.next().expect("the bridge ended before listening").unwrap();
+        if let Some(rest) = line.strip_prefix("mbtap: bridge listening on ") {
+            let addr = rest.split_whitespace().next().unwrap().to_owned();
+            if rest.contains("(Modbus TCP)") {
+                tcp = Some(addr);
+            } else {
+                others.push(addr);
+            }
+        } else if let Some(rest) = line.strip_prefix("mbtap: metrics at http://") {
+            others.push(rest.trim_end_matches("/metrics").to_owned());
+        }
+    }
+    // Keep draining stderr so the bridge never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines {});
+    (Kill(child), tcp.unwrap(), others)
+}
+
+/// A blocking Modbus TCP client.
+struct Client {
+    s: TcpStream,
+}
+
+impl Client {
+    fn connect(addr: &str) -> Self {
+        let s = TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        s.set_nodelay(true).unwrap();
+        Self { s }
+    }
+
+    fn send(&mut self, tid: u16, unit: u8, pdu: &[u8]) {
+        let mut f = Vec::new();
+        f.extend_from_slice(&tid.to_be_bytes());
+        f.extend_from_slice(&[0, 0]);
+        f.extend_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+        f.push(unit);
+        f.extend_from_slice(pdu);
+        self.s.write_all(&f).unwrap();
+    }
+
+    /// (transaction id, unit, PDU) of the next answer.
+    fn recv(&mut self) -> (u16, u8, Vec<u8>) {
+        let mut head = [0u8; 7];
+        self.s.read_exact(&mut head).unwrap();
+        let len = usize::from(u16::from_be_bytes([head[4], head[5]]));
+        let mut pdu = vec![0u8; len - 1];
+        self.s.read_exact(&mut pdu).unwrap();
+        (u16::from_be_bytes([head[0], head[1]]), head[6], pdu)
+    }
+
+    fn call(&mut self, tid: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+        self.send(tid, unit, pdu);
+        let (t, u, pdu) = self.recv();
+        assert_eq!((t, u), (tid, unit), "transaction and unit ids come back unchanged");
+        pdu
+    }
+}
+
+/// MK4 (unit 1) phase voltages: input registers 430–433 in 0.1 V.
+const READ_VOLTAGES: [u8; 5] = [0x04, 0x01, 0xAE, 0x00, 0x04];
+
+#[test]
+#[ignore = "needs mbpoll; .ci/run installs it and runs this with --ignored"]
+fn mbpoll_reads_the_simulated_devices_through_the_bridge() {
+    let d = dir("mbpoll");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, _) = bridge(&d.join("bus"), &[]);
+    let port = addr.rsplit(':').next().unwrap();
+    let out = Command::new("mbpoll")
+        .args(["-m", "tcp", "-p", port, "-a", "1", "-t", "3", "-0", "-r", "430", "-c", "4", "-1", "127.0.0.1"])
+        .output()
+        .expect("mbpoll must be installed");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    let volts: Vec<u32> =
+        text.lines().filter_map(|l| l.split_once("]:").map(|(_, v)| v.trim().parse().unwrap())).collect();
+    assert_eq!(volts.len(), 4, "{text}");
+    assert!(volts.iter().all(|v| (2200..=2400).contains(v)), "mains around 230 V: {volts:?}");
+    // No device at unit 9: the bridge answers 0x0B (Gateway Target Device Failed to Respond).
+    let out = Command::new("mbpoll")
+        .args(["-m", "tcp", "-p", port, "-a", "9", "-t", "3", "-0", "-r", "0", "-c", "1", "-1", "-o", "2", "127.0.0.1"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    assert!(text.contains("Target device failed to respond"), "{text}");
+}
+
+#[test]
+#[ignore = "needs pymodbus; .ci/run installs it and runs this with --ignored"]
+fn pymodbus_reads_and_writes_through_the_bridge() {
+    let d = dir("pymodbus");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, _) = bridge(&d.join("bus"), &[]);
+    let (host, port) = addr.rsplit_once(':').unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/pymodbus_tcp_client.py");
+    let out = Command::new("python3").arg(script).args([host, port]).output().expect("python3 must be installed");
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("ALL OK"), "{text}");
+}
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn many_clients_each_get_exactly_their_own_answers() {
+    const CLIENTS: usize = 64;
+    const ROUNDS: usize = 10;
+    const PIPELINE: usize = 4;
+    let d = dir("load");
+    let _sim = simulator(&d.join("bus"), &["--turnaround-ms", "0"]);
+    let (_bridge, addr, _) = bridge(&d.join("bus"), &["--queue-per-client", "8"]);
+    let threads: Vec<_> = (0..CLIENTS)
+        .map(|i| {
+            let addr = addr.clone();
+            std::thread::spawn(move || {
+                let mut c = Client::connect(&addr);
+                let mut tid = u16::try_from(i * 1000).unwrap();
+                let mut checked = 0;
+                for round in 0..ROUNDS {
+                    // Pipelined: several requests out before the answers come back.
+                    let mut sent = Vec::new();
+                    for k in 0..PIPELINE {
+                        tid = tid.wrapping_add(1);
+                        let n = round * PIPELINE + k;
+                        let pdu = if n % 2 == 0 {
+                            // Read input registers 400.. with a quantity only this client uses.
+                            let q = u8::try_from(i + 1).unwrap();
+                            vec![0x04, 0x01, 0x90, 0x00, q]
+                        } else {
+                            // Write a level set point (104–108, 0–10000) a value naming this client.
+                            let reg = 104 + u16::try_from(i % 5).unwrap();
+                            let v = u16::try_from(i * 100 + n % 100).unwrap();
+                            let [rh, rl] = reg.to_be_bytes();
+                            let [vh, vl] = v.to_be_bytes();
+                            vec![0x06, rh, rl, vh, vl]
+                        };
+                        c.send(tid, 1, &pdu);
+                        sent.push((tid, pdu));
+                    }
+                    for (tid, pdu) in sent {
+                        let (t, u, answer) = c.recv();
+                        assert_eq!((t, u), (tid, 1), "client {i}: answers in order, ids unchanged");
+                        if pdu[0] == 0x04 {
+                            assert_eq!(answer[0], 0x04, "client {i}: {answer:02X?}");
+                            assert_eq!(usize::from(answer[1]), 2 * (i + 1), "client {i} got someone else's read");
+                        } else {
+                            assert_eq!(answer, pdu, "client {i}: a write's answer echoes its own request");
+                        }
+                        checked += 1;
+                    }
+                }
+                checked
+            })
+        })
+        .collect();
+    let total: usize = threads.into_iter().map(|t| t.join().unwrap()).sum();
+    assert_eq!(total, CLIENTS * ROUNDS * PIPELINE, "no answer lost or duplicated");
+}
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_misbehaving_client_affects_only_its_own_connection() {
+    let d = dir("misbehave");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, _) = bridge(&d.join("bus"), &[]);
+    let mut good = Client::connect(&addr);
+    assert_eq!(good.call(1, 1, &READ_VOLTAGES)[..2], [0x04, 0x08]);
+    // Protocol id 1, then length 0, then length 300: each closes only its own connection.
+    for header in [[0, 1, 0, 1, 0, 2, 1], [0, 2, 0, 0, 0, 0, 1], [0, 3, 0, 0, 0x01, 0x2C, 1]] {
+        let mut bad = TcpStream::connect(&addr).unwrap();
+        bad.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        bad.write_all(&header).unwrap();
+        bad.write_all(&[0x03, 0, 0, 0, 1]).unwrap();
+        let mut buf = [0u8; 16];
+        assert_eq!(bad.read(&mut buf).unwrap_or(0), 0, "{header:?}: the bridge closes the connection");
+    }
+    // A client that leaves mid-transaction, with more requests queued behind it.
+    let mut leaving = Client::connect(&addr);
+    for tid in 0..5 {
+        leaving.send(tid, 1, &READ_VOLTAGES);
+    }
+    drop(leaving);
+    // The good client goes on as if nothing happened, and never sees anyone else's answer.
+    for tid in 10..20 {
+        let answer = good.call(tid, 1, &READ_VOLTAGES);
+        assert_eq!(answer[..2], [0x04, 0x08]);
+    }
+}
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn read_only_allowlists_exceptions_and_broadcasts() {
+    let d = dir("safety");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, others) = bridge(&d.join("bus"), &["--read-only", "--metrics", "127.0.0.1:0"]);
+    let mut c = Client::connect(&addr);
+    // A write is refused with exception 01 and never reaches the line.
+    assert_eq!(c.call(1, 1, &[0x06, 0x00, 0x68, 0x00, 0x07]), [0x86, 0x01]);
+    // The device's own exception comes back unchanged: MK4 input registers stop at 476 (02).
+    assert_eq!(c.call(2, 1, &[0x04, 0x03, 0xE8, 0x00, 0x01]), [0x84, 0x02]);
+    // No device at 9: 0x0B after the timeout.
+    let t = Instant::now();
+    assert_eq!(c.call(3, 9, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x83, 0x0B]);
+    assert!(t.elapsed() >= Duration::from_millis(900), "the timeout is waited for");
+    // Reads still pass.
+    assert_eq!(c.call(4, 17, &[0x03, 0x00, 0x32, 0x00, 0x03])[..2], [0x03, 0x06]);
+    let mut http = TcpStream::connect(&others[0]).unwrap();
+    http.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
+    let mut text = String::new();
+    http.read_to_string(&mut text).unwrap();
+    for line in [
+        "mbtap_bridge_refused_total{reason=\"read_only\"} 1",
+        "mbtap_bridge_exceptions_total{unit=\"1\",code=\"2\"} 1",
+        "mbtap_bridge_gateway_exceptions_total{unit=\"9\",code=\"11\"} 1",
+        "mbtap_bridge_timeouts_total{unit=\"9\"} 1",
+        "mbtap_bridge_responses_total{unit=\"17\"} 1",
+    ] {
+        assert!(text.lines().any(|l| l == line), "{line} missing:\n{text}");
+    }
+}
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn rtu_over_tcp_carries_raw_frames() {
+    let d = dir("rtu-tcp");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, _, others) = bridge(&d.join("bus"), &["--listen-rtu", "127.0.0.1:0"]);
+    let mut s = TcpStream::connect(&others[0]).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    // MK4 voltages as a raw RTU frame (unit, PDU, CRC).
+    s.write_all(&[0x01, 0x04, 0x01, 0xAE, 0x00, 0x04, 0x91, 0xD4]).unwrap();
+    let mut answer = [0u8; 13];
+    s.read_exact(&mut answer).unwrap();
+    assert_eq!(answer[..3], [0x01, 0x04, 0x08]);
+    let crc = mbtap::proto::crc16(&answer[..11]).to_le_bytes();
+    assert_eq!(answer[11..], crc, "a valid RTU frame back");
+}
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn the_serial_side_pulled_mid_load_gives_0x0a_then_recovers_by_itself() {
+    let d = dir("pull");
+    let link = d.join("bus");
+    let sim = simulator(&link, &[]);
+    let (_bridge, addr, _) = bridge(&link, &[]);
+    let mut c = Client::connect(&addr);
+    assert_eq!(c.call(1, 1, &READ_VOLTAGES)[..2], [0x04, 0x08]);
+    // Pull the adapter: the simulator and its pseudo-terminal go away.
+    drop(sim);
+    let _ = std::fs::remove_file(&link);
+    let mut codes = Vec::new();
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(4) {
+        codes.push(c.call(2, 1, &READ_VOLTAGES));
+    }
+    assert!(codes.iter().any(|a| *a == [0x84, 0x0A]), "0x0A while the port is gone: {codes:02X?}");
+    assert!(codes.iter().all(|a| a[0] == 0x84), "{codes:02X?}");
+    // Plug it back (a new pseudo-terminal at the same path): the bridge reopens by itself.
+    let _sim = simulator(&link, &[]);
+    let start = Instant::now();
+    loop {
+        let a = c.call(3, 1, &READ_VOLTAGES);
+        if a[..2] == [0x04, 0x08] {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(20), "the bridge never recovered: {a:02X?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
