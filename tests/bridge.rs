@@ -163,7 +163,7 @@ fn many_clients_each_get_exactly_their_own_answers() {
                     for k in 0..PIPELINE {
                         tid = tid.wrapping_add(1);
                         let n = round * PIPELINE + k;
-                        let pdu = if n % 2 == 0 {
+                        let pdu = if n.is_multiple_of(2) {
                             // Read input registers 400.. with a quantity only this client uses.
                             let q = u8::try_from(i + 1).unwrap();
                             vec![0x04, 0x01, 0x90, 0x00, q]
