@@ -55,6 +55,64 @@ pub fn parse_route(spec: &str) -> anyhow::Result<(RangeInclusive<u8>, String)> {
     Ok((a..=b, port.trim().to_owned()))
 }
 
+/// Parses a unit list `1,5,10-20` (empty: none, meaning all).
+///
+/// # Errors
+/// When an item is not a unit 1–247 or a range of them.
+pub fn parse_units(spec: &str) -> anyhow::Result<std::collections::BTreeSet<u8>> {
+    let mut out = std::collections::BTreeSet::new();
+    for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let (a, b) = item.split_once('-').unwrap_or((item, item));
+        let unit = |s: &str| {
+            s.trim()
+                .parse::<u8>()
+                .ok()
+                .filter(|u| (1..=247).contains(u))
+                .with_context(|| format!("units {spec:?}: {item:?} is not a unit 1–247 or a range like 10-20"))
+        };
+        let (a, b) = (unit(a)?, unit(b)?);
+        anyhow::ensure!(a <= b, "units {spec:?}: {item:?} runs backwards");
+        out.extend(a..=b);
+    }
+    Ok(out)
+}
+
+/// Runs reverse mode until Ctrl-C, SIGTERM or the duration.
+pub async fn reverse(opts: crate::bridge::reverse::ReverseOptions, duration: Option<Duration>, err: &mut dyn Write) {
+    let units = if opts.units.is_empty() {
+        "every unit".to_owned()
+    } else {
+        opts.units.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
+    };
+    let _ = writeln!(
+        err,
+        "mbtap: reverse bridge: answering as {units} on {} at {} {}, forwarding to {}",
+        opts.port,
+        opts.line,
+        opts.mode.name(),
+        opts.target
+    );
+    let metrics = crate::bridge::metrics::Metrics::default();
+    let run = crate::bridge::reverse::run(opts, &metrics);
+    tokio::pin!(run);
+    let stop = crate::sniff_cmd::shutdown_signal();
+    tokio::pin!(stop);
+    let deadline = duration.map(|d| tokio::time::Instant::now() + d);
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    loop {
+        tokio::select! {
+            () = &mut run => break,
+            () = &mut stop => break,
+            () = async { if let Some(d) = deadline { tokio::time::sleep_until(d).await } else { std::future::pending().await } } => break,
+            _ = tick.tick() => {
+                if let Some(note) = metrics.take_note() {
+                    let _ = writeln!(err, "mbtap: {note}");
+                }
+            }
+        }
+    }
+}
+
 /// Parses `TCP=SERIAL` unit mappings (`--map-unit 10=1`).
 ///
 /// # Errors
@@ -219,6 +277,11 @@ mod tests {
             assert!(e.contains(bad), "{e}");
         }
         assert_eq!(parse_unit_map(&["10=1".into(), "11=2".into()]).unwrap(), BTreeMap::from([(10, 1), (11, 2)]));
+        assert_eq!(parse_units("1,5, 10-12").unwrap().into_iter().collect::<Vec<_>>(), [1, 5, 10, 11, 12]);
+        assert!(parse_units("").unwrap().is_empty());
+        for bad in ["0", "1-300", "x", "9-3"] {
+            assert!(parse_units(bad).is_err(), "{bad}");
+        }
         assert!(parse_unit_map(&["x=1".into()]).unwrap_err().to_string().contains("x=1"));
     }
 }

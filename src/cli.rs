@@ -330,73 +330,87 @@ pub enum Command {
         heard_at: Option<LineSettings>,
     },
     /// Modbus TCP clients to serial devices: a TCP server in front of a serial master.
-    Bridge {
-        /// The serial port of the line (all units; see --route for several lines).
-        #[arg(long)]
-        serial: Option<String>,
-        #[command(flatten)]
-        line: LineArgs,
-        /// Modbus TCP (MBAP) listening address, e.g. 0.0.0.0:502 (port 0 picks a free port).
-        #[arg(long, value_name = "ADDR:PORT")]
-        listen: Option<String>,
-        /// Raw RTU frames over TCP on this address too (or instead).
-        #[arg(long, value_name = "ADDR:PORT")]
-        listen_rtu: Option<String>,
-        /// Units FIRST-LAST on another serial port (repeatable): --route 11-20=/dev/ttyUSB1.
-        #[arg(long = "route", value_name = "UNITS=PORT")]
-        routes: Vec<String>,
-        /// Response timeout per request, ms; then retries, then exception 0x0B.
-        #[arg(long, default_value_t = 1000)]
-        timeout_ms: u64,
-        /// Retries after a timeout or a failed CRC.
-        #[arg(long, default_value_t = 0)]
-        retries: u32,
-        /// Extra quiet time after t3.5 before the next request, ms.
-        #[arg(long, default_value_t = 0.0)]
-        turnaround_ms: f64,
-        /// Answer broadcast writes (unit 0) at once instead of not at all.
-        #[arg(long)]
-        broadcast_reply: bool,
-        /// Refuse writes (exception 0x01); they never reach the line.
-        #[arg(long)]
-        read_only: bool,
-        /// Only these function codes pass (repeatable; 3 or 0x03).
-        #[arg(long = "allow-function", value_name = "CODE")]
-        allow_functions: Vec<String>,
-        /// Only these clients may connect (repeatable; 10.0.0.5 or 10.0.0.0/24).
-        #[arg(long = "allow-ip", value_name = "NET")]
-        allow_ips: Vec<String>,
-        /// Connections open at once; more are refused.
-        #[arg(long, default_value_t = 64)]
-        max_connections: usize,
-        /// Close a connection silent this long, s.
-        #[arg(long, default_value_t = 300.0)]
-        idle_timeout: f64,
-        /// Requests per second per connection; above it exception 0x06 (busy).
-        #[arg(long)]
-        rate_limit: Option<f64>,
-        /// Requests a client may have waiting; more get exception 0x06.
-        #[arg(long, default_value_t = 32)]
-        queue_per_client: usize,
-        /// TCP unit id → serial address (repeatable): --map-unit 10=1.
-        #[arg(long = "map-unit", value_name = "TCP=SERIAL")]
-        unit_map: Vec<String>,
-        /// Serve Prometheus metrics on this address (GET /metrics).
-        #[arg(long, value_name = "ADDR:PORT")]
-        metrics: Option<String>,
-        /// Show the bridged traffic: text, jsonl or tui.
-        #[arg(long, value_enum)]
-        monitor: Option<EventFormatArg>,
-        /// Annotate unit UNIT's values in the monitor: `UNIT=NAME` or `UNIT=FILE.toml`.
-        #[arg(long = "device", value_name = "UNIT=PROFILE")]
-        devices: Vec<String>,
-        /// Stop after this many seconds.
-        #[arg(long)]
-        duration: Option<f64>,
-    },
+    Bridge(Box<BridgeArgs>),
     /// Device profiles: check a profile file, or show what it defines.
     #[command(subcommand)]
     Profiles(ProfilesCommand),
+}
+
+/// `mbtap bridge …` (boxed: by far the largest command).
+#[derive(Debug, Args)]
+pub struct BridgeArgs {
+    /// The serial port of the line (all units; see --route for several lines).
+    #[arg(long)]
+    pub serial: Option<String>,
+    #[command(flatten)]
+    pub line: LineArgs,
+    /// Modbus TCP (MBAP) listening address, e.g. 0.0.0.0:502 (port 0 picks a free port).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen: Option<String>,
+    /// Raw RTU frames over TCP on this address too (or instead).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen_rtu: Option<String>,
+    /// Units FIRST-LAST on another serial port (repeatable): --route 11-20=/dev/ttyUSB1.
+    #[arg(long = "route", value_name = "UNITS=PORT")]
+    pub routes: Vec<String>,
+    /// Response timeout per request, ms; then retries, then exception 0x0B.
+    #[arg(long, default_value_t = 1000)]
+    pub timeout_ms: u64,
+    /// Retries after a timeout or a failed CRC.
+    #[arg(long, default_value_t = 0)]
+    pub retries: u32,
+    /// Extra quiet time after t3.5 before the next request, ms.
+    #[arg(long, default_value_t = 0.0)]
+    pub turnaround_ms: f64,
+    /// Answer broadcast writes (unit 0) at once instead of not at all.
+    #[arg(long)]
+    pub broadcast_reply: bool,
+    /// Refuse writes (exception 0x01); they never reach the line.
+    #[arg(long)]
+    pub read_only: bool,
+    /// Only these function codes pass (repeatable; 3 or 0x03).
+    #[arg(long = "allow-function", value_name = "CODE")]
+    pub allow_functions: Vec<String>,
+    /// Only these clients may connect (repeatable; 10.0.0.5 or 10.0.0.0/24).
+    #[arg(long = "allow-ip", value_name = "NET")]
+    pub allow_ips: Vec<String>,
+    /// Connections open at once; more are refused.
+    #[arg(long, default_value_t = 64)]
+    pub max_connections: usize,
+    /// Close a connection silent this long, s.
+    #[arg(long, default_value_t = 300.0)]
+    pub idle_timeout: f64,
+    /// Requests per second per connection; above it exception 0x06 (busy).
+    #[arg(long)]
+    pub rate_limit: Option<f64>,
+    /// Requests a client may have waiting; more get exception 0x06.
+    #[arg(long, default_value_t = 32)]
+    pub queue_per_client: usize,
+    /// TCP unit id → serial address (repeatable): --map-unit 10=1.
+    #[arg(long = "map-unit", value_name = "TCP=SERIAL")]
+    pub unit_map: Vec<String>,
+    /// Serve Prometheus metrics on this address (GET /metrics).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub metrics: Option<String>,
+    /// Reverse: answer as serial slaves (--answer-as) and forward to the Modbus TCP server
+    /// --target, so an RTU master reaches TCP devices.
+    #[arg(long, requires = "target")]
+    pub reverse: bool,
+    /// Reverse mode: the Modbus TCP server to forward to.
+    #[arg(long, value_name = "HOST:PORT")]
+    pub target: Option<String>,
+    /// Reverse mode: serial addresses to answer as, e.g. 1,5,10-20 (default: all).
+    #[arg(long, value_name = "UNITS")]
+    pub answer_as: Option<String>,
+    /// Show the bridged traffic: text, jsonl or tui.
+    #[arg(long, value_enum)]
+    pub monitor: Option<EventFormatArg>,
+    /// Annotate unit UNIT's values in the monitor: `UNIT=NAME` or `UNIT=FILE.toml`.
+    #[arg(long = "device", value_name = "UNIT=PROFILE")]
+    pub devices: Vec<String>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    pub duration: Option<f64>,
 }
 
 /// A fault to inject on the simulated line.

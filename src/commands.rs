@@ -171,31 +171,48 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bridge {
-            serial,
-            line,
-            listen,
-            listen_rtu,
-            routes,
-            timeout_ms,
-            retries,
-            turnaround_ms,
-            broadcast_reply,
-            read_only,
-            allow_functions,
-            allow_ips,
-            max_connections,
-            idle_timeout,
-            rate_limit,
-            queue_per_client,
-            unit_map,
-            metrics,
-            monitor,
-            devices,
-            duration,
-        } => {
-            use crate::bridge::line::LineOptions;
+        Command::Bridge(args) => {
+            let crate::cli::BridgeArgs {
+                serial,
+                line,
+                listen,
+                listen_rtu,
+                routes,
+                timeout_ms,
+                retries,
+                turnaround_ms,
+                broadcast_reply,
+                read_only,
+                allow_functions,
+                allow_ips,
+                max_connections,
+                idle_timeout,
+                rate_limit,
+                queue_per_client,
+                unit_map,
+                metrics,
+                reverse,
+                target,
+                answer_as,
+                monitor,
+                devices,
+                duration,
+            } = *args;
             let (mode, settings, _) = overrides(&line).resolve();
+            if reverse {
+                let port = serial.context("--reverse needs --serial PORT: the line to answer on")?;
+                let opts = crate::bridge::reverse::ReverseOptions {
+                    port,
+                    line: settings,
+                    mode,
+                    units: crate::bridge_cmd::parse_units(answer_as.as_deref().unwrap_or(""))?,
+                    target: target.unwrap_or_default(),
+                    timeout: std::time::Duration::from_millis(timeout_ms),
+                    turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
+                };
+                runtime()?.block_on(crate::bridge_cmd::reverse(opts, seconds(duration), &mut io::stderr()));
+                return Ok(ExitCode::SUCCESS);
+            }
             anyhow::ensure!(
                 listen.is_some() || listen_rtu.is_some(),
                 "nothing to listen on: give --listen ADDR:PORT (Modbus TCP) and/or --listen-rtu ADDR:PORT"
@@ -208,7 +225,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 idle_timeout.is_finite() && idle_timeout > 0.0,
                 "--idle-timeout {idle_timeout}: expected seconds above 0"
             );
-            let line_for = |port: String| LineOptions {
+            let line_for = |port: String| crate::bridge::line::LineOptions {
                 port,
                 line: settings,
                 mode,

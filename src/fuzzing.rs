@@ -225,3 +225,20 @@ pub fn uart(data: &[u8]) {
         assert!(heard.iter().all(|h| !h.framing_error && !h.parity_error));
     }
 }
+
+/// Any bytes as a slave's answer to the bridge: byte 0 is the unit asked, byte 1 the function,
+/// the rest what was read; judged both before and after the silence, RTU and ASCII.
+///
+/// # Panics
+/// When an answer claims more bytes than were read: that is the bug the fuzzer is looking for.
+pub fn bridge_response(data: &[u8]) {
+    use crate::bridge::response::{Verdict, judge_ascii, judge_rtu};
+    let [unit, function, buf @ ..] = data else { return };
+    for silent in [false, true] {
+        for v in [judge_rtu(buf, *unit, *function, silent), judge_ascii(buf, *unit, silent)] {
+            if let Verdict::Answer { len } = v {
+                assert!(len <= buf.len(), "answer of {len} bytes from {} read", buf.len());
+            }
+        }
+    }
+}

@@ -308,3 +308,74 @@ fn the_serial_side_pulled_mid_load_gives_0x0a_then_recovers_by_itself() {
         std::thread::sleep(Duration::from_millis(100));
     }
 }
+
+/// A TCP port free right now (bound to port 0, then let go) for a peer that must be told one.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+#[test]
+#[ignore = "needs socat, mbpoll and pymodbus; .ci/run installs them and runs this with --ignored"]
+fn reverse_mode_lets_an_rtu_master_reach_a_tcp_server() {
+    let d = dir("reverse");
+    let (a, b) = (d.join("a"), d.join("b"));
+    let _socat = Kill(
+        Command::new("socat")
+            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
+            .spawn()
+            .expect("socat must be installed"),
+    );
+    wait_for(&a);
+    wait_for(&b);
+    let port = free_port();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/pymodbus_tcp_server.py");
+    let _server =
+        Kill(Command::new("python3").arg(script).arg(port.to_string()).stderr(Stdio::null()).spawn().unwrap());
+    let start = Instant::now();
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(start.elapsed() < Duration::from_secs(20), "the pymodbus server never listened");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let target = format!("127.0.0.1:{port}");
+    let _bridge = Kill(
+        Command::new(BIN)
+            .args(["bridge", "--reverse", "--serial", a.to_str().unwrap(), "--target", &target, "--answer-as", "1"])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    // mbpoll as the RTU master: holding registers 5–7 of unit 1 are 50, 60, 70 on the server.
+    let out = Command::new("mbpoll")
+        .args(["-m", "rtu", "-a", "1", "-b", "19200", "-P", "even", "-t", "4", "-0", "-r", "5", "-c", "3", "-1"])
+        .arg(b.to_str().unwrap())
+        .output()
+        .expect("mbpoll must be installed");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    for (r, v) in [(5, 50), (6, 60), (7, 70)] {
+        assert!(text.contains(&format!("[{r}]: \t{v}")), "{text}");
+    }
+    // A write goes through and reads back.
+    let out = Command::new("mbpoll")
+        .args(["-m", "rtu", "-a", "1", "-b", "19200", "-P", "even", "-t", "4", "-0", "-r", "9", "-1"])
+        .arg(b.to_str().unwrap())
+        .arg("4321")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
+    let out = Command::new("mbpoll")
+        .args(["-m", "rtu", "-a", "1", "-b", "19200", "-P", "even", "-t", "4", "-0", "-r", "9", "-c", "1", "-1"])
+        .arg(b.to_str().unwrap())
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&out.stdout).contains("[9]: \t4321"), "{}", String::from_utf8_lossy(&out.stdout));
+    // Unit 2 is not ours: the bridge stays silent on the bus and the master times out.
+    let out = Command::new("mbpoll")
+        .args(["-m", "rtu", "-a", "2", "-b", "19200", "-P", "even", "-t", "4", "-0", "-r", "5", "-1", "-o", "0.5"])
+        .arg(b.to_str().unwrap())
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    assert!(text.contains("timed out"), "{text}");
+}

@@ -24,6 +24,7 @@ fn run_dir(dir: &Path) -> usize {
             "profile" => mbtap::fuzzing::profile,
             "sim" => mbtap::fuzzing::sim,
             "uart" => mbtap::fuzzing::uart,
+            "bridge_response" => mbtap::fuzzing::bridge_response,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

@@ -3,10 +3,11 @@
 //! Pure parts: [`queue`] (fair per-client queues) and [`response`] (where a slave's answer
 //! ends). At the edge: [`line`] (the serial master, one transaction at a time, reopening a
 //! lost port), [`server`] (the TCP side, each connection on its own), [`metrics`] (Prometheus
-//! text).
+//! text); [`reverse`] (an RTU slave on the serial side, a Modbus TCP client behind).
 
 pub mod line;
 pub mod metrics;
 pub mod queue;
 pub mod response;
+pub mod reverse;
 pub mod server;

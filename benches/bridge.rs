@@ -1,0 +1,179 @@
+//! The bridge under load, end to end with the real binaries: `mbtap simulate` on a pseudo-
+//! terminal (answering at once: `--turnaround-ms 0`), `mbtap bridge` in front of it, and Modbus
+//! TCP clients here. Measures
+//! 1. the forwarding overhead: one client pausing past t3.5 between requests, its round trip
+//!    through the bridge against a direct RTU master's round trip on the same simulator;
+//! 2. throughput and latency (p50 / p99, queueing included) with 1, 4, 16 and 64 clients
+//!    sending back to back.
+//!
+//! Run: `cargo bench --bench bridge` (about a minute). Figures go to BENCHMARKS.md.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::cast_precision_loss)]
+#![allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // percentile indexes of short vectors
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
+/// MK4 phase voltages (unit 1, input registers 430–433).
+const PDU: [u8; 5] = [0x04, 0x01, 0xAE, 0x00, 0x04];
+const BAUD: &str = "115200";
+
+struct Kill(Child);
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn simulator(link: &Path) -> Kill {
+    let _ = std::fs::remove_file(link);
+    let k = Kill(
+        Command::new(BIN)
+            .args(["simulate", "--link", link.to_str().unwrap(), "--turnaround-ms", "0", "--baud", BAUD])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    while !link.exists() {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    k
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let i = ((v.len() - 1) as f64 * p).round() as usize;
+    v[i]
+}
+
+fn rtu(pdu: &[u8]) -> Vec<u8> {
+    let mut f = vec![1u8];
+    f.extend_from_slice(pdu);
+    let crc = mbtap::proto::crc16(&f);
+    f.extend_from_slice(&crc.to_le_bytes());
+    f
+}
+
+/// A direct RTU master on the pseudo-terminal: round trips in ms, pausing `pause` between.
+fn direct(link: &Path, n: usize, pause: Duration) -> Vec<f64> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut port = std::fs::OpenOptions::new().read(true).write(true).custom_flags(0o400).open(link).unwrap();
+    // Raw mode, as a serial master sets it.
+    let _ = Command::new("stty").args(["-F", link.to_str().unwrap(), "raw", "-echo"]).status();
+    let frame = rtu(&PDU);
+    let mut out = Vec::with_capacity(n);
+    let mut buf = [0u8; 64];
+    for _ in 0..n {
+        std::thread::sleep(pause);
+        let t = Instant::now();
+        port.write_all(&frame).unwrap();
+        let mut got = 0;
+        // 13 bytes: unit, fc, count, 8 data, CRC.
+        while got < 13 {
+            got += port.read(&mut buf[got..]).unwrap();
+        }
+        out.push(t.elapsed().as_secs_f64() * 1000.0);
+    }
+    out
+}
+
+fn bridge(link: &Path) -> (Kill, String) {
+    let mut child = Command::new(BIN)
+        .args(["bridge", "--serial", link.to_str().unwrap(), "--listen", "127.0.0.1:0", "--baud", BAUD])
+        .args(["--queue-per-client", "4"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let addr = loop {
+        let l = lines.next().unwrap().unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    std::thread::spawn(move || for _ in lines {});
+    (Kill(child), addr)
+}
+
+fn call(s: &mut TcpStream, tid: u16) {
+    let mut f = vec![0u8; 7];
+    f[..2].copy_from_slice(&tid.to_be_bytes());
+    f[5] = 6;
+    f[6] = 1;
+    f.extend_from_slice(&PDU);
+    s.write_all(&f).unwrap();
+    let mut answer = [0u8; 7 + 10];
+    s.read_exact(&mut answer).unwrap();
+    assert_eq!(answer[..2], tid.to_be_bytes());
+    assert_eq!(answer[7], 0x04, "a normal answer");
+}
+
+/// `clients` clients for `seconds`, each pausing `pause` between requests; (round trips ms, total).
+fn through_bridge(addr: &str, clients: usize, seconds: f64, pause: Duration) -> (Vec<f64>, usize) {
+    let until = Instant::now() + Duration::from_secs_f64(seconds);
+    let threads: Vec<_> = (0..clients)
+        .map(|_| {
+            let addr = addr.to_owned();
+            std::thread::spawn(move || {
+                let mut s = TcpStream::connect(&addr).unwrap();
+                s.set_nodelay(true).unwrap();
+                let mut rtts = Vec::new();
+                let mut tid = 0u16;
+                while Instant::now() < until {
+                    std::thread::sleep(pause);
+                    tid = tid.wrapping_add(1);
+                    let t = Instant::now();
+                    call(&mut s, tid);
+                    rtts.push(t.elapsed().as_secs_f64() * 1000.0);
+                }
+                rtts
+            })
+        })
+        .collect();
+    let mut all = Vec::new();
+    for t in threads {
+        all.extend(t.join().unwrap());
+    }
+    let n = all.len();
+    (all, n)
+}
+
+fn main() {
+    let dir = std::env::temp_dir().join(format!("mbtap-bench-bridge-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("bus");
+    // t3.5 at 115200 is fixed at 1.75 ms (Serial Line v1.02 §2.5.1.1); pause past it.
+    let pause = Duration::from_millis(3);
+
+    let sim = simulator(&link);
+    let mut d = direct(&link, 2000, pause);
+    drop(sim);
+    let (d50, d99) = (percentile(&mut d, 0.5), percentile(&mut d, 0.99));
+    println!("direct RTU master, {} round trips: p50 {d50:.3} ms, p99 {d99:.3} ms", d.len());
+
+    let _sim = simulator(&link);
+    let (_bridge, addr) = bridge(&link);
+    let (mut b, _) = through_bridge(&addr, 1, 6.0, pause);
+    let (b50, b99) = (percentile(&mut b, 0.5), percentile(&mut b, 0.99));
+    println!(
+        "through the bridge, 1 client pausing 3 ms, {} round trips: p50 {b50:.3} ms, p99 {b99:.3} ms → added p50 {:.3} ms, p99 {:.3} ms",
+        b.len(),
+        b50 - d50,
+        b99 - d99
+    );
+    for clients in [1, 4, 16, 64] {
+        let seconds = 8.0;
+        let (mut rtts, n) = through_bridge(&addr, clients, seconds, Duration::ZERO);
+        println!(
+            "{clients:>2} clients back to back: {:.0} transactions/s, round trip p50 {:.2} ms, p99 {:.2} ms",
+            n as f64 / seconds,
+            percentile(&mut rtts, 0.5),
+            percentile(&mut rtts, 0.99)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

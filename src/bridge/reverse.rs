@@ -1,0 +1,194 @@
+//! Reverse mode: the bridge answers as slave addresses on the serial bus and forwards each
+//! request to a Modbus TCP server, so an RTU (or ASCII) master can reach TCP devices.
+//!
+//! Requests are framed from the serial bytes the way a slave's UART sees them (structure and
+//! CRC, the silence for functions of unknown length: [`crate::sim::RequestAssembler`]). The TCP
+//! side is a plain MBAP client kept open and reconnected on failure; PDUs pass through
+//! unchanged in both directions, vendor codes included — which is why it is not tokio-modbus's
+//! client, whose typed responses would have to be re-encoded. A TCP server that cannot be
+//! reached gives exception 0x0A, one that does not answer in time 0x0B (MAP v1.1b3 §7).
+
+use std::collections::BTreeSet;
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+use tokio_serial::{SerialPortBuilderExt, SerialStream};
+
+use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED};
+use super::metrics::Metrics;
+use crate::analyzer::SerialMode;
+use crate::framer::LineSettings;
+use crate::proto::tcp::{Streaming, parse_tcp_frame};
+use crate::proto::{encode_ascii, encode_rtu, encode_tcp};
+use crate::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
+
+/// Reverse-mode settings.
+#[derive(Debug, Clone)]
+pub struct ReverseOptions {
+    pub port: String,
+    pub line: LineSettings,
+    pub mode: SerialMode,
+    /// Serial addresses to answer as (empty: every address 1–247).
+    pub units: BTreeSet<u8>,
+    /// The Modbus TCP server (`HOST:PORT`).
+    pub target: String,
+    pub timeout: Duration,
+    /// Time from the end of a request to the answer (a slave's turnaround).
+    pub turnaround: Duration,
+}
+
+/// Runs until the future is dropped; the serial port is reopened when it goes away.
+pub async fn run(opts: ReverseOptions, metrics: &Metrics) {
+    let mut tcp: Option<TcpStream> = None;
+    let mut tid: u16 = 0;
+    loop {
+        let Ok(mut port) = crate::source::serial::builder(&opts.port, opts.line).open_native_async() else {
+            metrics.note(&format!("cannot open {}; retrying", opts.port));
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            continue;
+        };
+        if let Err(e) = serve_port(&opts, &mut port, &mut tcp, &mut tid, metrics).await {
+            metrics.note(&format!("serial port {} lost: {e}; reopening", opts.port));
+            metrics.reopened();
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
+}
+
+async fn serve_port(
+    opts: &ReverseOptions,
+    port: &mut SerialStream,
+    tcp: &mut Option<TcpStream>,
+    tid: &mut u16,
+    metrics: &Metrics,
+) -> std::io::Result<()> {
+    let mut rtu = RequestAssembler::default();
+    let mut ascii = AsciiRequestAssembler::default();
+    let silence = Duration::from_nanos(opts.line.t35_ns()) + Duration::from_millis(1);
+    let mut buf = [0u8; 512];
+    let mut out = Vec::with_capacity(300);
+    loop {
+        let pending = match opts.mode {
+            SerialMode::Rtu => rtu.pending(),
+            SerialMode::Ascii => 0,
+        };
+        let wait = if pending > 0 { silence } else { Duration::from_hours(1) };
+        let mut requests: Vec<RequestFrame> = Vec::new();
+        match tokio::time::timeout(wait, port.read(&mut buf)).await {
+            Ok(Ok(0)) => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
+            Ok(Ok(n)) => {
+                let got = buf.get(..n).unwrap_or_default();
+                match opts.mode {
+                    SerialMode::Rtu => {
+                        rtu.push(got);
+                        requests.extend(std::iter::from_fn(|| rtu.next_request()));
+                    }
+                    SerialMode::Ascii => {
+                        ascii.push(got);
+                        requests.extend(std::iter::from_fn(|| ascii.next_request()));
+                    }
+                }
+            }
+            Ok(Err(e)) => return Err(e),
+            Err(_) => requests.extend(rtu.silence()),
+        }
+        for r in requests {
+            let broadcast = r.unit == 0;
+            let ours = opts.units.contains(&r.unit) || opts.units.is_empty() && r.unit <= 247;
+            if !(broadcast || ours) {
+                continue;
+            }
+            metrics.request(r.unit);
+            let answer = forward(opts, tcp, tid, r.unit, &r.pdu).await;
+            let pdu = match answer {
+                Ok(pdu) => {
+                    metrics.response(r.unit, &pdu);
+                    pdu
+                }
+                Err(code) => {
+                    metrics.gateway_exception(r.unit, code);
+                    vec![r.pdu.first().copied().unwrap_or(0) | 0x80, code]
+                }
+            };
+            if broadcast {
+                // Broadcasts are never answered (Serial Line v1.02 §2.1).
+                continue;
+            }
+            tokio::time::sleep(opts.turnaround).await;
+            out.clear();
+            match opts.mode {
+                SerialMode::Rtu => encode_rtu(r.unit, &pdu, &mut out),
+                SerialMode::Ascii => encode_ascii(r.unit, &pdu, &mut out),
+            }
+            port.write_all(&out).await?;
+        }
+    }
+}
+
+/// One request to the TCP server; its response PDU, or the gateway exception to answer.
+async fn forward(
+    opts: &ReverseOptions,
+    tcp: &mut Option<TcpStream>,
+    tid: &mut u16,
+    unit: u8,
+    pdu: &[u8],
+) -> Result<Vec<u8>, u8> {
+    // One reconnect per request: a server that restarted is found again at once.
+    for _ in 0..2 {
+        if tcp.is_none() {
+            let connect = tokio::time::timeout(opts.timeout, TcpStream::connect(&opts.target)).await;
+            match connect {
+                Ok(Ok(s)) => {
+                    let _ = s.set_nodelay(true);
+                    *tcp = Some(s);
+                }
+                _ => return Err(GATEWAY_PATH_UNAVAILABLE),
+            }
+        }
+        let Some(s) = tcp.as_mut() else { return Err(GATEWAY_PATH_UNAVAILABLE) };
+        *tid = tid.wrapping_add(1);
+        let mut frame = Vec::with_capacity(pdu.len() + 7);
+        encode_tcp(*tid, unit, pdu, &mut frame);
+        if s.write_all(&frame).await.is_err() {
+            *tcp = None;
+            continue;
+        }
+        match tokio::time::timeout(opts.timeout, read_answer(s, *tid)).await {
+            Ok(Ok(pdu)) => return Ok(pdu),
+            Ok(Err(_)) => *tcp = None,
+            Err(_) => {
+                // A late answer would arrive with this transaction id: start clean.
+                *tcp = None;
+                return Err(GATEWAY_TARGET_FAILED);
+            }
+        }
+    }
+    Err(GATEWAY_PATH_UNAVAILABLE)
+}
+
+/// Reads MBAP frames until the one with `tid`; its PDU.
+async fn read_answer(s: &mut TcpStream, tid: u16) -> std::io::Result<Vec<u8>> {
+    let mut buf = Vec::with_capacity(300);
+    let mut chunk = [0u8; 300];
+    loop {
+        match parse_tcp_frame(&buf) {
+            Ok(Streaming::Complete(f, used)) => {
+                let pdu = f.pdu.to_vec();
+                let this = f.header.transaction_id == tid;
+                buf.drain(..used);
+                if this {
+                    return Ok(pdu);
+                }
+            }
+            Ok(Streaming::Incomplete(_)) => {
+                let n = s.read(&mut chunk).await?;
+                if n == 0 {
+                    return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the server closed"));
+                }
+                buf.extend_from_slice(chunk.get(..n).unwrap_or_default());
+            }
+            Err(e) => return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, e.to_string())),
+        }
+    }
+}
