@@ -330,7 +330,10 @@ pub enum Command {
         heard_at: Option<LineSettings>,
     },
     /// Modbus TCP clients to serial devices: a TCP server in front of a serial master.
+    #[command(args_override_self = true)]
     Bridge(Box<BridgeArgs>),
+    /// Print a commented sample configuration for `bridge --config`.
+    GenerateConfig,
     /// Device profiles: check a profile file, or show what it defines.
     #[command(subcommand)]
     Profiles(ProfilesCommand),
@@ -339,6 +342,9 @@ pub enum Command {
 /// `mbtap bridge …` (boxed: by far the largest command).
 #[derive(Debug, Args)]
 pub struct BridgeArgs {
+    /// Read settings from this TOML file ([bridge] table; the command line wins).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
     /// The serial port of the line (all units; see --route for several lines).
     #[arg(long)]
     pub serial: Option<String>,

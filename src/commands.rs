@@ -171,8 +171,13 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::GenerateConfig => {
+            print!("{}", crate::bridge_config::SAMPLE);
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Bridge(args) => {
             let crate::cli::BridgeArgs {
+                config: _,
                 serial,
                 line,
                 listen,

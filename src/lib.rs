@@ -22,6 +22,7 @@
 pub mod analyzer;
 pub mod bridge;
 pub mod bridge_cmd;
+pub mod bridge_config;
 pub mod capture;
 pub mod chunk;
 pub mod cli;

@@ -8,7 +8,15 @@ use clap::Parser;
 use mbtap::cli::Cli;
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    // `bridge --config FILE`: the file's settings become options the command line overrides.
+    let args = match mbtap::bridge_config::expand(std::env::args_os().collect()) {
+        Ok(args) => args,
+        Err(e) => {
+            eprintln!("mbtap: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let cli = Cli::parse_from(args);
     match mbtap::commands::run(cli.command) {
         Ok(code) => code,
         Err(e) => {
