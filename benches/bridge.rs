@@ -6,7 +6,12 @@
 //! 2. throughput and latency (p50 / p99, queueing included) with 1, 4, 16 and 64 clients
 //!    sending back to back.
 //!
-//! Run: `cargo bench --bench bridge` (about a minute). Figures go to BENCHMARKS.md.
+//! 3. on a line paced at 9600 baud (the simulator takes each request's and answer's line time,
+//!    `simulate --paced`), 16 clients back to back, heard by mbtap's own tap between the bridge
+//!    and the line: the idle time between each answer and the next request, and the share of
+//!    line time in use.
+//!
+//! Run: `cargo bench --bench bridge` (about two minutes). Figures go to BENCHMARKS.md.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::cast_precision_loss)]
 #![allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // percentile indexes of short vectors
 
@@ -155,8 +160,8 @@ fn main() {
     let (d50, d99) = (percentile(&mut d, 0.5), percentile(&mut d, 0.99));
     println!("direct RTU master, {} round trips: p50 {d50:.3} ms, p99 {d99:.3} ms", d.len());
 
-    let _sim = simulator(&link);
-    let (_bridge, addr) = bridge(&link);
+    let sim = simulator(&link);
+    let (bridge_process, addr) = bridge(&link);
     let (mut b, _) = through_bridge(&addr, 1, 6.0, pause);
     let (b50, b99) = (percentile(&mut b, 0.5), percentile(&mut b, 0.99));
     println!(
@@ -175,5 +180,83 @@ fn main() {
             percentile(&mut rtts, 0.99)
         );
     }
+    drop(bridge_process);
+    drop(sim);
+    line_at_9600(&dir);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// 16 clients through the bridge onto a paced 9600 8E1 line, heard by `mbtap tap`.
+fn line_at_9600(dir: &Path) {
+    let bus = dir.join("bus9600");
+    let app = dir.join("app9600");
+    let _ = std::fs::remove_file(&bus);
+    let _sim = Kill(
+        Command::new(BIN)
+            .args(["simulate", "--link", bus.to_str().unwrap(), "--paced", "--baud", "9600"])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    while !bus.exists() {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut tap = Command::new(BIN)
+        .args(["tap", bus.to_str().unwrap(), "--link", app.to_str().unwrap(), "--baud", "9600", "--format", "jsonl"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    while !app.exists() {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut child = Command::new(BIN)
+        .args(["bridge", "--serial", app.to_str().unwrap(), "--listen", "127.0.0.1:0", "--baud", "9600"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let addr = loop {
+        let l = lines.next().unwrap().unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    let bridge = Kill(child);
+    let seconds = 20.0;
+    let (_, n) = through_bridge(&addr, 16, seconds, Duration::ZERO);
+    drop(bridge);
+    let _ = Command::new("kill").args(["-INT", &tap.id().to_string()]).status();
+    let mut out = String::new();
+    tap.stdout.take().unwrap().read_to_string(&mut out).unwrap();
+    let _ = tap.wait();
+    // Frames in order: (port, arrival of the last byte, bytes).
+    let frames: Vec<(u64, u64, usize)> = out
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|j| j["event"] == "frame" && j["check_ok"] == true)
+        .map(|j| (j["port"].as_u64().unwrap(), j["t_end_ns"].as_u64().unwrap(), j["hex"].as_str().unwrap().len() / 2))
+        .collect();
+    // Idle: from an answer's last byte to the next request's arrival (the bridge writes a
+    // request at once; on a real line it would start crossing then).
+    let mut idle: Vec<f64> = frames
+        .windows(2)
+        .filter(|w| w[0].0 == 1 && w[1].0 == 0)
+        .map(|w| (w[1].1.saturating_sub(w[0].1)) as f64 / 1e6)
+        .collect();
+    let char_ns = 11.0 * 1e9 / 9600.0;
+    let (first, last) = (frames.first().map_or(0, |f| f.1), frames.last().map_or(0, |f| f.1));
+    let busy: f64 = frames.iter().map(|f| f.2 as f64 * char_ns).sum();
+    let t35 = 3.5 * char_ns / 1e6;
+    let over = idle.iter().filter(|&&g| g > t35 + 0.5).count();
+    println!(
+        "9600 8E1 paced line, 16 clients, {seconds} s: {:.1} transactions/s through the bridge; line in use {:.1} % of the time; \
+         idle between answer and next request over {} gaps: p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (t3.5 = {t35:.2} ms; {over} gaps over t3.5 + 0.5 ms)",
+        n as f64 / seconds,
+        busy / (last - first) as f64 * 100.0,
+        idle.len(),
+        percentile(&mut idle, 0.5),
+        percentile(&mut idle, 0.99),
+        percentile(&mut idle, 1.0),
+    );
 }

@@ -318,6 +318,10 @@ pub enum Command {
         /// A slave's time from the end of a request to its answer, ms.
         #[arg(long, default_value_t = 3.0)]
         turnaround_ms: f64,
+        /// Take the line's time when answering: requests end when their characters would
+        /// have crossed the line, answers leave at the character rate.
+        #[arg(long)]
+        paced: bool,
         /// Play the master too: poll the devices and put the whole line on the pseudo-terminal,
         /// paced at the line's character rate, for a listener (`mbtap sniff LINK`).
         #[arg(long)]

@@ -311,7 +311,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 }
             }
         }
-        Command::Simulate { link, devices, line, duration, turnaround_ms, poll, faults, heard_at } => {
+        Command::Simulate { link, devices, line, duration, turnaround_ms, paced, poll, faults, heard_at } => {
             anyhow::ensure!(
                 turnaround_ms.is_finite() && turnaround_ms >= 0.0,
                 "--turnaround-ms {turnaround_ms}: expected 0 or more"
@@ -330,6 +330,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 mode,
                 duration: seconds(duration),
                 turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
+                paced,
                 poll: poll.then(|| crate::simulate_cmd::PollOptions { faults: fault_list(&faults), heard_at }),
             };
             let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;

@@ -61,6 +61,9 @@ pub struct SimulateOptions {
     pub duration: Option<Duration>,
     /// A slave's time from a request to its answer.
     pub turnaround: Duration,
+    /// Answer mode: take the line's time — a request ends when its characters would have
+    /// crossed the line, and the answer leaves at the character rate (in 1 ms batches).
+    pub paced: bool,
     /// Play the master too (`--poll`): the whole line goes out on the pseudo-terminal, for a
     /// listener (`mbtap sniff`) to hear.
     pub poll: Option<PollOptions>,
@@ -144,6 +147,9 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
     };
     let mut buf = [0u8; 512];
     let mut out = Vec::with_capacity(260);
+    let char_time = Duration::from_nanos(opts.line.char_ns());
+    // Paced: when the first byte of the request being heard arrived, and how many bytes so far.
+    let mut request_start: Option<(tokio::time::Instant, usize)> = None;
     loop {
         if deadline.is_some_and(|d| Instant::now() >= d) {
             break;
@@ -159,7 +165,11 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
                 tokio::time::sleep(Duration::from_millis(20)).await;
                 continue;
             }
-            Ok(Ok(n)) => assembler.push(buf.get(..n).unwrap_or_default(), &mut requests),
+            Ok(Ok(n)) => {
+                let (_, count) = request_start.get_or_insert((tokio::time::Instant::now(), 0));
+                *count += n;
+                assembler.push(buf.get(..n).unwrap_or_default(), &mut requests);
+            }
             // EIO while no master has the far end open; try again shortly.
             Ok(Err(_)) => {
                 tokio::time::sleep(Duration::from_millis(20)).await;
@@ -168,13 +178,18 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
             Err(_) => requests.extend(assembler.silence()),
         }
         let t = started.elapsed().as_secs_f64();
+        // Paced: a request is over when its characters would have crossed the line.
+        let heard = if requests.is_empty() { None } else { request_start.take() };
         for request in requests {
             for s in &mut slaves {
                 world::step(s, t);
                 if let Some(pdu) = s.handle(request.unit, &request.pdu) {
                     // A slave answers after a turnaround (the MK4 document gives no figure;
                     // a few milliseconds is typical of such controllers).
-                    if !opts.turnaround.is_zero() {
+                    if let (true, Some((first, count))) = (opts.paced, heard) {
+                        let ended = first + char_time * u32::try_from(count).unwrap_or(u32::MAX);
+                        tokio::time::sleep_until(ended + opts.turnaround).await;
+                    } else if !opts.turnaround.is_zero() {
                         tokio::time::sleep(opts.turnaround).await;
                     }
                     out.clear();
@@ -182,9 +197,13 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
                         SerialMode::Rtu => encode_rtu(request.unit, &pdu, &mut out),
                         SerialMode::Ascii => encode_ascii(request.unit, &pdu, &mut out),
                     }
-                    AsyncWriteExt::write_all(&mut master_side, &out)
-                        .await
-                        .context("writing a response to the pseudo-terminal")?;
+                    if opts.paced {
+                        write_paced(&mut master_side, &out, char_time).await?;
+                    } else {
+                        AsyncWriteExt::write_all(&mut master_side, &out)
+                            .await
+                            .context("writing a response to the pseudo-terminal")?;
+                    }
                     let _ = AsyncWriteExt::flush(&mut master_side).await;
                     // Only one slave answers an address (two on one address is a fault to inject).
                     break;
@@ -260,4 +279,24 @@ async fn drive_line(
 /// Whatever a listener writes is read and dropped here (a sniffer writes nothing).
 async fn nobody_listening(port: &mut SerialStream, scratch: &mut [u8]) -> bool {
     matches!(tokio::time::timeout(Duration::ZERO, port.read(scratch)).await, Ok(Err(_) | Ok(0)))
+}
+
+/// Writes `bytes` at the character rate, in 1 ms batches (the timer's granularity).
+async fn write_paced(port: &mut SerialStream, bytes: &[u8], char_time: Duration) -> anyhow::Result<()> {
+    let start = tokio::time::Instant::now();
+    let mut sent = 0;
+    while sent < bytes.len() {
+        let due = u32::try_from(start.elapsed().as_nanos() / char_time.as_nanos().max(1)).unwrap_or(u32::MAX);
+        let upto = usize::try_from(due).unwrap_or(usize::MAX).saturating_add(1).min(bytes.len());
+        if upto > sent {
+            AsyncWriteExt::write_all(port, bytes.get(sent..upto).unwrap_or_default())
+                .await
+                .context("writing a response to the pseudo-terminal")?;
+            sent = upto;
+        }
+        if sent < bytes.len() {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+    }
+    Ok(())
 }
