@@ -203,7 +203,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 devices,
                 duration,
             } = *args;
-            let (mode, settings, _) = overrides(&line).resolve();
+            let (mode, settings, latency_ns) = overrides(&line).resolve();
             if reverse {
                 let port = serial.context("--reverse needs --serial PORT: the line to answer on")?;
                 let opts = crate::bridge::reverse::ReverseOptions {
@@ -238,6 +238,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 retries,
                 turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
                 broadcast_reply,
+                latency: std::time::Duration::from_nanos(latency_ns),
             };
             let mut lines = Vec::new();
             for r in &routes {

@@ -61,6 +61,9 @@ pub struct LineOptions {
     pub turnaround: Duration,
     /// Answer broadcast writes at once (for SCADA that insists on a reply).
     pub broadcast_reply: bool,
+    /// How late the adapter may deliver a byte (a USB adapter's latency timer): added to the
+    /// silence that ends an answer of unknown length.
+    pub latency: Duration,
 }
 
 /// What the line task and the connections share.
@@ -269,7 +272,9 @@ impl Master<'_> {
         // RTU: t3.5 of silence ends a frame; ASCII: the 1 s inter-character timeout (Serial
         // Line v1.02 §2.5.2.1). Plus one timer tick, as reads come in 1 ms steps.
         let silence = match self.opts.mode {
-            SerialMode::Rtu => Duration::from_nanos(self.opts.line.t35_ns()) + Duration::from_millis(1),
+            SerialMode::Rtu => {
+                Duration::from_nanos(self.opts.line.t35_ns()) + Duration::from_millis(1) + self.opts.latency
+            }
             SerialMode::Ascii => Duration::from_secs(1),
         };
         self.buf.clear();

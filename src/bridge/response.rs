@@ -34,11 +34,15 @@ pub fn judge_rtu(buf: &[u8], unit: u8, function: u8, silent: bool) -> Verdict {
             })
     };
     let (Some(&u), Some(&fc)) = (buf.first(), buf.get(1)) else {
-        return if silent && !buf.is_empty() { Verdict::Foreign } else { Verdict::Pending };
+        // One byte: the start of the answer (wait for more) unless it names another unit.
+        return if silent && buf.first().is_some_and(|&u| u != unit) { Verdict::Foreign } else { Verdict::Pending };
     };
     if u != unit {
         return if silent { Verdict::Foreign } else { Verdict::Pending };
     }
+    // A frame whose structure says more bytes are coming waits for them (until the response
+    // timeout) even across a silence: USB adapters deliver in bursts, and a pause inside an
+    // answer is the adapter's latency far more often than a truncated frame.
     if fc == function | 0x80 {
         // Exception: unit, function | 0x80, code, CRC (MAP v1.1b3 §7).
         return match buf.len() {
@@ -54,16 +58,17 @@ pub fn judge_rtu(buf: &[u8], unit: u8, function: u8, silent: bool) -> Verdict {
             let total = pdu.saturating_add(3);
             if buf.len() >= total && crc_ok(total) {
                 Verdict::Answer { len: total }
-            } else if silent {
+            } else if silent && buf.len() >= total {
                 Verdict::BadCheck
             } else {
                 Verdict::Pending
             }
         }
+        PduLength::AtLeast(_) => Verdict::Pending,
         // Only the silence ends it; then the whole of it must check.
         PduLength::Unknown if silent && crc_ok(buf.len()) => Verdict::Answer { len: buf.len() },
-        PduLength::AtLeast(_) | PduLength::Unknown if silent => Verdict::BadCheck,
-        PduLength::AtLeast(_) | PduLength::Unknown => Verdict::Pending,
+        PduLength::Unknown if silent => Verdict::BadCheck,
+        PduLength::Unknown => Verdict::Pending,
     }
 }
 
@@ -113,6 +118,17 @@ mod tests {
         bad[4] ^= 1;
         assert_eq!(judge_rtu(&bad, 1, 0x03, false), Verdict::Pending, "more may come, or the silence");
         assert_eq!(judge_rtu(&bad, 1, 0x03, true), Verdict::BadCheck);
+    }
+
+    /// Regression: a USB adapter (or a relay) delivering an answer in bursts with pauses
+    /// longer than t3.5 made the bridge call half an answer a CRC error.
+    #[test]
+    fn a_pause_inside_a_known_length_answer_is_waited_out() {
+        let resp = rtu(&[0x01, 0x04, 0x08, 0x08, 0xF7, 0x09, 0x07, 0x08, 0xF6, 0x08, 0xFC]);
+        for cut in 1..resp.len() {
+            assert_eq!(judge_rtu(&resp[..cut], 1, 0x04, true), Verdict::Pending, "{cut} bytes then a pause");
+        }
+        assert_eq!(judge_rtu(&resp, 1, 0x04, true), Verdict::Answer { len: resp.len() });
     }
 
     #[test]
