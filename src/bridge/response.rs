@@ -64,11 +64,10 @@ pub fn judge_rtu(buf: &[u8], unit: u8, function: u8, silent: bool) -> Verdict {
                 Verdict::Pending
             }
         }
-        PduLength::AtLeast(_) => Verdict::Pending,
         // Only the silence ends it; then the whole of it must check.
         PduLength::Unknown if silent && crc_ok(buf.len()) => Verdict::Answer { len: buf.len() },
         PduLength::Unknown if silent => Verdict::BadCheck,
-        PduLength::Unknown => Verdict::Pending,
+        PduLength::AtLeast(_) | PduLength::Unknown => Verdict::Pending,
     }
 }
 
