@@ -338,6 +338,19 @@ pub enum Command {
     Bridge(Box<BridgeArgs>),
     /// Print a commented sample configuration for `bridge --config`.
     GenerateConfig,
+    /// A bus health report from a capture: per unit and per bus, and findings with evidence.
+    Report {
+        /// The capture file (pcap or pcapng, as `sniff --record` writes).
+        file: PathBuf,
+        #[command(flatten)]
+        line: LineArgs,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = ReportFormatArg::Text)]
+        format: ReportFormatArg,
+        /// Check unit UNIT's values against a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
+        #[arg(long = "device", value_name = "UNIT=PROFILE")]
+        devices: Vec<String>,
+    },
     /// Device profiles: check a profile file, or show what it defines.
     #[command(subcommand)]
     Profiles(ProfilesCommand),
@@ -421,6 +434,14 @@ pub struct BridgeArgs {
     /// Stop after this many seconds.
     #[arg(long)]
     pub duration: Option<f64>,
+}
+
+/// Output of `report`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ReportFormatArg {
+    Text,
+    /// One JSON document with a top-level `findings` list.
+    Json,
 }
 
 /// A fault to inject on the simulated line.

@@ -171,6 +171,25 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Report { file, line, format, devices } => {
+            let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+            let mut health = crate::health::Health::new(load_devices(&devices)?);
+            let mut warnings = Vec::new();
+            {
+                let mut sink = HealthSink { health: &mut health, warnings: &mut warnings };
+                crate::replay_cmd::replay_into(input, overrides(&line), &mut sink)
+                    .with_context(|| format!("reading {}", file.display()))?;
+            }
+            for w in &warnings {
+                eprintln!("mbtap: warning: {w}");
+            }
+            let report = health.report();
+            match format {
+                crate::cli::ReportFormatArg::Text => print!("{}", report.text()),
+                crate::cli::ReportFormatArg::Json => println!("{}", serde_json::to_string_pretty(&report.json())?),
+            }
+            Ok(ExitCode::SUCCESS)
+        }
         Command::GenerateConfig => {
             print!("{}", crate::bridge_config::SAMPLE);
             Ok(ExitCode::SUCCESS)
@@ -647,4 +666,20 @@ fn fault_list(args: &[crate::cli::FaultArg]) -> Vec<crate::sim::bus::Fault> {
             FaultArg::All => Fault::ALL.to_vec(),
         })
         .collect()
+}
+
+/// The health report as an analyzer sink.
+struct HealthSink<'a> {
+    health: &'a mut crate::health::Health,
+    warnings: &'a mut Vec<String>,
+}
+
+impl crate::analyzer::Sink for HealthSink<'_> {
+    fn event(&mut self, event: &crate::analyzer::Event<'_>) {
+        self.health.event(event);
+    }
+
+    fn warning(&mut self, message: &str) {
+        self.warnings.push(message.to_owned());
+    }
 }

@@ -33,6 +33,7 @@ pub mod demo_cmd;
 pub mod framer;
 pub mod fuzzing;
 pub mod generate_cmd;
+pub mod health;
 pub mod hexinput;
 pub mod line_args;
 pub mod pairing;

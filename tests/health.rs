@@ -1,0 +1,182 @@
+//! The health report names each fault the virtual bus injects — with the right unit, count and
+//! times — and says nothing about a healthy bus. Ground truth comes from the frames the bus
+//! generated, not from the analyzer.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use mbtap::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap::chunk::{Chunk, PortId, Timestamp};
+use mbtap::framer::{FramerConfig, LineSettings};
+use mbtap::health::{Finding, Health, Report};
+use mbtap::sim::Slave;
+use mbtap::sim::bus::{Fault, LineFrame, VirtualBus};
+use mbtap::sim::uart::Listener;
+
+const START_NS: u64 = 1_000_000_000_000;
+
+/// `n` transactions of the demo bus with `faults` (every 4th), heard at `heard_at`; the
+/// frames of each transaction and the report.
+fn run(n: usize, faults: &[Fault], heard_at: Option<LineSettings>) -> (Vec<Vec<LineFrame>>, Report) {
+    let profiles = mbtap::demo_cmd::profiles().unwrap();
+    let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
+    let line = LineSettings::default();
+    let mut bus = VirtualBus::new(slaves, line);
+    bus.faults = faults.to_vec();
+    let listen = heard_at.unwrap_or(line);
+    let mut listener = Listener::new(line, listen);
+    let mut health = Health::new(profiles);
+    let mut analyzer =
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(listen, 0), ..AnalyzerConfig::default() });
+    let mut all = Vec::new();
+    for _ in 0..n {
+        let frames = bus.next_transaction();
+        for f in &frames {
+            let bytes: Vec<u8> = listener.hear(f).into_iter().map(|(_, b)| b).collect();
+            let t = Timestamp(START_NS + f.end_ns);
+            analyzer.push(&Chunk { port: PortId(0), t, bytes: &bytes }, &mut |e: &Event<'_>| health.event(e));
+            analyzer.tick(Timestamp(t.0 + 2_000_000), &mut |e: &Event<'_>| health.event(e));
+        }
+        all.push(frames);
+    }
+    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
+    (all, health.report())
+}
+
+fn of_kind<'a>(r: &'a Report, kind: &str) -> Vec<&'a Finding> {
+    r.findings.iter().filter(|f| f.kind == kind).collect()
+}
+
+fn crc_ok(f: &[u8]) -> bool {
+    f.len() >= 4 && mbtap::proto::crc16(&f[..f.len() - 2]).to_le_bytes() == f[f.len() - 2..]
+}
+
+/// Start of a frame (ns, as the report's clock) from its end and length.
+fn start_ns(f: &LineFrame) -> u64 {
+    START_NS + f.end_ns - LineSettings::default().char_ns() * f.bytes.len() as u64
+}
+
+#[test]
+fn a_healthy_bus_gives_a_clean_report() {
+    let (_, r) = run(200, &[], None);
+    assert!(r.findings.is_empty(), "{}", r.text());
+    assert_eq!(r.units.len(), 3);
+    assert!(r.units.iter().all(|u| (u.availability_percent - 100.0).abs() < 1e-9));
+    assert!(r.text().contains("findings: none"));
+}
+
+#[test]
+fn a_silent_slave_is_named_with_its_unanswered_requests_and_times() {
+    let (tx, r) = run(120, &[Fault::SilentSlave], None);
+    // Ground truth: transactions that are a request alone.
+    let mut truth: BTreeMap<u8, Vec<u64>> = BTreeMap::new();
+    for frames in &tx {
+        if frames.len() == 1 {
+            truth.entry(frames[0].bytes[0]).or_default().push(start_ns(&frames[0]));
+        }
+    }
+    let found = of_kind(&r, "no_response");
+    assert_eq!(found.len(), truth.len(), "{}", r.text());
+    for f in found {
+        let times = &truth[&f.unit.unwrap()];
+        assert_eq!(f.count, times.len() as u64);
+        assert!(f.first_t_ns.abs_diff(times[0]) < 1_000_000, "first time");
+        assert!(f.last_t_ns.abs_diff(*times.last().unwrap()) < 1_000_000, "last time");
+        assert!(f.summary.contains("intermittently"), "they answer the other polls: {}", f.summary);
+    }
+}
+
+#[test]
+fn corrupted_answers_are_check_errors_of_their_units_or_of_the_bus() {
+    let (tx, r) = run(120, &[Fault::Corrupt], None);
+    let bad: u64 = tx.iter().filter(|f| f.len() == 2 && !crc_ok(&f[1].bytes)).count() as u64;
+    let found = of_kind(&r, "check_errors");
+    assert!(!found.is_empty(), "{}", r.text());
+    assert_eq!(found.iter().map(|f| f.count).sum::<u64>(), bad, "{}", r.text());
+    assert!(of_kind(&r, "no_response").is_empty(), "{}", r.text());
+}
+
+#[test]
+fn noise_bursts_are_counted() {
+    let (tx, r) = run(120, &[Fault::Noise], None);
+    let bursts = tx.iter().filter(|f| f.len() == 3).count() as u64;
+    let found = of_kind(&r, "noise");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!(found[0].unit, None);
+    assert_eq!(found[0].count, bursts);
+}
+
+#[test]
+fn a_slave_pausing_inside_its_frames_is_named() {
+    let (tx, r) = run(120, &[Fault::SlowSlave], None);
+    // Ground truth: answers sent in two parts.
+    let mut truth: BTreeMap<u8, u64> = BTreeMap::new();
+    for frames in &tx {
+        if frames.len() == 3 {
+            *truth.entry(frames[1].bytes[0]).or_default() += 1;
+        }
+    }
+    let found: BTreeMap<u8, u64> = of_kind(&r, "gap_inside_frame").iter().map(|f| (f.unit.unwrap(), f.count)).collect();
+    assert_eq!(found, truth, "{}", r.text());
+}
+
+#[test]
+fn a_master_polling_faster_than_t35_is_named() {
+    let (tx, r) = run(120, &[Fault::FastMaster], None);
+    // Ground truth: requests that start less than t3.5 after the previous frame ended.
+    let t35 = LineSettings::default().t35_ns();
+    let fast = tx.windows(2).filter(|w| start_ns(&w[1][0]) - (START_NS + w[0].last().unwrap().end_ns) < t35).count();
+    let found = of_kind(&r, "fast_master");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!(found[0].count, fast as u64, "{}", r.text());
+}
+
+#[test]
+fn a_listener_at_the_wrong_baud_rate_is_told_so() {
+    let (_, r) = run(60, &[], Some("9600 8N1".parse().unwrap()));
+    let found = of_kind(&r, "wrong_line_settings");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert!(found[0].summary.contains("mbtap scan"));
+}
+
+#[test]
+fn an_exception_storm_is_named_with_its_codes() {
+    // A master polling registers the MK4 does not have: exception 02 every time.
+    let profile = mbtap::profile::builtin::get("mk4").unwrap().unwrap();
+    let mut slave = Slave::new(Arc::new(profile), 1);
+    let mut health = Health::new(mbtap::decode_cmd::Profiles::new());
+    let mut analyzer = Analyzer::new(AnalyzerConfig::default());
+    let char_ns = LineSettings::default().char_ns();
+    let mut t = START_NS;
+    for _ in 0..20 {
+        let pdu = [0x04, 0x03, 0xE8, 0x00, 0x01];
+        let mut req = Vec::new();
+        mbtap::proto::encode_rtu(1, &pdu, &mut req);
+        let mut resp = Vec::new();
+        mbtap::proto::encode_rtu(1, &slave.handle(1, &pdu).unwrap(), &mut resp);
+        for frame in [req, resp] {
+            t += char_ns * frame.len() as u64 + 5_000_000;
+            analyzer
+                .push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: &frame }, &mut |e: &Event<'_>| health.event(e));
+        }
+        t += 100_000_000;
+    }
+    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
+    let r = health.report();
+    let found = of_kind(&r, "exception_storm");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!((found[0].unit, found[0].count), (Some(1), 20));
+    assert!(found[0].summary.contains("0x02×20"), "{}", found[0].summary);
+}
+
+#[test]
+fn the_json_report_has_the_documented_keys() {
+    let (_, r) = run(60, &[Fault::SilentSlave], None);
+    let j = r.json();
+    let f = &j["findings"][0];
+    for key in ["kind", "unit", "count", "first_t_ns", "last_t_ns", "evidence"] {
+        assert!(!f[key].is_null() || key == "unit", "{key} missing in {f}");
+    }
+    assert!(j["units"].as_array().unwrap().len() == 3);
+}
