@@ -442,6 +442,8 @@ pub enum ReportFormatArg {
     Text,
     /// One JSON document with a top-level `findings` list.
     Json,
+    /// A self-contained HTML page with plots (latency, errors over time, availability).
+    Html,
 }
 
 /// A fault to inject on the simulated line.

@@ -184,14 +184,16 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 eprintln!("mbtap: warning: {w}");
             }
             let report = health.report();
-            match format {
-                crate::cli::ReportFormatArg::Text => print!("{}", report.text()),
-                crate::cli::ReportFormatArg::Json => println!("{}", serde_json::to_string_pretty(&report.json())?),
-            }
+            let text = match format {
+                crate::cli::ReportFormatArg::Text => report.text(),
+                crate::cli::ReportFormatArg::Json => serde_json::to_string_pretty(&report.json())? + "\n",
+                crate::cli::ReportFormatArg::Html => crate::health_html::render(&report, &file.display().to_string()),
+            };
+            io::stdout().lock().write_all(text.as_bytes())?;
             Ok(ExitCode::SUCCESS)
         }
         Command::GenerateConfig => {
-            print!("{}", crate::bridge_config::SAMPLE);
+            io::stdout().lock().write_all(crate::bridge_config::SAMPLE.as_bytes())?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Bridge(args) => {

@@ -57,6 +57,24 @@ pub struct UnitHealth {
     pub latency_max_ns: Option<u64>,
 }
 
+/// One slice of the capture's time, for the plots.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Bin {
+    pub t_start_ns: u64,
+    pub transactions: u64,
+    /// Transactions that did not end with an answer (timeouts, failed checks) plus noise bursts.
+    pub errors: u64,
+    pub latency_max_ns: Option<u64>,
+}
+
+/// One transaction's latency, for the latency plot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct LatencyPoint {
+    pub t_ns: u64,
+    pub unit: u8,
+    pub latency_ns: u64,
+}
+
 /// The whole report.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Report {
@@ -69,7 +87,16 @@ pub struct Report {
     pub transactions: u64,
     pub units: Vec<UnitHealth>,
     pub findings: Vec<Finding>,
+    /// The capture cut into [`BINS`] slices of time.
+    pub timeline: Vec<Bin>,
+    /// Latencies over time (every one up to [`LATENCY_POINTS`], then evenly thinned).
+    pub latencies: Vec<LatencyPoint>,
 }
+
+/// Slices of time in the timeline.
+pub const BINS: usize = 120;
+/// Latency points kept for the plot.
+pub const LATENCY_POINTS: usize = 4000;
 
 #[derive(Debug, Default)]
 struct Tally {
@@ -119,6 +146,9 @@ pub struct Health {
     first: Option<u64>,
     last: Option<u64>,
     profiles: Profiles,
+    /// (time, unit, latency, error) of every transaction, and the noise times, for the plots.
+    samples: Vec<(u64, u8, Option<u64>, bool)>,
+    noise_times: Vec<u64>,
     /// A request is waiting for its answer: a frame that fails its check now is that answer
     /// (pairing reports it); one that fails while nothing waits is noise that looked like a frame.
     awaiting: bool,
@@ -145,6 +175,7 @@ impl Health {
                 if !frame.check_ok {
                     self.bad_frames += 1;
                     if !self.awaiting {
+                        self.noise_times.push(frame.t_start.0);
                         self.noise.add(frame.t_start.0);
                         self.noise_bytes += frame.bytes.len() as u64;
                         self.frame_bytes -= frame.bytes.len() as u64;
@@ -164,6 +195,7 @@ impl Health {
             }
             Event::Noise(n) => {
                 self.seen(n.t_end.0);
+                self.noise_times.push(n.t_start.0);
                 self.noise.add(n.t_start.0);
                 self.noise_bytes += n.bytes.len() as u64;
             }
@@ -172,6 +204,10 @@ impl Health {
                 let at = t.t_start.0;
                 self.seen(at);
                 self.transactions += 1;
+                if t.outcome == Outcome::Broadcast {
+                    // Addressed to everyone, answered by no one: not a unit's figures.
+                    return;
+                }
                 let u = self.units.entry(t.unit).or_default();
                 u.transactions += 1;
                 match t.outcome {
@@ -187,6 +223,8 @@ impl Health {
                 if let Some(l) = t.latency_ns {
                     u.latencies.push(l);
                 }
+                let failed = matches!(t.outcome, Outcome::NoResponse | Outcome::BadResponse);
+                self.samples.push((at, t.unit, t.latency_ns, failed));
                 if t.outcome == Outcome::Ok
                     && let (Some(p), Some(req)) = (self.profiles.get(&t.unit), t.request)
                 {
@@ -333,6 +371,7 @@ impl Health {
             });
         }
         findings.sort_by_key(|f| (f.first_t_ns, f.kind));
+        let (timeline, latencies) = self.plots();
         Report {
             first_t_ns: self.first,
             last_t_ns: self.last,
@@ -343,7 +382,35 @@ impl Health {
             transactions: self.transactions,
             units,
             findings,
+            timeline,
+            latencies,
         }
+    }
+
+    fn plots(&self) -> (Vec<Bin>, Vec<LatencyPoint>) {
+        let (Some(first), Some(last)) = (self.first, self.last) else { return (Vec::new(), Vec::new()) };
+        let width = (last - first) / BINS as u64 + 1;
+        let mut bins: Vec<Bin> =
+            (0..BINS as u64).map(|i| Bin { t_start_ns: first + i * width, ..Bin::default() }).collect();
+        let bin = |t: u64| usize::try_from((t.saturating_sub(first)) / width).unwrap_or(0).min(BINS - 1);
+        for &(t, _, latency, failed) in &self.samples {
+            let b = &mut bins[bin(t)];
+            b.transactions += 1;
+            b.errors += u64::from(failed);
+            if let Some(l) = latency {
+                b.latency_max_ns = Some(b.latency_max_ns.map_or(l, |m| m.max(l)));
+            }
+        }
+        for &t in &self.noise_times {
+            bins[bin(t)].errors += 1;
+        }
+        let with_latency: Vec<LatencyPoint> = self
+            .samples
+            .iter()
+            .filter_map(|&(t_ns, unit, l, _)| l.map(|latency_ns| LatencyPoint { t_ns, unit, latency_ns }))
+            .collect();
+        let step = with_latency.len().div_ceil(LATENCY_POINTS).max(1);
+        (bins, with_latency.into_iter().step_by(step).collect())
     }
 }
 

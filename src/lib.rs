@@ -34,6 +34,7 @@ pub mod framer;
 pub mod fuzzing;
 pub mod generate_cmd;
 pub mod health;
+pub mod health_html;
 pub mod hexinput;
 pub mod line_args;
 pub mod pairing;

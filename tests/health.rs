@@ -180,3 +180,28 @@ fn the_json_report_has_the_documented_keys() {
     }
     assert!(j["units"].as_array().unwrap().len() == 3);
 }
+
+#[test]
+fn the_html_report_is_self_contained_and_has_its_three_plots() {
+    let (_, r) = run(120, &[Fault::SilentSlave, Fault::Noise], None);
+    let html = mbtap::health_html::render(&r, "test <bus>");
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert!(html.contains("test &lt;bus&gt;"), "titles are escaped");
+    for id in ["id=\"latency\"", "id=\"errors\"", "id=\"availability\""] {
+        assert!(html.contains(id), "{id} missing");
+    }
+    // Points for latencies, bars for errors and units; no external resources.
+    assert!(html.matches("<circle").count() > 50);
+    assert!(html.contains("fill=\"#d62728\"><title>"), "error bars");
+    assert!(!html.contains("src=") && !html.contains("href="), "nothing loaded from elsewhere");
+    assert!(html.contains("data-kind=\"no_response\"") && html.contains("data-kind=\"noise\""));
+}
+
+/// The report of a recorded noisy line, as a user sees it (golden transcript).
+#[test]
+fn report_of_a_recorded_noisy_line() {
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-19200-8e1-usb1ms-noisy.pcapng");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap")).args(["report", capture]).output().unwrap();
+    assert!(out.status.success());
+    insta::assert_snapshot!(String::from_utf8(out.stdout).unwrap());
+}
