@@ -43,6 +43,7 @@ pub mod profile;
 pub mod proto;
 pub mod replay_cmd;
 pub mod report;
+pub mod scan;
 pub mod sim;
 pub mod simulate_cmd;
 pub mod sniff_cmd;

@@ -205,3 +205,33 @@ fn report_of_a_recorded_noisy_line() {
     assert!(out.status.success());
     insta::assert_snapshot!(String::from_utf8(out.stdout).unwrap());
 }
+
+/// `scan` on simulated lines: the virtual bus sent at the true settings, heard through the UART
+/// model at every candidate's; the winner must be the truth and the units all three devices.
+fn scan(truth: &str, ascii: bool) -> Vec<mbtap::scan::Score> {
+    let line: LineSettings = truth.parse().unwrap();
+    let profiles = mbtap::demo_cmd::profiles().unwrap();
+    let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
+    let mut bus = VirtualBus::new(slaves, line);
+    bus.ascii = ascii;
+    let frames: Vec<LineFrame> = (0..20).flat_map(|_| bus.next_transaction()).collect();
+    mbtap::scan::scan_line(&frames, line)
+}
+
+#[test]
+fn scan_finds_the_settings_of_simulated_lines() {
+    use mbtap::analyzer::SerialMode;
+    for (truth, ascii) in [("9600 8E1", false), ("19200 8N2", false), ("115200 8N1", false), ("9600 7E1", true)] {
+        let ranked = scan(truth, ascii);
+        let best = &ranked[0];
+        let expected: LineSettings = truth.parse().unwrap();
+        assert_eq!(
+            best.candidate.line, expected,
+            "{truth}: best {:?} (runner-up {:?})",
+            best.candidate, ranked[1].candidate
+        );
+        assert_eq!(best.candidate.mode, if ascii { SerialMode::Ascii } else { SerialMode::Rtu }, "{truth}");
+        assert_eq!(best.units, [1, 5, 17].into_iter().collect(), "{truth}");
+        assert_eq!(best.valid_frames, 40, "{truth}: every frame of 20 transactions");
+    }
+}

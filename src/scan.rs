@@ -1,0 +1,141 @@
+//! Line-settings detection: which baud rate, parity, stop bits and mode make the bytes of a bus
+//! into valid Modbus frames. Each candidate is scored by the frames the analyzer rebuilds with a
+//! valid CRC/LRC, less what it had to call garbage. Pure: the caller supplies what a receiver at
+//! each candidate's settings heard (a live port reopened per setting, or the UART model of
+//! [`crate::sim::uart`] for simulated lines).
+//!
+//! Ties: a sender with two stop bits is heard perfectly by a one-stop-bit receiver (the second
+//! stop bit is idle line), so the stop bits cannot always be told apart by frames alone; when
+//! they tie, two stop bits win without parity — what Serial Line v1.02 §2.5.1 prescribes for
+//! "no parity" — and one stop bit with parity.
+
+use std::collections::BTreeSet;
+
+use crate::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
+use crate::chunk::{Chunk, PortId, Timestamp};
+use crate::framer::{FramerConfig, LineSettings, Parity};
+
+/// Baud rates tried: the common ones plus 14400, 56000, 128000 and 256000, which the MK4 offers.
+pub const BAUDS: [u32; 13] =
+    [1200, 2400, 4800, 9600, 14_400, 19_200, 38_400, 56_000, 57_600, 115_200, 128_000, 230_400, 256_000];
+
+/// Settings to try.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Candidate {
+    pub mode: SerialMode,
+    pub line: LineSettings,
+}
+
+/// How well a candidate decoded the bus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Score {
+    pub candidate: Candidate,
+    pub valid_frames: u64,
+    pub bad_frames: u64,
+    pub noise_bytes: u64,
+    /// Units heard in valid frames.
+    pub units: BTreeSet<u8>,
+}
+
+impl Score {
+    /// Valid frames, less a penalty for garbage (one frame per failed frame or 8 noise bytes).
+    #[must_use]
+    pub fn value(&self) -> i64 {
+        let good = i64::try_from(self.valid_frames).unwrap_or(i64::MAX);
+        let bad = i64::try_from(self.bad_frames + self.noise_bytes / 8).unwrap_or(i64::MAX);
+        good.saturating_sub(bad)
+    }
+}
+
+/// Every combination tried: RTU with 8 data bits, ASCII with 7 (and 8), each parity, 1 or 2
+/// stop bits, every baud rate in [`BAUDS`].
+#[must_use]
+pub fn candidates() -> Vec<Candidate> {
+    let mut out = Vec::new();
+    for &baud in &BAUDS {
+        for (mode, data_bits) in [(SerialMode::Rtu, 8), (SerialMode::Ascii, 7), (SerialMode::Ascii, 8)] {
+            for parity in [Parity::Even, Parity::None, Parity::Odd] {
+                for stop_bits in [1, 2] {
+                    out.push(Candidate { mode, line: LineSettings { baud, data_bits, parity, stop_bits } });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Scores what a receiver at `candidate`'s settings heard: `(arrival ns, bytes)` chunks.
+#[must_use]
+pub fn score(candidate: Candidate, heard: &[(u64, Vec<u8>)]) -> Score {
+    let mut s = Score { candidate, valid_frames: 0, bad_frames: 0, noise_bytes: 0, units: BTreeSet::new() };
+    let mut analyzer = Analyzer::new(AnalyzerConfig {
+        mode: candidate.mode,
+        framer: FramerConfig::new(candidate.line, 0),
+        ..AnalyzerConfig::default()
+    });
+    let mut sink = |e: &Event<'_>| match e {
+        Event::Frame { frame, unit, .. } if frame.check_ok => {
+            s.valid_frames += 1;
+            s.units.extend(*unit);
+        }
+        Event::Frame { .. } => s.bad_frames += 1,
+        Event::Noise(n) => s.noise_bytes += n.bytes.len() as u64,
+        Event::Transaction(_) => {}
+    };
+    for (t, bytes) in heard {
+        analyzer.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut sink);
+    }
+    analyzer.finish(&mut sink);
+    s
+}
+
+/// Best first, ties broken as the module says.
+pub fn rank(scores: &mut [Score]) {
+    let preference = |s: &Score| {
+        let c = s.candidate;
+        let stop_rule = match (c.line.parity, c.line.stop_bits) {
+            (Parity::None, 2) | (Parity::Even | Parity::Odd, 1) => 1,
+            _ => 0,
+        };
+        // Even parity is the serial line's default (Serial Line v1.02 §2.5.1).
+        (s.value(), stop_rule, i32::from(c.line.parity == Parity::Even), i32::from(c.line.data_bits == 8))
+    };
+    scores.sort_by_key(|s| std::cmp::Reverse(preference(s)));
+}
+
+/// Scans a simulated line: `frames` as sent at `sender` settings, heard through the UART model
+/// at every candidate's settings. Ranked, best first.
+#[must_use]
+pub fn scan_line(frames: &[crate::sim::bus::LineFrame], sender: LineSettings) -> Vec<Score> {
+    let mut scores: Vec<Score> = candidates()
+        .into_iter()
+        .map(|c| {
+            let mut uart = crate::sim::uart::Listener::new(sender, c.line);
+            let heard: Vec<(u64, Vec<u8>)> = frames
+                .iter()
+                .filter_map(|f| {
+                    let bytes = uart.hear(f);
+                    let t = bytes.last()?.0;
+                    Some((t, bytes.into_iter().map(|(_, b)| b).collect()))
+                })
+                .collect();
+            score(c, &heard)
+        })
+        .collect();
+    rank(&mut scores);
+    scores
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_candidate_is_distinct_and_the_mk4_rates_are_in() {
+        let c = candidates();
+        assert_eq!(c.len(), BAUDS.len() * 3 * 3 * 2);
+        for baud in [14_400, 56_000, 128_000, 256_000] {
+            assert!(c.iter().any(|x| x.line.baud == baud));
+        }
+    }
+}
