@@ -338,6 +338,18 @@ pub enum Command {
     Bridge(Box<BridgeArgs>),
     /// Print a commented sample configuration for `bridge --config`.
     GenerateConfig,
+    /// Find a live bus's line settings: try baud rates, parities, character sizes and both
+    /// modes, and rank them by the valid frames they give.
+    Scan {
+        /// The serial port.
+        port: String,
+        /// Only these baud rates (repeatable; default: 1200 to 256000).
+        #[arg(long = "baud")]
+        bauds: Vec<u32>,
+        /// How long to listen at each setting, ms.
+        #[arg(long, default_value_t = 600)]
+        dwell_ms: u64,
+    },
     /// A bus health report from a capture: per unit and per bus, and findings with evidence.
     Report {
         /// The capture file (pcap or pcapng, as `sniff --record` writes).

@@ -192,6 +192,12 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             io::stdout().lock().write_all(text.as_bytes())?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Scan { port, bauds, dwell_ms } => {
+            let dwell = std::time::Duration::from_millis(dwell_ms.max(1));
+            let scores = runtime()?.block_on(crate::scan_cmd::scan(&port, &bauds, dwell, &mut io::stderr()))?;
+            io::stdout().lock().write_all(crate::scan_cmd::describe(&scores).as_bytes())?;
+            Ok(if scores.first().is_some_and(|b| b.valid_frames > 0) { ExitCode::SUCCESS } else { ExitCode::from(1) })
+        }
         Command::GenerateConfig => {
             io::stdout().lock().write_all(crate::bridge_config::SAMPLE.as_bytes())?;
             Ok(ExitCode::SUCCESS)

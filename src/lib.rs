@@ -44,6 +44,7 @@ pub mod proto;
 pub mod replay_cmd;
 pub mod report;
 pub mod scan;
+pub mod scan_cmd;
 pub mod sim;
 pub mod simulate_cmd;
 pub mod sniff_cmd;
