@@ -5,7 +5,8 @@
 //! Findings (stable `kind` names): `check_errors` (failed CRC/LRC, per unit or, when every unit
 //! suffers, the bus), `noise`, `wrong_line_settings` (mostly garbage, few valid frames),
 //! `gap_inside_frame` (t1.5 violations, Serial Line v1.02 §2.5.1.1), `fast_master` (requests
-//! after less than t3.5), `no_response` (always or intermittently), `exception_storm`,
+//! after less than t3.5), `no_response` (always or intermittently), `duplicate_address`
+//! (answers that come twice), `exception_storm`,
 //! `value_out_of_range` (outside the profile's range).
 
 use std::collections::BTreeMap;
@@ -22,6 +23,8 @@ const EVIDENCE: usize = 10;
 /// Exceptions above this share of a unit's transactions (and at least [`STORM_MIN`]) are a storm.
 const STORM_SHARE: f64 = 0.2;
 const STORM_MIN: u64 = 5;
+/// An orphan answer this soon after an answered request from the same unit is a doubled answer.
+const DOUBLED_WITHIN_NS: u64 = 500_000_000;
 /// Below this share of bytes in valid frames, the line settings are suspect.
 const GARBAGE_SHARE: f64 = 0.5;
 
@@ -129,6 +132,8 @@ struct UnitState {
     bad_response: Tally,
     gaps: Tally,
     out_of_range: Tally,
+    /// Answers that came twice: two devices on one address.
+    doubled: Tally,
     latencies: Vec<u64>,
 }
 
@@ -152,6 +157,9 @@ pub struct Health {
     /// A request is waiting for its answer: a frame that fails its check now is that answer
     /// (pairing reports it); one that fails while nothing waits is noise that looked like a frame.
     awaiting: bool,
+    /// The last transaction, when it was answered (unit, function, time) and nothing failed
+    /// its check since: an orphan answer matching it is the same request answered twice.
+    last_ok: Option<(u8, u8, u64)>,
 }
 
 impl Health {
@@ -174,6 +182,7 @@ impl Health {
                 self.frame_bytes += frame.bytes.len() as u64;
                 if !frame.check_ok {
                     self.bad_frames += 1;
+                    self.last_ok = None;
                     if !self.awaiting {
                         self.noise_times.push(frame.t_start.0);
                         self.noise.add(frame.t_start.0);
@@ -210,8 +219,21 @@ impl Health {
                 }
                 let u = self.units.entry(t.unit).or_default();
                 u.transactions += 1;
+                let previous = self.last_ok.take();
                 match t.outcome {
-                    Outcome::Ok => u.ok += 1,
+                    Outcome::Ok => {
+                        u.ok += 1;
+                        self.last_ok = Some((t.unit, t.function, at));
+                    }
+                    // A second answer to the same request, nothing garbled in between: another
+                    // device at this address.
+                    Outcome::Orphan
+                        if previous.is_some_and(|(unit, function, ok)| {
+                            unit == t.unit && function == t.function && at.saturating_sub(ok) < DOUBLED_WITHIN_NS
+                        }) =>
+                    {
+                        u.doubled.add(at);
+                    }
                     Outcome::Exception(code) => {
                         *u.exceptions.entry(code).or_default() += 1;
                         u.exception_tally.add(at);
@@ -314,6 +336,12 @@ impl Health {
                     format!("{n} answer(s) from unit {unit} failed their check"),
                 );
             }
+            push(
+                "duplicate_address",
+                Some(unit),
+                &u.doubled,
+                format!("unit {unit} answers twice to one request: two devices are set to address {unit}"),
+            );
             push(
                 "gap_inside_frame",
                 Some(unit),

@@ -235,3 +235,31 @@ fn scan_finds_the_settings_of_simulated_lines() {
         assert_eq!(best.valid_frames, 40, "{truth}: every frame of 20 transactions");
     }
 }
+
+#[test]
+fn two_devices_on_one_address_answer_twice() {
+    // Unit 1 asked, two answers (the second from the other device at address 1).
+    let mut health = Health::new(mbtap::decode_cmd::Profiles::new());
+    let mut analyzer = Analyzer::new(AnalyzerConfig::default());
+    let char_ns = LineSettings::default().char_ns();
+    let mut t = START_NS;
+    let mut req = Vec::new();
+    mbtap::proto::encode_rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01], &mut req);
+    let mut a = Vec::new();
+    mbtap::proto::encode_rtu(1, &[0x03, 0x02, 0x00, 0x07], &mut a);
+    let mut b = Vec::new();
+    mbtap::proto::encode_rtu(1, &[0x03, 0x02, 0x00, 0x09], &mut b);
+    for _ in 0..5 {
+        for frame in [&req, &a, &b] {
+            t += char_ns * frame.len() as u64 + 5_000_000;
+            analyzer
+                .push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: frame }, &mut |e: &Event<'_>| health.event(e));
+        }
+        t += 100_000_000;
+    }
+    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
+    let r = health.report();
+    let found = of_kind(&r, "duplicate_address");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!((found[0].unit, found[0].count), (Some(1), 5));
+}
