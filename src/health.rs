@@ -6,7 +6,8 @@
 //! suffers, the bus), `noise`, `wrong_line_settings` (mostly garbage, few valid frames),
 //! `gap_inside_frame` (t1.5 violations, Serial Line v1.02 §2.5.1.1), `fast_master` (requests
 //! after less than t3.5), `no_response` (always or intermittently), `duplicate_address`
-//! (answers that come twice), `exception_storm`,
+//! (answers that come twice), `implausible_jump` (a reading moving over half its documented
+//! range between two reads), `exception_storm`,
 //! `value_out_of_range` (outside the profile's range).
 
 use std::collections::BTreeMap;
@@ -134,6 +135,10 @@ struct UnitState {
     out_of_range: Tally,
     /// Answers that came twice: two devices on one address.
     doubled: Tally,
+    /// Readings that moved more than half their documented range from one read to the next.
+    jumps: Tally,
+    /// The last raw reading of each documented value with a range.
+    last_values: BTreeMap<(crate::profile::Table, u16), i64>,
     latencies: Vec<u64>,
 }
 
@@ -254,6 +259,20 @@ impl Health {
                     if annotations.iter().any(|a| a.notes.iter().any(|n| matches!(n, Note::OutOfRange { .. }))) {
                         u.out_of_range.add(at);
                     }
+                    let mut jumped = false;
+                    for a in &annotations {
+                        let Some((min, max)) = p.slot(a.table, a.address).and_then(|(_, def)| def.range) else {
+                            continue;
+                        };
+                        let is_number = matches!(a.shown, crate::profile::annotate::Shown::Number { .. });
+                        if let (true, Some(prev)) = (is_number, u.last_values.insert((a.table, a.address), a.raw)) {
+                            // More than half the documented span between two reads.
+                            jumped |= (a.raw - prev).unsigned_abs().saturating_mul(2) > (max - min).unsigned_abs();
+                        }
+                    }
+                    if jumped {
+                        u.jumps.add(at);
+                    }
                 }
             }
         }
@@ -336,6 +355,14 @@ impl Health {
                     format!("{n} answer(s) from unit {unit} failed their check"),
                 );
             }
+            push(
+                "implausible_jump",
+                Some(unit),
+                &u.jumps,
+                format!(
+                    "unit {unit} reports readings that move more than half their documented range between two reads"
+                ),
+            );
             push(
                 "duplicate_address",
                 Some(unit),

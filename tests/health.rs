@@ -263,3 +263,31 @@ fn two_devices_on_one_address_answer_twice() {
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 5));
 }
+
+#[test]
+fn a_reading_that_jumps_implausibly_is_named() {
+    // MK4 phase A voltage (input register 430, 0.1 V, documented 0–4000): 230 V, then 0 V,
+    // then 230 V again — a sensor or wiring fault, not mains.
+    let mut health = Health::new(mbtap::demo_cmd::profiles().unwrap());
+    let mut analyzer = Analyzer::new(AnalyzerConfig::default());
+    let char_ns = LineSettings::default().char_ns();
+    let mut t = START_NS;
+    let mut req = Vec::new();
+    mbtap::proto::encode_rtu(1, &[0x04, 0x01, 0xAE, 0x00, 0x01], &mut req);
+    for volts in [2300u16, 2301, 2299, 0, 2300, 2302] {
+        let [h, l] = volts.to_be_bytes();
+        let mut resp = Vec::new();
+        mbtap::proto::encode_rtu(1, &[0x04, 0x02, h, l], &mut resp);
+        for frame in [&req, &resp] {
+            t += char_ns * frame.len() as u64 + 5_000_000;
+            analyzer
+                .push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: frame }, &mut |e: &Event<'_>| health.event(e));
+        }
+        t += 100_000_000;
+    }
+    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
+    let r = health.report();
+    let found = of_kind(&r, "implausible_jump");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!((found[0].unit, found[0].count), (Some(1), 2), "down to 0 and back up: {}", r.text());
+}
