@@ -168,6 +168,9 @@ pub enum Command {
         /// Language of register names in annotations.
         #[arg(long, value_enum, default_value_t = LangArg::En)]
         lang: LangArg,
+        /// End with the bus health report (findings with evidence), as `mbtap report` gives it.
+        #[arg(long)]
+        report: bool,
     },
     /// Write a synthetic line capture with known content (for training, tests and benchmarks).
     Generate {
@@ -237,6 +240,9 @@ pub enum Command {
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
+        /// End (Ctrl-C or --duration) with the bus health report, as `mbtap report` gives it.
+        #[arg(long)]
+        report: bool,
     },
     /// Play a line capture into a serial port with its recorded timing.
     Play {

@@ -60,7 +60,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.flush()?;
             Ok(ExitCode::from(outcome as u8))
         }
-        Command::Replay { file, image, line, format, devices, lang } => {
+        Command::Replay { file, image, line, format, devices, lang, report } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
             if format == EventFormatArg::Tui {
                 let (_, settings, _) = overrides(&line).resolve();
@@ -78,6 +78,9 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
             writer.lang = lang.into();
+            if report {
+                writer.health = Some(crate::health::Health::new(writer.profiles.clone()));
+            }
             if image.is_some() {
                 writer.image = Some(crate::profile::image::RegisterImage::default());
             }
@@ -94,7 +97,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Sniff { port, line, format, devices, lang, record, duration } => {
+        Command::Sniff { port, line, format, devices, lang, record, duration, report } => {
             let (mode, settings, latency_ns) = overrides(&line).resolve();
             let opts = crate::sniff_cmd::SniffOptions {
                 port,
@@ -115,6 +118,9 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
             writer.profiles = load_devices(&devices)?;
             writer.lang = lang.into();
+            if report {
+                writer.health = Some(crate::health::Health::new(writer.profiles.clone()));
+            }
             runtime()?.block_on(crate::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)

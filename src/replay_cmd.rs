@@ -39,6 +39,8 @@ pub struct EventWriter<W: Write> {
     pub tui: Option<std::sync::Arc<crate::tui::terminal::Shared>>,
     /// Recorded input shown in the UI: hold each event until its time at the UI's speed.
     pub pacer: Option<crate::tui::terminal::Pacer>,
+    /// The bus health report, written by [`Self::finish`] when set.
+    pub health: Option<crate::health::Health>,
 }
 
 impl<W: Write> EventWriter<W> {
@@ -53,12 +55,16 @@ impl<W: Write> EventWriter<W> {
             lang: crate::profile::annotate::Lang::En,
             tui: None,
             pacer: None,
+            health: None,
         }
     }
 
     /// Writes one event (errors are kept for the caller; a closed pipe stops output).
     pub fn write(&mut self, e: &Event<'_>) {
         self.stats.add(e);
+        if let Some(h) = self.health.as_mut() {
+            h.event(e);
+        }
         if let (Some(image), Event::Transaction(t)) = (self.image.as_mut(), e)
             && let Some(req) = t.request
         {
@@ -135,10 +141,23 @@ impl<W: Write> EventWriter<W> {
     /// # Errors
     /// The first output error.
     pub fn finish(mut self) -> io::Result<Stats> {
-        let r = match self.format {
+        let mut r = match self.format {
             EventFormat::Text | EventFormat::Summary => writeln!(self.out, "{}", self.stats.text()),
             EventFormat::Jsonl => writeln!(self.out, "{}", self.stats.json()),
         };
+        if let Some(h) = self.health.take() {
+            let report = h.report();
+            r = r.and_then(|()| match self.format {
+                EventFormat::Text | EventFormat::Summary => write!(self.out, "{}", report.text()),
+                EventFormat::Jsonl => {
+                    let mut j = report.json();
+                    if let Some(o) = j.as_object_mut() {
+                        o.insert("event".into(), "report".into());
+                    }
+                    writeln!(self.out, "{j}")
+                }
+            });
+        }
         if let Some(e) = self.error.take() {
             return Err(e);
         }

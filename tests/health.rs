@@ -291,3 +291,17 @@ fn a_reading_that_jumps_implausibly_is_named() {
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 2), "down to 0 and back up: {}", r.text());
 }
+
+#[test]
+fn replay_ends_with_the_same_report_when_asked() {
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-19200-8e1-usb1ms-noisy.pcapng");
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let out =
+        std::process::Command::new(bin).args(["replay", capture, "--report", "--format", "jsonl"]).output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    let last: serde_json::Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+    assert_eq!(last["event"], "report");
+    let report = std::process::Command::new(bin).args(["report", capture, "--format", "json"]).output().unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&report.stdout).unwrap();
+    assert_eq!(last["findings"], report["findings"], "one analysis, two ways to ask for it");
+}
