@@ -24,6 +24,21 @@ const EVIDENCE: usize = 10;
 /// Exceptions above this share of a unit's transactions (and at least [`STORM_MIN`]) are a storm.
 const STORM_SHARE: f64 = 0.2;
 const STORM_MIN: u64 = 5;
+/// Samples kept for plots and percentiles; past this they are thinned (every other one
+/// dropped), so an endless live bus (`sniff --report`) stays in bounded memory.
+const MAX_SAMPLES: usize = 1 << 20;
+
+/// Halves `v` by keeping every other element once it is full.
+fn thin<T>(v: &mut Vec<T>) {
+    if v.len() >= MAX_SAMPLES {
+        let mut i = 0;
+        v.retain(|_| {
+            i += 1;
+            i % 2 == 0
+        });
+    }
+}
+
 /// An orphan answer this soon after an answered request from the same unit is a doubled answer.
 const DOUBLED_WITHIN_NS: u64 = 500_000_000;
 /// Below this share of bytes in valid frames, the line settings are suspect.
@@ -189,6 +204,7 @@ impl Health {
                     self.bad_frames += 1;
                     self.last_ok = None;
                     if !self.awaiting {
+                        thin(&mut self.noise_times);
                         self.noise_times.push(frame.t_start.0);
                         self.noise.add(frame.t_start.0);
                         self.noise_bytes += frame.bytes.len() as u64;
@@ -209,6 +225,7 @@ impl Health {
             }
             Event::Noise(n) => {
                 self.seen(n.t_end.0);
+                thin(&mut self.noise_times);
                 self.noise_times.push(n.t_start.0);
                 self.noise.add(n.t_start.0);
                 self.noise_bytes += n.bytes.len() as u64;
@@ -248,9 +265,11 @@ impl Health {
                     Outcome::Broadcast | Outcome::Orphan | Outcome::WrongUnit(_) => {}
                 }
                 if let Some(l) = t.latency_ns {
+                    thin(&mut u.latencies);
                     u.latencies.push(l);
                 }
                 let failed = matches!(t.outcome, Outcome::NoResponse | Outcome::BadResponse);
+                thin(&mut self.samples);
                 self.samples.push((at, t.unit, t.latency_ns, failed));
                 if t.outcome == Outcome::Ok
                     && let (Some(p), Some(req)) = (self.profiles.get(&t.unit), t.request)
@@ -540,4 +559,17 @@ fn clock(t_ns: u64) -> String {
     let secs = t_ns / 1_000_000_000;
     let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
     format!("{h:02}:{m:02}:{s:02}.{:03}", (t_ns % 1_000_000_000) / 1_000_000)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_memory_bounded_and_spread() {
+        let mut v: Vec<usize> = (0..MAX_SAMPLES).collect();
+        thin(&mut v);
+        assert_eq!(v.len(), MAX_SAMPLES / 2);
+        assert_eq!((v[0], v[1], *v.last().unwrap()), (1, 3, MAX_SAMPLES - 1), "every other one, end to end");
+    }
 }
