@@ -299,7 +299,7 @@ impl Health {
 
     /// The report.
     #[must_use]
-    pub fn report(mut self) -> Report {
+    pub fn report(&self) -> Report {
         let mut findings = Vec::new();
         let mut push = |kind, unit, t: &Tally, summary: String| {
             if t.count > 0 {
@@ -364,7 +364,7 @@ impl Health {
             "requests sent less than t3.5 after the previous frame (Serial Line v1.02 §2.5.1.1): slaves may merge or drop them".into(),
         );
         let mut units = Vec::new();
-        for (&unit, u) in &mut self.units {
+        for (&unit, u) in &self.units {
             if !bus_wide && !garbage {
                 let n = u.bad_response.count;
                 push(
@@ -424,8 +424,9 @@ impl Health {
                 &u.out_of_range,
                 format!("unit {unit} reports values outside its profile's range"),
             );
-            u.latencies.sort_unstable();
-            let pct = |p: usize| u.latencies.get((u.latencies.len().saturating_sub(1)) * p / 100).copied();
+            let mut latencies = u.latencies.clone();
+            latencies.sort_unstable();
+            let pct = |p: usize| latencies.get((latencies.len().saturating_sub(1)) * p / 100).copied();
             units.push(UnitHealth {
                 unit,
                 transactions: u.transactions,
@@ -441,7 +442,7 @@ impl Health {
                 },
                 latency_p50_ns: pct(50),
                 latency_p99_ns: pct(99),
-                latency_max_ns: u.latencies.last().copied(),
+                latency_max_ns: latencies.last().copied(),
             });
         }
         findings.sort_by_key(|f| (f.first_t_ns, f.kind));

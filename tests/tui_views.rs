@@ -135,6 +135,12 @@ fn devices_view() {
     for name in ["mk4", "display", "mkzp"] {
         assert!(s.contains(name), "{name}");
     }
+    // The silent slave shows up as a live finding, as `mbtap report` would name it.
+    assert!(s.contains("findings (") && s.contains("no_response"), "{s}");
+    let healthy = model(30, &[]);
+    let mut app = App::new(true);
+    key(&mut app, &healthy, KeyCode::Char('2'));
+    assert!(screen(&mut app, &healthy, 120, 30).contains("none — the bus looks healthy"));
 }
 
 #[test]

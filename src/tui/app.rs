@@ -158,6 +158,11 @@ pub struct App {
     visible: Visible,
     /// Lines a page moves (set by the renderer from the terminal height).
     pub page: usize,
+    /// The health findings shown in the devices view, and the row count they were made at
+    /// (recomputed at most every 20 draws — about a second — when rows arrived).
+    pub findings: Vec<crate::health::Finding>,
+    pub findings_rows: Option<u64>,
+    pub draws: u64,
 }
 
 /// Sequence numbers of the rows that pass the filter, kept up to date incrementally: the
@@ -193,6 +198,9 @@ impl App {
             message: None,
             visible: Visible::default(),
             page: 10,
+            findings: Vec::new(),
+            findings_rows: None,
+            draws: 0,
         }
     }
 

@@ -107,11 +107,14 @@ pub struct Model {
     pub finished: Option<String>,
     /// The producer's latest message (a port lost and reopened, a warning about the input).
     pub notice: Option<String>,
+    /// The bus health findings, live (the devices view shows them).
+    pub health: crate::health::Health,
 }
 
 impl Model {
     #[must_use]
     pub fn new(profiles: Profiles, lang: Lang, line: LineSettings, capacity: usize) -> Self {
+        let profiles_for_health = profiles.clone();
         Self {
             rows: VecDeque::with_capacity(capacity.min(4096)),
             capacity: capacity.max(1),
@@ -127,6 +130,7 @@ impl Model {
             pending: TimingFlags::default(),
             finished: None,
             notice: None,
+            health: crate::health::Health::new(profiles_for_health),
         }
     }
 
@@ -138,6 +142,7 @@ impl Model {
 
     /// Takes in one analyzer event.
     pub fn event(&mut self, e: &Event<'_>) {
+        self.health.event(e);
         match *e {
             Event::Frame { frame, .. } => {
                 self.bus.frame(frame.bytes.len(), frame.check_ok, frame.t_end.0, self.line);

@@ -35,6 +35,12 @@ pub const KEYS: &[(&str, &str)] = &[
 /// Draws everything; `source` names what is shown (`demo`, a port, a file).
 pub fn draw(frame: &mut Frame<'_>, app: &mut App, model: &Model, source: &str) {
     app.refresh(model);
+    app.draws += 1;
+    let stale = app.findings_rows != Some(model.total_rows());
+    if app.view == View::Devices && stale && (app.findings_rows.is_none() || app.draws.is_multiple_of(20)) {
+        app.findings = model.health.report().findings;
+        app.findings_rows = Some(model.total_rows());
+    }
     let [title, body, status] =
         Layout::vertical([Constraint::Length(1), Constraint::Min(3), Constraint::Length(1)]).areas(frame.area());
     app.page = usize::from(body.height.saturating_sub(2)).max(1);

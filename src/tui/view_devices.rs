@@ -11,7 +11,26 @@ use super::model::Model;
 use super::render::{clock, duration};
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &App, model: &Model) {
-    let [bus, table] = Layout::vertical([Constraint::Length(1), Constraint::Min(3)]).areas(area);
+    let shown = u16::try_from(app.findings.len().min(6)).unwrap_or(6);
+    let [bus, table, findings] =
+        Layout::vertical([Constraint::Length(1), Constraint::Min(3), Constraint::Length(shown.max(1) + 2)]).areas(area);
+    let lines: Vec<ratatui::text::Line<'_>> = if app.findings.is_empty() {
+        vec![ratatui::text::Line::styled("none — the bus looks healthy", Style::new().fg(Color::Green))]
+    } else {
+        app.findings
+            .iter()
+            .take(6)
+            .map(|f| {
+                let who = f.unit.map_or_else(|| "bus".to_owned(), |u| format!("unit {u}"));
+                ratatui::text::Line::from(vec![
+                    ratatui::text::Span::styled(format!("{} ", f.kind), Style::new().fg(Color::Red)),
+                    ratatui::text::Span::raw(format!("{who} ×{}: {}", f.count, f.summary)),
+                ])
+            })
+            .collect()
+    };
+    let title = format!(" findings ({}; mbtap report for the evidence) ", app.findings.len());
+    frame.render_widget(Paragraph::new(lines).block(Block::bordered().title(title)), findings);
     let b = &model.bus;
     let pct = |v: Option<f64>| v.map_or_else(|| "–".to_owned(), |v| format!("{v:.1} %"));
     let line = format!(
