@@ -556,7 +556,9 @@ impl Report {
     }
 }
 
-fn clock(t_ns: u64) -> String {
+/// `HH:MM:SS.mmm` (UTC) of a time in ns since the epoch, as the findings show it.
+#[must_use]
+pub fn clock(t_ns: u64) -> String {
     let secs = t_ns / 1_000_000_000;
     let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
     format!("{h:02}:{m:02}:{s:02}.{:03}", (t_ns % 1_000_000_000) / 1_000_000)

@@ -6,7 +6,7 @@
 
 use std::fmt::Write as _;
 
-use crate::health::Report;
+use crate::health::{Report, clock};
 
 const WIDTH: f64 = 760.0;
 const HEIGHT: f64 = 180.0;
@@ -21,12 +21,6 @@ fn esc(s: &str) -> String {
 #[allow(clippy::cast_precision_loss)]
 fn f(v: u64) -> f64 {
     v as f64
-}
-
-fn clock(t_ns: u64) -> String {
-    let secs = t_ns / 1_000_000_000;
-    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
-    format!("{h:02}:{m:02}:{s:02}.{:03}", (t_ns % 1_000_000_000) / 1_000_000)
 }
 
 /// The page.
