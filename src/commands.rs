@@ -193,7 +193,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let text = match format {
                 crate::cli::ReportFormatArg::Text => report.text(),
                 crate::cli::ReportFormatArg::Json => serde_json::to_string_pretty(&report.json())? + "\n",
-                crate::cli::ReportFormatArg::Html => crate::health_html::render(&report, &file.display().to_string()),
+                crate::cli::ReportFormatArg::Html => crate::health::html::render(&report, &file.display().to_string()),
             };
             io::stdout().lock().write_all(text.as_bytes())?;
             Ok(ExitCode::SUCCESS)

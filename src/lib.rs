@@ -14,6 +14,8 @@
 //! Around it:
 //! - [`capture`] — pcap/pcapng reading and writing, Wireshark export.
 //! - [`report`] — text and JSON-lines rendering.
+//! - [`health`] — the bus health report (findings with evidence; text, JSON, HTML) and [`scan`]
+//!   line-settings detection.
 //! - [`source`] — live serial ports and the clock (the edge).
 //! - [`cli`], [`commands`] and the `*_cmd` modules — the commands; `hexinput`, `line_args` —
 //!   what users type.
@@ -34,7 +36,6 @@ pub mod framer;
 pub mod fuzzing;
 pub mod generate_cmd;
 pub mod health;
-pub mod health_html;
 pub mod hexinput;
 pub mod line_args;
 pub mod pairing;

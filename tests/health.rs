@@ -184,7 +184,7 @@ fn the_json_report_has_the_documented_keys() {
 #[test]
 fn the_html_report_is_self_contained_and_has_its_three_plots() {
     let (_, r) = run(120, &[Fault::SilentSlave, Fault::Noise], None);
-    let html = mbtap::health_html::render(&r, "test <bus>");
+    let html = mbtap::health::html::render(&r, "test <bus>");
     assert!(html.starts_with("<!DOCTYPE html>"));
     assert!(html.contains("test &lt;bus&gt;"), "titles are escaped");
     for id in ["id=\"latency\"", "id=\"errors\"", "id=\"availability\""] {

@@ -1,0 +1,150 @@
+//! The report's shape — findings with their evidence, per-unit figures, the timeline for the
+//! plots — and its text and JSON renderings.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::ratio;
+
+/// One thing wrong, with its evidence.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Finding {
+    /// A stable snake_case name.
+    pub kind: &'static str,
+    /// The unit, or `None` for the whole bus.
+    pub unit: Option<u8>,
+    pub count: u64,
+    pub first_t_ns: u64,
+    pub last_t_ns: u64,
+    /// What it means, in a sentence.
+    pub summary: String,
+    /// Times (ns) of the first occurrences.
+    pub evidence: Vec<u64>,
+}
+
+/// Per-unit figures.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct UnitHealth {
+    pub unit: u8,
+    pub transactions: u64,
+    pub ok: u64,
+    pub exceptions: BTreeMap<u8, u64>,
+    pub no_response: u64,
+    pub bad_responses: u64,
+    /// Answered share of requests, percent.
+    pub availability_percent: f64,
+    pub latency_p50_ns: Option<u64>,
+    pub latency_p99_ns: Option<u64>,
+    pub latency_max_ns: Option<u64>,
+}
+
+/// One slice of the capture's time, for the plots.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Bin {
+    pub t_start_ns: u64,
+    pub transactions: u64,
+    /// Transactions that did not end with an answer (timeouts, failed checks) plus noise bursts.
+    pub errors: u64,
+    pub latency_max_ns: Option<u64>,
+}
+
+/// One transaction's latency, for the latency plot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct LatencyPoint {
+    pub t_ns: u64,
+    pub unit: u8,
+    pub latency_ns: u64,
+}
+
+/// The whole report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    pub first_t_ns: Option<u64>,
+    pub last_t_ns: Option<u64>,
+    pub frames: u64,
+    pub bad_frames: u64,
+    pub noise_bytes: u64,
+    pub frame_bytes: u64,
+    pub transactions: u64,
+    pub units: Vec<UnitHealth>,
+    pub findings: Vec<Finding>,
+    /// The capture cut into [`BINS`] slices of time.
+    pub timeline: Vec<Bin>,
+    /// Latencies over time (every one up to [`LATENCY_POINTS`], then evenly thinned).
+    pub latencies: Vec<LatencyPoint>,
+}
+
+/// Slices of time in the timeline.
+pub const BINS: usize = 120;
+/// Latency points kept for the plot.
+pub const LATENCY_POINTS: usize = 4000;
+
+impl Report {
+    /// The report for people.
+    #[must_use]
+    pub fn text(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let span = match (self.first_t_ns, self.last_t_ns) {
+            (Some(a), Some(b)) => format!("{:.1} s", ratio(b - a, 1_000_000_000)),
+            _ => "nothing".into(),
+        };
+        let _ = writeln!(
+            s,
+            "bus: {span} of traffic, {} frames ({} failed checks), {} transactions, {} bytes of noise",
+            self.frames, self.bad_frames, self.transactions, self.noise_bytes
+        );
+        for u in &self.units {
+            let ms = |v: Option<u64>| v.map_or_else(|| "–".into(), |v| format!("{:.1} ms", ratio(v, 1_000_000)));
+            let _ = writeln!(
+                s,
+                "unit {:>3}: {} transactions, availability {:.1} %, {} unanswered, {} bad answers, {} exceptions, latency p50 {} p99 {} max {}",
+                u.unit,
+                u.transactions,
+                u.availability_percent,
+                u.no_response,
+                u.bad_responses,
+                u.exceptions.values().sum::<u64>(),
+                ms(u.latency_p50_ns),
+                ms(u.latency_p99_ns),
+                ms(u.latency_max_ns)
+            );
+        }
+        if self.findings.is_empty() {
+            let _ = writeln!(s, "findings: none — the bus looks healthy");
+        } else {
+            let _ = writeln!(s, "findings:");
+            for f in &self.findings {
+                let who = f.unit.map_or_else(|| "bus".to_owned(), |u| format!("unit {u}"));
+                let _ = writeln!(
+                    s,
+                    "  [{}] {who}: {} ({}×, from {} to {})",
+                    f.kind,
+                    f.summary,
+                    f.count,
+                    clock(f.first_t_ns),
+                    clock(f.last_t_ns)
+                );
+                let times: Vec<String> = f.evidence.iter().map(|&t| clock(t)).collect();
+                let _ = writeln!(s, "      at {}", times.join(", "));
+            }
+        }
+        s
+    }
+
+    /// The report for programs: `findings` at the top level with `kind`, `unit`, `count`,
+    /// `first_t_ns`, `last_t_ns`, `evidence`.
+    #[must_use]
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+}
+
+/// `HH:MM:SS.mmm` (UTC) of a time in ns since the epoch, as the findings show it.
+#[must_use]
+pub fn clock(t_ns: u64) -> String {
+    let secs = t_ns / 1_000_000_000;
+    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
+    format!("{h:02}:{m:02}:{s:02}.{:03}", (t_ns % 1_000_000_000) / 1_000_000)
+}
