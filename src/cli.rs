@@ -475,10 +475,12 @@ pub enum FaultArg {
     SlowSlave,
     /// A slave that does not answer (the master times out).
     SilentSlave,
-    /// Two slaves answering on one address at once.
+    /// A second device on the first unit's address answering with it.
     Collision,
     /// A master polling again before t3.5 of silence.
     FastMaster,
+    /// A second master sending its own request while the first one's answer is due.
+    SecondMaster,
     /// The MK4's running pump trips on overcurrent; its alarm log records it.
     PumpTrip,
     /// All of the above, taking turns.

@@ -676,6 +676,7 @@ fn fault_list(args: &[crate::cli::FaultArg]) -> Vec<crate::sim::bus::Fault> {
             FaultArg::SilentSlave => vec![Fault::SilentSlave],
             FaultArg::Collision => vec![Fault::Collision],
             FaultArg::FastMaster => vec![Fault::FastMaster],
+            FaultArg::SecondMaster => vec![Fault::SecondMaster],
             FaultArg::PumpTrip => vec![Fault::PumpTrip],
             FaultArg::All => Fault::ALL.to_vec(),
         })

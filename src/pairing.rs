@@ -5,6 +5,12 @@
 //! answers the pending request — same unit, same function or its exception, and a response
 //! structure — and a request otherwise. What does not fit is reported as what it is: an
 //! orphan response, a response from another unit, a request that got no answer.
+//!
+//! One exception to "one at a time": a request that arrives while another still waits for its
+//! answer does not end the waiting one at once. The earlier request is kept, *overtaken*, until
+//! the newer one is answered, another request comes, or its time runs out — so a second master
+//! on the line, or an answer that comes after its master gave up, still pairs with the request
+//! it answers (the health report tells the two apart, [`crate::health`]).
 
 use crate::chunk::{PortId, Timestamp};
 use crate::framer::Frame;
@@ -99,6 +105,8 @@ struct Pending {
 pub struct Pairing {
     config: PairingConfig,
     pending: Option<Box<Pending>>,
+    /// A request that another request followed before it was answered.
+    overtaken: Option<Box<Pending>>,
     spare: Option<Box<Pending>>,
 }
 
@@ -106,6 +114,8 @@ enum Decision {
     Unknown,
     Request,
     Answers(Outcome),
+    /// Answers the overtaken request.
+    AnswersOvertaken(Outcome),
     Orphan,
 }
 
@@ -126,7 +136,7 @@ pub enum Role {
 impl Pairing {
     #[must_use]
     pub fn new(config: PairingConfig) -> Self {
-        Self { config, pending: None, spare: None }
+        Self { config, pending: None, overtaken: None, spare: None }
     }
 
     fn role_hint(&self, port: PortId) -> DirectionHint {
@@ -152,17 +162,18 @@ impl Pairing {
             };
         }
         let base = fc & !EXCEPTION_FLAG;
-        let answers = self
-            .pending
-            .as_ref()
-            .is_some_and(|p| p.unit == unit && p.function == base && hint != DirectionHint::Request)
-            && clean(pdu, DirectionHint::Response);
-        if answers {
-            return Decision::Answers(if fc & EXCEPTION_FLAG != 0 {
-                Outcome::Exception(pdu.get(1).copied().unwrap_or(0))
-            } else {
-                Outcome::Ok
-            });
+        let answers = |p: &Option<Box<Pending>>| {
+            p.as_ref().is_some_and(|p| p.unit == unit && p.function == base && hint != DirectionHint::Request)
+                && clean(pdu, DirectionHint::Response)
+        };
+        let outcome = || {
+            if fc & EXCEPTION_FLAG != 0 { Outcome::Exception(pdu.get(1).copied().unwrap_or(0)) } else { Outcome::Ok }
+        };
+        if answers(&self.pending) {
+            return Decision::Answers(outcome());
+        }
+        if answers(&self.overtaken) {
+            return Decision::AnswersOvertaken(outcome());
         }
         if hint != DirectionHint::Response && fc & EXCEPTION_FLAG == 0 && clean(pdu, DirectionHint::Request) {
             return Decision::Request;
@@ -180,7 +191,7 @@ impl Pairing {
         match self.decide(f, unit, pdu) {
             Decision::Unknown => Role::Unknown,
             Decision::Request => Role::Request,
-            Decision::Answers(_) | Decision::Orphan => Role::Response,
+            Decision::Answers(_) | Decision::AnswersOvertaken(_) | Decision::Orphan => Role::Response,
         }
     }
 
@@ -214,22 +225,29 @@ impl Pairing {
         on_role(match decision {
             Decision::Unknown => Role::Unknown,
             Decision::Request => Role::Request,
-            Decision::Answers(_) | Decision::Orphan => Role::Response,
+            Decision::Answers(_) | Decision::AnswersOvertaken(_) | Decision::Orphan => Role::Response,
         });
         match decision {
             Decision::Unknown => Role::Unknown,
             Decision::Answers(outcome) => {
+                // The newer request is answered: the overtaken one will not be.
+                self.give_up_overtaken(emit);
                 if let Some(p) = self.pending.take() {
                     emit(Self::finish(&p, outcome, Some(f)));
                     self.spare = Some(p);
                 }
                 Role::Response
             }
-            Decision::Request => {
-                if let Some(p) = self.pending.take() {
-                    emit(Self::finish(&p, Outcome::NoResponse, None));
+            Decision::AnswersOvertaken(outcome) => {
+                if let Some(p) = self.overtaken.take() {
+                    emit(Self::finish(&p, outcome, Some(f)));
                     self.spare = Some(p);
                 }
+                Role::Response
+            }
+            Decision::Request => {
+                self.give_up_overtaken(emit);
+                self.overtaken = self.pending.take();
                 let fc = pdu.first().copied().unwrap_or(0);
                 if unit == 0 {
                     emit(Transaction {
@@ -271,8 +289,19 @@ impl Pairing {
         }
     }
 
+    /// The overtaken request got no response.
+    fn give_up_overtaken<F: FnMut(Transaction<'_>)>(&mut self, emit: &mut F) {
+        if let Some(p) = self.overtaken.take() {
+            emit(Self::finish(&p, Outcome::NoResponse, None));
+            self.spare = Some(p);
+        }
+    }
+
     /// The time is `now`: a request pending longer than the timeout got no response.
     pub fn tick<F: FnMut(Transaction<'_>)>(&mut self, now: Timestamp, emit: &mut F) {
+        if self.overtaken.as_ref().is_some_and(|p| now.since(p.t_end) > self.config.timeout_ns) {
+            self.give_up_overtaken(emit);
+        }
         if let Some(p) = &self.pending
             && now.since(p.t_end) > self.config.timeout_ns
             && let Some(p) = self.pending.take()
@@ -284,6 +313,7 @@ impl Pairing {
 
     /// End of input: a pending request got no response.
     pub fn finish_all<F: FnMut(Transaction<'_>)>(&mut self, emit: &mut F) {
+        self.give_up_overtaken(emit);
         if let Some(p) = self.pending.take() {
             emit(Self::finish(&p, Outcome::NoResponse, None));
         }
@@ -308,5 +338,72 @@ fn clean(pdu: &[u8], hint: DirectionHint) -> bool {
         DirectionHint::Request => matches!(parse_request(pdu), Ok(([], _))),
         DirectionHint::Response => matches!(parse_response(pdu), Ok(([], _))),
         DirectionHint::Unknown => clean(pdu, DirectionHint::Request) || clean(pdu, DirectionHint::Response),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Read holding register 100 (function 03, address 0x0064, quantity 1), RTU with CRC.
+    fn ask(unit: u8) -> Vec<u8> {
+        let mut out = Vec::new();
+        crate::proto::encode_rtu(unit, &[0x03, 0x00, 0x64, 0x00, 0x01], &mut out);
+        out
+    }
+
+    /// Its answer: byte count 2, value 7.
+    fn answer(unit: u8) -> Vec<u8> {
+        let mut out = Vec::new();
+        crate::proto::encode_rtu(unit, &[0x03, 0x02, 0x00, 0x07], &mut out);
+        out
+    }
+
+    /// Feeds `(start ms, bytes)` frames; the transactions as (unit, outcome, latency ms).
+    fn pair(frames: &[(u64, Vec<u8>)], end_ms: u64) -> Vec<(u8, Outcome, Option<u64>)> {
+        let mut p = Pairing::new(PairingConfig::default());
+        let mut out = Vec::new();
+        let mut emit = |t: Transaction<'_>| out.push((t.unit, t.outcome, t.latency_ns.map(|l| l / 1_000_000)));
+        for (ms, bytes) in frames {
+            let f = Frame {
+                port: PortId(0),
+                bytes,
+                t_start: Timestamp(ms * 1_000_000),
+                t_end: Timestamp((ms + 1) * 1_000_000),
+                check_ok: true,
+                gap_violation_ns: None,
+                short_gap_before_ns: None,
+                bad_chars: false,
+            };
+            let len = bytes.len().saturating_sub(2);
+            p.frame(&f, Some((bytes[0], &bytes[1..len])), &mut emit);
+        }
+        p.tick(Timestamp(end_ms * 1_000_000), &mut emit);
+        out
+    }
+
+    #[test]
+    fn a_second_masters_request_does_not_cost_the_first_its_answer() {
+        // Unit 1 asked; another master asks unit 5; unit 1 answers, then unit 5.
+        let tx = pair(&[(0, ask(1)), (3, ask(5)), (10, answer(1)), (15, answer(5))], 20);
+        assert_eq!(tx, [(1, Outcome::Ok, Some(9)), (5, Outcome::Ok, Some(11))]);
+    }
+
+    #[test]
+    fn an_overtaken_request_gives_up_when_the_newer_one_is_answered() {
+        let tx = pair(&[(0, ask(9)), (100, ask(1)), (105, answer(1))], 110);
+        assert_eq!(tx, [(9, Outcome::NoResponse, None), (1, Outcome::Ok, Some(4))]);
+    }
+
+    #[test]
+    fn overtaken_and_pending_both_time_out_oldest_first() {
+        let tx = pair(&[(0, ask(9)), (100, ask(8))], 5_000);
+        assert_eq!(tx, [(9, Outcome::NoResponse, None), (8, Outcome::NoResponse, None)]);
+    }
+
+    #[test]
+    fn a_third_request_gives_up_the_overtaken_one() {
+        let tx = pair(&[(0, ask(9)), (100, ask(8)), (200, ask(1)), (205, answer(1))], 210);
+        assert_eq!(tx, [(9, Outcome::NoResponse, None), (8, Outcome::NoResponse, None), (1, Outcome::Ok, Some(4))]);
     }
 }

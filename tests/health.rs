@@ -19,18 +19,31 @@ const START_NS: u64 = 1_000_000_000_000;
 /// `n` transactions of the demo bus with `faults` (every 4th), heard at `heard_at`; the
 /// frames of each transaction and the report.
 fn run(n: usize, faults: &[Fault], heard_at: Option<LineSettings>) -> (Vec<Vec<LineFrame>>, Report) {
+    run_with(n, heard_at, |bus, i| {
+        if i == 0 {
+            bus.faults = faults.to_vec();
+        }
+    })
+}
+
+/// As [`run`], with `setup` changing the bus before transaction `i`.
+fn run_with(
+    n: usize,
+    heard_at: Option<LineSettings>,
+    mut setup: impl FnMut(&mut VirtualBus, usize),
+) -> (Vec<Vec<LineFrame>>, Report) {
     let profiles = mbtap::demo_cmd::profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let line = LineSettings::default();
     let mut bus = VirtualBus::new(slaves, line);
-    bus.faults = faults.to_vec();
     let listen = heard_at.unwrap_or(line);
     let mut listener = Listener::new(line, listen);
     let mut health = Health::new(profiles);
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(listen, 0), ..AnalyzerConfig::default() });
     let mut all = Vec::new();
-    for _ in 0..n {
+    for i in 0..n {
+        setup(&mut bus, i);
         let frames = bus.next_transaction();
         for f in &frames {
             let bytes: Vec<u8> = listener.hear(f).into_iter().map(|(_, b)| b).collect();
@@ -42,6 +55,28 @@ fn run(n: usize, faults: &[Fault], heard_at: Option<LineSettings>) -> (Vec<Vec<L
     }
     analyzer.finish(&mut |e: &Event<'_>| health.event(e));
     (all, health.report())
+}
+
+/// An RTU frame.
+fn rtu(unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    mbtap::proto::encode_rtu(unit, pdu, &mut out);
+    out
+}
+
+/// The report of `frames` — each `(silence before it in ns, bytes)`, sent at the default
+/// line's character time — checked against `profiles`.
+fn report_of(profiles: mbtap::decode_cmd::Profiles, frames: &[(u64, Vec<u8>)]) -> Report {
+    let mut health = Health::new(profiles);
+    let mut analyzer = Analyzer::new(AnalyzerConfig::default());
+    let char_ns = LineSettings::default().char_ns();
+    let mut t = START_NS;
+    for (silence, frame) in frames {
+        t += silence + char_ns * frame.len() as u64;
+        analyzer.push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: frame }, &mut |e: &Event<'_>| health.event(e));
+    }
+    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
+    health.report()
 }
 
 fn of_kind<'a>(r: &'a Report, kind: &str) -> Vec<&'a Finding> {
@@ -145,25 +180,12 @@ fn an_exception_storm_is_named_with_its_codes() {
     // A master polling registers the MK4 does not have: exception 02 every time.
     let profile = mbtap::profile::builtin::get("mk4").unwrap().unwrap();
     let mut slave = Slave::new(Arc::new(profile), 1);
-    let mut health = Health::new(mbtap::decode_cmd::Profiles::new());
-    let mut analyzer = Analyzer::new(AnalyzerConfig::default());
-    let char_ns = LineSettings::default().char_ns();
-    let mut t = START_NS;
-    for _ in 0..20 {
-        let pdu = [0x04, 0x03, 0xE8, 0x00, 0x01];
-        let mut req = Vec::new();
-        mbtap::proto::encode_rtu(1, &pdu, &mut req);
-        let mut resp = Vec::new();
-        mbtap::proto::encode_rtu(1, &slave.handle(1, &pdu).unwrap(), &mut resp);
-        for frame in [req, resp] {
-            t += char_ns * frame.len() as u64 + 5_000_000;
-            analyzer
-                .push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: &frame }, &mut |e: &Event<'_>| health.event(e));
-        }
-        t += 100_000_000;
-    }
-    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
-    let r = health.report();
+    // Read input register 1000 (function 04, address 0x03E8, quantity 1).
+    let pdu = [0x04, 0x03, 0xE8, 0x00, 0x01];
+    let answer = rtu(1, &slave.handle(1, &pdu).unwrap());
+    let frames: Vec<(u64, Vec<u8>)> =
+        (0..20).flat_map(|_| [(100_000_000, rtu(1, &pdu)), (5_000_000, answer.clone())]).collect();
+    let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
     let found = of_kind(&r, "exception_storm");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 20));
@@ -238,55 +260,158 @@ fn scan_finds_the_settings_of_simulated_lines() {
 
 #[test]
 fn two_devices_on_one_address_answer_twice() {
-    // Unit 1 asked, two answers (the second from the other device at address 1).
-    let mut health = Health::new(mbtap::decode_cmd::Profiles::new());
-    let mut analyzer = Analyzer::new(AnalyzerConfig::default());
-    let char_ns = LineSettings::default().char_ns();
-    let mut t = START_NS;
-    let mut req = Vec::new();
-    mbtap::proto::encode_rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01], &mut req);
-    let mut a = Vec::new();
-    mbtap::proto::encode_rtu(1, &[0x03, 0x02, 0x00, 0x07], &mut a);
-    let mut b = Vec::new();
-    mbtap::proto::encode_rtu(1, &[0x03, 0x02, 0x00, 0x09], &mut b);
-    for _ in 0..5 {
-        for frame in [&req, &a, &b] {
-            t += char_ns * frame.len() as u64 + 5_000_000;
-            analyzer
-                .push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: frame }, &mut |e: &Event<'_>| health.event(e));
-        }
-        t += 100_000_000;
-    }
-    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
-    let r = health.report();
+    // Unit 1 asked to read holding register 100 (function 03, address 0x0064, quantity 1); two
+    // answers (7, then 9 from the other device at address 1).
+    let req = rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01]);
+    let a = rtu(1, &[0x03, 0x02, 0x00, 0x07]);
+    let b = rtu(1, &[0x03, 0x02, 0x00, 0x09]);
+    let frames: Vec<(u64, Vec<u8>)> =
+        (0..5).flat_map(|_| [(100_000_000, req.clone()), (5_000_000, a.clone()), (5_000_000, b.clone())]).collect();
+    let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
     let found = of_kind(&r, "duplicate_address");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 5));
 }
 
 #[test]
+fn two_devices_answering_together_garble_like_a_wired_and() {
+    let (tx, r) = run(200, &[Fault::Collision], None);
+    // Ground truth: answers that failed their check (the fault hits unit 1 only).
+    let garbled: Vec<&Vec<LineFrame>> = tx.iter().filter(|f| f.len() == 2 && !crc_ok(&f[1].bytes)).collect();
+    assert!(garbled.iter().all(|f| f[0].bytes[0] == 1));
+    let truth: Vec<u64> = garbled.iter().map(|f| start_ns(&f[0])).collect();
+    assert!(truth.len() >= 5, "the fault happened: {}", truth.len());
+    let found = of_kind(&r, "duplicate_address");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!(found[0].unit, Some(1));
+    // Recognised only against an earlier good answer to the same request, and only when
+    // enough bits were cleared: most of them, and never one that was not a collision.
+    let n = usize::try_from(found[0].count).unwrap();
+    assert!(n * 2 >= truth.len() && n <= truth.len(), "{n} of {}: {}", truth.len(), r.text());
+    for t in &found[0].evidence {
+        assert!(truth.iter().any(|x| x.abs_diff(*t) < 1_000_000), "evidence {t} is not a collision");
+    }
+}
+
+#[test]
+fn flipped_bits_are_not_taken_for_a_second_device() {
+    let (_, r) = run(200, &[Fault::Corrupt], None);
+    assert!(of_kind(&r, "duplicate_address").is_empty(), "{}", r.text());
+}
+
+#[test]
+fn a_second_master_is_named_with_the_times_of_its_requests() {
+    let (tx, r) = run(160, &[Fault::SecondMaster], None);
+    // Ground truth: the transactions with the other master's request (frame 1 of 4).
+    let truth: Vec<u64> = tx.iter().filter(|f| f.len() == 4).map(|f| start_ns(&f[1])).collect();
+    assert!(truth.len() >= 20, "{}", truth.len());
+    let found = of_kind(&r, "second_master");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!((found[0].unit, found[0].count), (None, truth.len() as u64), "{}", r.text());
+    for (t, x) in found[0].evidence.iter().zip(&truth) {
+        assert!(t.abs_diff(*x) < 1_000_000, "evidence {t} vs {x}");
+    }
+    // Every request was answered: the overlap is not mistaken for a silent unit.
+    for kind in ["no_response", "late_answer", "duplicate_address", "check_errors"] {
+        assert!(of_kind(&r, kind).is_empty(), "{kind}: {}", r.text());
+    }
+    assert!(r.units.iter().all(|u| (u.availability_percent - 100.0).abs() < 1e-9), "{}", r.text());
+}
+
+#[test]
+fn an_answer_after_the_master_gave_up_is_a_late_answer() {
+    // Unit 1 answers in about 30 ms; the master waits 20 ms, then asks unit 5, whose answer
+    // follows unit 1's. Read holding register 100 of each (function 03, quantity 1).
+    let ask1 = rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01]);
+    let ask5 = rtu(5, &[0x03, 0x00, 0x64, 0x00, 0x01]);
+    let answer1 = rtu(1, &[0x03, 0x02, 0x00, 0x07]);
+    let answer5 = rtu(5, &[0x03, 0x02, 0x00, 0x08]);
+    let frames: Vec<(u64, Vec<u8>)> = (0..6)
+        .flat_map(|_| {
+            [
+                (100_000_000, ask1.clone()),
+                (20_000_000, ask5.clone()),
+                (5_000_000, answer1.clone()),
+                (3_000_000, answer5.clone()),
+            ]
+        })
+        .collect();
+    let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
+    let found = of_kind(&r, "late_answer");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!((found[0].unit, found[0].count), (Some(1), 6), "{}", r.text());
+    assert!(found[0].summary.contains("waited only 20.0 ms"), "{}", found[0].summary);
+    assert!(of_kind(&r, "second_master").is_empty(), "{}", r.text());
+}
+
+#[test]
+fn check_errors_in_one_burst_are_told_apart_from_steady_ones() {
+    // Every answer corrupted for 15 transactions in the middle of 300, none elsewhere.
+    let (_, r) = run_with(300, None, |bus, i| {
+        bus.fault_every = 1;
+        bus.faults = if (150..165).contains(&i) { vec![Fault::Corrupt] } else { Vec::new() };
+    });
+    let found = of_kind(&r, "check_errors");
+    assert!(!found.is_empty(), "{}", r.text());
+    assert!(found.iter().all(|f| f.summary.contains("in bursts")), "{}", r.text());
+    let (_, steady) = run(300, &[Fault::Corrupt], None);
+    let found = of_kind(&steady, "check_errors");
+    assert!(!found.is_empty() && found.iter().all(|f| f.summary.contains("spread over")), "{}", steady.text());
+}
+
+#[test]
+fn the_polling_period_is_the_time_between_identical_requests() {
+    let (tx, r) = run(200, &[], None);
+    // Ground truth: per unit, the median interval between a request and the next identical one.
+    let mut last: BTreeMap<Vec<u8>, u64> = BTreeMap::new();
+    let mut periods: BTreeMap<u8, Vec<u64>> = BTreeMap::new();
+    for f in &tx {
+        let t = start_ns(&f[0]);
+        if let Some(prev) = last.insert(f[0].bytes.clone(), t) {
+            periods.entry(f[0].bytes[0]).or_default().push(t - prev);
+        }
+    }
+    for u in &r.units {
+        let p = periods.get_mut(&u.unit).unwrap();
+        p.sort_unstable();
+        let truth = p[p.len() / 2];
+        let found = u.poll_period_ns.unwrap();
+        assert!(found.abs_diff(truth) < 1_000_000, "unit {}: {found} vs {truth}", u.unit);
+    }
+}
+
+/// Regression: a failed answer to a request that overtook an unanswered one was counted as
+/// noise too (the overtaken request's timeout cleared "awaiting an answer").
+#[test]
+fn a_failed_answer_to_a_request_that_overtook_another_is_not_noise() {
+    // Unit 9 (absent) asked, then after 200 ms unit 1, whose answer's CRC is damaged.
+    let mut bad = rtu(1, &[0x03, 0x02, 0x00, 0x07]);
+    *bad.last_mut().unwrap() ^= 0x55;
+    let frames = [
+        (0, rtu(9, &[0x03, 0x00, 0x64, 0x00, 0x01])),
+        (200_000_000, rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01])),
+        (5_000_000, bad),
+    ];
+    let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
+    assert!(of_kind(&r, "noise").is_empty(), "{}", r.text());
+    let units = |kind| of_kind(&r, kind).iter().map(|f| (f.unit, f.count)).collect::<Vec<_>>();
+    assert_eq!(units("check_errors"), [(Some(1), 1)], "{}", r.text());
+    assert_eq!(units("no_response"), [(Some(9), 1)], "{}", r.text());
+}
+
+#[test]
 fn a_reading_that_jumps_implausibly_is_named() {
     // MK4 phase A voltage (input register 430, 0.1 V, documented 0–4000): 230 V, then 0 V,
     // then 230 V again — a sensor or wiring fault, not mains.
-    let mut health = Health::new(mbtap::demo_cmd::profiles().unwrap());
-    let mut analyzer = Analyzer::new(AnalyzerConfig::default());
-    let char_ns = LineSettings::default().char_ns();
-    let mut t = START_NS;
-    let mut req = Vec::new();
-    mbtap::proto::encode_rtu(1, &[0x04, 0x01, 0xAE, 0x00, 0x01], &mut req);
-    for volts in [2300u16, 2301, 2299, 0, 2300, 2302] {
-        let [h, l] = volts.to_be_bytes();
-        let mut resp = Vec::new();
-        mbtap::proto::encode_rtu(1, &[0x04, 0x02, h, l], &mut resp);
-        for frame in [&req, &resp] {
-            t += char_ns * frame.len() as u64 + 5_000_000;
-            analyzer
-                .push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: frame }, &mut |e: &Event<'_>| health.event(e));
-        }
-        t += 100_000_000;
-    }
-    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
-    let r = health.report();
+    let req = rtu(1, &[0x04, 0x01, 0xAE, 0x00, 0x01]);
+    let frames: Vec<(u64, Vec<u8>)> = [2300u16, 2301, 2299, 0, 2300, 2302]
+        .into_iter()
+        .flat_map(|volts| {
+            let [h, l] = volts.to_be_bytes();
+            [(100_000_000, req.clone()), (5_000_000, rtu(1, &[0x04, 0x02, h, l]))]
+        })
+        .collect();
+    let r = report_of(mbtap::demo_cmd::profiles().unwrap(), &frames);
     let found = of_kind(&r, "implausible_jump");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 2), "down to 0 and back up: {}", r.text());

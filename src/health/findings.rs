@@ -2,9 +2,17 @@
 //! per-unit figures and plots of the report.
 
 use super::{
-    BINS, Bin, EVIDENCE, Finding, GARBAGE_SHARE, Health, LATENCY_POINTS, LatencyPoint, Report, STORM_MIN, STORM_SHARE,
-    Tally, UnitHealth, ratio,
+    BINS, Bin, Class, Finding, GARBAGE_SHARE, Health, LATENCY_POINTS, LatencyPoint, Report, STORM_MIN, STORM_SHARE,
+    Tally, UnitHealth, clock, ratio,
 };
+
+/// Check errors are judged for clustering only from this many on.
+const CLUSTER_MIN: u64 = 5;
+/// Windows the capture is cut into to see whether check errors cluster.
+const CLUSTER_WINDOWS: usize = 20;
+/// The busiest tenth of the windows holding this share of the errors (and not merely the
+/// traffic) is a burst pattern.
+const BURST_SHARE: f64 = 0.5;
 
 impl Health {
     /// The report.
@@ -24,6 +32,7 @@ impl Health {
                 });
             }
         };
+        let pattern = |unit: Option<u8>| self.clustering(unit).map_or_else(String::new, |p| format!("; {p}"));
         let total_bytes = self.noise_bytes + self.frame_bytes;
         let garbage = total_bytes > 64 && ratio(self.noise_bytes, total_bytes) > GARBAGE_SHARE;
         if garbage {
@@ -50,23 +59,23 @@ impl Health {
         let failing: Vec<u8> = self.units.iter().filter(|(_, u)| u.bad_response.count > 0).map(|(&k, _)| k).collect();
         let bus_wide = answering.len() > 1 && answering.iter().all(|u| failing.contains(u));
         if bus_wide && !garbage {
-            let mut all = Tally::default();
-            let mut times: Vec<u64> =
-                self.units.values().flat_map(|u| u.bad_response.evidence.iter().copied()).collect();
-            times.sort_unstable();
-            for u in self.units.values() {
-                all.count += u.bad_response.count;
-                all.first = if all.first == 0 { u.bad_response.first } else { all.first.min(u.bad_response.first) };
-                all.last = all.last.max(u.bad_response.last);
-            }
-            all.evidence = times.into_iter().take(EVIDENCE).collect();
+            let all = self.units.values().fold(Tally::default(), |all, u| all.merged(&u.bad_response));
             push(
                 "check_errors",
                 None,
                 &all,
-                "answers with failed checks from every unit: the cabling, termination or grounding of the bus".into(),
+                format!(
+                    "answers with failed checks from every unit: the cabling, termination or grounding of the bus{}",
+                    pattern(None)
+                ),
             );
         }
+        push(
+            "second_master",
+            None,
+            &self.second_master,
+            "requests went out while another request's answer was still due, and that answer then came: a second master shares the line (its requests collide with the first one's traffic)".into(),
+        );
         push(
             "fast_master",
             None,
@@ -77,11 +86,16 @@ impl Health {
         for (&unit, u) in &self.units {
             if !bus_wide && !garbage {
                 let n = u.bad_response.count;
+                let collided = if u.collided.count > 0 {
+                    format!(" ({} of them look like collisions: see duplicate_address)", u.collided.count)
+                } else {
+                    String::new()
+                };
                 push(
                     "check_errors",
                     Some(unit),
                     &u.bad_response,
-                    format!("{n} answer(s) from unit {unit} failed their check"),
+                    format!("{n} answer(s) from unit {unit} failed their check{collided}{}", pattern(Some(unit))),
                 );
             }
             push(
@@ -92,12 +106,29 @@ impl Health {
                     "unit {unit} reports readings that move more than half their documented range between two reads"
                 ),
             );
+            let how = match (u.doubled.count, u.collided.count) {
+                (0, c) => format!("{c} answer(s) garbled as two answers on top of each other (bits only cleared)"),
+                (d, 0) => format!("{d} request(s) answered twice"),
+                (d, c) => format!("{d} request(s) answered twice, {c} answer(s) garbled by a second one"),
+            };
             push(
                 "duplicate_address",
                 Some(unit),
-                &u.doubled,
-                format!("unit {unit} answers twice to one request: two devices are set to address {unit}"),
+                &u.doubled.merged(&u.collided),
+                format!("unit {unit}: {how} — two devices are set to address {unit}"),
             );
+            if let Some(wait) = u.master_wait_min {
+                push(
+                    "late_answer",
+                    Some(unit),
+                    &u.late,
+                    format!(
+                        "unit {unit} answered after its master had moved on (answers up to {:.1} ms after the request; the master waited only {:.1} ms): raise the master's response timeout",
+                        ratio(u.late_latency_max, 1_000_000),
+                        ratio(wait, 1_000_000)
+                    ),
+                );
+            }
             push(
                 "gap_inside_frame",
                 Some(unit),
@@ -134,6 +165,8 @@ impl Health {
                 &u.out_of_range,
                 format!("unit {unit} reports values outside its profile's range"),
             );
+            let mut periods = u.periods.clone();
+            periods.sort_unstable();
             let mut latencies = u.latencies.clone();
             latencies.sort_unstable();
             let pct = |p: usize| latencies.get((latencies.len().saturating_sub(1)) * p / 100).copied();
@@ -153,6 +186,7 @@ impl Health {
                 latency_p50_ns: pct(50),
                 latency_p99_ns: pct(99),
                 latency_max_ns: latencies.last().copied(),
+                poll_period_ns: periods.get(periods.len() / 2).copied(),
             });
         }
         findings.sort_by_key(|f| (f.first_t_ns, f.kind));
@@ -178,10 +212,10 @@ impl Health {
         let mut bins: Vec<Bin> =
             (0..BINS as u64).map(|i| Bin { t_start_ns: first + i * width, ..Bin::default() }).collect();
         let bin = |t: u64| usize::try_from((t.saturating_sub(first)) / width).unwrap_or(0).min(BINS - 1);
-        for &(t, _, latency, failed) in &self.samples {
+        for &super::Sample { t, latency, class, .. } in &self.samples {
             let b = &mut bins[bin(t)];
             b.transactions += 1;
-            b.errors += u64::from(failed);
+            b.errors += u64::from(class != Class::Answered);
             if let Some(l) = latency {
                 b.latency_max_ns = Some(b.latency_max_ns.map_or(l, |m| m.max(l)));
             }
@@ -192,9 +226,48 @@ impl Health {
         let with_latency: Vec<LatencyPoint> = self
             .samples
             .iter()
-            .filter_map(|&(t_ns, unit, l, _)| l.map(|latency_ns| LatencyPoint { t_ns, unit, latency_ns }))
+            .filter_map(|s| s.latency.map(|latency_ns| LatencyPoint { t_ns: s.t, unit: s.unit, latency_ns }))
             .collect();
         let step = with_latency.len().div_ceil(LATENCY_POINTS).max(1);
         (bins, with_latency.into_iter().step_by(step).collect())
+    }
+
+    /// Whether failed checks (of `unit`, or of every unit) come in bursts or steadily, in words.
+    fn clustering(&self, unit: Option<u8>) -> Option<String> {
+        let (Some(first), Some(last)) = (self.first, self.last) else { return None };
+        let width = (last - first) / CLUSTER_WINDOWS as u64 + 1;
+        let mut windows = [(0u64, 0u64); CLUSTER_WINDOWS];
+        let mut failed = 0u64;
+        let mut traffic = 0u64;
+        for s in self.samples.iter().filter(|s| unit.is_none_or(|u| s.unit == u)) {
+            let w = usize::try_from((s.t.saturating_sub(first)) / width).unwrap_or(0).min(CLUSTER_WINDOWS - 1);
+            windows[w].1 += 1;
+            traffic += 1;
+            if s.class == Class::FailedCheck {
+                windows[w].0 += 1;
+                failed += 1;
+            }
+        }
+        if failed < CLUSTER_MIN {
+            return None;
+        }
+        let mut order: Vec<usize> = (0..CLUSTER_WINDOWS).collect();
+        order.sort_by_key(|&w| std::cmp::Reverse(windows[w].0));
+        let top = &order[..CLUSTER_WINDOWS / 10];
+        let in_top: u64 = top.iter().map(|&w| windows[w].0).sum();
+        let traffic_in_top: u64 = top.iter().map(|&w| windows[w].1).sum();
+        let share = ratio(in_top, failed);
+        let traffic_share = ratio(traffic_in_top, traffic);
+        // Errors that merely follow the traffic are not a burst.
+        Some(if share >= BURST_SHARE && traffic_share < share / 2.0 {
+            let peak = first + top[0] as u64 * width;
+            format!(
+                "in bursts: {:.0} % of them within a tenth of the time (around {}) — something intermittent: a motor or contactor switching, a welder, a radio",
+                share * 100.0,
+                clock(peak)
+            )
+        } else {
+            "spread over the whole capture — a steady fault: termination, biasing, grounding or cable length".into()
+        })
     }
 }

@@ -5,10 +5,12 @@
 //! Findings (stable `kind` names): `check_errors` (failed CRC/LRC, per unit or, when every unit
 //! suffers, the bus), `noise`, `wrong_line_settings` (mostly garbage, few valid frames),
 //! `gap_inside_frame` (t1.5 violations, Serial Line v1.02 §2.5.1.1), `fast_master` (requests
-//! after less than t3.5), `no_response` (always or intermittently), `duplicate_address`
-//! (answers that come twice), `implausible_jump` (a reading moving over half its documented
-//! range between two reads), `exception_storm`,
-//! `value_out_of_range` (outside the profile's range).
+//! after less than t3.5), `second_master` (requests sent while another request's answer was
+//! due, which then came), `no_response` (always or intermittently), `late_answer` (answers
+//! after the master moved on), `duplicate_address` (answers that come twice, or garbled the
+//! way two answers on top of each other garble), `implausible_jump` (a reading moving over half
+//! its documented range between two reads), `exception_storm`, `value_out_of_range` (outside
+//! the profile's range). Check errors say whether they come in bursts or steadily.
 
 mod findings;
 pub mod html;
@@ -57,6 +59,19 @@ struct Tally {
 }
 
 impl Tally {
+    /// Both tallies as one: counts added, the earliest evidence kept.
+    fn merged(&self, other: &Self) -> Self {
+        let mut evidence: Vec<u64> = self.evidence.iter().chain(&other.evidence).copied().collect();
+        evidence.sort_unstable();
+        evidence.truncate(EVIDENCE);
+        let first = match (self.count, other.count) {
+            (0, _) => other.first,
+            (_, 0) => self.first,
+            _ => self.first.min(other.first),
+        };
+        Self { count: self.count + other.count, first, last: self.last.max(other.last), evidence }
+    }
+
     fn add(&mut self, t: u64) {
         if self.count == 0 {
             self.first = t;
@@ -81,11 +96,47 @@ struct UnitState {
     out_of_range: Tally,
     /// Answers that came twice: two devices on one address.
     doubled: Tally,
+    /// Answers garbled the way two devices answering together garble them.
+    collided: Tally,
+    /// Answers that came after the master had moved on to another request.
+    late: Tally,
+    /// The longest such answer's latency, and the shortest time the master waited.
+    late_latency_max: u64,
+    master_wait_min: Option<u64>,
     /// Readings that moved more than half their documented range from one read to the next.
     jumps: Tally,
     /// The last raw reading of each documented value with a range.
     last_values: BTreeMap<(crate::profile::Table, u16), i64>,
     latencies: Vec<u64>,
+    /// A smoothed latency of answers on time (1/8 of each new one).
+    typical_latency: Option<u64>,
+    /// Per distinct request (up to [`MAX_POLLS`]): when it was last asked and its last good answer.
+    polls: BTreeMap<Vec<u8>, Poll>,
+    /// Time between one request and the next identical one: the polling period.
+    periods: Vec<u64>,
+}
+
+#[derive(Debug, Default)]
+struct Poll {
+    last_t: u64,
+    answer: Option<Vec<u8>>,
+}
+
+/// Distinct requests remembered per unit (a master polls a handful; a scanner sweeping
+/// addresses must not grow memory without bound).
+const MAX_POLLS: usize = 64;
+/// Below this, no master has given up on its request: a new request this soon after one that
+/// is then answered comes from another master. (Above the unit's typical latency too.)
+const SECOND_MASTER_GAP_NS: u64 = 10_000_000;
+
+/// A request waiting for its answer, as the health collector follows pairing.
+#[derive(Debug, Clone, Copy)]
+struct Asked {
+    unit: u8,
+    t_start: u64,
+    t_end: u64,
+    /// When the next request came, if one overtook this one.
+    overtaken_at: Option<u64>,
 }
 
 /// Collects events into a report.
@@ -98,19 +149,38 @@ pub struct Health {
     frames: u64,
     bad_frames: u64,
     fast_master: Tally,
+    second_master: Tally,
     transactions: u64,
     first: Option<u64>,
     last: Option<u64>,
     profiles: Profiles,
-    /// (time, unit, latency, error) of every transaction, and the noise times, for the plots.
-    samples: Vec<(u64, u8, Option<u64>, bool)>,
+    /// (time, unit, latency, class) of every transaction, and the noise times, for the plots.
+    samples: Vec<Sample>,
     noise_times: Vec<u64>,
-    /// A request is waiting for its answer: a frame that fails its check now is that answer
-    /// (pairing reports it); one that fails while nothing waits is noise that looked like a frame.
-    awaiting: bool,
+    /// The request waiting for its answer (a frame that fails its check now is that answer —
+    /// pairing reports it; one that fails while nothing waits is noise that looked like a
+    /// frame), and one it overtook, as pairing keeps them.
+    pending: Option<Asked>,
+    overtaken: Option<Asked>,
     /// The last transaction, when it was answered (unit, function, time) and nothing failed
     /// its check since: an orphan answer matching it is the same request answered twice.
     last_ok: Option<(u8, u8, u64)>,
+}
+
+/// How a transaction ended, for the plots and the clustering of errors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Class {
+    Answered,
+    Unanswered,
+    FailedCheck,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    t: u64,
+    unit: u8,
+    latency: Option<u64>,
+    class: Class,
 }
 
 impl Health {
@@ -127,33 +197,7 @@ impl Health {
     /// Takes in one analyzer event.
     pub fn event(&mut self, e: &Event<'_>) {
         match *e {
-            Event::Frame { frame, role, unit, .. } => {
-                self.seen(frame.t_end.0);
-                self.frames += 1;
-                self.frame_bytes += frame.bytes.len() as u64;
-                if !frame.check_ok {
-                    self.bad_frames += 1;
-                    self.last_ok = None;
-                    if !self.awaiting {
-                        thin(&mut self.noise_times);
-                        self.noise_times.push(frame.t_start.0);
-                        self.noise.add(frame.t_start.0);
-                        self.noise_bytes += frame.bytes.len() as u64;
-                        self.frame_bytes -= frame.bytes.len() as u64;
-                    }
-                }
-                if frame.check_ok && role == Role::Request && unit != Some(0) {
-                    self.awaiting = true;
-                }
-                if frame.gap_violation_ns.is_some()
-                    && let Some(u) = unit
-                {
-                    self.units.entry(u).or_default().gaps.add(frame.t_start.0);
-                }
-                if frame.short_gap_before_ns.is_some() && role == Role::Request {
-                    self.fast_master.add(frame.t_start.0);
-                }
-            }
+            Event::Frame { frame, role, unit, .. } => self.frame(frame, role, unit),
             Event::Noise(n) => {
                 self.seen(n.t_end.0);
                 thin(&mut self.noise_times);
@@ -161,72 +205,179 @@ impl Health {
                 self.noise.add(n.t_start.0);
                 self.noise_bytes += n.bytes.len() as u64;
             }
-            Event::Transaction(t) => {
-                self.awaiting = false;
-                let at = t.t_start.0;
-                self.seen(at);
-                self.transactions += 1;
-                if t.outcome == Outcome::Broadcast {
-                    // Addressed to everyone, answered by no one: not a unit's figures.
-                    return;
-                }
-                let u = self.units.entry(t.unit).or_default();
-                u.transactions += 1;
-                let previous = self.last_ok.take();
-                match t.outcome {
-                    Outcome::Ok => {
-                        u.ok += 1;
-                        self.last_ok = Some((t.unit, t.function, at));
-                    }
-                    // A second answer to the same request, nothing garbled in between: another
-                    // device at this address.
-                    Outcome::Orphan
-                        if previous.is_some_and(|(unit, function, ok)| {
-                            unit == t.unit && function == t.function && at.saturating_sub(ok) < DOUBLED_WITHIN_NS
-                        }) =>
-                    {
-                        u.doubled.add(at);
-                    }
-                    Outcome::Exception(code) => {
-                        *u.exceptions.entry(code).or_default() += 1;
-                        u.exception_tally.add(at);
-                    }
-                    Outcome::NoResponse => u.no_response.add(at),
-                    Outcome::BadResponse => u.bad_response.add(at),
-                    Outcome::Broadcast | Outcome::Orphan | Outcome::WrongUnit(_) => {}
-                }
-                if let Some(l) = t.latency_ns {
-                    thin(&mut u.latencies);
-                    u.latencies.push(l);
-                }
-                let failed = matches!(t.outcome, Outcome::NoResponse | Outcome::BadResponse);
-                thin(&mut self.samples);
-                self.samples.push((at, t.unit, t.latency_ns, failed));
-                if t.outcome == Outcome::Ok
-                    && let (Some(p), Some(req)) = (self.profiles.get(&t.unit), t.request)
-                {
-                    let annotations = crate::profile::transaction::annotate_wire(p, req, t.response);
-                    if annotations.iter().any(|a| a.notes.iter().any(|n| matches!(n, Note::OutOfRange { .. }))) {
-                        u.out_of_range.add(at);
-                    }
-                    let mut jumped = false;
-                    for a in &annotations {
-                        let Some((min, max)) = p.slot(a.table, a.address).and_then(|(_, def)| def.range) else {
-                            continue;
-                        };
-                        let is_number = matches!(a.shown, crate::profile::annotate::Shown::Number { .. });
-                        if let (true, Some(prev)) = (is_number, u.last_values.insert((a.table, a.address), a.raw)) {
-                            // More than half the documented span between two reads.
-                            jumped |= (a.raw - prev).unsigned_abs().saturating_mul(2) > (max - min).unsigned_abs();
-                        }
-                    }
-                    if jumped {
-                        u.jumps.add(at);
-                    }
-                }
-            }
+            Event::Transaction(t) => self.transaction(t),
         }
     }
+
+    fn frame(&mut self, frame: &crate::framer::Frame<'_>, role: Role, unit: Option<u8>) {
+        self.seen(frame.t_end.0);
+        self.frames += 1;
+        self.frame_bytes += frame.bytes.len() as u64;
+        if !frame.check_ok {
+            self.bad_frames += 1;
+            self.last_ok = None;
+            if self.pending.is_none() {
+                thin(&mut self.noise_times);
+                self.noise_times.push(frame.t_start.0);
+                self.noise.add(frame.t_start.0);
+                self.noise_bytes += frame.bytes.len() as u64;
+                self.frame_bytes -= frame.bytes.len() as u64;
+            }
+        }
+        if frame.check_ok
+            && role == Role::Request
+            && let Some(u) = unit.filter(|&u| u != 0)
+        {
+            // Pairing keeps the request this one overtakes (and gives up an older one).
+            self.overtaken = self.pending.take().map(|p| Asked { overtaken_at: Some(frame.t_start.0), ..p });
+            self.pending = Some(Asked { unit: u, t_start: frame.t_start.0, t_end: frame.t_end.0, overtaken_at: None });
+        }
+        if frame.gap_violation_ns.is_some()
+            && let Some(u) = unit
+        {
+            self.units.entry(u).or_default().gaps.add(frame.t_start.0);
+        }
+        if frame.short_gap_before_ns.is_some() && role == Role::Request {
+            self.fast_master.add(frame.t_start.0);
+        }
+    }
+
+    fn transaction(&mut self, t: &crate::pairing::Transaction<'_>) {
+        let at = t.t_start.0;
+        if self.pending.is_some_and(|p| p.t_start == at) {
+            self.pending = None;
+        }
+        let overtaken = self.overtaken.filter(|p| p.t_start == at && p.unit == t.unit);
+        if overtaken.is_some() {
+            self.overtaken = None;
+        }
+        self.seen(at);
+        self.transactions += 1;
+        if t.outcome == Outcome::Broadcast {
+            // Addressed to everyone, answered by no one: not a unit's figures.
+            return;
+        }
+        let u = self.units.entry(t.unit).or_default();
+        u.transactions += 1;
+        let previous = self.last_ok.take();
+        let answered = matches!(t.outcome, Outcome::Ok | Outcome::Exception(_));
+        match t.outcome {
+            Outcome::Ok => {
+                u.ok += 1;
+                self.last_ok = Some((t.unit, t.function, at));
+            }
+            // A second answer to the same request, nothing garbled in between: another
+            // device at this address.
+            Outcome::Orphan
+                if previous.is_some_and(|(unit, function, ok)| {
+                    unit == t.unit && function == t.function && at.saturating_sub(ok) < DOUBLED_WITHIN_NS
+                }) =>
+            {
+                u.doubled.add(at);
+            }
+            Outcome::Exception(code) => {
+                *u.exceptions.entry(code).or_default() += 1;
+                u.exception_tally.add(at);
+            }
+            Outcome::NoResponse => u.no_response.add(at),
+            Outcome::BadResponse => u.bad_response.add(at),
+            Outcome::Broadcast | Outcome::Orphan | Outcome::WrongUnit(_) => {}
+        }
+        if let (Some(l), Some(p), true) = (t.latency_ns, overtaken, answered) {
+            // Answered after another request went out: which master sent that one?
+            let waited = p.overtaken_at.unwrap_or(p.t_end).saturating_sub(p.t_end);
+            if waited < u.typical_latency.unwrap_or(0).max(SECOND_MASTER_GAP_NS) {
+                self.second_master.add(p.overtaken_at.unwrap_or(at));
+            } else {
+                u.late.add(at);
+                u.late_latency_max = u.late_latency_max.max(l);
+                u.master_wait_min = Some(u.master_wait_min.map_or(waited, |m| m.min(waited)));
+            }
+        } else if let (Some(l), true) = (t.latency_ns, answered) {
+            u.typical_latency = Some(u.typical_latency.map_or(l, |m| (m * 7 + l) / 8));
+        }
+        if let Some(l) = t.latency_ns {
+            thin(&mut u.latencies);
+            u.latencies.push(l);
+        }
+        if let Some(req) = t.request {
+            Self::remember_poll(u, at, req, t);
+        }
+        let class = match t.outcome {
+            Outcome::NoResponse => Class::Unanswered,
+            Outcome::BadResponse => Class::FailedCheck,
+            _ => Class::Answered,
+        };
+        thin(&mut self.samples);
+        self.samples.push(Sample { t: at, unit: t.unit, latency: t.latency_ns, class });
+        if t.outcome == Outcome::Ok {
+            self.check_values(t);
+        }
+    }
+
+    /// The polling period, and garbled answers that look like two devices answering at once:
+    /// compared with the last good answer to the same request, a wired-AND collision only
+    /// clears bits (a dominant 0 wins on RS-485), where noise flips them both ways.
+    fn remember_poll(u: &mut UnitState, at: u64, request: &[u8], t: &crate::pairing::Transaction<'_>) {
+        if u.polls.len() >= MAX_POLLS && !u.polls.contains_key(request) {
+            return;
+        }
+        let poll = u.polls.entry(request.to_vec()).or_default();
+        if poll.last_t != 0 && at > poll.last_t {
+            thin(&mut u.periods);
+            u.periods.push(at - poll.last_t);
+        }
+        poll.last_t = at;
+        match (t.outcome, t.response, &poll.answer) {
+            (Outcome::Ok, Some(r), _) => poll.answer = Some(r.to_vec()),
+            (Outcome::BadResponse, Some(bad), Some(good)) if looks_collided(good, bad) => u.collided.add(at),
+            _ => {}
+        }
+    }
+
+    /// Values outside the profile's range, and readings that jump.
+    fn check_values(&mut self, t: &crate::pairing::Transaction<'_>) {
+        let (Some(p), Some(req)) = (self.profiles.get(&t.unit), t.request) else { return };
+        let Some(u) = self.units.get_mut(&t.unit) else { return };
+        let at = t.t_start.0;
+        let annotations = crate::profile::transaction::annotate_wire(p, req, t.response);
+        if annotations.iter().any(|a| a.notes.iter().any(|n| matches!(n, Note::OutOfRange { .. }))) {
+            u.out_of_range.add(at);
+        }
+        let mut jumped = false;
+        for a in &annotations {
+            let Some((min, max)) = p.slot(a.table, a.address).and_then(|(_, def)| def.range) else {
+                continue;
+            };
+            let is_number = matches!(a.shown, crate::profile::annotate::Shown::Number { .. });
+            if let (true, Some(prev)) = (is_number, u.last_values.insert((a.table, a.address), a.raw)) {
+                // More than half the documented span between two reads.
+                jumped |= (a.raw - prev).unsigned_abs().saturating_mul(2) > (max - min).unsigned_abs();
+            }
+        }
+        if jumped {
+            u.jumps.add(at);
+        }
+    }
+}
+
+/// A failed answer of the same length and header as a good one, whose payload and CRC differ
+/// only by cleared bits — several of them — is two answers on top of each other.
+fn looks_collided(good: &[u8], bad: &[u8]) -> bool {
+    // Unit, function, byte count (Modbus over Serial Line v1.02 §2.5.1: RTU frame layout):
+    // identical in both devices' answers, so the fight starts after them.
+    const HEADER: usize = 3;
+    if good.len() != bad.len() || good.len() <= HEADER || good.get(..HEADER) != bad.get(..HEADER) {
+        return false;
+    }
+    let (mut cleared, mut set) = (0u32, 0u32);
+    for (g, b) in good.iter().zip(bad).skip(HEADER) {
+        cleared += (g & !b).count_ones();
+        set += (b & !g).count_ones();
+    }
+    // Values move a little between two reads (and the CRC with them): allow a few set bits
+    // against many cleared. A flipped bit or two of noise is not enough.
+    cleared >= 3 && set * 4 <= cleared
 }
 
 /// a / b for percentages (counts stay far below 2^52).

@@ -37,6 +37,8 @@ pub struct UnitHealth {
     pub latency_p50_ns: Option<u64>,
     pub latency_p99_ns: Option<u64>,
     pub latency_max_ns: Option<u64>,
+    /// The median time between one request and the next identical one.
+    pub poll_period_ns: Option<u64>,
 }
 
 /// One slice of the capture's time, for the plots.
@@ -99,7 +101,7 @@ impl Report {
             let ms = |v: Option<u64>| v.map_or_else(|| "–".into(), |v| format!("{:.1} ms", ratio(v, 1_000_000)));
             let _ = writeln!(
                 s,
-                "unit {:>3}: {} transactions, availability {:.1} %, {} unanswered, {} bad answers, {} exceptions, latency p50 {} p99 {} max {}",
+                "unit {:>3}: {} transactions, availability {:.1} %, {} unanswered, {} bad answers, {} exceptions, latency p50 {} p99 {} max {}, polled every {}",
                 u.unit,
                 u.transactions,
                 u.availability_percent,
@@ -108,7 +110,8 @@ impl Report {
                 u.exceptions.values().sum::<u64>(),
                 ms(u.latency_p50_ns),
                 ms(u.latency_p99_ns),
-                ms(u.latency_max_ns)
+                ms(u.latency_max_ns),
+                u.poll_period_ns.map_or_else(|| "–".into(), |p| format!("{:.2} s", ratio(p, 1_000_000_000)))
             );
         }
         if self.findings.is_empty() {

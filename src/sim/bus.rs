@@ -65,11 +65,17 @@ pub enum Fault {
     SlowSlave,
     /// The addressed slave does not answer: the master times out.
     SilentSlave,
-    /// Two slaves on one address both answer at once; the drivers fight and the line carries
-    /// the wired-AND of both (a dominant 0 wins on RS-485 fail-safe biasing).
+    /// A second device set to the first slave's address answers with it; the drivers fight and
+    /// the line carries the wired-AND of both answers (a dominant 0 wins on RS-485 fail-safe
+    /// biasing). Only that address suffers; other units' turns pass unharmed.
     Collision,
     /// A master that sends its next request before t3.5 of silence has passed.
     FastMaster,
+    /// A second master on the line: just after the first master's request, when the line has
+    /// been quiet for t3.5 (the addressed slave is still turning around), it sends a request of
+    /// its own to another unit. The slaves wait for the line to go quiet, then both answer:
+    /// first the one the first master asked, then the other.
+    SecondMaster,
     /// Not a line fault: the MK4's running pump trips on overcurrent, and the alarm log
     /// records it ([`world::mk4_pump_trip`]).
     PumpTrip,
@@ -77,13 +83,14 @@ pub enum Fault {
 
 impl Fault {
     /// Every fault, for `--fault all`.
-    pub const ALL: [Self; 7] = [
+    pub const ALL: [Self; 8] = [
         Self::Corrupt,
         Self::Noise,
         Self::SlowSlave,
         Self::SilentSlave,
         Self::Collision,
         Self::FastMaster,
+        Self::SecondMaster,
         Self::PumpTrip,
     ];
 }
@@ -131,8 +138,11 @@ impl VirtualBus {
         let Some((unit, pdu)) = self.polls.get(self.next).cloned() else { return Vec::new() };
         self.next = (self.next + 1) % self.polls.len();
         self.count = self.count.wrapping_add(1);
-        let fault = self.due_fault();
-        let mut frames = Vec::with_capacity(3);
+        let mut fault = self.due_fault();
+        if fault == Some(Fault::Collision) && self.slaves.first().map(Slave::address) != Some(unit) {
+            fault = None;
+        }
+        let mut frames = Vec::with_capacity(4);
         if fault == Some(Fault::Noise) {
             let len = 3 + usize::try_from(self.random() % 5).unwrap_or(0);
             let noise: Vec<u8> = (0..len).map(|_| self.random().to_le_bytes()[0]).collect();
@@ -156,15 +166,24 @@ impl VirtualBus {
                 answers.push(answer);
             }
         }
-        let end;
+        let mut end;
         let answer = answers.first().filter(|_| fault != Some(Fault::SilentSlave));
+        // The second master's request and its answer, sent while the first one's is due.
+        let second =
+            if fault == Some(Fault::SecondMaster) && answer.is_some() { self.second_master(unit) } else { None };
+        let mut quiet_from = request_end;
+        if let Some((request, _)) = &second {
+            // It waits for four characters of silence (more than t3.5), then sends.
+            quiet_from = request_end.saturating_add(self.duration(4)).saturating_add(self.duration(request.len()));
+            frames.push(LineFrame { end_ns: quiet_from, bytes: request.clone() });
+        }
         match answer {
             None => end = request_end.saturating_add(self.master_timeout_ns),
             Some(answer) => {
                 let mut response = Vec::with_capacity(answer.len() * 2 + 5);
                 self.encode(unit, answer, &mut response);
                 self.apply_response_fault(fault, &mut response);
-                let start = request_end.saturating_add(self.turnaround_ns);
+                let start = quiet_from.saturating_add(self.turnaround_ns);
                 if fault == Some(Fault::SlowSlave) && response.len() > 2 {
                     let tail = response.split_off(response.len() / 2);
                     let first_end = start.saturating_add(self.duration(response.len()));
@@ -178,6 +197,10 @@ impl VirtualBus {
                 }
             }
         }
+        if let Some((_, response)) = second {
+            end = end.saturating_add(self.turnaround_ns).saturating_add(self.duration(response.len()));
+            frames.push(LineFrame { end_ns: end, bytes: response });
+        }
         self.now_ns = if fault == Some(Fault::FastMaster) {
             // One character of silence instead of at least three and a half.
             end.saturating_add(self.char_ns)
@@ -185,6 +208,18 @@ impl VirtualBus {
             end.saturating_add(self.interval_ns)
         };
         frames
+    }
+
+    /// The second master's request — the first poll of a unit other than `busy` — and that
+    /// unit's answer, encoded; `None` on a bus with one unit.
+    fn second_master(&mut self, busy: u8) -> Option<(Vec<u8>, Vec<u8>)> {
+        let (unit, pdu) = self.polls.iter().find(|(u, _)| *u != busy).cloned()?;
+        let answer = self.slaves.iter_mut().find_map(|s| s.handle(unit, &pdu))?;
+        let mut request = Vec::new();
+        self.encode(unit, &pdu, &mut request);
+        let mut response = Vec::new();
+        self.encode(unit, &answer, &mut response);
+        Some((request, response))
     }
 
     fn encode(&self, unit: u8, pdu: &[u8], out: &mut Vec<u8>) {
