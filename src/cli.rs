@@ -159,18 +159,8 @@ pub enum Command {
         image: Option<PathBuf>,
         #[command(flatten)]
         line: LineArgs,
-        /// Output format.
-        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
-        format: EventFormatArg,
-        /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
-        #[arg(long = "device", value_name = "UNIT=PROFILE")]
-        devices: Vec<String>,
-        /// Language of register names in annotations.
-        #[arg(long, value_enum, default_value_t = LangArg::En)]
-        lang: LangArg,
-        /// End with the bus health report (findings with evidence), as `mbtap report` gives it.
-        #[arg(long)]
-        report: bool,
+        #[command(flatten)]
+        output: OutputArgs,
     },
     /// Write a synthetic line capture with known content (for training, tests and benchmarks).
     Generate {
@@ -225,24 +215,14 @@ pub enum Command {
         port: String,
         #[command(flatten)]
         line: LineArgs,
-        /// Output format.
-        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
-        format: EventFormatArg,
-        /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
-        #[arg(long = "device", value_name = "UNIT=PROFILE")]
-        devices: Vec<String>,
-        /// Language of register names in annotations.
-        #[arg(long, value_enum, default_value_t = LangArg::En)]
-        lang: LangArg,
+        #[command(flatten)]
+        output: OutputArgs,
         /// Record every read to this pcapng file.
         #[arg(long)]
         record: Option<PathBuf>,
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
-        /// End (Ctrl-C or --duration) with the bus health report, as `mbtap report` gives it.
-        #[arg(long)]
-        report: bool,
     },
     /// Play a line capture into a serial port with its recorded timing.
     Play {
@@ -269,15 +249,8 @@ pub enum Command {
         link: PathBuf,
         #[command(flatten)]
         line: LineArgs,
-        /// Output format.
-        #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
-        format: EventFormatArg,
-        /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
-        #[arg(long = "device", value_name = "UNIT=PROFILE")]
-        devices: Vec<String>,
-        /// Language of register names in annotations.
-        #[arg(long, value_enum, default_value_t = LangArg::En)]
-        lang: LangArg,
+        #[command(flatten)]
+        output: OutputArgs,
         /// Record both directions to this pcapng file.
         #[arg(long)]
         record: Option<PathBuf>,
@@ -372,6 +345,27 @@ pub enum Command {
     /// Device profiles: check a profile file, or show what it defines.
     #[command(subcommand)]
     Profiles(ProfilesCommand),
+}
+
+/// What `sniff`, `tap` and `replay` show, and how.
+#[derive(Debug, Args)]
+pub struct OutputArgs {
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
+    pub format: EventFormatArg,
+    /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
+    #[arg(long = "device", value_name = "UNIT=PROFILE")]
+    pub devices: Vec<String>,
+    /// Language of register names in annotations.
+    #[arg(long, value_enum, default_value_t = LangArg::En)]
+    pub lang: LangArg,
+    /// End (end of file, Ctrl-C or --duration) with the bus health report, as `mbtap report`
+    /// gives it.
+    #[arg(long)]
+    pub report: bool,
+    /// Also give the report so far every SECONDS of bus time, while it runs (implies --report).
+    #[arg(long, value_name = "SECONDS")]
+    pub report_every: Option<f64>,
 }
 
 /// `mbtap bridge …` (boxed: by far the largest command).

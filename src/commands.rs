@@ -60,13 +60,17 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             out.flush()?;
             Ok(ExitCode::from(outcome as u8))
         }
-        Command::Replay { file, image, line, format, devices, lang, report } => {
+        Command::Replay { file, image, line, output } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
-            if format == EventFormatArg::Tui {
+            if output.format == EventFormatArg::Tui {
                 let (_, settings, _) = overrides(&line).resolve();
                 let source = file.display().to_string();
-                let ui =
-                    TuiSource { profiles: load_devices(&devices)?, lang: lang.into(), line: settings, pacing: true };
+                let ui = TuiSource {
+                    profiles: load_devices(&output.devices)?,
+                    lang: output.lang.into(),
+                    line: settings,
+                    pacing: true,
+                };
                 return ui.run(&source, move |writer, err| {
                     writer.pacer = Some(crate::tui::terminal::Pacer::default());
                     crate::replay_cmd::replay(input, overrides(&line), writer, err)
@@ -74,13 +78,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 });
             }
             let stdout = io::stdout();
-            let mut writer =
-                EventWriter::new(io::BufWriter::with_capacity(1 << 16, stdout.lock()), event_format(format));
-            writer.profiles = load_devices(&devices)?;
-            writer.lang = lang.into();
-            if report {
-                writer.health = Some(crate::health::Health::new(writer.profiles.clone()));
-            }
+            let mut writer = event_writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()), &output)?;
             if image.is_some() {
                 writer.image = Some(crate::profile::image::RegisterImage::default());
             }
@@ -97,7 +95,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Sniff { port, line, format, devices, lang, record, duration, report } => {
+        Command::Sniff { port, line, output, record, duration } => {
             let (mode, settings, latency_ns) = overrides(&line).resolve();
             let opts = crate::sniff_cmd::SniffOptions {
                 port,
@@ -107,25 +105,24 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 record,
                 duration: seconds(duration),
             };
-            if format == EventFormatArg::Tui {
+            if output.format == EventFormatArg::Tui {
                 let source = opts.port.clone();
-                let ui =
-                    TuiSource { profiles: load_devices(&devices)?, lang: lang.into(), line: settings, pacing: false };
+                let ui = TuiSource {
+                    profiles: load_devices(&output.devices)?,
+                    lang: output.lang.into(),
+                    line: settings,
+                    pacing: false,
+                };
                 return ui
                     .run(&source, move |writer, err| runtime()?.block_on(crate::sniff_cmd::sniff(opts, writer, err)));
             }
             let stdout = io::stdout();
-            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
-            writer.profiles = load_devices(&devices)?;
-            writer.lang = lang.into();
-            if report {
-                writer.health = Some(crate::health::Health::new(writer.profiles.clone()));
-            }
+            let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
             runtime()?.block_on(crate::sniff_cmd::sniff(opts, &mut writer, &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Tap { port, link, line, format, devices, lang, record, duration } => {
+        Command::Tap { port, link, line, output, record, duration } => {
             let (mode, settings, latency_ns) = overrides(&line).resolve();
             let opts = crate::tap_cmd::TapOptions {
                 port,
@@ -136,16 +133,18 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 record,
                 duration: seconds(duration),
             };
-            if format == EventFormatArg::Tui {
+            if output.format == EventFormatArg::Tui {
                 let source = format!("{} ⇄ {}", opts.port, opts.link.display());
-                let ui =
-                    TuiSource { profiles: load_devices(&devices)?, lang: lang.into(), line: settings, pacing: false };
+                let ui = TuiSource {
+                    profiles: load_devices(&output.devices)?,
+                    lang: output.lang.into(),
+                    line: settings,
+                    pacing: false,
+                };
                 return ui.run(&source, move |writer, err| runtime()?.block_on(crate::tap_cmd::tap(opts, writer, err)));
             }
             let stdout = io::stdout();
-            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), event_format(format));
-            writer.profiles = load_devices(&devices)?;
-            writer.lang = lang.into();
+            let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
             runtime()?.block_on(crate::tap_cmd::tap(opts, &mut writer, &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
@@ -657,6 +656,25 @@ fn overrides(a: &LineArgs) -> LineOverrides {
         #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
         latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
     }
+}
+
+/// The event writer `sniff`, `tap` and `replay` print through, as their output options say.
+fn event_writer<W: io::Write>(out: W, o: &crate::cli::OutputArgs) -> anyhow::Result<EventWriter<W>> {
+    let mut writer = EventWriter::new(out, event_format(o.format));
+    writer.profiles = load_devices(&o.devices)?;
+    writer.lang = o.lang.into();
+    if let Some(every) = o.report_every {
+        anyhow::ensure!(
+            every.is_finite() && every > 0.0,
+            "--report-every {every}: expected a number of seconds above 0, e.g. 60"
+        );
+        // Capped at a year: the report then comes at the end only.
+        writer.report_every_ns = Some(std::time::Duration::from_secs_f64(every.min(3.2e7)).as_nanos().try_into()?);
+    }
+    if o.report || o.report_every.is_some() {
+        writer.health = Some(crate::health::Health::new(writer.profiles.clone()));
+    }
+    Ok(writer)
 }
 
 /// `--duration SECONDS` as a duration (negative as 0, absurdly large capped).

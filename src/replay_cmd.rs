@@ -41,6 +41,9 @@ pub struct EventWriter<W: Write> {
     pub pacer: Option<crate::tui::terminal::Pacer>,
     /// The bus health report, written by [`Self::finish`] when set.
     pub health: Option<crate::health::Health>,
+    /// Also write the report so far each time this much bus time has passed.
+    pub report_every_ns: Option<u64>,
+    next_report_ns: Option<u64>,
 }
 
 impl<W: Write> EventWriter<W> {
@@ -56,6 +59,8 @@ impl<W: Write> EventWriter<W> {
             tui: None,
             pacer: None,
             health: None,
+            report_every_ns: None,
+            next_report_ns: None,
         }
     }
 
@@ -64,6 +69,17 @@ impl<W: Write> EventWriter<W> {
         self.stats.add(e);
         if let Some(h) = self.health.as_mut() {
             h.event(e);
+        }
+        if let Some(every) = self.report_every_ns {
+            // Bus time, not the clock: a replay gives the same interim reports as the live run.
+            let t = event_time(e);
+            let due = *self.next_report_ns.get_or_insert(t.saturating_add(every));
+            if t >= due && self.tui.is_none() && self.error.is_none() {
+                self.next_report_ns = Some(t.saturating_add(every));
+                if let Err(err) = self.write_report(false) {
+                    self.error = Some(err);
+                }
+            }
         }
         if let (Some(image), Event::Transaction(t)) = (self.image.as_mut(), e)
             && let Some(req) = t.request
@@ -145,18 +161,8 @@ impl<W: Write> EventWriter<W> {
             EventFormat::Text | EventFormat::Summary => writeln!(self.out, "{}", self.stats.text()),
             EventFormat::Jsonl => writeln!(self.out, "{}", self.stats.json()),
         };
-        if let Some(h) = self.health.take() {
-            let report = h.report();
-            r = r.and_then(|()| match self.format {
-                EventFormat::Text | EventFormat::Summary => write!(self.out, "{}", report.text()),
-                EventFormat::Jsonl => {
-                    let mut j = report.json();
-                    if let Some(o) = j.as_object_mut() {
-                        o.insert("event".into(), "report".into());
-                    }
-                    writeln!(self.out, "{j}")
-                }
-            });
+        if self.health.is_some() {
+            r = r.and_then(|()| self.write_report(true));
         }
         if let Some(e) = self.error.take() {
             return Err(e);
@@ -167,13 +173,48 @@ impl<W: Write> EventWriter<W> {
     }
 }
 
-/// Waits (this thread) until `e` is due at the UI's speed; a stop request ends all waiting.
-fn pace(pacer: &mut crate::tui::terminal::Pacer, shared: &crate::tui::terminal::Shared, e: &Event<'_>) {
-    let t = match e {
+impl<W: Write> EventWriter<W> {
+    /// The health report so far (text: headed with its time unless `last`; JSON lines: a
+    /// `report` event with `final` true or false).
+    fn write_report(&mut self, last: bool) -> io::Result<()> {
+        let Some(h) = self.health.as_ref() else { return Ok(()) };
+        let report = h.report();
+        match self.format {
+            EventFormat::Text | EventFormat::Summary => {
+                if !last {
+                    let until = report.last_t_ns.map_or_else(String::new, crate::health::clock);
+                    writeln!(self.out, "--- bus health so far (until {until}) ---")?;
+                }
+                write!(self.out, "{}", report.text())?;
+                if !last {
+                    writeln!(self.out, "---")?;
+                }
+                Ok(())
+            }
+            EventFormat::Jsonl => {
+                let mut j = report.json();
+                if let Some(o) = j.as_object_mut() {
+                    o.insert("event".into(), "report".into());
+                    o.insert("final".into(), last.into());
+                }
+                writeln!(self.out, "{j}")
+            }
+        }
+    }
+}
+
+/// The time an event happened (its end for frames and noise, its start for transactions).
+fn event_time(e: &Event<'_>) -> u64 {
+    match e {
         Event::Frame { frame, .. } => frame.t_end.0,
         Event::Noise(n) => n.t_end.0,
         Event::Transaction(t) => t.t_start.0,
-    };
+    }
+}
+
+/// Waits (this thread) until `e` is due at the UI's speed; a stop request ends all waiting.
+fn pace(pacer: &mut crate::tui::terminal::Pacer, shared: &crate::tui::terminal::Shared, e: &Event<'_>) {
+    let t = event_time(e);
     while !crate::sniff_cmd::stop_requested() {
         match pacer.delay(t, shared.speed(), std::time::Instant::now()) {
             None => break,

@@ -430,3 +430,32 @@ fn replay_ends_with_the_same_report_when_asked() {
     let report: serde_json::Value = serde_json::from_slice(&report.stdout).unwrap();
     assert_eq!(last["findings"], report["findings"], "one analysis, two ways to ask for it");
 }
+
+#[test]
+fn report_every_gives_the_report_so_far_by_bus_time() {
+    // The capture spans 5.9 s of bus time: reports after 2 and 4 s, then the final one.
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-19200-8e1-usb1ms-noisy.pcapng");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["replay", capture, "--report-every", "2", "--format", "jsonl"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let events: Vec<serde_json::Value> =
+        String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let reports: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "report").collect();
+    let finals: Vec<bool> = reports.iter().map(|r| r["final"].as_bool().unwrap()).collect();
+    assert_eq!(finals, [false, false, true]);
+    // Each covers more of the bus than the one before, and the last all of it.
+    let transactions: Vec<u64> = reports.iter().map(|r| r["transactions"].as_u64().unwrap()).collect();
+    assert!(transactions.windows(2).all(|w| w[0] < w[1]), "{transactions:?}");
+    let first = reports[0]["first_t_ns"].as_u64().unwrap();
+    let until = reports[0]["last_t_ns"].as_u64().unwrap();
+    assert!((2_000_000_000..2_200_000_000).contains(&(until - first)), "first after 2 s: {}", until - first);
+    // A bad value is an error that names the option.
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["replay", capture, "--report-every", "0"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--report-every 0"));
+}

@@ -75,3 +75,19 @@ fn a_listener_at_the_wrong_baud_rate_hears_garbage_not_frames() {
     assert_eq!(good, 0, "a wrong-baud listener cannot decode frames");
     assert!(noise > 3, "it hears garbage: {noise} noise events");
 }
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_live_sniffer_reports_bus_health_while_it_runs_and_names_a_second_master() {
+    let (_sim, link) = line("second-master", &["--fault", "second-master"]);
+    let events = sniff(&link, "5", &["--report-every", "1"]);
+    let reports: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "report").collect();
+    let interim = reports.iter().filter(|r| r["final"] == false).count();
+    assert!(interim >= 3, "a report about every second of 5: {interim}");
+    let last = reports.last().unwrap();
+    assert_eq!(last["final"], true, "the last report is the final one");
+    let kinds: BTreeSet<&str> =
+        last["findings"].as_array().unwrap().iter().map(|f| f["kind"].as_str().unwrap()).collect();
+    assert!(kinds.contains("second_master"), "{kinds:?}");
+    assert!(!kinds.contains("no_response"), "the overlap is not a silent unit: {kinds:?}");
+}

@@ -74,7 +74,7 @@ impl Health {
             "second_master",
             None,
             &self.second_master,
-            "requests went out while another request's answer was still due, and that answer then came: a second master shares the line (its requests collide with the first one's traffic)".into(),
+            "requests went out while another request's answer was still due, and that answer then came: a second master shares the line (their requests will collide sooner or later)".into(),
         );
         push(
             "fast_master",
