@@ -319,8 +319,12 @@ pub enum Command {
     GenerateConfig,
     /// Find a live bus's line settings: try baud rates, parities, character sizes and both
     /// modes, and rank them by the valid frames they give.
+    ///
+    /// Given a file instead of a port — a capture (pcap/pcapng) or a raw dump of received
+    /// bytes — it tells the mode and character size from the stored bytes (their baud rate
+    /// and parity can no longer be changed: a wrong receiver's lost bits are gone).
     Scan {
-        /// The serial port.
+        /// The serial port, or a file of stored bytes.
         port: String,
         /// Only these baud rates (repeatable; default: 1200 to 256000).
         #[arg(long = "baud")]

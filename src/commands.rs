@@ -198,6 +198,11 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Scan { port, bauds, dwell_ms } => {
+            if std::fs::metadata(&port).is_ok_and(|m| m.is_file()) {
+                let (text, ok) = crate::scan_cmd::scan_file(std::path::Path::new(&port))?;
+                io::stdout().lock().write_all(text.as_bytes())?;
+                return Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) });
+            }
             let dwell = std::time::Duration::from_millis(dwell_ms.max(1));
             let scores = runtime()?.block_on(crate::scan_cmd::scan(&port, &bauds, dwell, &mut io::stderr()))?;
             io::stdout().lock().write_all(crate::scan_cmd::describe(&scores).as_bytes())?;

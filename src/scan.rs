@@ -68,11 +68,13 @@ pub fn candidates() -> Vec<Candidate> {
 #[must_use]
 pub fn score(candidate: Candidate, heard: &[(u64, Vec<u8>)]) -> Score {
     let mut s = Score { candidate, valid_frames: 0, bad_frames: 0, noise_bytes: 0, units: BTreeSet::new() };
-    let mut analyzer = Analyzer::new(AnalyzerConfig {
-        mode: candidate.mode,
-        framer: FramerConfig::new(candidate.line, 0),
-        ..AnalyzerConfig::default()
-    });
+    count(&mut s, candidate.mode, FramerConfig::new(candidate.line, 0), heard);
+    s
+}
+
+/// Adds what the analyzer makes of `heard` in `mode` to `s`.
+fn count(s: &mut Score, mode: SerialMode, framer: FramerConfig, heard: &[(u64, Vec<u8>)]) {
+    let mut analyzer = Analyzer::new(AnalyzerConfig { mode, framer, ..AnalyzerConfig::default() });
     let mut sink = |e: &Event<'_>| match e {
         Event::Frame { frame, unit, .. } if frame.check_ok => {
             s.valid_frames += 1;
@@ -86,7 +88,6 @@ pub fn score(candidate: Candidate, heard: &[(u64, Vec<u8>)]) -> Score {
         analyzer.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut sink);
     }
     analyzer.finish(&mut sink);
-    s
 }
 
 /// Best first, ties broken as the module says.
@@ -124,6 +125,98 @@ pub fn scan_line(frames: &[crate::sim::bus::LineFrame], sender: LineSettings) ->
         .collect();
     rank(&mut scores);
     scores
+}
+
+/// What the eighth bit of stored characters says about a 7-bit (ASCII) line recorded as
+/// 8 data bits: the receiver took the parity bit (or the first stop bit) for data.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EighthBit {
+    /// Always 0: 7-bit characters (parity, if any, removed by the receiver) or 8-bit ASCII.
+    Zero,
+    /// Even parity of the seven data bits: a 7E1 line recorded at 8N1.
+    Even,
+    /// Odd parity: a 7O1 line recorded at 8N1.
+    Odd,
+    /// Always 1: the first stop bit of a 7N2 line recorded at 8N1.
+    One,
+    /// None of those.
+    Mixed,
+}
+
+/// What the eighth bits of `bytes` are, judged on the characters that can be in an ASCII
+/// frame (Serial Line v1.02 §2.5.2: ':', hex digits, CR, LF); `None` with too few of them.
+#[must_use]
+pub fn eighth_bit(bytes: &[u8]) -> Option<EighthBit> {
+    let ascii = |b: u8| matches!(b & 0x7F, b':' | b'0'..=b'9' | b'A'..=b'F' | b'\r' | b'\n');
+    let (mut n, mut zero, mut one, mut even, mut odd) = (0u64, 0u64, 0u64, 0u64, 0u64);
+    for &b in bytes.iter().filter(|&&b| ascii(b)) {
+        n += 1;
+        let high = b & 0x80 != 0;
+        zero += u64::from(!high);
+        one += u64::from(high);
+        // The eighth bit makes the number of ones even (even parity) or odd.
+        even += u64::from(b.count_ones() % 2 == 0);
+        odd += u64::from(b.count_ones() % 2 == 1);
+    }
+    if n < 16 {
+        return None;
+    }
+    // Allow a few damaged characters.
+    let most = |k: u64| k * 100 >= n * 95;
+    Some(if most(zero) {
+        EighthBit::Zero
+    } else if most(one) {
+        EighthBit::One
+    } else if most(even) {
+        EighthBit::Even
+    } else if most(odd) {
+        EighthBit::Odd
+    } else {
+        EighthBit::Mixed
+    })
+}
+
+/// A reading of stored bytes (a capture or a raw dump): the mode, and whether the eighth bit
+/// was stripped.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StoredScore {
+    pub mode: SerialMode,
+    /// For a 7-bit reading: what the stripped eighth bit was.
+    pub seven_bit: Option<EighthBit>,
+    pub score: Score,
+}
+
+/// Scores stored bytes — `(time ns, bytes)` chunks as recorded at `recorded` settings — as
+/// RTU, as ASCII, and as ASCII with the eighth bit stripped (a 7-bit line recorded as 8 bits).
+/// Stored bytes cannot be re-sampled at other baud rates or parities: the bits a wrong
+/// receiver lost are gone; only the mode and the character size can still be told. Ranked,
+/// best first. Untimed input (a raw dump) is framed by structure and check alone.
+#[must_use]
+pub fn scan_stored(chunks: &[(u64, Vec<u8>)], recorded: LineSettings) -> Vec<StoredScore> {
+    let all: Vec<u8> = chunks.iter().flat_map(|(_, b)| b.iter().copied()).collect();
+    let eighth = eighth_bit(&all);
+    let mut readings = vec![(SerialMode::Rtu, None), (SerialMode::Ascii, None)];
+    if eighth.is_some_and(|e| e != EighthBit::Zero) {
+        readings.push((SerialMode::Ascii, eighth));
+    }
+    let mut out: Vec<StoredScore> = readings
+        .into_iter()
+        .map(|(mode, seven_bit)| {
+            let stripped: Vec<(u64, Vec<u8>)>;
+            let heard = if seven_bit.is_some() {
+                stripped = chunks.iter().map(|(t, b)| (*t, b.iter().map(|&c| c & 0x7F).collect())).collect();
+                &stripped
+            } else {
+                chunks
+            };
+            let candidate = Candidate { mode, line: recorded };
+            let mut score = Score { candidate, valid_frames: 0, bad_frames: 0, noise_bytes: 0, units: BTreeSet::new() };
+            count(&mut score, mode, FramerConfig::new(recorded, 0), heard);
+            StoredScore { mode, seven_bit, score }
+        })
+        .collect();
+    out.sort_by_key(|s| std::cmp::Reverse(s.score.value()));
+    out
 }
 
 #[cfg(test)]

@@ -113,3 +113,129 @@ pub fn describe(scores: &[Score]) -> String {
     }
     s
 }
+
+/// Stored bytes read at most: enough frames to judge by, bounded memory on any file.
+const STORED_MAX: usize = 16 << 20;
+
+/// `mbtap scan FILE`: the readings of a capture (pcap/pcapng, with its timing and recorded
+/// settings) or of a raw dump of received bytes; the description for people and whether any
+/// reading gave a valid frame.
+///
+/// # Errors
+/// When the file cannot be read.
+pub fn scan_file(path: &std::path::Path) -> anyhow::Result<(String, bool)> {
+    use std::io::Read;
+    let mut head = [0u8; 4];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| f.read(&mut head))
+        .with_context(|| format!("opening {}", path.display()))?;
+    // pcapng section header; pcap in either byte order, µs or ns timestamps.
+    let capture = n == 4
+        && matches!(u32::from_le_bytes(head), 0x0A0D_0D0A | 0xA1B2_C3D4 | 0xD4C3_B2A1 | 0xA1B2_3C4D | 0x4D3C_B2A1);
+    let (chunks, recorded) = if capture {
+        read_capture(path)?
+    } else {
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(STORED_MAX as u64).read_to_end(&mut bytes))
+            .with_context(|| format!("reading {}", path.display()))?;
+        (vec![(0, bytes)], None)
+    };
+    let total: usize = chunks.iter().map(|(_, b)| b.len()).sum();
+    let ranked = crate::scan::scan_stored(&chunks, recorded.unwrap_or_default());
+    let ok = ranked.first().is_some_and(|b| b.score.valid_frames > 0);
+    Ok((describe_stored(&ranked, recorded, total, capture), ok))
+}
+
+/// Stored chunks: (time ns, bytes).
+type Chunks = Vec<(u64, Vec<u8>)>;
+
+/// The packets of a capture (merged in time order) and the line settings it was recorded at.
+fn read_capture(path: &std::path::Path) -> anyhow::Result<(Chunks, Option<LineSettings>)> {
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut reader = crate::capture::CaptureReader::new(std::io::BufReader::new(file));
+    let mut chunks = Vec::new();
+    let mut recorded = None;
+    let mut total = 0usize;
+    while let Some(item) = reader.next_item().with_context(|| format!("reading {}", path.display()))? {
+        match item {
+            crate::capture::Item::Interface { interface, .. } if recorded.is_none() => {
+                let described = crate::line_args::LineOverrides::from_description(
+                    interface.description.as_deref().unwrap_or_default(),
+                );
+                if described.baud.is_some() {
+                    recorded = Some(described.resolve().1);
+                }
+            }
+            crate::capture::Item::Packet { t, data, .. } if total < STORED_MAX => {
+                total += data.len();
+                chunks.push((t.0, data.to_vec()));
+            }
+            _ => {}
+        }
+    }
+    chunks.sort_by_key(|(t, _)| *t);
+    Ok((chunks, recorded))
+}
+
+/// The readings of stored bytes, for people.
+fn describe_stored(
+    ranked: &[crate::scan::StoredScore],
+    recorded: Option<LineSettings>,
+    bytes: usize,
+    capture: bool,
+) -> String {
+    use crate::scan::EighthBit;
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let what = if capture { "bytes of capture" } else { "raw bytes (no timing: framed by structure and check)" };
+    let at = recorded.map_or_else(String::new, |l| format!(", recorded at {l}"));
+    let _ = writeln!(s, "{bytes} {what}{at}");
+    let reading = |r: &crate::scan::StoredScore| match r.seven_bit {
+        None => r.mode.name().to_owned(),
+        Some(EighthBit::Even) => {
+            "ascii, 7 data bits + even parity stored as the 8th bit (a 7E1 line recorded at 8N1)".into()
+        }
+        Some(EighthBit::Odd) => {
+            "ascii, 7 data bits + odd parity stored as the 8th bit (a 7O1 line recorded at 8N1)".into()
+        }
+        Some(EighthBit::One) => {
+            "ascii, 7 data bits + a stop bit stored as the 8th bit (a 7N2 line recorded at 8N1)".into()
+        }
+        Some(EighthBit::Zero | EighthBit::Mixed) => "ascii, 7 data bits (8th bit ignored)".into(),
+    };
+    match ranked.first().filter(|b| b.score.valid_frames > 0) {
+        None => s.push_str(
+            "no reading gave a valid Modbus frame: the bytes were recorded at the wrong baud rate or parity, and what \
+             a wrong receiver lost cannot be re-read at other settings — scan the live port (mbtap scan /dev/ttyUSB0)\n",
+        ),
+        Some(best) => {
+            let units: Vec<String> = best.score.units.iter().map(u8::to_string).collect();
+            let _ = writeln!(
+                s,
+                "best: {} — {} valid frames, {} failed, {} noise bytes; units heard: {}",
+                reading(best),
+                best.score.valid_frames,
+                best.score.bad_frames,
+                best.score.noise_bytes,
+                units.join(", ")
+            );
+            for r in ranked.iter().skip(1).filter(|r| r.score.valid_frames > 0) {
+                let _ = writeln!(
+                    s,
+                    "  then: {} — {} valid, {} failed, {} noise bytes",
+                    reading(r),
+                    r.score.valid_frames,
+                    r.score.bad_frames,
+                    r.score.noise_bytes
+                );
+            }
+            if best.score.bad_frames + best.score.noise_bytes / 8 > best.score.valid_frames {
+                s.push_str(
+                    "  mostly garbage even so: the recording's baud rate or parity is probably wrong; scan the live port\n",
+                );
+            }
+        }
+    }
+    s
+}

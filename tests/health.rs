@@ -459,3 +459,63 @@ fn report_every_gives_the_report_so_far_by_bus_time() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--report-every 0"));
 }
+
+/// The frames of `n` transactions of the demo bus at `sent`, as a receiver at `heard` got them:
+/// one untimed byte stream, as `cat /dev/ttyUSB0 > dump.bin` stores it.
+fn dump(sent: &str, heard: &str, ascii: bool, n: usize) -> Vec<u8> {
+    let sent: LineSettings = sent.parse().unwrap();
+    let profiles = mbtap::demo_cmd::profiles().unwrap();
+    let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
+    let mut bus = VirtualBus::new(slaves, sent);
+    bus.ascii = ascii;
+    let mut listener = Listener::new(sent, heard.parse().unwrap());
+    (0..n).flat_map(|_| bus.next_transaction()).flat_map(|f| listener.hear(&f)).map(|(_, b)| b).collect()
+}
+
+#[test]
+fn scan_of_stored_bytes_tells_the_mode_and_the_character_size() {
+    use mbtap::analyzer::SerialMode;
+    use mbtap::scan::{EighthBit, scan_stored};
+    let untimed = |bytes: Vec<u8>| vec![(0u64, bytes)];
+    // RTU recorded at the right settings: every frame, all three units.
+    let best = &scan_stored(&untimed(dump("19200 8E1", "19200 8E1", false, 20)), LineSettings::default())[0];
+    assert_eq!((best.mode, best.seven_bit), (SerialMode::Rtu, None));
+    assert_eq!((best.score.valid_frames, best.score.bad_frames), (40, 0));
+    assert_eq!(best.score.units, [1, 5, 17].into_iter().collect());
+    // A 7E1 ASCII line recorded at 8N1: the parity bit is stored as the eighth data bit.
+    let best = &scan_stored(&untimed(dump("9600 7E1", "9600 8N1", true, 20)), LineSettings::default())[0];
+    assert_eq!((best.mode, best.seven_bit), (SerialMode::Ascii, Some(EighthBit::Even)));
+    assert_eq!(best.score.valid_frames, 40);
+    // ... and at 7E1: plain ASCII.
+    let best = &scan_stored(&untimed(dump("9600 7E1", "9600 7E1", true, 20)), LineSettings::default())[0];
+    assert_eq!((best.mode, best.seven_bit, best.score.valid_frames), (SerialMode::Ascii, None, 40));
+    // Recorded at the wrong baud rate: nothing can be recovered from the bytes.
+    let ranked = scan_stored(&untimed(dump("19200 8E1", "9600 8N1", false, 20)), LineSettings::default());
+    assert!(ranked.iter().all(|r| r.score.valid_frames == 0), "{ranked:?}");
+}
+
+#[test]
+fn scan_of_a_file_reads_captures_and_raw_dumps() {
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-ascii.pcapng");
+    let out = std::process::Command::new(bin).args(["scan", capture]).output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("recorded at 19200 7E1") && text.contains("best: ascii — 20 valid frames"), "{text}");
+    // A raw dump of a 7E1 ASCII line taken at 8N1.
+    let dir = std::env::temp_dir().join(format!("mbtap-scan-file-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let raw = dir.join("dump.bin");
+    std::fs::write(&raw, dump("9600 7E1", "9600 8N1", true, 20)).unwrap();
+    let out = std::process::Command::new(bin).arg("scan").arg(&raw).output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("best: ascii, 7 data bits + even parity"), "{text}");
+    assert!(text.contains("units heard: 1, 5, 17"), "{text}");
+    // Recorded at the wrong baud rate: said so, exit 1.
+    std::fs::write(&raw, dump("19200 8E1", "9600 8N1", false, 20)).unwrap();
+    let out = std::process::Command::new(bin).arg("scan").arg(&raw).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8(out.stdout).unwrap().contains("no reading gave a valid Modbus frame"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
