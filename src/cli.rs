@@ -309,8 +309,13 @@ pub enum Command {
         #[arg(long = "fault", value_enum, requires = "poll")]
         faults: Vec<FaultArg>,
         /// With --poll: the listener's UART settings when they are not the line's ("9600 8N1").
-        #[arg(long, value_name = "SETTINGS", requires = "poll")]
+        #[arg(long, value_name = "SETTINGS", requires = "poll", conflicts_with = "follow_baud")]
         heard_at: Option<LineSettings>,
+        /// With --poll: hear the line at the baud rate the listener set on the pseudo-terminal
+        /// (as `mbtap scan` reopens it at each rate). A pty keeps the baud rate and odd parity
+        /// of its termios but not the character size or parity enable, so only the rate follows.
+        #[arg(long, requires = "poll")]
+        follow_baud: bool,
     },
     /// Modbus TCP clients to serial devices: a TCP server in front of a serial master.
     #[command(args_override_self = true)]

@@ -349,7 +349,18 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 }
             }
         }
-        Command::Simulate { link, devices, line, duration, turnaround_ms, paced, poll, faults, heard_at } => {
+        Command::Simulate {
+            link,
+            devices,
+            line,
+            duration,
+            turnaround_ms,
+            paced,
+            poll,
+            faults,
+            heard_at,
+            follow_baud,
+        } => {
             anyhow::ensure!(
                 turnaround_ms.is_finite() && turnaround_ms >= 0.0,
                 "--turnaround-ms {turnaround_ms}: expected 0 or more"
@@ -369,7 +380,11 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 duration: seconds(duration),
                 turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
                 paced,
-                poll: poll.then(|| crate::simulate_cmd::PollOptions { faults: fault_list(&faults), heard_at }),
+                poll: poll.then(|| crate::simulate_cmd::PollOptions {
+                    faults: fault_list(&faults),
+                    heard_at,
+                    follow_baud,
+                }),
             };
             let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
             rt.block_on(crate::simulate_cmd::simulate(opts, &mut io::stderr()))?;

@@ -76,6 +76,8 @@ pub struct PollOptions {
     /// The listener's UART settings when they differ from the line's (a wrong-baud or
     /// wrong-parity training line).
     pub heard_at: Option<LineSettings>,
+    /// Hear at the baud rate the listener set on the pty (its termios).
+    pub follow_baud: bool,
 }
 
 /// The default line: all three built-in devices at the addresses used throughout the docs.
@@ -134,7 +136,8 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
         bus.ascii = opts.mode == SerialMode::Ascii;
         bus.turnaround_ns = u64::try_from(opts.turnaround.as_nanos()).unwrap_or(u64::MAX);
         let listener = Listener::new(opts.line, poll.heard_at.unwrap_or(opts.line));
-        let result = drive_line(&mut master_side, bus, listener, opts.duration).await;
+        let follow = poll.follow_baud.then_some(opts.line);
+        let result = drive_line(&mut master_side, bus, listener, follow, opts.duration).await;
         let _ = std::fs::remove_file(&opts.link);
         return result;
     }
@@ -223,10 +226,14 @@ const STALL: Duration = Duration::from_millis(50);
 /// Writes the virtual line onto the pseudo-terminal, each byte when the listener would get
 /// it. The timer has 1 ms steps, so bytes leave in 1 ms batches — as a USB adapter delivers
 /// them; the listener sees the line's pauses, not its character spacing within a batch.
+///
+/// With `follow` (the sender's settings), the listener's baud rate is read from the pty's
+/// termios before each transaction: whatever rate the program at the far end set.
 async fn drive_line(
     port: &mut SerialStream,
     mut bus: VirtualBus,
     mut listener: Listener,
+    follow: Option<LineSettings>,
     duration: Option<Duration>,
 ) -> anyhow::Result<()> {
     let mut start = tokio::time::Instant::now();
@@ -234,7 +241,16 @@ async fn drive_line(
     let mut batch = Vec::with_capacity(64);
     let began = Instant::now();
     let mut scratch = [0u8; 256];
+    let mut heard_baud = None;
     loop {
+        if let Some(sender) = follow {
+            // The master side of a pty reports the far end's termios (Linux: the slave's).
+            let baud = tokio_serial::SerialPort::baud_rate(port).unwrap_or(sender.baud);
+            if heard_baud != Some(baud) {
+                heard_baud = Some(baud);
+                listener = Listener::new(sender, LineSettings { baud, ..sender });
+            }
+        }
         for frame in bus.next_transaction() {
             let heard = listener.hear(&frame);
             let mut i = 0;

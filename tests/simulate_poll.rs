@@ -91,3 +91,23 @@ fn a_live_sniffer_reports_bus_health_while_it_runs_and_names_a_second_master() {
     assert!(kinds.contains("second_master"), "{kinds:?}");
     assert!(!kinds.contains("no_response"), "the overlap is not a silent unit: {kinds:?}");
 }
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_live_scan_on_a_real_pty_finds_the_baud_rate() {
+    // The simulator hears the line at whatever baud rate the scanner set on the pty. A pty
+    // keeps the rate in its termios but not parity enable or character size, so only the rate
+    // can be found here; parity, stop bits and mode are proven on the UART model
+    // (tests/health.rs, scan_finds_the_settings_of_simulated_lines).
+    let (_sim, link) = line("scan", &["--baud", "9600", "--parity", "even", "--follow-baud"]);
+    let out = Command::new(BIN)
+        .args(["scan", link.to_str().unwrap(), "--baud", "4800", "--baud", "9600", "--dwell-ms", "1500"])
+        .stderr(Stdio::null())
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(out.status.success(), "{text}");
+    let best = text.lines().next().unwrap();
+    assert!(best.starts_with("best: 9600 8") && best.contains(" rtu "), "{text}");
+    assert!(best.ends_with("units heard: 1, 5, 17"), "{text}");
+}
