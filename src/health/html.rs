@@ -6,7 +6,7 @@
 
 use std::fmt::Write as _;
 
-use crate::health::{Report, clock};
+use crate::health::{Report, UnitHealth, clock};
 
 const WIDTH: f64 = 760.0;
 const HEIGHT: f64 = 180.0;
@@ -64,22 +64,17 @@ pub fn render(report: &Report, title: &str) -> String {
             k = fi.kind
         );
     }
-    s.push_str("<h2>Units</h2>\n<table><tr><th>unit</th><th>transactions</th><th>availability</th><th>unanswered</th><th>failed checks</th><th>exceptions</th><th>latency p50</th><th>p99</th><th>max</th></tr>\n");
-    let ms = |v: Option<u64>| v.map_or_else(|| "–".into(), |v| format!("{:.1} ms", f(v) / 1e6));
+    s.push_str("<h2>Units</h2>\n<table><tr><th>unit</th>");
+    for (label, _) in report.units.first().map(UnitHealth::figures).unwrap_or_default() {
+        let _ = write!(s, "<th>{}</th>", esc(label));
+    }
+    s.push_str("</tr>\n");
     for u in &report.units {
-        let _ = writeln!(
-            s,
-            "<tr><td>{}</td><td>{}</td><td>{:.1} %</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-            u.unit,
-            u.transactions,
-            u.availability_percent,
-            u.no_response,
-            u.bad_responses,
-            u.exceptions.values().sum::<u64>(),
-            ms(u.latency_p50_ns),
-            ms(u.latency_p99_ns),
-            ms(u.latency_max_ns)
-        );
+        let _ = write!(s, "<tr><td>{}</td>", u.unit);
+        for (_, value) in u.figures() {
+            let _ = write!(s, "<td>{}</td>", esc(&value));
+        }
+        s.push_str("</tr>\n");
     }
     s.push_str("</table>\n<h2>Latency over time</h2>\n");
     s.push_str(&latency_plot(report));

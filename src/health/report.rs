@@ -41,6 +41,28 @@ pub struct UnitHealth {
     pub poll_period_ns: Option<u64>,
 }
 
+impl UnitHealth {
+    /// The figures as the text and HTML reports show them: (label, value), in table order.
+    #[must_use]
+    pub fn figures(&self) -> [(&'static str, String); 9] {
+        let ms = |v: Option<u64>| v.map_or_else(|| "–".into(), |v| format!("{:.1} ms", ratio(v, 1_000_000)));
+        [
+            ("transactions", self.transactions.to_string()),
+            ("availability", format!("{:.1} %", self.availability_percent)),
+            ("unanswered", self.no_response.to_string()),
+            ("failed checks", self.bad_responses.to_string()),
+            ("exceptions", self.exceptions.values().sum::<u64>().to_string()),
+            ("latency p50", ms(self.latency_p50_ns)),
+            ("p99", ms(self.latency_p99_ns)),
+            ("max", ms(self.latency_max_ns)),
+            (
+                "polled every",
+                self.poll_period_ns.map_or_else(|| "–".into(), |p| format!("{:.2} s", ratio(p, 1_000_000_000))),
+            ),
+        ]
+    }
+}
+
 /// One slice of the capture's time, for the plots.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Bin {
@@ -98,21 +120,8 @@ impl Report {
             self.frames, self.bad_frames, self.transactions, self.noise_bytes
         );
         for u in &self.units {
-            let ms = |v: Option<u64>| v.map_or_else(|| "–".into(), |v| format!("{:.1} ms", ratio(v, 1_000_000)));
-            let _ = writeln!(
-                s,
-                "unit {:>3}: {} transactions, availability {:.1} %, {} unanswered, {} bad answers, {} exceptions, latency p50 {} p99 {} max {}, polled every {}",
-                u.unit,
-                u.transactions,
-                u.availability_percent,
-                u.no_response,
-                u.bad_responses,
-                u.exceptions.values().sum::<u64>(),
-                ms(u.latency_p50_ns),
-                ms(u.latency_p99_ns),
-                ms(u.latency_max_ns),
-                u.poll_period_ns.map_or_else(|| "–".into(), |p| format!("{:.2} s", ratio(p, 1_000_000_000)))
-            );
+            let figures: Vec<String> = u.figures().iter().map(|(label, value)| format!("{label} {value}")).collect();
+            let _ = writeln!(s, "unit {:>3}: {}", u.unit, figures.join(", "));
         }
         if self.findings.is_empty() {
             let _ = writeln!(s, "findings: none — the bus looks healthy");
@@ -144,10 +153,4 @@ impl Report {
     }
 }
 
-/// `HH:MM:SS.mmm` (UTC) of a time in ns since the epoch, as the findings show it.
-#[must_use]
-pub fn clock(t_ns: u64) -> String {
-    let secs = t_ns / 1_000_000_000;
-    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
-    format!("{h:02}:{m:02}:{s:02}.{:03}", (t_ns % 1_000_000_000) / 1_000_000)
-}
+pub use crate::report::format::clock_ms as clock;

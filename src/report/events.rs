@@ -10,31 +10,14 @@ use super::fields::{Field, Value, request_fields, response_fields};
 use crate::analyzer::Event;
 use crate::pairing::{Outcome, Role, Transaction};
 use crate::proto::{DecodedPdu, DirectionHint, FunctionCode, Pdu, PduDecode, decode_pdu};
-
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().fold(String::with_capacity(bytes.len() * 2), |mut s, b| {
-        let _ = write!(s, "{b:02x}");
-        s
-    })
-}
-
-fn spaced_hex(bytes: &[u8]) -> String {
-    let mut s = String::with_capacity(bytes.len() * 3);
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        let _ = write!(s, "{b:02X}");
-    }
-    s
-}
+use crate::report::format::{clock_us, hex_compact, hex_spaced};
 
 /// Wire text: ASCII frames as their characters (CR LF escaped), RTU as hex.
 fn wire(bytes: &[u8]) -> String {
     if bytes.first() == Some(&b':') {
         String::from_utf8_lossy(bytes).replace('\r', "\\r").replace('\n', "\\n")
     } else {
-        spaced_hex(bytes)
+        hex_spaced(bytes)
     }
 }
 
@@ -76,7 +59,7 @@ fn summary(fields: &[Field<'_>]) -> String {
             Value::Hex(h) => format!("0x{h:04X}"),
             Value::Name(n) => (*n).to_owned(),
             Value::Text(t) => format!("{t:?}"),
-            Value::Bytes(b) => spaced_hex(b),
+            Value::Bytes(b) => hex_spaced(b),
             Value::Registers { values, .. } => {
                 let v: Vec<String> = values.iter().take(16).map(|r| r.to_string()).collect();
                 let more = if values.len() > 16 { ", …" } else { "" };
@@ -93,18 +76,12 @@ fn summary(fields: &[Field<'_>]) -> String {
     s
 }
 
-fn time(t_ns: u64) -> String {
-    let secs = t_ns / 1_000_000_000;
-    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
-    format!("{h:02}:{m:02}:{s:02}.{:06}", (t_ns % 1_000_000_000) / 1000)
-}
-
 /// One event as a line of text.
 #[must_use]
 pub fn text_line(e: &Event<'_>) -> String {
     match *e {
         Event::Frame { frame, role, unit, pdu } => {
-            let mut line = format!("{} p{} ", time(frame.t_start.0), frame.port.0);
+            let mut line = format!("{} p{} ", clock_us(frame.t_start.0), frame.port.0);
             let check = if frame.check_ok { "ok " } else { "BAD" };
             let fc = pdu.and_then(|p| p.first().copied());
             match (unit, fc) {
@@ -133,7 +110,7 @@ pub fn text_line(e: &Event<'_>) -> String {
             line
         }
         Event::Noise(n) => {
-            format!("{} p{} NOISE {} byte(s) | {}", time(n.t_start.0), n.port.0, n.bytes.len(), wire(n.bytes))
+            format!("{} p{} NOISE {} byte(s) | {}", clock_us(n.t_start.0), n.port.0, n.bytes.len(), wire(n.bytes))
         }
         Event::Transaction(t) => transaction_text(t),
     }
@@ -142,7 +119,7 @@ pub fn text_line(e: &Event<'_>) -> String {
 fn transaction_text(t: &Transaction<'_>) -> String {
     let mut line = format!(
         "{} --> unit {:>3} 0x{:02X} {} {}",
-        time(t.t_start.0),
+        clock_us(t.t_start.0),
         t.unit,
         t.function,
         FunctionCode::from(t.function).label(),
@@ -173,7 +150,7 @@ pub fn json(e: &Event<'_>) -> J {
             let shown = if frame.bytes.first() == Some(&b':') {
                 String::from_utf8_lossy(frame.bytes).into_owned()
             } else {
-                hex(frame.bytes)
+                hex_compact(frame.bytes)
             };
             m.insert("hex".into(), json!(shown));
             m.insert("check_ok".into(), json!(frame.check_ok));
@@ -206,7 +183,7 @@ pub fn json(e: &Event<'_>) -> J {
             "t_ns": n.t_start.0,
             "t_end_ns": n.t_end.0,
             "port": n.port.0,
-            "hex": hex(n.bytes),
+            "hex": hex_compact(n.bytes),
             "check_ok": false,
             "len": n.bytes.len(),
         }),
@@ -231,10 +208,10 @@ pub fn json(e: &Event<'_>) -> J {
                 m.insert("latency_ns".into(), json!(l));
             }
             if let Some(r) = t.request {
-                m.insert("request_hex".into(), json!(hex(r)));
+                m.insert("request_hex".into(), json!(hex_compact(r)));
             }
             if let Some(r) = t.response {
-                m.insert("response_hex".into(), json!(hex(r)));
+                m.insert("response_hex".into(), json!(hex_compact(r)));
             }
             J::Object(m)
         }

@@ -7,14 +7,7 @@ use serde_json::{Map, Value as J, json};
 use super::FrameView;
 use super::fields::{Field, Value};
 use crate::proto::{Check, Finding, FunctionCode, Mode, Pdu};
-
-fn hex(bytes: &[u8]) -> String {
-    use std::fmt::Write as _;
-    bytes.iter().fold(String::with_capacity(bytes.len() * 2), |mut s, b| {
-        let _ = write!(s, "{b:02x}");
-        s
-    })
-}
+use crate::report::format::hex_compact;
 
 fn field_value(v: &Value<'_>) -> J {
     match v {
@@ -22,7 +15,7 @@ fn field_value(v: &Value<'_>) -> J {
         Value::Hex(h) => json!(h),
         Value::Name(s) => json!(s),
         Value::Text(s) => json!(s),
-        Value::Bytes(b) => json!(hex(b)),
+        Value::Bytes(b) => json!(hex_compact(b)),
         Value::Registers { values, .. } => J::Array(values.iter().map(|v| json!(v)).collect()),
         Value::Bits { count, bits, .. } => {
             let n = count.map_or(bits.capacity(), usize::from);
@@ -69,7 +62,8 @@ pub fn findings(list: &[Finding]) -> J {
 pub fn frame(view: &FrameView<'_>) -> J {
     let adu = view.adu;
     let mut m = Map::new();
-    let wire = if adu.mode == Mode::Ascii { String::from_utf8_lossy(view.wire).into_owned() } else { hex(view.wire) };
+    let wire =
+        if adu.mode == Mode::Ascii { String::from_utf8_lossy(view.wire).into_owned() } else { hex_compact(view.wire) };
     m.insert("hex".into(), json!(wire));
     m.insert("mode".into(), json!(adu.mode.name().to_lowercase()));
     m.insert("check_ok".into(), json!(adu.check.ok()));
@@ -100,7 +94,7 @@ pub fn frame(view: &FrameView<'_>) -> J {
             };
             m.insert("fields".into(), fields_object(&fields));
             if !d.trailing.is_empty() {
-                m.insert("trailing".into(), json!(hex(d.trailing)));
+                m.insert("trailing".into(), json!(hex_compact(d.trailing)));
             }
         }
         None => {

@@ -4,6 +4,7 @@
 pub mod annotations;
 pub mod events;
 pub mod fields;
+pub mod format;
 pub mod jsonl;
 pub mod text;
 

@@ -5,17 +5,7 @@ use std::fmt::Write as _;
 use super::FrameView;
 use super::fields::{Field, Value};
 use crate::proto::{Check, Finding, FunctionCode, PduDecode};
-
-fn hex(bytes: &[u8]) -> String {
-    let mut s = String::with_capacity(bytes.len() * 3);
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        let _ = write!(s, "{b:02X}");
-    }
-    s
-}
+use crate::report::format::hex_spaced;
 
 fn check_text(check: Check) -> String {
     match check {
@@ -61,7 +51,7 @@ pub fn frame(view: &FrameView<'_>, indent: &str) -> String {
     let shown = if adu.mode == crate::proto::Mode::Ascii {
         String::from_utf8_lossy(view.wire).trim_end().to_owned()
     } else {
-        hex(view.wire)
+        hex_spaced(view.wire)
     };
     let _ = writeln!(out, "{indent}  {shown}");
     match (view.decode, view.primary()) {
@@ -77,7 +67,7 @@ pub fn frame(view: &FrameView<'_>, indent: &str) -> String {
                 write_field(&mut out, &format!("{indent}  "), field);
             }
             if !d.trailing.is_empty() {
-                let _ = writeln!(out, "{indent}  trailing: {}", hex(d.trailing));
+                let _ = writeln!(out, "{indent}  trailing: {}", hex_spaced(d.trailing));
             }
         }
         (_, None) => {}
@@ -125,7 +115,7 @@ fn write_field(out: &mut String, indent: &str, field: &Field<'_>) {
             let _ = writeln!(out, "{indent}{key}: (none)");
         }
         Value::Bytes(b) => {
-            let _ = writeln!(out, "{indent}{key}: {}", hex(b));
+            let _ = writeln!(out, "{indent}{key}: {}", hex_spaced(b));
         }
         Value::Registers { start, values } => {
             let _ = writeln!(out, "{indent}{key}: {} register(s)", values.len());

@@ -41,21 +41,6 @@ pub fn wire_pdu(wire: &[u8]) -> Option<Vec<u8>> {
     }
 }
 
-/// Bytes as hex: `"01 03 00"` with `sep` " ", `"010300"` with "" (lower case then, as the
-/// JSON output).
-#[must_use]
-pub fn hex(bytes: &[u8], sep: &str) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::with_capacity(bytes.len() * (2 + sep.len()));
-    for (i, b) in bytes.iter().enumerate() {
-        if i > 0 {
-            s.push_str(sep);
-        }
-        let _ = if sep.is_empty() { write!(s, "{b:02x}") } else { write!(s, "{b:02X}") };
-    }
-    s
-}
-
 fn u16_at(b: &[u8], i: usize) -> Option<u16> {
     Some(u16::from_be_bytes([*b.get(i)?, *b.get(i.checked_add(1)?)?]))
 }

@@ -125,13 +125,7 @@ fn help(frame: &mut Frame<'_>, area: Rect) {
     frame.render_widget(Paragraph::new(lines).block(Block::bordered().title(" keys (any key closes) ")), popup);
 }
 
-/// `HH:MM:SS.mmm` of a time in ns since the epoch (UTC, as the text output).
-#[must_use]
-pub fn clock(t_ns: u64) -> String {
-    let secs = t_ns / 1_000_000_000;
-    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
-    format!("{h:02}:{m:02}:{s:02}.{:03}", (t_ns % 1_000_000_000) / 1_000_000)
-}
+pub use crate::report::format::clock_ms as clock;
 
 /// A duration for a narrow column: `850µs`, `12.3ms`, `1.25s`, `3m05s`.
 #[must_use]

@@ -184,7 +184,7 @@ fn export(rows: &[&Row], model: &Model, pcap: bool) -> anyhow::Result<(String, u
 }
 
 fn hex(b: Option<&[u8]>) -> Option<String> {
-    b.map(|b| super::layout::hex(b, ""))
+    b.map(crate::report::format::hex_compact)
 }
 
 /// One exported row (the same keys as `sniff --format jsonl` transactions and noise).

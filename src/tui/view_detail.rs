@@ -81,7 +81,7 @@ fn decoded(row: &Row, model: &Model) -> Vec<Line<'static>> {
         if wire.first() == Some(&b':') {
             String::from_utf8_lossy(wire).trim_end().to_owned()
         } else {
-            super::layout::hex(wire, " ")
+            crate::report::format::hex_spaced(wire)
         }
     };
     let lines: Vec<String> =

@@ -1,0 +1,55 @@
+//! Small formatters every output shares: times of day and hex dumps, so the text transcript,
+//! JSON lines, the terminal UI and the health report print them the same way.
+
+use std::fmt::Write as _;
+
+/// `HH:MM:SS.mmm` (UTC) of a time in ns since the epoch: the UI's and the reports' clock.
+#[must_use]
+pub fn clock_ms(t_ns: u64) -> String {
+    let secs = t_ns / 1_000_000_000;
+    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
+    format!("{h:02}:{m:02}:{s:02}.{:03}", (t_ns % 1_000_000_000) / 1_000_000)
+}
+
+/// `HH:MM:SS.uuuuuu` (UTC): the transcript's clock, fine enough for character timing.
+#[must_use]
+pub fn clock_us(t_ns: u64) -> String {
+    let secs = t_ns / 1_000_000_000;
+    let (h, m, s) = ((secs / 3600) % 24, (secs / 60) % 60, secs % 60);
+    format!("{h:02}:{m:02}:{s:02}.{:06}", (t_ns % 1_000_000_000) / 1000)
+}
+
+/// `01 03 A0` — for people.
+#[must_use]
+pub fn hex_spaced(bytes: &[u8]) -> String {
+    let mut s = String::with_capacity(bytes.len() * 3);
+    for (i, b) in bytes.iter().enumerate() {
+        if i > 0 {
+            s.push(' ');
+        }
+        let _ = write!(s, "{b:02X}");
+    }
+    s
+}
+
+/// `0103a0` — for programs (JSON values).
+#[must_use]
+pub fn hex_compact(bytes: &[u8]) -> String {
+    bytes.iter().fold(String::with_capacity(bytes.len() * 2), |mut s, b| {
+        let _ = write!(s, "{b:02x}");
+        s
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clocks_and_hex() {
+        let t = 3_723_004_005_006;
+        assert_eq!((clock_ms(t), clock_us(t)), ("01:02:03.004".into(), "01:02:03.004005".into()));
+        assert_eq!((hex_spaced(&[1, 0xA0]), hex_compact(&[1, 0xA0])), ("01 A0".into(), "01a0".into()));
+        assert_eq!((hex_spaced(&[]), hex_compact(&[])), (String::new(), String::new()));
+    }
+}
