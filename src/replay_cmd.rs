@@ -67,8 +67,19 @@ impl<W: Write> EventWriter<W> {
     /// Writes one event (errors are kept for the caller; a closed pipe stops output).
     pub fn write(&mut self, e: &Event<'_>) {
         self.stats.add(e);
+        // Annotated once, for the health report and the output alike (the UI makes its own).
+        let shown = self.tui.is_none() && self.error.is_none() && self.format != EventFormat::Summary;
+        let annotations = match e {
+            Event::Transaction(t) if t.outcome == crate::pairing::Outcome::Ok && (shown || self.health.is_some()) => {
+                match (self.profiles.get(&t.unit), t.request) {
+                    (Some(p), Some(req)) => Some(crate::profile::transaction::annotate_wire(p, req, t.response)),
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
         if let Some(h) = self.health.as_mut() {
-            h.event(e);
+            h.event_annotated(e, annotations.as_deref());
         }
         if let Some(every) = self.report_every_ns {
             // Bus time, not the clock: a replay gives the same interim reports as the live run.
@@ -100,15 +111,7 @@ impl<W: Write> EventWriter<W> {
         if self.format == EventFormat::Summary {
             return;
         }
-        let annotations = match e {
-            Event::Transaction(t) if t.outcome == crate::pairing::Outcome::Ok => {
-                match (self.profiles.get(&t.unit), t.request) {
-                    (Some(p), Some(req)) => crate::profile::transaction::annotate_wire(p, req, t.response),
-                    _ => Vec::new(),
-                }
-            }
-            _ => Vec::new(),
-        };
+        let annotations = annotations.unwrap_or_default();
         let r = match self.format {
             EventFormat::Text => {
                 let mut text = text_line(e);

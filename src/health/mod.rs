@@ -23,7 +23,7 @@ pub use report::{BINS, Bin, Finding, LATENCY_POINTS, LatencyPoint, Report, UnitH
 use crate::analyzer::Event;
 use crate::decode_cmd::Profiles;
 use crate::pairing::{Outcome, Role};
-use crate::profile::annotate::Note;
+use crate::profile::annotate::{Annotation, Note};
 
 /// Evidence kept per finding: the first few times, enough to show a customer.
 const EVIDENCE: usize = 10;
@@ -196,6 +196,13 @@ impl Health {
 
     /// Takes in one analyzer event.
     pub fn event(&mut self, e: &Event<'_>) {
+        self.event_annotated(e, None);
+    }
+
+    /// As [`Self::event`], with the annotations of an answered transaction when the caller has
+    /// already made them from the same profiles (the UI and the transcript do), so they are
+    /// not made twice.
+    pub fn event_annotated(&mut self, e: &Event<'_>, annotations: Option<&[Annotation]>) {
         match *e {
             Event::Frame { frame, role, unit, .. } => self.frame(frame, role, unit),
             Event::Noise(n) => {
@@ -205,7 +212,7 @@ impl Health {
                 self.noise.add(n.t_start.0);
                 self.noise_bytes += n.bytes.len() as u64;
             }
-            Event::Transaction(t) => self.transaction(t),
+            Event::Transaction(t) => self.transaction(t, annotations),
         }
     }
 
@@ -242,7 +249,7 @@ impl Health {
         }
     }
 
-    fn transaction(&mut self, t: &crate::pairing::Transaction<'_>) {
+    fn transaction(&mut self, t: &crate::pairing::Transaction<'_>, annotations: Option<&[Annotation]>) {
         let at = t.t_start.0;
         if self.pending.is_some_and(|p| p.t_start == at) {
             self.pending = None;
@@ -311,7 +318,7 @@ impl Health {
         thin(&mut self.samples);
         self.samples.push(Sample { t: at, unit: t.unit, latency: t.latency_ns, class });
         if t.outcome == Outcome::Ok {
-            self.check_values(t);
+            self.check_values(t, annotations);
         }
     }
 
@@ -336,16 +343,22 @@ impl Health {
     }
 
     /// Values outside the profile's range, and readings that jump.
-    fn check_values(&mut self, t: &crate::pairing::Transaction<'_>) {
+    fn check_values(&mut self, t: &crate::pairing::Transaction<'_>, given: Option<&[Annotation]>) {
         let (Some(p), Some(req)) = (self.profiles.get(&t.unit), t.request) else { return };
         let Some(u) = self.units.get_mut(&t.unit) else { return };
         let at = t.t_start.0;
-        let annotations = crate::profile::transaction::annotate_wire(p, req, t.response);
+        let made;
+        let annotations = if let Some(a) = given {
+            a
+        } else {
+            made = crate::profile::transaction::annotate_wire(p, req, t.response);
+            &made
+        };
         if annotations.iter().any(|a| a.notes.iter().any(|n| matches!(n, Note::OutOfRange { .. }))) {
             u.out_of_range.add(at);
         }
         let mut jumped = false;
-        for a in &annotations {
+        for a in annotations {
             let Some((min, max)) = p.slot(a.table, a.address).and_then(|(_, def)| def.range) else {
                 continue;
             };

@@ -142,7 +142,9 @@ impl Model {
 
     /// Takes in one analyzer event.
     pub fn event(&mut self, e: &Event<'_>) {
-        self.health.event(e);
+        if !matches!(e, Event::Transaction(_)) {
+            self.health.event(e);
+        }
         match *e {
             Event::Frame { frame, .. } => {
                 self.bus.frame(frame.bytes.len(), frame.check_ok, frame.t_end.0, self.line);
@@ -171,6 +173,7 @@ impl Model {
                     (Outcome::Ok, Some(req), Some(p)) => crate::profile::transaction::annotate_wire(p, req, t.response),
                     _ => Vec::new(),
                 };
+                self.health.event_annotated(e, Some(&annotations));
                 if t.outcome == Outcome::Ok
                     && let Some(req) = t.request
                 {
