@@ -82,36 +82,36 @@ async fn listen(port: &mut tokio_serial::SerialStream, dwell: Duration) -> Vec<(
 /// The result for people: the best setting and the units heard, then the runners-up.
 #[must_use]
 pub fn describe(scores: &[Score]) -> String {
-    use std::fmt::Write as _;
     let mut s = String::new();
-    match scores.first().filter(|b| b.valid_frames > 0) {
-        None => s.push_str("no setting gave a valid Modbus frame: is the bus silent, or the wiring (A/B) swapped?\n"),
-        Some(best) => {
-            let units: Vec<String> = best.units.iter().map(u8::to_string).collect();
-            let _ = writeln!(
-                s,
-                "best: {} {} — {} valid frames, {} failed, {} noise bytes; units heard: {}",
-                best.candidate.line,
-                best.candidate.mode.name(),
-                best.valid_frames,
-                best.bad_frames,
-                best.noise_bytes,
-                units.join(", ")
-            );
-            for r in scores.iter().skip(1).take(3).filter(|r| r.valid_frames > 0) {
-                let _ = writeln!(
-                    s,
-                    "  then: {} {} — {} valid, {} failed, {} noise bytes",
-                    r.candidate.line,
-                    r.candidate.mode.name(),
-                    r.valid_frames,
-                    r.bad_frames,
-                    r.noise_bytes
-                );
-            }
-        }
+    let ranked = scores.iter().map(|r| (format!("{} {}", r.candidate.line, r.candidate.mode.name()), r));
+    if !write_ranked(&mut s, ranked, 3) {
+        s.push_str("no setting gave a valid Modbus frame: is the bus silent, or the wiring (A/B) swapped?\n");
     }
     s
+}
+
+/// Writes the best reading with the units heard and up to `more` runners-up that gave valid
+/// frames; false when none did.
+fn write_ranked<'a>(s: &mut String, mut ranked: impl Iterator<Item = (String, &'a Score)>, more: usize) -> bool {
+    use std::fmt::Write as _;
+    let Some((label, best)) = ranked.next().filter(|(_, b)| b.valid_frames > 0) else { return false };
+    let units: Vec<String> = best.units.iter().map(u8::to_string).collect();
+    let _ = writeln!(
+        s,
+        "best: {label} — {} valid frames, {} failed, {} noise bytes; units heard: {}",
+        best.valid_frames,
+        best.bad_frames,
+        best.noise_bytes,
+        units.join(", ")
+    );
+    for (label, r) in ranked.take(more).filter(|(_, r)| r.valid_frames > 0) {
+        let _ = writeln!(
+            s,
+            "  then: {label} — {} valid, {} failed, {} noise bytes",
+            r.valid_frames, r.bad_frames, r.noise_bytes
+        );
+    }
+    true
 }
 
 /// Stored bytes read at most: enough frames to judge by, bounded memory on any file.
@@ -204,38 +204,15 @@ fn describe_stored(
         }
         Some(EighthBit::Zero | EighthBit::Mixed) => "ascii, 7 data bits (8th bit ignored)".into(),
     };
-    match ranked.first().filter(|b| b.score.valid_frames > 0) {
-        None => s.push_str(
+    if !write_ranked(&mut s, ranked.iter().map(|r| (reading(r), &r.score)), ranked.len()) {
+        s.push_str(
             "no reading gave a valid Modbus frame: the bytes were recorded at the wrong baud rate or parity, and what \
              a wrong receiver lost cannot be re-read at other settings — scan the live port (mbtap scan /dev/ttyUSB0)\n",
-        ),
-        Some(best) => {
-            let units: Vec<String> = best.score.units.iter().map(u8::to_string).collect();
-            let _ = writeln!(
-                s,
-                "best: {} — {} valid frames, {} failed, {} noise bytes; units heard: {}",
-                reading(best),
-                best.score.valid_frames,
-                best.score.bad_frames,
-                best.score.noise_bytes,
-                units.join(", ")
-            );
-            for r in ranked.iter().skip(1).filter(|r| r.score.valid_frames > 0) {
-                let _ = writeln!(
-                    s,
-                    "  then: {} — {} valid, {} failed, {} noise bytes",
-                    reading(r),
-                    r.score.valid_frames,
-                    r.score.bad_frames,
-                    r.score.noise_bytes
-                );
-            }
-            if best.score.bad_frames + best.score.noise_bytes / 8 > best.score.valid_frames {
-                s.push_str(
-                    "  mostly garbage even so: the recording's baud rate or parity is probably wrong; scan the live port\n",
-                );
-            }
-        }
+        );
+    } else if ranked.first().is_some_and(|b| b.score.bad_frames + b.score.noise_bytes / 8 > b.score.valid_frames) {
+        s.push_str(
+            "  mostly garbage even so: the recording's baud rate or parity is probably wrong; scan the live port\n",
+        );
     }
     s
 }
