@@ -242,3 +242,36 @@ pub fn bridge_response(data: &[u8]) {
         }
     }
 }
+
+/// Arbitrary chunks (framed as in [`framer`]) through the analyzer in RTU or ASCII into the
+/// bus health report with the built-in profiles, rendered as text, JSON and HTML; and the
+/// same bytes through the stored-bytes scan.
+pub fn health(data: &[u8]) {
+    use crate::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
+    use crate::chunk::{Chunk, PortId, Timestamp};
+    use crate::framer::{FramerConfig, LineSettings};
+    static PROFILES: std::sync::OnceLock<crate::decode_cmd::Profiles> = std::sync::OnceLock::new();
+    let profiles = PROFILES.get_or_init(|| crate::demo_cmd::profiles().unwrap_or_default());
+    let mode = if data.first().is_some_and(|b| b & 1 == 1) { SerialMode::Ascii } else { SerialMode::Rtu };
+    let line = LineSettings::default();
+    let mut analyzer =
+        Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
+    let mut health = crate::health::Health::new(profiles.clone());
+    let mut chunks = Vec::new();
+    let mut t = 1_000_000_000u64;
+    let mut rest = data.get(1..).unwrap_or(&[]);
+    while rest.len() >= 4 {
+        let n = usize::from(rest[0] % 64);
+        let step = u64::from(u32::from_le_bytes([rest[1], rest[2], rest[3], 0])) * 10;
+        rest = &rest[4..];
+        let (bytes, after) = rest.split_at(n.min(rest.len()));
+        rest = after;
+        t = t.wrapping_add(step);
+        analyzer.push(&Chunk { port: PortId(0), t: Timestamp(t), bytes }, &mut |e: &Event<'_>| health.event(e));
+        chunks.push((t, bytes.to_vec()));
+    }
+    analyzer.finish(&mut |e: &Event<'_>| health.event(e));
+    let report = health.report();
+    let _ = (report.text(), report.json(), crate::health::html::render(&report, "fuzz"));
+    let _ = crate::scan::scan_stored(&chunks, line);
+}

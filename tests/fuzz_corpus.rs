@@ -25,6 +25,7 @@ fn run_dir(dir: &Path) -> usize {
             "sim" => mbtap::fuzzing::sim,
             "uart" => mbtap::fuzzing::uart,
             "bridge_response" => mbtap::fuzzing::bridge_response,
+            "health" => mbtap::fuzzing::health,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {
