@@ -519,3 +519,29 @@ fn scan_of_a_file_reads_captures_and_raw_dumps() {
     assert!(String::from_utf8(out.stdout).unwrap().contains("no reading gave a valid Modbus frame"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_value_outside_the_profiles_range_is_named_with_its_times() {
+    // MK4 phase A voltage (input register 430, 0.1 V, documented 0–4000): 230 V, then 3 reads
+    // of 6553.5 V (0xFFFF: a sensor input floating), then 230 V.
+    let req = rtu(1, &[0x04, 0x01, 0xAE, 0x00, 0x01]);
+    let raw = [2300u16, 0xFFFF, 0xFFFF, 2301, 0xFFFF, 2299];
+    let frames: Vec<(u64, Vec<u8>)> = raw
+        .into_iter()
+        .flat_map(|v| {
+            let [h, l] = v.to_be_bytes();
+            [(100_000_000, req.clone()), (5_000_000, rtu(1, &[0x04, 0x02, h, l]))]
+        })
+        .collect();
+    let r = report_of(mbtap::demo_cmd::profiles().unwrap(), &frames);
+    let found = of_kind(&r, "value_out_of_range");
+    assert_eq!(found.len(), 1, "{}", r.text());
+    assert_eq!((found[0].unit, found[0].count), (Some(1), 3), "{}", r.text());
+    // The times are those of the transactions that carried the values (their requests' starts).
+    let char_ns = LineSettings::default().char_ns();
+    let start = |i: u64| START_NS + (i + 1) * 100_000_000 + i * (5_000_000 + char_ns * 7) + i * char_ns * 8;
+    assert_eq!(found[0].evidence, [start(1), start(2), start(4)], "{}", r.text());
+    // Without the profile, nothing to judge values by.
+    let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
+    assert!(of_kind(&r, "value_out_of_range").is_empty());
+}
