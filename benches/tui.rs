@@ -161,6 +161,7 @@ fn ingest_1000_transactions(bencher: Bencher) {
                 response: resp.as_deref(),
                 t_start: *t_start,
                 latency_ns: *latency_ns,
+                input_ended: false,
             };
             m.event(&Event::Transaction(&t));
         }

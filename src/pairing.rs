@@ -69,6 +69,9 @@ pub struct Transaction<'a> {
     pub t_start: Timestamp,
     /// End of the request to start of the response.
     pub latency_ns: Option<u64>,
+    /// The input ended (end of file, the sniffer stopped) while this request still waited:
+    /// "no response" only as far as anyone heard — the answer may have come.
+    pub input_ended: bool,
 }
 
 /// Pairing settings.
@@ -258,6 +261,7 @@ impl Pairing {
                         response: None,
                         t_start: f.t_start,
                         latency_ns: None,
+                        input_ended: false,
                     });
                 } else {
                     // Reuse the pending box's allocation from one request to the next.
@@ -283,6 +287,7 @@ impl Pairing {
                     response: Some(f.bytes),
                     t_start: f.t_start,
                     latency_ns: None,
+                    input_ended: false,
                 });
                 Role::Response
             }
@@ -311,11 +316,10 @@ impl Pairing {
         }
     }
 
-    /// End of input: a pending request got no response.
+    /// End of input: a waiting request got no response as far as anyone heard.
     pub fn finish_all<F: FnMut(Transaction<'_>)>(&mut self, emit: &mut F) {
-        self.give_up_overtaken(emit);
-        if let Some(p) = self.pending.take() {
-            emit(Self::finish(&p, Outcome::NoResponse, None));
+        for p in [self.overtaken.take(), self.pending.take()].into_iter().flatten() {
+            emit(Transaction { input_ended: true, ..Self::finish(&p, Outcome::NoResponse, None) });
         }
     }
 
@@ -328,6 +332,7 @@ impl Pairing {
             response: response.map(|f| f.bytes),
             t_start: p.t_start,
             latency_ns: response.map(|f| f.t_start.since(p.t_end)),
+            input_ended: false,
         }
     }
 }

@@ -103,10 +103,13 @@ fn a_healthy_bus_gives_a_clean_report() {
 
 #[test]
 fn a_silent_slave_is_named_with_its_unanswered_requests_and_times() {
+    // 120 transactions: the 120th is silent, and the capture ends while it waits.
     let (tx, r) = run(120, &[Fault::SilentSlave], None);
-    // Ground truth: transactions that are a request alone.
+    assert_eq!(tx.last().unwrap().len(), 1);
+    // Ground truth: transactions that are a request alone, but for the last one — no one can
+    // know it went unanswered (regression: it was counted as no_response).
     let mut truth: BTreeMap<u8, Vec<u64>> = BTreeMap::new();
-    for frames in &tx {
+    for frames in &tx[..tx.len() - 1] {
         if frames.len() == 1 {
             truth.entry(frames[0].bytes[0]).or_default().push(start_ns(&frames[0]));
         }
@@ -544,4 +547,24 @@ fn a_value_outside_the_profiles_range_is_named_with_its_times() {
     // Without the profile, nothing to judge values by.
     let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
     assert!(of_kind(&r, "value_out_of_range").is_empty());
+}
+
+/// Regression: a listener that starts in the middle of a frame heard its tail as noise, and
+/// the report of a healthy bus named `noise`.
+#[test]
+fn joining_the_line_mid_frame_is_not_noise() {
+    // The last 5 bytes of an answer, then healthy polls of unit 1.
+    let answer = rtu(1, &[0x03, 0x02, 0x00, 0x07]);
+    let mut frames = vec![(0, answer[2..].to_vec())];
+    for _ in 0..5 {
+        frames.push((100_000_000, rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01])));
+        frames.push((5_000_000, answer.clone()));
+    }
+    let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
+    assert!(r.findings.is_empty(), "{}", r.text());
+    assert_eq!((r.noise_bytes, r.cut_at_start_bytes), (0, 5));
+    // The same bytes later on are noise.
+    frames.push((100_000_000, answer[2..].to_vec()));
+    let r = report_of(mbtap::decode_cmd::Profiles::new(), &frames);
+    assert_eq!(of_kind(&r, "noise").len(), 1, "{}", r.text());
 }

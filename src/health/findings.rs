@@ -197,6 +197,7 @@ impl Health {
             frames: self.frames,
             bad_frames: self.bad_frames,
             noise_bytes: self.noise_bytes,
+            cut_at_start_bytes: self.cut_at_start,
             frame_bytes: self.frame_bytes,
             transactions: self.transactions,
             units,

@@ -165,7 +165,17 @@ pub struct Health {
     /// The last transaction, when it was answered (unit, function, time) and nothing failed
     /// its check since: an orphan answer matching it is the same request answered twice.
     last_ok: Option<(u8, u8, u64)>,
+    /// A frame has passed its check: the listener is in step with the line.
+    in_step: bool,
+    /// Garbage before that, up to one longest frame: the listener started in the middle of a
+    /// frame, which says nothing about the bus.
+    cut_at_start: u64,
 }
+
+/// The longest frame on the wire (an ASCII frame: 513 characters, Modbus over Serial Line
+/// v1.02 §2.5.2.1): garbage up to this much before the first good frame is a frame the
+/// listener joined halfway.
+const JOINED_MID_FRAME: u64 = 513;
 
 /// How a transaction ended, for the plots and the clustering of errors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -207,6 +217,9 @@ impl Health {
             Event::Frame { frame, role, unit, .. } => self.frame(frame, role, unit),
             Event::Noise(n) => {
                 self.seen(n.t_end.0);
+                if self.joined_mid_frame(n.bytes.len()) {
+                    return;
+                }
                 thin(&mut self.noise_times);
                 self.noise_times.push(n.t_start.0);
                 self.noise.add(n.t_start.0);
@@ -216,14 +229,28 @@ impl Health {
         }
     }
 
+    /// Garbage of `len` bytes before the first good frame, within one frame's length in all:
+    /// set aside, not noise.
+    fn joined_mid_frame(&mut self, len: usize) -> bool {
+        let len = len as u64;
+        let aside = !self.in_step && self.cut_at_start + len <= JOINED_MID_FRAME;
+        if aside {
+            self.cut_at_start += len;
+        }
+        aside
+    }
+
     fn frame(&mut self, frame: &crate::framer::Frame<'_>, role: Role, unit: Option<u8>) {
         self.seen(frame.t_end.0);
         self.frames += 1;
         self.frame_bytes += frame.bytes.len() as u64;
+        self.in_step |= frame.check_ok;
         if !frame.check_ok {
             self.bad_frames += 1;
             self.last_ok = None;
-            if self.pending.is_none() {
+            if self.pending.is_none() && self.joined_mid_frame(frame.bytes.len()) {
+                self.frame_bytes -= frame.bytes.len() as u64;
+            } else if self.pending.is_none() {
                 thin(&mut self.noise_times);
                 self.noise_times.push(frame.t_start.0);
                 self.noise.add(frame.t_start.0);
@@ -259,6 +286,10 @@ impl Health {
             self.overtaken = None;
         }
         self.seen(at);
+        if t.input_ended {
+            // Cut off by the end of the capture, not evidence of a silent unit.
+            return;
+        }
         self.transactions += 1;
         if t.outcome == Outcome::Broadcast {
             // Addressed to everyone, answered by no one: not a unit's figures.

@@ -89,6 +89,8 @@ pub struct Report {
     pub frames: u64,
     pub bad_frames: u64,
     pub noise_bytes: u64,
+    /// Garbage before the first good frame (the listener joined mid-frame), not counted as noise.
+    pub cut_at_start_bytes: u64,
     pub frame_bytes: u64,
     pub transactions: u64,
     pub units: Vec<UnitHealth>,
@@ -119,6 +121,13 @@ impl Report {
             "bus: {span} of traffic, {} frames ({} failed checks), {} transactions, {} bytes of noise",
             self.frames, self.bad_frames, self.transactions, self.noise_bytes
         );
+        if self.cut_at_start_bytes > 0 {
+            let _ = writeln!(
+                s,
+                "     ({} byte(s) before the first good frame: listening began mid-frame; not counted as noise)",
+                self.cut_at_start_bytes
+            );
+        }
         for u in &self.units {
             let figures: Vec<String> = u.figures().iter().map(|(label, value)| format!("{label} {value}")).collect();
             let _ = writeln!(s, "unit {:>3}: {}", u.unit, figures.join(", "));

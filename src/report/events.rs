@@ -134,6 +134,9 @@ fn transaction_text(t: &Transaction<'_>) -> String {
     if let Some(l) = t.latency_ns {
         let _ = write!(line, " latency {}.{:03} ms", l / 1_000_000, (l / 1000) % 1000);
     }
+    if t.input_ended {
+        line.push_str(" (input ended while waiting)");
+    }
     line
 }
 
@@ -195,6 +198,9 @@ pub fn json(e: &Event<'_>) -> J {
             m.insert("function".into(), json!(t.function));
             m.insert("function_name".into(), json!(FunctionCode::from(t.function).label()));
             m.insert("outcome".into(), json!(t.outcome.name()));
+            if t.input_ended {
+                m.insert("input_ended".into(), json!(true));
+            }
             match t.outcome {
                 Outcome::Exception(c) => {
                     m.insert("exception_code".into(), json!(c));

@@ -159,6 +159,7 @@ mod tests {
             response: None,
             t_start: Timestamp(at_ms * 1_000_000),
             latency_ns: latency_ms.map(|l| l * 1_000_000),
+            input_ended: false,
         }
     }
 
