@@ -96,7 +96,8 @@ pub struct LineArgs {
     #[arg(long, value_parser = clap::value_parser!(u8).range(7..=8))]
     pub data_bits: Option<u8>,
     /// How late the adapter may deliver a byte, in ms (FTDI default latency timer: 16).
-    /// Timing gaps shorter than this are not trusted. [default: 0, or what the capture says]
+    /// Timing gaps shorter than this are not trusted. [default: live ports: the adapter's
+    /// latency timer, at least 1 ms; captures: what they were recorded with; else 0]
     #[arg(long)]
     pub latency_ms: Option<f64>,
 }

@@ -101,7 +101,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 port,
                 mode,
                 line: settings,
-                latency_ns,
+                latency_ns: line.latency_ms.is_some().then_some(latency_ns),
                 record,
                 duration: seconds(duration),
             };
@@ -129,7 +129,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 link,
                 mode,
                 line: settings,
-                latency_ns,
+                latency_ns: line.latency_ms.is_some().then_some(latency_ns),
                 record,
                 duration: seconds(duration),
             };

@@ -18,7 +18,7 @@ use crate::chunk::{Chunk, PortId};
 use crate::framer::{FramerConfig, LineSettings};
 use crate::line_args::LineOverrides;
 use crate::replay_cmd::EventWriter;
-use crate::source::serial::{LowLatency, builder, now, request_low_latency};
+use crate::source::serial::{builder, now};
 
 /// Sniff settings.
 #[derive(Debug, Clone)]
@@ -26,7 +26,8 @@ pub struct SniffOptions {
     pub port: String,
     pub mode: SerialMode,
     pub line: LineSettings,
-    pub latency_ns: u64,
+    /// Delivery latency to allow (`--latency-ms`); `None`: from the adapter, at least 1 ms.
+    pub latency_ns: Option<u64>,
     pub record: Option<std::path::PathBuf>,
     /// Stop after this long (for tests and timed captures); `None` runs until Ctrl-C.
     pub duration: Option<Duration>,
@@ -46,37 +47,33 @@ pub async fn sniff<W: Write>(
     writer: &mut EventWriter<W>,
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
-    match request_low_latency(&opts.port) {
-        LowLatency::Set { previous } => {
-            let _ = writeln!(err, "mbtap: adapter latency timer set to 1 ms (was {previous} ms)");
-        }
-        LowLatency::Denied { path, error } => {
-            let _ = writeln!(
-                err,
-                "mbtap: could not set the adapter's latency timer ({path}: {error}); timing is coarse — run as root or add a udev rule, or pass --latency-ms 16"
-            );
-        }
-        LowLatency::NotApplicable => {}
-    }
+    let latency_ns = crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err);
     let mut recorder = match &opts.record {
         Some(path) => {
             let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
             let mut w = PcapNgWriter::new(std::io::BufWriter::new(file))?;
-            w.add_serial_interface(&opts.port, &LineOverrides::describe(opts.mode, opts.line, opts.latency_ns))?;
+            w.add_serial_interface(&opts.port, &LineOverrides::describe(opts.mode, opts.line, latency_ns))?;
             Some(w)
         }
         None => None,
     };
     let config = AnalyzerConfig {
         mode: opts.mode,
-        framer: FramerConfig::new(opts.line, opts.latency_ns),
+        framer: FramerConfig::new(opts.line, latency_ns),
         ..AnalyzerConfig::default()
     };
     let mut analyzer = Analyzer::new(config);
     let mut stream = builder(&opts.port, opts.line)
         .open_native_async()
         .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?;
-    let _ = writeln!(err, "mbtap: sniffing {} at {} {}", opts.port, opts.line, opts.mode.name());
+    let _ = writeln!(
+        err,
+        "mbtap: sniffing {} at {} {} (reads trusted to {} µs: --latency-ms)",
+        opts.port,
+        opts.line,
+        opts.mode.name(),
+        latency_ns / 1000
+    );
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     let mut last_flush = tokio::time::Instant::now();
     let mut buf = vec![0u8; 4096];

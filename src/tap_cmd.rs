@@ -35,7 +35,8 @@ pub struct TapOptions {
     pub link: PathBuf,
     pub mode: SerialMode,
     pub line: LineSettings,
-    pub latency_ns: u64,
+    /// Delivery latency to allow (`--latency-ms`); `None`: from the adapter, at least 1 ms.
+    pub latency_ns: Option<u64>,
     pub record: Option<PathBuf>,
     pub duration: Option<Duration>,
 }
@@ -45,6 +46,7 @@ pub struct TapOptions {
 /// # Errors
 /// When the port or the pseudo-terminal cannot be set up, or the recording written.
 pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &mut dyn Write) -> anyhow::Result<()> {
+    let latency_ns = crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err);
     let mut bus = builder(&opts.port, opts.line)
         .open_native_async()
         .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?;
@@ -68,7 +70,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
         Some(path) => {
             let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
             let mut w = PcapNgWriter::new(std::io::BufWriter::new(file))?;
-            let d = LineOverrides::describe(opts.mode, opts.line, opts.latency_ns);
+            let d = LineOverrides::describe(opts.mode, opts.line, latency_ns);
             w.add_serial_interface(&format!("{} (application)", opts.link.display()), &format!("{d} role=requests"))?;
             w.add_serial_interface(&opts.port, &format!("{d} role=responses"))?;
             Some(w)
@@ -77,11 +79,8 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
     };
     let pairing =
         PairingConfig { request_port: Some(APP_PORT), response_port: Some(BUS_PORT), ..PairingConfig::default() };
-    let mut analyzer = Analyzer::new(AnalyzerConfig {
-        mode: opts.mode,
-        framer: FramerConfig::new(opts.line, opts.latency_ns),
-        pairing,
-    });
+    let mut analyzer =
+        Analyzer::new(AnalyzerConfig { mode: opts.mode, framer: FramerConfig::new(opts.line, latency_ns), pairing });
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     let mut stop = Box::pin(crate::sniff_cmd::shutdown_signal());
     let (mut from_app, mut from_bus) = (vec![0u8; 4096], vec![0u8; 4096]);

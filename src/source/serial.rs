@@ -38,8 +38,8 @@ pub fn builder(path: &str, line: LineSettings) -> SerialPortBuilder {
 pub enum LowLatency {
     /// The USB-serial driver's latency timer was set to 1 ms (was `previous` ms).
     Set { previous: String },
-    /// The driver has a latency timer but we may not change it.
-    Denied { path: String, error: String },
+    /// The driver has a latency timer (`current` ms) but we may not change it.
+    Denied { path: String, error: String, current: Option<u64> },
     /// Not a USB-serial adapter with a latency timer (a built-in UART, a pseudo-terminal):
     /// nothing to set.
     NotApplicable,
@@ -56,6 +56,35 @@ pub fn request_low_latency(path: &str) -> LowLatency {
     let Ok(previous) = std::fs::read_to_string(&timer) else { return LowLatency::NotApplicable };
     match std::fs::write(&timer, "1") {
         Ok(()) => LowLatency::Set { previous: previous.trim().to_owned() },
-        Err(e) => LowLatency::Denied { path: timer, error: e.to_string() },
+        Err(e) => LowLatency::Denied { path: timer, error: e.to_string(), current: previous.trim().parse().ok() },
     }
+}
+
+/// The least delivery latency a live reader allows when the user did not say: a process on a
+/// busy machine is not always scheduled the moment its bytes arrive, and a read that returns
+/// late would otherwise show as a pause inside a frame.
+pub const LIVE_LATENCY_NS: u64 = 1_000_000;
+
+/// Asks for low latency on `port` (telling `err` what came of it) and gives the delivery
+/// latency the framer should allow: `said` (`--latency-ms`) when given, else what the
+/// adapter's latency timer lets through, at least [`LIVE_LATENCY_NS`].
+pub fn prepare_latency(port: &str, said: Option<u64>, err: &mut dyn std::io::Write) -> u64 {
+    let low = request_low_latency(port);
+    let found = match &low {
+        LowLatency::Set { previous } => {
+            let _ = writeln!(err, "mbtap: adapter latency timer set to 1 ms (was {previous} ms)");
+            LIVE_LATENCY_NS
+        }
+        LowLatency::Denied { path, error, current } => {
+            let timer = current.unwrap_or(16);
+            let _ = writeln!(
+                err,
+                "mbtap: could not set the adapter's latency timer ({path}: {error}); it stays at {timer} ms, so pauses \
+                 shorter than that cannot be judged — run as root or add a udev rule for finer timing"
+            );
+            timer.saturating_mul(1_000_000).max(LIVE_LATENCY_NS)
+        }
+        LowLatency::NotApplicable => LIVE_LATENCY_NS,
+    };
+    said.unwrap_or(found)
 }
