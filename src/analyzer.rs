@@ -59,6 +59,12 @@ pub trait Sink {
     fn warning(&mut self, message: &str) {
         let _ = message;
     }
+
+    /// The line settings the analysis runs with, once known (a capture says them in its
+    /// header, after the sink was made).
+    fn settings(&mut self, line: crate::framer::LineSettings) {
+        let _ = line;
+    }
 }
 
 impl<F: FnMut(&Event<'_>)> Sink for F {

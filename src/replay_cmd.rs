@@ -253,6 +253,13 @@ impl<W: Write> crate::analyzer::Sink for WriterSink<'_, W> {
     fn warning(&mut self, message: &str) {
         self.writer.warning(self.err, message);
     }
+
+    fn settings(&mut self, line: crate::framer::LineSettings) {
+        // The UI shows the line the capture was recorded on, not the command line's default.
+        if let Some(shared) = &self.writer.tui {
+            shared.model().line = line;
+        }
+    }
 }
 
 /// A packet held for reordering: (time, arrival order, port, bytes).
@@ -285,8 +292,9 @@ pub fn replay_into<R: Read, S: crate::analyzer::Sink>(
     let mut ports = 0usize;
     let mut held: BinaryHeap<Reverse<Held>> = BinaryHeap::new();
     let mut seq = 0u64;
-    let make = |file: LineOverrides, pairing: PairingConfig| {
+    let make = |file: LineOverrides, pairing: PairingConfig, sink: &mut S| {
         let (mode, line, latency_ns) = cli.or(file).resolve();
+        sink.settings(line);
         Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(line, latency_ns), pairing })
     };
     loop {
@@ -307,7 +315,10 @@ pub fn replay_into<R: Read, S: crate::analyzer::Sink>(
             }
             Item::Warning(w) => sink.warning(&w),
             Item::Packet { port, t, data } => {
-                let a = analyzer.get_or_insert_with(|| make(file_settings, pairing));
+                if analyzer.is_none() {
+                    analyzer = Some(make(file_settings, pairing, sink));
+                }
+                let Some(a) = analyzer.as_mut() else { continue };
                 if ports <= 1 {
                     a.push(&Chunk { port, t, bytes: data }, sink);
                     continue;

@@ -194,3 +194,24 @@ fn scroll_back_is_bounded_and_says_so() {
     // Statistics cover everything seen, not only what is kept.
     assert_eq!(small.devices.values().map(|d| d.requests).sum::<u64>(), 40);
 }
+
+/// Regression: a replay shown in the UI gave the devices view the command line's (default)
+/// line settings, not the ones the capture was recorded with.
+#[test]
+fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-ascii.pcapng");
+    let model = mbtap::tui::model::Model::new(
+        mbtap::decode_cmd::Profiles::new(),
+        mbtap::profile::annotate::Lang::En,
+        LineSettings::default(),
+        1000,
+    );
+    let shared = mbtap::tui::terminal::Shared::new(model);
+    let mut writer = mbtap::replay_cmd::EventWriter::new(std::io::sink(), mbtap::replay_cmd::EventFormat::Text);
+    writer.tui = Some(shared.clone());
+    let input = std::fs::File::open(capture).unwrap();
+    mbtap::replay_cmd::replay(input, mbtap::line_args::LineOverrides::default(), &mut writer, &mut std::io::sink())
+        .unwrap();
+    assert_eq!(shared.model().line, "19200 7E1".parse::<LineSettings>().unwrap());
+    assert!(shared.model().total_rows() > 0);
+}
