@@ -15,6 +15,8 @@ use tokio::sync::mpsc;
 
 use crate::analyzer::{Analyzer, AnalyzerConfig, Event};
 use crate::bridge::line::{self, LineOptions, LineShared, MonitorChunk};
+use crate::bridge::metrics::Metrics;
+use crate::bridge::reverse::ReverseOptions;
 use crate::bridge::server::{self, Route, ServerOptions};
 use crate::chunk::{Chunk, PortId};
 use crate::framer::FramerConfig;
@@ -32,6 +34,55 @@ pub struct BridgeOptions {
     pub queue_per_client: usize,
     pub metrics: Option<String>,
     pub duration: Option<Duration>,
+    /// Reverse mode instead of `lines` and the listeners: answer as slaves on a serial line,
+    /// forwarding to a Modbus TCP server.
+    pub reverse: Option<ReverseOptions>,
+}
+
+/// What the bridge serves, for the metrics endpoint and the notes on stderr.
+enum Served {
+    Lines(Arc<Vec<Route>>),
+    Reverse(Arc<Metrics>),
+}
+
+impl Served {
+    /// The Prometheus text: one line's families as they are; several lines' series told
+    /// apart by a `line` label.
+    fn render(&self) -> String {
+        let routes = match self {
+            Self::Reverse(m) => return m.render(),
+            Self::Lines(routes) => routes,
+        };
+        let mut body = String::new();
+        for (i, r) in routes.iter().enumerate() {
+            let text = r.line.metrics.render();
+            if routes.len() == 1 {
+                body.push_str(&text);
+                continue;
+            }
+            for l in text.lines() {
+                if l.starts_with('#') {
+                    if i == 0 {
+                        body.push_str(l);
+                        body.push('\n');
+                    }
+                } else if let Some((name, rest)) = l.split_once('{') {
+                    let _ = writeln!(body, "{name}{{line=\"{i}\",{rest}");
+                } else if let Some((name, value)) = l.split_once(' ') {
+                    let _ = writeln!(body, "{name}{{line=\"{i}\"}} {value}");
+                }
+            }
+        }
+        body
+    }
+
+    /// Messages for the operator (a port lost, reopened) since the last call.
+    fn notes(&self) -> Vec<String> {
+        match self {
+            Self::Reverse(m) => m.take_note().into_iter().collect(),
+            Self::Lines(routes) => routes.iter().filter_map(|r| r.line.metrics.take_note()).collect(),
+        }
+    }
 }
 
 /// Parses `FIRST-LAST=PORT` or `UNIT=PORT` (`--route 1-10=/dev/ttyUSB0`).
@@ -77,42 +128,6 @@ pub fn parse_units(spec: &str) -> anyhow::Result<std::collections::BTreeSet<u8>>
     Ok(out)
 }
 
-/// Runs reverse mode until Ctrl-C, SIGTERM or the duration.
-pub async fn reverse(opts: crate::bridge::reverse::ReverseOptions, duration: Option<Duration>, err: &mut dyn Write) {
-    let units = if opts.units.is_empty() {
-        "every unit".to_owned()
-    } else {
-        opts.units.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
-    };
-    let _ = writeln!(
-        err,
-        "mbtap: reverse bridge: answering as {units} on {} at {} {}, forwarding to {}",
-        opts.port,
-        opts.line,
-        opts.mode.name(),
-        opts.target
-    );
-    let metrics = crate::bridge::metrics::Metrics::default();
-    let run = crate::bridge::reverse::run(opts, &metrics);
-    tokio::pin!(run);
-    let stop = crate::sniff_cmd::shutdown_signal();
-    tokio::pin!(stop);
-    let deadline = duration.map(|d| tokio::time::Instant::now() + d);
-    let mut tick = tokio::time::interval(Duration::from_millis(200));
-    loop {
-        tokio::select! {
-            () = &mut run => break,
-            () = &mut stop => break,
-            () = async { if let Some(d) = deadline { tokio::time::sleep_until(d).await } else { std::future::pending().await } } => break,
-            _ = tick.tick() => {
-                if let Some(note) = metrics.take_note() {
-                    let _ = writeln!(err, "mbtap: {note}");
-                }
-            }
-        }
-    }
-}
-
 /// Parses `TCP=SERIAL` unit mappings (`--map-unit 10=1`).
 ///
 /// # Errors
@@ -141,55 +156,77 @@ pub async fn bridge<W: Write>(
 ) -> anyhow::Result<()> {
     let (monitor_tx, mut monitor_rx) = mpsc::unbounded_channel::<MonitorChunk>();
     let monitoring = writer.is_some();
-    let mut routes = Vec::new();
-    for (units, line_opts) in &opts.lines {
-        let shared = LineShared::new(opts.queue_per_client);
-        let monitor = monitoring.then(|| monitor_tx.clone());
-        tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
-        routes.push(Route { units: units.clone(), line: shared });
+    // What the monitor's analyzer is told: the line settings, and which port says what.
+    let (mode, settings, pairing);
+    let served = if let Some(rev) = opts.reverse.clone() {
+        let units = if rev.units.is_empty() {
+            "every unit".to_owned()
+        } else {
+            rev.units.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
+        };
         let _ = writeln!(
             err,
-            "mbtap: serial line {} at {} {} for units {}–{}",
-            line_opts.port,
-            line_opts.line,
-            line_opts.mode.name(),
-            units.start(),
-            units.end()
+            "mbtap: reverse bridge: answering as {units} on {} at {} {}, forwarding to {}",
+            rev.port,
+            rev.line,
+            rev.mode.name(),
+            rev.target
         );
-    }
+        (mode, settings) = (rev.mode, rev.line);
+        // Port 0 is all the line carries (other slaves' answers too); port 1 our answers.
+        pairing = PairingConfig { response_port: Some(PortId(1)), ..Default::default() };
+        let metrics = Arc::new(Metrics::default());
+        tokio::spawn(crate::bridge::reverse::run(rev, Arc::clone(&metrics), monitoring.then(|| monitor_tx.clone())));
+        Served::Reverse(metrics)
+    } else {
+        let mut routes = Vec::new();
+        for (units, line_opts) in &opts.lines {
+            let shared = LineShared::new(opts.queue_per_client);
+            let monitor = monitoring.then(|| monitor_tx.clone());
+            tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
+            routes.push(Route { units: units.clone(), line: shared });
+            let _ = writeln!(
+                err,
+                "mbtap: serial line {} at {} {} for units {}–{}",
+                line_opts.port,
+                line_opts.line,
+                line_opts.mode.name(),
+                units.start(),
+                units.end()
+            );
+        }
+        let routes = Arc::new(routes);
+        for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
+            let Some(addr) = addr else { continue };
+            let listener = TcpListener::bind(addr).await.with_context(|| format!("listening on {addr}"))?;
+            let local = listener.local_addr().with_context(|| format!("listening on {addr}"))?;
+            let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
+            let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
+            let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
+            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts));
+        }
+        (mode, settings) = opts
+            .lines
+            .first()
+            .map_or((crate::analyzer::SerialMode::Rtu, crate::framer::LineSettings::default()), |(_, l)| {
+                (l.mode, l.line)
+            });
+        // The bridge knows who said what: requests on port 0, responses on port 1.
+        pairing = PairingConfig { request_port: Some(PortId(0)), response_port: Some(PortId(1)), ..Default::default() };
+        Served::Lines(routes)
+    };
     drop(monitor_tx);
-    let routes = Arc::new(routes);
-    for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
-        let Some(addr) = addr else { continue };
-        let listener = TcpListener::bind(addr).await.with_context(|| format!("listening on {addr}"))?;
-        let local = listener.local_addr().with_context(|| format!("listening on {addr}"))?;
-        let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
-        let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
-        let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
-        tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts));
-    }
+    let served = Arc::new(served);
     if let Some(addr) = &opts.metrics {
         let listener = TcpListener::bind(addr).await.with_context(|| format!("metrics: listening on {addr}"))?;
         let local = listener.local_addr().with_context(|| format!("metrics: listening on {addr}"))?;
         let _ = writeln!(err, "mbtap: metrics at http://{local}/metrics");
-        tokio::spawn(serve_metrics(listener, Arc::clone(&routes)));
+        tokio::spawn(serve_metrics(listener, Arc::clone(&served)));
     }
     let _ = err.flush();
-    let mut analyzer = writer.is_some().then(|| {
-        let line = opts.lines.first().map(|(_, l)| l.clone());
-        let (mode, settings) = line
-            .map_or((crate::analyzer::SerialMode::Rtu, crate::framer::LineSettings::default()), |l| (l.mode, l.line));
-        Analyzer::new(AnalyzerConfig {
-            mode,
-            framer: FramerConfig::new(settings, 0),
-            // The bridge knows who said what: requests on port 0, responses on port 1.
-            pairing: PairingConfig {
-                request_port: Some(PortId(0)),
-                response_port: Some(PortId(1)),
-                ..Default::default()
-            },
-        })
-    });
+    let mut analyzer = writer
+        .is_some()
+        .then(|| Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(settings, 0), pairing }));
     let mut writer = writer;
     let stop = crate::sniff_cmd::shutdown_signal();
     tokio::pin!(stop);
@@ -209,10 +246,8 @@ pub async fn bridge<W: Write>(
                     a.tick(crate::source::serial::now(), &mut |e: &Event<'_>| w.write(e));
                     let _ = w.out.flush();
                 }
-                for r in routes.iter() {
-                    if let Some(note) = r.line.metrics.take_note() {
-                        let _ = writeln!(err, "mbtap: {note}");
-                    }
+                for note in served.notes() {
+                    let _ = writeln!(err, "mbtap: {note}");
                 }
             }
         }
@@ -224,35 +259,15 @@ pub async fn bridge<W: Write>(
 }
 
 /// Serves `GET /metrics` (any path, really) in the Prometheus text format.
-async fn serve_metrics(listener: TcpListener, routes: Arc<Vec<Route>>) {
+async fn serve_metrics(listener: TcpListener, served: Arc<Served>) {
     loop {
         let Ok((mut stream, _)) = listener.accept().await else { continue };
-        let routes = Arc::clone(&routes);
+        let served = Arc::clone(&served);
         tokio::spawn(async move {
             let mut req = [0u8; 1024];
             // The request line and headers; the answer does not depend on them.
             let _ = tokio::time::timeout(Duration::from_secs(2), stream.read(&mut req)).await;
-            let mut body = String::new();
-            for (i, r) in routes.iter().enumerate() {
-                let text = r.line.metrics.render();
-                if routes.len() == 1 {
-                    body.push_str(&text);
-                    continue;
-                }
-                // Several lines: one set of families, each series told apart by a `line` label.
-                for l in text.lines() {
-                    if l.starts_with('#') {
-                        if i == 0 {
-                            body.push_str(l);
-                            body.push('\n');
-                        }
-                    } else if let Some((name, rest)) = l.split_once('{') {
-                        let _ = writeln!(body, "{name}{{line=\"{i}\",{rest}");
-                    } else if let Some((name, value)) = l.split_once(' ') {
-                        let _ = writeln!(body, "{name}{{line=\"{i}\"}} {value}");
-                    }
-                }
-            }
+            let body = served.render();
             let head = format!(
                 "HTTP/1.1 200 OK\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
                 body.len()

@@ -241,22 +241,23 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 duration,
             } = *args;
             let (mode, settings, latency_ns) = overrides(&line).resolve();
-            if reverse {
-                let port = serial.context("--reverse needs --serial PORT: the line to answer on")?;
-                let opts = crate::bridge::reverse::ReverseOptions {
+            let reverse = if reverse {
+                let port = serial.clone().context("--reverse needs --serial PORT: the line to answer on")?;
+                let target = target.context("--reverse needs --target HOST:PORT: the Modbus TCP server to reach")?;
+                Some(crate::bridge::reverse::ReverseOptions {
                     port,
                     line: settings,
                     mode,
                     units: crate::bridge_cmd::parse_units(answer_as.as_deref().unwrap_or(""))?,
-                    target: target.unwrap_or_default(),
+                    target,
                     timeout: std::time::Duration::from_millis(timeout_ms),
                     turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
-                };
-                runtime()?.block_on(crate::bridge_cmd::reverse(opts, seconds(duration), &mut io::stderr()));
-                return Ok(ExitCode::SUCCESS);
-            }
+                })
+            } else {
+                None
+            };
             anyhow::ensure!(
-                listen.is_some() || listen_rtu.is_some(),
+                reverse.is_some() || listen.is_some() || listen_rtu.is_some(),
                 "nothing to listen on: give --listen ADDR:PORT (Modbus TCP) and/or --listen-rtu ADDR:PORT"
             );
             anyhow::ensure!(
@@ -282,11 +283,14 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 let (units, port) = crate::bridge_cmd::parse_route(r)?;
                 lines.push((units, line_for(port)));
             }
-            if let Some(port) = serial {
+            if let (Some(port), None) = (serial, &reverse) {
                 // The plain --serial line serves every unit the routes do not.
                 lines.push((1..=247, line_for(port)));
             }
-            anyhow::ensure!(!lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
+            anyhow::ensure!(
+                reverse.is_some() || !lines.is_empty(),
+                "no serial line: give --serial PORT or --route UNITS=PORT"
+            );
             let allow_functions = if allow_functions.is_empty() {
                 None
             } else {
@@ -325,6 +329,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 queue_per_client,
                 metrics,
                 duration: seconds(duration),
+                reverse,
             };
             let profiles = load_devices(&devices)?;
             match monitor {

@@ -21,7 +21,9 @@ fn dir(name: &str) -> PathBuf {
 }
 
 fn simulator(link: &Path, extra: &[&str]) -> Kill {
-    let mut args = vec!["simulate", "--link", link.to_str().unwrap(), "--duration", "300"];
+    // The duration is only a safety net: the test kills it when done (the full-size load run
+    // takes about 21 minutes).
+    let mut args = vec!["simulate", "--link", link.to_str().unwrap(), "--duration", "3600"];
     args.extend_from_slice(extra);
     let sim = Kill(Command::new(BIN).args(&args).stderr(Stdio::null()).spawn().unwrap());
     wait_for(link);
@@ -145,8 +147,10 @@ fn pymodbus_reads_and_writes_through_the_bridge() {
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn many_clients_each_get_exactly_their_own_answers() {
     const CLIENTS: usize = 64;
-    const ROUNDS: usize = 10;
     const PIPELINE: usize = 4;
+    // 10 rounds (2 560 answers, ~10 s) in CI; MBTAP_LOAD_ROUNDS=2500 is the full
+    // 64 × 10 000 requests (~21 minutes: the line carries ~500 transactions/s).
+    let rounds: usize = std::env::var("MBTAP_LOAD_ROUNDS").ok().and_then(|v| v.parse().ok()).unwrap_or(10);
     let d = dir("load");
     let _sim = simulator(&d.join("bus"), &["--turnaround-ms", "0"]);
     let (_bridge, addr, _) = bridge(&d.join("bus"), &["--queue-per-client", "8"]);
@@ -157,7 +161,7 @@ fn many_clients_each_get_exactly_their_own_answers() {
                 let mut c = Client::connect(&addr);
                 let mut tid = u16::try_from(i * 1000).unwrap();
                 let mut checked = 0;
-                for round in 0..ROUNDS {
+                for round in 0..rounds {
                     // Pipelined: several requests out before the answers come back.
                     let mut sent = Vec::new();
                     for k in 0..PIPELINE {
@@ -195,7 +199,7 @@ fn many_clients_each_get_exactly_their_own_answers() {
         })
         .collect();
     let total: usize = threads.into_iter().map(|t| t.join().unwrap()).sum();
-    assert_eq!(total, CLIENTS * ROUNDS * PIPELINE, "no answer lost or duplicated");
+    assert_eq!(total, CLIENTS * rounds * PIPELINE, "no answer lost or duplicated");
 }
 
 #[test]
@@ -245,10 +249,7 @@ fn read_only_allowlists_exceptions_and_broadcasts() {
     assert!(t.elapsed() >= Duration::from_millis(900), "the timeout is waited for");
     // Reads still pass.
     assert_eq!(c.call(4, 17, &[0x03, 0x00, 0x32, 0x00, 0x03])[..2], [0x03, 0x06]);
-    let mut http = TcpStream::connect(&others[0]).unwrap();
-    http.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
-    let mut text = String::new();
-    http.read_to_string(&mut text).unwrap();
+    let text = metrics(&others[0]);
     for line in [
         "mbtap_bridge_refused_total{reason=\"read_only\"} 1",
         "mbtap_bridge_exceptions_total{unit=\"1\",code=\"2\"} 1",
@@ -309,6 +310,15 @@ fn the_serial_side_pulled_mid_load_gives_0x0a_then_recovers_by_itself() {
     }
 }
 
+/// The metrics endpoint's text.
+fn metrics(addr: &str) -> String {
+    let mut http = TcpStream::connect(addr).unwrap();
+    http.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
+    let mut text = String::new();
+    http.read_to_string(&mut text).unwrap();
+    text
+}
+
 /// A TCP port free right now (bound to port 0, then let go) for a peer that must be told one.
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
@@ -337,13 +347,30 @@ fn reverse_mode_lets_an_rtu_master_reach_a_tcp_server() {
         std::thread::sleep(Duration::from_millis(100));
     }
     let target = format!("127.0.0.1:{port}");
-    let _bridge = Kill(
-        Command::new(BIN)
-            .args(["bridge", "--reverse", "--serial", a.to_str().unwrap(), "--target", &target, "--answer-as", "1"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    let mut child = Command::new(BIN)
+        .args(["bridge", "--reverse", "--serial", a.to_str().unwrap(), "--target", &target, "--answer-as", "1"])
+        .args(["--metrics", "127.0.0.1:0", "--monitor", "jsonl"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The monitor's JSON lines, collected as they come.
+    let monitored = std::sync::Arc::new(std::sync::Mutex::new(Vec::<serde_json::Value>::new()));
+    let (stdout, sink) = (child.stdout.take().unwrap(), std::sync::Arc::clone(&monitored));
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            sink.lock().unwrap().push(serde_json::from_str(&line).unwrap());
+        }
+    });
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let metrics_at = loop {
+        let line = lines.next().expect("the bridge ended before serving metrics").unwrap();
+        if let Some(rest) = line.strip_prefix("mbtap: metrics at http://") {
+            break rest.trim_end_matches("/metrics").to_owned();
+        }
+    };
+    std::thread::spawn(move || for _ in lines {});
+    let _bridge = Kill(child);
     std::thread::sleep(Duration::from_millis(500));
     // mbpoll as the RTU master: holding registers 5–7 of unit 1 are 50, 60, 70 on the server.
     let out = Command::new("mbpoll")
@@ -378,4 +405,25 @@ fn reverse_mode_lets_an_rtu_master_reach_a_tcp_server() {
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
     assert!(text.contains("timed out"), "{text}");
+    // The metrics count what went through: three answered requests for unit 1, none for 2.
+    let text = metrics(&metrics_at);
+    for line in ["mbtap_bridge_requests_total{unit=\"1\"} 3", "mbtap_bridge_responses_total{unit=\"1\"} 3"] {
+        assert!(text.lines().any(|l| l == line), "{line} missing:\n{text}");
+    }
+    assert!(!text.contains("unit=\"2\""), "unit 2 is not ours:\n{text}");
+    // The monitor saw the line: unit 1's transactions answered (our answers on port 1).
+    let start = Instant::now();
+    loop {
+        let ok = monitored
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|e| e["event"] == "transaction" && e["unit"] == 1 && e["outcome"] == "ok")
+            .count();
+        if ok == 3 {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(5), "{ok} of 3 monitored: {:#?}", monitored.lock().unwrap());
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }

@@ -9,15 +9,18 @@
 //! reached gives exception 0x0A, one that does not answer in time 0x0B (MAP v1.1b3 §7).
 
 use std::collections::BTreeSet;
+use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
+use tokio::sync::mpsc;
 use tokio_serial::{SerialPortBuilderExt, SerialStream};
 
-use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED};
+use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, MonitorChunk};
 use super::metrics::Metrics;
 use crate::analyzer::SerialMode;
+use crate::chunk::PortId;
 use crate::framer::LineSettings;
 use crate::proto::tcp::{Streaming, parse_tcp_frame};
 use crate::proto::{encode_ascii, encode_rtu, encode_tcp};
@@ -38,17 +41,20 @@ pub struct ReverseOptions {
     pub turnaround: Duration,
 }
 
-/// Runs until the future is dropped; the serial port is reopened when it goes away.
-pub async fn run(opts: ReverseOptions, metrics: &Metrics) {
+/// Runs until the future is dropped; the serial port is reopened when it goes away. With
+/// `monitor`, the bytes heard (port 0) and answered (port 1) go there for `--monitor`.
+pub async fn run(opts: ReverseOptions, metrics: Arc<Metrics>, monitor: Option<mpsc::UnboundedSender<MonitorChunk>>) {
     let mut tcp: Option<TcpStream> = None;
     let mut tid: u16 = 0;
+    let metrics = &*metrics;
     loop {
         let Ok(mut port) = crate::source::serial::builder(&opts.port, opts.line).open_native_async() else {
             metrics.note(&format!("cannot open {}; retrying", opts.port));
             tokio::time::sleep(Duration::from_secs(1)).await;
             continue;
         };
-        if let Err(e) = serve_port(&opts, &mut port, &mut tcp, &mut tid, metrics).await {
+        let mut side = Side { tcp: &mut tcp, tid: &mut tid, metrics, monitor: monitor.as_ref() };
+        if let Err(e) = serve_port(&opts, &mut port, &mut side).await {
             metrics.note(&format!("serial port {} lost: {e}; reopening", opts.port));
             metrics.reopened();
             tokio::time::sleep(Duration::from_millis(200)).await;
@@ -56,13 +62,24 @@ pub async fn run(opts: ReverseOptions, metrics: &Metrics) {
     }
 }
 
-async fn serve_port(
-    opts: &ReverseOptions,
-    port: &mut SerialStream,
-    tcp: &mut Option<TcpStream>,
-    tid: &mut u16,
-    metrics: &Metrics,
-) -> std::io::Result<()> {
+/// What serving a port works with besides the port.
+struct Side<'a> {
+    tcp: &'a mut Option<TcpStream>,
+    tid: &'a mut u16,
+    metrics: &'a Metrics,
+    monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
+}
+
+impl Side<'_> {
+    fn monitor(&self, port: PortId, bytes: &[u8]) {
+        if let Some(m) = self.monitor {
+            let _ = m.send((port, crate::source::serial::now(), bytes.to_vec()));
+        }
+    }
+}
+
+async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut Side<'_>) -> std::io::Result<()> {
+    let metrics = side.metrics;
     let mut rtu = RequestAssembler::default();
     let mut ascii = AsciiRequestAssembler::default();
     let silence = Duration::from_nanos(opts.line.t35_ns()) + Duration::from_millis(1);
@@ -79,6 +96,7 @@ async fn serve_port(
             Ok(Ok(0)) => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
             Ok(Ok(n)) => {
                 let got = buf.get(..n).unwrap_or_default();
+                side.monitor(PortId(0), got);
                 match opts.mode {
                     SerialMode::Rtu => {
                         rtu.push(got);
@@ -100,7 +118,7 @@ async fn serve_port(
                 continue;
             }
             metrics.request(r.unit);
-            let answer = forward(opts, tcp, tid, r.unit, &r.pdu).await;
+            let answer = forward(opts, side.tcp, side.tid, r.unit, &r.pdu).await;
             let pdu = match answer {
                 Ok(pdu) => {
                     metrics.response(r.unit, &pdu);
@@ -122,6 +140,7 @@ async fn serve_port(
                 SerialMode::Ascii => encode_ascii(r.unit, &pdu, &mut out),
             }
             port.write_all(&out).await?;
+            side.monitor(PortId(1), &out);
         }
     }
 }
