@@ -98,6 +98,21 @@ pub fn decode_text(data: &[u8]) {
     }
 }
 
+/// Fuzz bytes as timed chunks: each 4-byte header gives a chunk length (its first byte, mod
+/// 64) and a time step (the next three, ×10 ns); the data follows. `(time, step, bytes)`.
+fn chunks(mut rest: &[u8]) -> Vec<(u64, u64, &[u8])> {
+    let mut out = Vec::new();
+    let mut t = 1_000_000_000u64;
+    while let [len, s0, s1, s2, after @ ..] = rest {
+        let step = u64::from(u32::from_le_bytes([*s0, *s1, *s2, 0])) * 10;
+        let (bytes, after) = after.split_at(usize::from(len % 64).min(after.len()));
+        rest = after;
+        t = t.wrapping_add(step);
+        out.push((t, step, bytes));
+    }
+    out
+}
+
 /// Arbitrary chunks through the RTU and ASCII framers: the first byte of each 4-byte header
 /// gives a chunk length, the next three a time step; the rest is data. Every byte must come
 /// out in exactly one event.
@@ -115,16 +130,7 @@ pub fn framer(data: &[u8]) {
         RtuFramer::new(PortId(0), FramerConfig::new(line, u64::from(data.get(1).copied().unwrap_or(0)) * 100_000));
     let mut ascii = AsciiFramer::new(PortId(0), line);
     let (mut fed, mut out_rtu) = (0usize, 0usize);
-    let mut t = 1_000_000_000u64;
-    let mut rest = data.get(2..).unwrap_or(&[]);
-    while rest.len() >= 4 {
-        let n = usize::from(rest[0] % 64);
-        let step = u64::from(u32::from_le_bytes([rest[1], rest[2], rest[3], 0])) * 10;
-        rest = &rest[4..];
-        let take = n.min(rest.len());
-        let (bytes, after) = rest.split_at(take);
-        rest = after;
-        t = t.wrapping_add(step);
+    for (t, step, bytes) in chunks(data.get(2..).unwrap_or(&[])) {
         let chunk = Chunk { port: PortId(0), t: Timestamp(t), bytes };
         fed += bytes.len();
         rtu.push(&chunk, &mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());
@@ -257,21 +263,13 @@ pub fn health(data: &[u8]) {
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
     let mut health = crate::health::Health::new(profiles.clone());
-    let mut chunks = Vec::new();
-    let mut t = 1_000_000_000u64;
-    let mut rest = data.get(1..).unwrap_or(&[]);
-    while rest.len() >= 4 {
-        let n = usize::from(rest[0] % 64);
-        let step = u64::from(u32::from_le_bytes([rest[1], rest[2], rest[3], 0])) * 10;
-        rest = &rest[4..];
-        let (bytes, after) = rest.split_at(n.min(rest.len()));
-        rest = after;
-        t = t.wrapping_add(step);
+    let mut stored = Vec::new();
+    for (t, _, bytes) in chunks(data.get(1..).unwrap_or(&[])) {
         analyzer.push(&Chunk { port: PortId(0), t: Timestamp(t), bytes }, &mut |e: &Event<'_>| health.event(e));
-        chunks.push((t, bytes.to_vec()));
+        stored.push((t, bytes.to_vec()));
     }
     analyzer.finish(&mut |e: &Event<'_>| health.event(e));
     let report = health.report();
     let _ = (report.text(), report.json(), crate::health::html::render(&report, "fuzz"));
-    let _ = crate::scan::scan_stored(&chunks, line);
+    let _ = crate::scan::scan_stored(&stored, line);
 }

@@ -125,20 +125,17 @@ const STORED_MAX: usize = 16 << 20;
 /// When the file cannot be read.
 pub fn scan_file(path: &std::path::Path) -> anyhow::Result<(String, bool)> {
     use std::io::Read;
-    let mut head = [0u8; 4];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| f.read(&mut head))
-        .with_context(|| format!("opening {}", path.display()))?;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(STORED_MAX as u64).read_to_end(&mut bytes))
+        .with_context(|| format!("reading {}", path.display()))?;
     // pcapng section header; pcap in either byte order, µs or ns timestamps.
-    let capture = n == 4
-        && matches!(u32::from_le_bytes(head), 0x0A0D_0D0A | 0xA1B2_C3D4 | 0xD4C3_B2A1 | 0xA1B2_3C4D | 0x4D3C_B2A1);
+    let capture = bytes.get(..4).and_then(|h| <[u8; 4]>::try_from(h).ok()).is_some_and(|h| {
+        matches!(u32::from_le_bytes(h), 0x0A0D_0D0A | 0xA1B2_C3D4 | 0xD4C3_B2A1 | 0xA1B2_3C4D | 0x4D3C_B2A1)
+    });
     let (chunks, recorded) = if capture {
-        read_capture(path)?
+        read_capture(&bytes).with_context(|| format!("reading {}", path.display()))?
     } else {
-        let mut bytes = Vec::new();
-        std::fs::File::open(path)
-            .and_then(|f| f.take(STORED_MAX as u64).read_to_end(&mut bytes))
-            .with_context(|| format!("reading {}", path.display()))?;
         (vec![(0, bytes)], None)
     };
     let total: usize = chunks.iter().map(|(_, b)| b.len()).sum();
@@ -151,13 +148,11 @@ pub fn scan_file(path: &std::path::Path) -> anyhow::Result<(String, bool)> {
 type Chunks = Vec<(u64, Vec<u8>)>;
 
 /// The packets of a capture (merged in time order) and the line settings it was recorded at.
-fn read_capture(path: &std::path::Path) -> anyhow::Result<(Chunks, Option<LineSettings>)> {
-    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let mut reader = crate::capture::CaptureReader::new(std::io::BufReader::new(file));
+fn read_capture(file: &[u8]) -> anyhow::Result<(Chunks, Option<LineSettings>)> {
+    let mut reader = crate::capture::CaptureReader::new(file);
     let mut chunks = Vec::new();
     let mut recorded = None;
-    let mut total = 0usize;
-    while let Some(item) = reader.next_item().with_context(|| format!("reading {}", path.display()))? {
+    while let Some(item) = reader.next_item()? {
         match item {
             crate::capture::Item::Interface { interface, .. } if recorded.is_none() => {
                 let described = crate::line_args::LineOverrides::from_description(
@@ -167,10 +162,7 @@ fn read_capture(path: &std::path::Path) -> anyhow::Result<(Chunks, Option<LineSe
                     recorded = Some(described.resolve().1);
                 }
             }
-            crate::capture::Item::Packet { t, data, .. } if total < STORED_MAX => {
-                total += data.len();
-                chunks.push((t.0, data.to_vec()));
-            }
+            crate::capture::Item::Packet { t, data, .. } => chunks.push((t.0, data.to_vec())),
             _ => {}
         }
     }

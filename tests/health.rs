@@ -402,18 +402,23 @@ fn a_failed_answer_to_a_request_that_overtook_another_is_not_noise() {
     assert_eq!(units("no_response"), [(Some(9), 1)], "{}", r.text());
 }
 
+/// Reads of the MK4's phase A voltage (unit 1, input register 430 = 0x01AE, quantity 1),
+/// 100 ms apart, each answered after 5 ms with one raw value (0.1 V).
+fn mk4_phase_a_reads(raw: &[u16]) -> Vec<(u64, Vec<u8>)> {
+    let req = rtu(1, &[0x04, 0x01, 0xAE, 0x00, 0x01]);
+    raw.iter()
+        .flat_map(|v| {
+            let [h, l] = v.to_be_bytes();
+            [(100_000_000, req.clone()), (5_000_000, rtu(1, &[0x04, 0x02, h, l]))]
+        })
+        .collect()
+}
+
 #[test]
 fn a_reading_that_jumps_implausibly_is_named() {
     // MK4 phase A voltage (input register 430, 0.1 V, documented 0–4000): 230 V, then 0 V,
     // then 230 V again — a sensor or wiring fault, not mains.
-    let req = rtu(1, &[0x04, 0x01, 0xAE, 0x00, 0x01]);
-    let frames: Vec<(u64, Vec<u8>)> = [2300u16, 2301, 2299, 0, 2300, 2302]
-        .into_iter()
-        .flat_map(|volts| {
-            let [h, l] = volts.to_be_bytes();
-            [(100_000_000, req.clone()), (5_000_000, rtu(1, &[0x04, 0x02, h, l]))]
-        })
-        .collect();
+    let frames = mk4_phase_a_reads(&[2300, 2301, 2299, 0, 2300, 2302]);
     let r = report_of(mbtap::demo_cmd::profiles().unwrap(), &frames);
     let found = of_kind(&r, "implausible_jump");
     assert_eq!(found.len(), 1, "{}", r.text());
@@ -527,15 +532,7 @@ fn scan_of_a_file_reads_captures_and_raw_dumps() {
 fn a_value_outside_the_profiles_range_is_named_with_its_times() {
     // MK4 phase A voltage (input register 430, 0.1 V, documented 0–4000): 230 V, then 3 reads
     // of 6553.5 V (0xFFFF: a sensor input floating), then 230 V.
-    let req = rtu(1, &[0x04, 0x01, 0xAE, 0x00, 0x01]);
-    let raw = [2300u16, 0xFFFF, 0xFFFF, 2301, 0xFFFF, 2299];
-    let frames: Vec<(u64, Vec<u8>)> = raw
-        .into_iter()
-        .flat_map(|v| {
-            let [h, l] = v.to_be_bytes();
-            [(100_000_000, req.clone()), (5_000_000, rtu(1, &[0x04, 0x02, h, l]))]
-        })
-        .collect();
+    let frames = mk4_phase_a_reads(&[2300, 0xFFFF, 0xFFFF, 2301, 0xFFFF, 2299]);
     let r = report_of(mbtap::demo_cmd::profiles().unwrap(), &frames);
     let found = of_kind(&r, "value_out_of_range");
     assert_eq!(found.len(), 1, "{}", r.text());

@@ -217,27 +217,24 @@ impl Health {
             Event::Frame { frame, role, unit, .. } => self.frame(frame, role, unit),
             Event::Noise(n) => {
                 self.seen(n.t_end.0);
-                if self.joined_mid_frame(n.bytes.len()) {
-                    return;
-                }
-                thin(&mut self.noise_times);
-                self.noise_times.push(n.t_start.0);
-                self.noise.add(n.t_start.0);
-                self.noise_bytes += n.bytes.len() as u64;
+                self.garbage(n.t_start.0, n.bytes.len());
             }
             Event::Transaction(t) => self.transaction(t, annotations),
         }
     }
 
-    /// Garbage of `len` bytes before the first good frame, within one frame's length in all:
-    /// set aside, not noise.
-    fn joined_mid_frame(&mut self, len: usize) -> bool {
+    /// `len` bytes of garbage from `t`: noise — unless they come before the first good frame,
+    /// within one frame's length in all, where they are the frame the listener joined halfway.
+    fn garbage(&mut self, t: u64, len: usize) {
         let len = len as u64;
-        let aside = !self.in_step && self.cut_at_start + len <= JOINED_MID_FRAME;
-        if aside {
+        if !self.in_step && self.cut_at_start + len <= JOINED_MID_FRAME {
             self.cut_at_start += len;
+            return;
         }
-        aside
+        thin(&mut self.noise_times);
+        self.noise_times.push(t);
+        self.noise.add(t);
+        self.noise_bytes += len;
     }
 
     fn frame(&mut self, frame: &crate::framer::Frame<'_>, role: Role, unit: Option<u8>) {
@@ -248,14 +245,10 @@ impl Health {
         if !frame.check_ok {
             self.bad_frames += 1;
             self.last_ok = None;
-            if self.pending.is_none() && self.joined_mid_frame(frame.bytes.len()) {
+            if self.pending.is_none() {
+                // Nothing awaited an answer: garbage that only looked like a frame.
                 self.frame_bytes -= frame.bytes.len() as u64;
-            } else if self.pending.is_none() {
-                thin(&mut self.noise_times);
-                self.noise_times.push(frame.t_start.0);
-                self.noise.add(frame.t_start.0);
-                self.noise_bytes += frame.bytes.len() as u64;
-                self.frame_bytes -= frame.bytes.len() as u64;
+                self.garbage(frame.t_start.0, frame.bytes.len());
             }
         }
         if frame.check_ok
