@@ -3,8 +3,8 @@
 //!
 //! Run: `cargo run --release --example framer_accuracy [transactions]`
 
-use mbtap::framer::{FramerConfig, LineSettings, Parity};
-use mbtap::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
+use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
 
 fn main() {
     let transactions: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(20_000);

@@ -13,15 +13,15 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 use tokio::sync::mpsc;
 
-use crate::analyzer::{Analyzer, AnalyzerConfig, Event};
 use crate::bridge::line::{self, LineOptions, LineShared, MonitorChunk};
 use crate::bridge::metrics::Metrics;
 use crate::bridge::reverse::ReverseOptions;
 use crate::bridge::server::{self, Route, ServerOptions};
-use crate::chunk::{Chunk, PortId};
-use crate::framer::FramerConfig;
-use crate::pairing::PairingConfig;
 use crate::replay_cmd::EventWriter;
+use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_core::chunk::{Chunk, PortId};
+use mbtap_core::framer::FramerConfig;
+use mbtap_core::pairing::PairingConfig;
 
 /// Everything the bridge needs.
 #[derive(Debug, Clone)]
@@ -205,12 +205,11 @@ pub async fn bridge<W: Write>(
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
             tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts));
         }
-        (mode, settings) = opts
-            .lines
-            .first()
-            .map_or((crate::analyzer::SerialMode::Rtu, crate::framer::LineSettings::default()), |(_, l)| {
-                (l.mode, l.line)
-            });
+        (mode, settings) =
+            opts.lines.first().map_or(
+                (mbtap_core::analyzer::SerialMode::Rtu, mbtap_core::framer::LineSettings::default()),
+                |(_, l)| (l.mode, l.line),
+            );
         // The bridge knows who said what: requests on port 0, responses on port 1.
         pairing = PairingConfig { request_port: Some(PortId(0)), response_port: Some(PortId(1)), ..Default::default() };
         Served::Lines(routes)

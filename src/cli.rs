@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use crate::framer::LineSettings;
+use mbtap_core::framer::LineSettings;
 
 /// mbtap — a Modbus RTU/ASCII bus analyzer: sniff, decode, record, replay, bridge.
 #[derive(Debug, Parser)]
@@ -40,7 +40,7 @@ pub enum LangArg {
     Ru,
 }
 
-impl From<LangArg> for crate::profile::annotate::Lang {
+impl From<LangArg> for mbtap_core::profile::annotate::Lang {
     fn from(l: LangArg) -> Self {
         match l {
             LangArg::En => Self::En,

@@ -6,16 +6,16 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 
-use crate::analyzer::SerialMode;
 use crate::cli::{
     Command, EventFormatArg, FormatArg, LineArgs, ModeArg, ObserveArg, ParityArg, ProfilesCommand, SerialModeArg,
 };
-use crate::decode_cmd::{self, Format};
-use crate::framer::Parity;
-use crate::line_args::LineOverrides;
-use crate::proto::Mode;
 use crate::replay_cmd::{EventFormat, EventWriter};
-use crate::traffic::{Observation, TrafficConfig};
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::decode::{self as decode_cmd, Format};
+use mbtap_core::framer::Parity;
+use mbtap_core::line_args::LineOverrides;
+use mbtap_core::proto::Mode;
+use mbtap_core::traffic::{Observation, TrafficConfig};
 
 /// Runs one command; the exit code on success.
 ///
@@ -80,7 +80,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let stdout = io::stdout();
             let mut writer = event_writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()), &output)?;
             if image.is_some() {
-                writer.image = Some(crate::profile::image::RegisterImage::default());
+                writer.image = Some(mbtap_core::profile::image::RegisterImage::default());
             }
             crate::replay_cmd::replay(input, overrides(&line), &mut writer, &mut io::stderr())
                 .with_context(|| format!("replaying {}", file.display()))?;
@@ -164,7 +164,8 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 .unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });
             if format == EventFormatArg::Tui {
                 let line = heard_at.unwrap_or_default();
-                let ui = TuiSource { profiles: crate::demo_cmd::profiles()?, lang: lang.into(), line, pacing: true };
+                let ui =
+                    TuiSource { profiles: mbtap_core::sim::demo_profiles()?, lang: lang.into(), line, pacing: true };
                 return ui.run("demo (simulated bus)", move |writer, _| {
                     runtime()?.block_on(crate::demo_cmd::demo(opts, writer))
                 });
@@ -178,11 +179,12 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         }
         Command::Report { file, line, format, devices } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
-            let mut health = crate::health::Health::new(load_devices(&devices)?);
+            let mut health = mbtap_core::health::Health::new(load_devices(&devices)?);
             let mut warnings = Vec::new();
             {
                 let mut sink = HealthSink { health: &mut health, warnings: &mut warnings };
-                crate::replay_cmd::replay_into(input, overrides(&line), &mut sink)
+                mbtap_core::replay::replay_into(input, overrides(&line), &mut sink)
+                    .context("reading the capture")
                     .with_context(|| format!("reading {}", file.display()))?;
             }
             for w in &warnings {
@@ -192,7 +194,9 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let text = match format {
                 crate::cli::ReportFormatArg::Text => report.text(),
                 crate::cli::ReportFormatArg::Json => serde_json::to_string_pretty(&report.json())? + "\n",
-                crate::cli::ReportFormatArg::Html => crate::health::html::render(&report, &file.display().to_string()),
+                crate::cli::ReportFormatArg::Html => {
+                    mbtap_core::health::html::render(&report, &file.display().to_string())
+                }
             };
             io::stdout().lock().write_all(text.as_bytes())?;
             Ok(ExitCode::SUCCESS)
@@ -334,8 +338,12 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let profiles = load_devices(&devices)?;
             match monitor {
                 Some(EventFormatArg::Tui) => {
-                    let ui =
-                        TuiSource { profiles, lang: crate::profile::annotate::Lang::En, line: settings, pacing: false };
+                    let ui = TuiSource {
+                        profiles,
+                        lang: mbtap_core::profile::annotate::Lang::En,
+                        line: settings,
+                        pacing: false,
+                    };
                     ui.run("bridge", move |writer, err| {
                         runtime()?.block_on(crate::bridge_cmd::bridge(opts, Some(writer), err))
                     })
@@ -403,17 +411,17 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 file.display(),
                 p.meta.name,
                 p.meta.device,
-                count(crate::profile::Table::Coils),
-                count(crate::profile::Table::DiscreteInputs),
-                count(crate::profile::Table::HoldingRegisters),
-                count(crate::profile::Table::InputRegisters),
+                count(mbtap_core::profile::Table::Coils),
+                count(mbtap_core::profile::Table::DiscreteInputs),
+                count(mbtap_core::profile::Table::HoldingRegisters),
+                count(mbtap_core::profile::Table::InputRegisters),
                 p.reserved.len()
             );
             Ok(ExitCode::SUCCESS)
         }
         Command::Profiles(ProfilesCommand::List) => {
-            for name in crate::profile::builtin::names() {
-                if let Some(Ok(p)) = crate::profile::builtin::get(name) {
+            for name in mbtap_core::profile::builtin::names() {
+                if let Some(Ok(p)) = mbtap_core::profile::builtin::get(name) {
                     println!("{name:<8} built-in  {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""));
                 }
             }
@@ -440,10 +448,10 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
             let p = resolve_profile(&profile)?;
             println!("{} — {}", p.meta.name, p.meta.device);
             for t in [
-                crate::profile::Table::Coils,
-                crate::profile::Table::DiscreteInputs,
-                crate::profile::Table::HoldingRegisters,
-                crate::profile::Table::InputRegisters,
+                mbtap_core::profile::Table::Coils,
+                mbtap_core::profile::Table::DiscreteInputs,
+                mbtap_core::profile::Table::HoldingRegisters,
+                mbtap_core::profile::Table::InputRegisters,
             ] {
                 println!("[{}]", t.name());
                 for a in p.addresses(t) {
@@ -461,9 +469,10 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Export { file, out, line } => {
             let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
             let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
-            let export = crate::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
+            let export = mbtap_core::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
             let mut sink = ExportSink { export, error: None };
-            crate::replay_cmd::replay_into(input, overrides(&line), &mut sink)
+            mbtap_core::replay::replay_into(input, overrides(&line), &mut sink)
+                .context("reading the capture")
                 .with_context(|| format!("reading {}", file.display()))?;
             if let Some(e) = sink.error {
                 return Err(e).with_context(|| format!("writing {}", out.display()));
@@ -483,7 +492,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
                 if l.is_empty() || l.starts_with('#') {
                     continue;
                 }
-                let wire = crate::hexinput::parse_frame_text(l)
+                let wire = mbtap_core::proto::hexinput::parse_frame_text(l)
                     .map_err(|e| anyhow::anyhow!("{}:{}: {e}", list.display(), i + 1))?;
                 frames.push(wire);
             }
@@ -530,13 +539,13 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
 
 /// Collects frames for the Wireshark export.
 struct ExportSink<W: Write> {
-    export: crate::capture::export::WiresharkExport<W>,
+    export: mbtap_core::capture::export::WiresharkExport<W>,
     error: Option<io::Error>,
 }
 
-impl<W: Write> crate::analyzer::Sink for ExportSink<W> {
-    fn event(&mut self, e: &crate::analyzer::Event<'_>) {
-        if let crate::analyzer::Event::Frame { frame, role, .. } = *e
+impl<W: Write> mbtap_core::analyzer::Sink for ExportSink<W> {
+    fn event(&mut self, e: &mbtap_core::analyzer::Event<'_>) {
+        if let mbtap_core::analyzer::Event::Frame { frame, role, .. } = *e
             && self.error.is_none()
             && let Err(err) = self.export.frame(frame.t_start, frame.bytes, role, frame.check_ok)
         {
@@ -549,9 +558,9 @@ impl<W: Write> crate::analyzer::Sink for ExportSink<W> {
     }
 }
 
-fn load_profile_file(path: &std::path::Path) -> anyhow::Result<crate::profile::Profile> {
+fn load_profile_file(path: &std::path::Path) -> anyhow::Result<mbtap_core::profile::Profile> {
     let src = std::fs::read_to_string(path).with_context(|| format!("reading profile {}", path.display()))?;
-    Ok(crate::profile::load(&path.display().to_string(), &src)?)
+    Ok(mbtap_core::profile::load(&path.display().to_string(), &src)?)
 }
 
 /// Where users keep their own profiles: `$MBTAP_PROFILE_DIR`, else
@@ -568,8 +577,8 @@ fn user_profile_dir() -> Option<std::path::PathBuf> {
 
 /// A built-in profile by name, a user profile by name (`NAME.toml` in the user profile
 /// directory), or a profile file by path.
-fn resolve_profile(spec: &str) -> anyhow::Result<crate::profile::Profile> {
-    if let Some(p) = crate::profile::builtin::get(spec) {
+fn resolve_profile(spec: &str) -> anyhow::Result<mbtap_core::profile::Profile> {
+    if let Some(p) = mbtap_core::profile::builtin::get(spec) {
         return Ok(p?);
     }
     let path = std::path::Path::new(spec);
@@ -585,14 +594,14 @@ fn resolve_profile(spec: &str) -> anyhow::Result<crate::profile::Profile> {
     let dir = user_profile_dir().map_or_else(|| "(no config directory)".to_owned(), |d| d.display().to_string());
     anyhow::bail!(
         "no profile named {spec:?}: built-in profiles are {}; user profiles are NAME.toml files in {dir}; or give the path of a profile file (see docs/profiles.md)",
-        crate::profile::builtin::names().join(", ")
+        mbtap_core::profile::builtin::names().join(", ")
     )
 }
 
 /// `--device UNIT=PROFILE` values: a unit address and a built-in name or a profile file.
 /// The configuration file's `[devices]` come first; `--device` replaces them unit by unit.
-fn load_devices(devices: &[String]) -> anyhow::Result<crate::decode_cmd::Profiles> {
-    let mut out = crate::decode_cmd::Profiles::new();
+fn load_devices(devices: &[String]) -> anyhow::Result<mbtap_core::profile::Profiles> {
+    let mut out = mbtap_core::profile::Profiles::new();
     if let Some(path) = crate::config::default_path() {
         let config = crate::config::load(&path)?;
         for (unit, profile) in &config.devices {
@@ -628,9 +637,9 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 
 /// What the terminal UI needs to know about a source.
 struct TuiSource {
-    profiles: decode_cmd::Profiles,
-    lang: crate::profile::annotate::Lang,
-    line: crate::framer::LineSettings,
+    profiles: mbtap_core::profile::Profiles,
+    lang: mbtap_core::profile::annotate::Lang,
+    line: mbtap_core::framer::LineSettings,
     /// Recorded or simulated input the UI may pace; live input it can only freeze.
     pacing: bool,
 }
@@ -697,7 +706,7 @@ fn event_writer<W: io::Write>(out: W, o: &crate::cli::OutputArgs) -> anyhow::Res
         writer.report_every_ns = Some(std::time::Duration::from_secs_f64(every.min(3.2e7)).as_nanos().try_into()?);
     }
     if o.report || o.report_every.is_some() {
-        writer.health = Some(crate::health::Health::new(writer.profiles.clone()));
+        writer.health = Some(mbtap_core::health::Health::new(writer.profiles.clone()));
     }
     Ok(writer)
 }
@@ -708,9 +717,9 @@ fn seconds(s: Option<f64>) -> Option<std::time::Duration> {
 }
 
 /// The faults named on the command line (`all`: every one, taking turns).
-fn fault_list(args: &[crate::cli::FaultArg]) -> Vec<crate::sim::bus::Fault> {
+fn fault_list(args: &[crate::cli::FaultArg]) -> Vec<mbtap_core::sim::bus::Fault> {
     use crate::cli::FaultArg;
-    use crate::sim::bus::Fault;
+    use mbtap_core::sim::bus::Fault;
     args.iter()
         .flat_map(|f| match f {
             FaultArg::Corrupt => vec![Fault::Corrupt],
@@ -728,12 +737,12 @@ fn fault_list(args: &[crate::cli::FaultArg]) -> Vec<crate::sim::bus::Fault> {
 
 /// The health report as an analyzer sink.
 struct HealthSink<'a> {
-    health: &'a mut crate::health::Health,
+    health: &'a mut mbtap_core::health::Health,
     warnings: &'a mut Vec<String>,
 }
 
-impl crate::analyzer::Sink for HealthSink<'_> {
-    fn event(&mut self, event: &crate::analyzer::Event<'_>) {
+impl mbtap_core::analyzer::Sink for HealthSink<'_> {
+    fn event(&mut self, event: &mbtap_core::analyzer::Event<'_>) {
         self.health.event(event);
     }
 

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::profile::ProfileError;
+use mbtap_core::profile::ProfileError;
 
 /// The parsed file.
 #[derive(Debug, Clone, Default, Deserialize)]

@@ -1,43 +1,26 @@
 //! `mbtap demo`: the whole job with no hardware — simulated MK4, Display and MKZP-0.4 on a
-//! virtual line ([`crate::sim::bus`]), polled by a built-in master, heard by the same analyzer
+//! virtual line ([`mbtap_core::sim::bus`]), polled by a built-in master, heard by the same analyzer
 //! `sniff` uses and shown annotated by their profiles, in real time.
 
 use std::io::Write;
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::analyzer::{Analyzer, AnalyzerConfig, Event};
-use crate::chunk::{Chunk, PortId, Timestamp};
-use crate::framer::{FramerConfig, LineSettings};
 use crate::replay_cmd::EventWriter;
-use crate::sim::Slave;
-use crate::sim::bus::VirtualBus;
-use crate::sim::uart::Listener;
 use crate::source::serial::now;
-
-/// The devices of the demo line and their addresses.
-pub const DEVICES: [(&str, u8); 3] = [("mk4", 1), ("display", 5), ("mkzp", 17)];
-
-/// The profiles of the demo's devices, by address.
-///
-/// # Errors
-/// When a built-in profile does not load (a build defect).
-pub fn profiles() -> anyhow::Result<crate::decode_cmd::Profiles> {
-    let mut out = crate::decode_cmd::Profiles::new();
-    for (name, address) in DEVICES {
-        let profile =
-            crate::profile::builtin::get(name).ok_or_else(|| anyhow::anyhow!("built-in profile {name} missing"))??;
-        out.insert(address, profile);
-    }
-    Ok(out)
-}
+use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_core::chunk::{Chunk, PortId, Timestamp};
+use mbtap_core::framer::{FramerConfig, LineSettings};
+use mbtap_core::sim::Slave;
+use mbtap_core::sim::bus::VirtualBus;
+use mbtap_core::sim::uart::Listener;
 
 /// Demo settings.
 #[derive(Debug, Clone, Default)]
 pub struct DemoOptions {
     /// Line time to run for.
     pub duration: Option<Duration>,
-    pub faults: Vec<crate::sim::bus::Fault>,
+    pub faults: Vec<mbtap_core::sim::bus::Fault>,
     /// Line time per wall-clock time; 0 runs without waiting.
     pub speed: f64,
     /// The listener's UART settings, when not the line's.
@@ -52,7 +35,7 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     let duration = opts.duration;
     let line = LineSettings::default();
     let mut slaves = Vec::new();
-    for (address, profile) in profiles()? {
+    for (address, profile) in mbtap_core::sim::demo_profiles()? {
         writer.profiles.insert(address, profile.clone());
         slaves.push(Slave::new(Arc::new(profile), address));
     }

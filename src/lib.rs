@@ -21,35 +21,19 @@
 //!   what users type.
 //! - [`fuzzing`] — the bodies of the fuzz targets, also run over the seeds by `cargo test`.
 
-pub mod analyzer;
 pub mod bridge;
 pub mod bridge_cmd;
 pub mod bridge_config;
-pub mod capture;
-pub mod chunk;
 pub mod cli;
 pub mod commands;
 pub mod config;
-pub mod decode_cmd;
 pub mod demo_cmd;
-pub mod framer;
-pub mod fuzzing;
 pub mod generate_cmd;
-pub mod health;
-pub mod hexinput;
-pub mod line_args;
-pub mod pairing;
 pub mod play_cmd;
-pub mod profile;
-pub mod proto;
 pub mod replay_cmd;
-pub mod report;
-pub mod scan;
 pub mod scan_cmd;
-pub mod sim;
 pub mod simulate_cmd;
 pub mod sniff_cmd;
 pub mod source;
 pub mod tap_cmd;
-pub mod traffic;
 pub mod tui;

@@ -8,9 +8,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use crate::capture::{CaptureReader, Item};
-use crate::framer::LineSettings;
 use crate::source::serial::builder;
+use mbtap_core::capture::{CaptureReader, Item};
+use mbtap_core::framer::LineSettings;
 
 /// Plays `file` into `port`; returns (packets, bytes) written.
 ///

@@ -5,13 +5,9 @@ use std::io::{self, Read, Write};
 
 use anyhow::Context;
 
-use crate::analyzer::{Analyzer, AnalyzerConfig, Event};
-use crate::capture::{CaptureReader, Item};
-use crate::chunk::{Chunk, PortId, Timestamp};
-use crate::framer::FramerConfig;
-use crate::line_args::LineOverrides;
-use crate::pairing::PairingConfig;
-use crate::report::events::{Stats, json, text_line};
+use mbtap_core::analyzer::Event;
+use mbtap_core::line_args::LineOverrides;
+use mbtap_core::report::events::{Stats, json, text_line};
 
 /// Output of `replay` and `sniff`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -30,17 +26,17 @@ pub struct EventWriter<W: Write> {
     pub stats: Stats,
     pub error: Option<io::Error>,
     /// Profiles by unit: transactions of these units get their values annotated.
-    pub profiles: crate::decode_cmd::Profiles,
+    pub profiles: mbtap_core::profile::Profiles,
     /// The register image, when asked for.
-    pub image: Option<crate::profile::image::RegisterImage>,
+    pub image: Option<mbtap_core::profile::image::RegisterImage>,
     /// Language of names in text annotations.
-    pub lang: crate::profile::annotate::Lang,
+    pub lang: mbtap_core::profile::annotate::Lang,
     /// The terminal UI's model: events go there instead of `out`.
     pub tui: Option<std::sync::Arc<crate::tui::terminal::Shared>>,
     /// Recorded input shown in the UI: hold each event until its time at the UI's speed.
     pub pacer: Option<crate::tui::terminal::Pacer>,
     /// The bus health report, written by [`Self::finish`] when set.
-    pub health: Option<crate::health::Health>,
+    pub health: Option<mbtap_core::health::Health>,
     /// Also write the report so far each time this much bus time has passed.
     pub report_every_ns: Option<u64>,
     next_report_ns: Option<u64>,
@@ -53,9 +49,9 @@ impl<W: Write> EventWriter<W> {
             format,
             stats: Stats::default(),
             error: None,
-            profiles: crate::decode_cmd::Profiles::new(),
+            profiles: mbtap_core::profile::Profiles::new(),
             image: None,
-            lang: crate::profile::annotate::Lang::En,
+            lang: mbtap_core::profile::annotate::Lang::En,
             tui: None,
             pacer: None,
             health: None,
@@ -70,9 +66,11 @@ impl<W: Write> EventWriter<W> {
         // Annotated once, for the health report and the output alike (the UI makes its own).
         let shown = self.tui.is_none() && self.error.is_none() && self.format != EventFormat::Summary;
         let annotations = match e {
-            Event::Transaction(t) if t.outcome == crate::pairing::Outcome::Ok && (shown || self.health.is_some()) => {
+            Event::Transaction(t)
+                if t.outcome == mbtap_core::pairing::Outcome::Ok && (shown || self.health.is_some()) =>
+            {
                 match (self.profiles.get(&t.unit), t.request) {
-                    (Some(p), Some(req)) => Some(crate::profile::transaction::annotate_wire(p, req, t.response)),
+                    (Some(p), Some(req)) => Some(mbtap_core::profile::transaction::annotate_wire(p, req, t.response)),
                     _ => None,
                 }
             }
@@ -95,7 +93,7 @@ impl<W: Write> EventWriter<W> {
         if let (Some(image), Event::Transaction(t)) = (self.image.as_mut(), e)
             && let Some(req) = t.request
         {
-            let resp = if t.outcome == crate::pairing::Outcome::Ok { t.response } else { None };
+            let resp = if t.outcome == mbtap_core::pairing::Outcome::Ok { t.response } else { None };
             image.update(t.unit, t.t_start.0, req, resp);
         }
         if let Some(shared) = &self.tui {
@@ -130,7 +128,7 @@ impl<W: Write> EventWriter<W> {
                         if i > 0 {
                             line.push(',');
                         }
-                        crate::report::annotations::write_json(&mut line, a);
+                        mbtap_core::report::annotations::write_json(&mut line, a);
                     }
                     line.push_str("]}");
                 }
@@ -185,7 +183,7 @@ impl<W: Write> EventWriter<W> {
         match self.format {
             EventFormat::Text | EventFormat::Summary => {
                 if !last {
-                    let until = report.last_t_ns.map_or_else(String::new, crate::health::clock);
+                    let until = report.last_t_ns.map_or_else(String::new, mbtap_core::health::clock);
                     writeln!(self.out, "--- bus health so far (until {until}) ---")?;
                 }
                 write!(self.out, "{}", report.text())?;
@@ -236,7 +234,7 @@ pub fn replay<R: Read, W: Write>(
     writer: &mut EventWriter<W>,
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
-    replay_into(input, cli, &mut WriterSink { writer, err })
+    mbtap_core::replay::replay_into(input, cli, &mut WriterSink { writer, err }).context("reading the capture")
 }
 
 /// An [`EventWriter`] as an analyzer sink, warnings included.
@@ -245,7 +243,7 @@ struct WriterSink<'a, W: Write> {
     err: &'a mut dyn Write,
 }
 
-impl<W: Write> crate::analyzer::Sink for WriterSink<'_, W> {
+impl<W: Write> mbtap_core::analyzer::Sink for WriterSink<'_, W> {
     fn event(&mut self, event: &Event<'_>) {
         self.writer.write(event);
     }
@@ -254,93 +252,10 @@ impl<W: Write> crate::analyzer::Sink for WriterSink<'_, W> {
         self.writer.warning(self.err, message);
     }
 
-    fn settings(&mut self, line: crate::framer::LineSettings) {
+    fn settings(&mut self, line: mbtap_core::framer::LineSettings) {
         // The UI shows the line the capture was recorded on, not the command line's default.
         if let Some(shared) = &self.writer.tui {
             shared.model().line = line;
         }
     }
-}
-
-/// A packet held for reordering: (time, arrival order, port, bytes).
-type Held = (u64, u64, u8, Vec<u8>);
-
-/// Packets held to put several ports' packets in time order.
-const REORDER_PACKETS: usize = 4096;
-/// ... or this much time between the oldest and newest held packet.
-const REORDER_NS: u64 = 1_000_000_000;
-
-/// Replays a capture into any sink.
-///
-/// A capture with one port goes straight through. With several ports (a tap with one port per
-/// direction) packets are merged by time through a bounded reorder window, and a port whose
-/// description says `role=requests` or `role=responses` tells pairing the direction.
-///
-/// # Errors
-/// When the file cannot be read at all (not pcap/pcapng, I/O error).
-pub fn replay_into<R: Read, S: crate::analyzer::Sink>(
-    input: R,
-    cli: LineOverrides,
-    sink: &mut S,
-) -> anyhow::Result<()> {
-    use std::cmp::Reverse;
-    use std::collections::BinaryHeap;
-    let mut reader = CaptureReader::new(input);
-    let mut analyzer: Option<Analyzer> = None;
-    let mut file_settings = LineOverrides::default();
-    let mut pairing = PairingConfig::default();
-    let mut ports = 0usize;
-    let mut held: BinaryHeap<Reverse<Held>> = BinaryHeap::new();
-    let mut seq = 0u64;
-    let make = |file: LineOverrides, pairing: PairingConfig, sink: &mut S| {
-        let (mode, line, latency_ns) = cli.or(file).resolve();
-        sink.settings(line);
-        Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(line, latency_ns), pairing })
-    };
-    loop {
-        let item = reader.next_item().context("reading the capture")?;
-        let Some(item) = item else { break };
-        match item {
-            Item::Interface { port, interface } => {
-                ports += 1;
-                let description = interface.description.unwrap_or_default();
-                if ports == 1 {
-                    file_settings = LineOverrides::from_description(&description);
-                }
-                if description.split_whitespace().any(|w| w == "role=requests") {
-                    pairing.request_port = Some(port);
-                } else if description.split_whitespace().any(|w| w == "role=responses") {
-                    pairing.response_port = Some(port);
-                }
-            }
-            Item::Warning(w) => sink.warning(&w),
-            Item::Packet { port, t, data } => {
-                if analyzer.is_none() {
-                    analyzer = Some(make(file_settings, pairing, sink));
-                }
-                let Some(a) = analyzer.as_mut() else { continue };
-                if ports <= 1 {
-                    a.push(&Chunk { port, t, bytes: data }, sink);
-                    continue;
-                }
-                seq += 1;
-                held.push(Reverse((t.0, seq, port.0, data.to_vec())));
-                while let Some(Reverse((oldest, ..))) = held.peek() {
-                    if held.len() <= REORDER_PACKETS && t.0.saturating_sub(*oldest) <= REORDER_NS {
-                        break;
-                    }
-                    if let Some(Reverse((t, _, p, bytes))) = held.pop() {
-                        a.push(&Chunk { port: PortId(p), t: Timestamp(t), bytes: &bytes }, sink);
-                    }
-                }
-            }
-        }
-    }
-    if let Some(a) = analyzer.as_mut() {
-        while let Some(Reverse((t, _, p, bytes))) = held.pop() {
-            a.push(&Chunk { port: PortId(p), t: Timestamp(t), bytes: &bytes }, sink);
-        }
-        a.finish(sink);
-    }
-    Ok(())
 }

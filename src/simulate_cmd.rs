@@ -2,8 +2,8 @@
 //! tests, and commissioning a SCADA before the hardware arrives.
 //!
 //! A master opens PATH as its serial port. Requests are assembled from what it writes
-//! ([`crate::sim::RequestAssembler`]), handed to every simulated slave, and the one that answers
-//! is heard after a turnaround delay. Values move with the host clock ([`crate::sim::world`]).
+//! ([`mbtap_core::sim::RequestAssembler`]), handed to every simulated slave, and the one that answers
+//! is heard after a turnaround delay. Values move with the host clock ([`mbtap_core::sim::world`]).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -14,12 +14,12 @@ use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::{SerialPort, SerialStream};
 
-use crate::analyzer::SerialMode;
-use crate::framer::LineSettings;
-use crate::proto::{encode_ascii, encode_rtu};
-use crate::sim::bus::VirtualBus;
-use crate::sim::uart::Listener;
-use crate::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame, Slave, world};
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::framer::LineSettings;
+use mbtap_core::proto::{encode_ascii, encode_rtu};
+use mbtap_core::sim::bus::VirtualBus;
+use mbtap_core::sim::uart::Listener;
+use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame, Slave, world};
 
 /// Frames requests in the line's mode.
 enum Assembler {
@@ -55,7 +55,7 @@ impl Assembler {
 pub struct SimulateOptions {
     pub link: PathBuf,
     /// `(profile name, address)` of each slave.
-    pub devices: Vec<(crate::profile::Profile, u8)>,
+    pub devices: Vec<(mbtap_core::profile::Profile, u8)>,
     pub line: LineSettings,
     pub mode: SerialMode,
     pub duration: Option<Duration>,
@@ -72,7 +72,7 @@ pub struct SimulateOptions {
 /// The built-in master's settings.
 #[derive(Debug, Clone, Default)]
 pub struct PollOptions {
-    pub faults: Vec<crate::sim::bus::Fault>,
+    pub faults: Vec<mbtap_core::sim::bus::Fault>,
     /// The listener's UART settings when they differ from the line's (a wrong-baud or
     /// wrong-parity training line).
     pub heard_at: Option<LineSettings>,
@@ -87,7 +87,7 @@ pub const DEFAULT_DEVICES: [(&str, u8); 3] = [("mk4", 1), ("display", 5), ("mkzp
 ///
 /// # Errors
 /// When the form, the address (1–247) or the profile name is wrong, saying which.
-pub fn parse_device(spec: &str) -> anyhow::Result<(crate::profile::Profile, u8)> {
+pub fn parse_device(spec: &str) -> anyhow::Result<(mbtap_core::profile::Profile, u8)> {
     let (name, address) =
         spec.split_once('@').with_context(|| format!("device {spec:?}: expected NAME@ADDRESS, e.g. mk4@1"))?;
     let address: u8 = address
@@ -95,7 +95,7 @@ pub fn parse_device(spec: &str) -> anyhow::Result<(crate::profile::Profile, u8)>
         .ok()
         .filter(|a| (1..=247).contains(a))
         .with_context(|| format!("device {spec:?}: the address must be 1–247 (Serial Line v1.02 §2.2)"))?;
-    let profile = crate::profile::builtin::get(name)
+    let profile = mbtap_core::profile::builtin::get(name)
         .with_context(|| format!("device {spec:?}: no built-in profile {name:?}; built in: mk4, mkzp, display"))??;
     Ok((profile, address))
 }

@@ -12,13 +12,13 @@ use anyhow::Context;
 use tokio::io::AsyncReadExt;
 use tokio_serial::SerialPortBuilderExt;
 
-use crate::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
-use crate::capture::PcapNgWriter;
-use crate::chunk::{Chunk, PortId};
-use crate::framer::{FramerConfig, LineSettings};
-use crate::line_args::LineOverrides;
 use crate::replay_cmd::EventWriter;
 use crate::source::serial::{builder, now};
+use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
+use mbtap_core::capture::PcapNgWriter;
+use mbtap_core::chunk::{Chunk, PortId};
+use mbtap_core::framer::{FramerConfig, LineSettings};
+use mbtap_core::line_args::LineOverrides;
 
 /// Sniff settings.
 #[derive(Debug, Clone)]

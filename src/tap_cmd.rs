@@ -15,14 +15,14 @@ use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
 
-use crate::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
-use crate::capture::PcapNgWriter;
-use crate::chunk::{Chunk, PortId};
-use crate::framer::{FramerConfig, LineSettings};
-use crate::line_args::LineOverrides;
-use crate::pairing::PairingConfig;
 use crate::replay_cmd::EventWriter;
 use crate::source::serial::{builder, now};
+use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
+use mbtap_core::capture::PcapNgWriter;
+use mbtap_core::chunk::{Chunk, PortId};
+use mbtap_core::framer::{FramerConfig, LineSettings};
+use mbtap_core::line_args::LineOverrides;
+use mbtap_core::pairing::PairingConfig;
 
 /// The application's side (requests) and the bus's side (responses).
 pub const APP_PORT: PortId = PortId(0);

@@ -274,7 +274,7 @@ fn rtu_over_tcp_carries_raw_frames() {
     let mut answer = [0u8; 13];
     s.read_exact(&mut answer).unwrap();
     assert_eq!(answer[..3], [0x01, 0x04, 0x08]);
-    let crc = mbtap::proto::crc16(&answer[..11]).to_le_bytes();
+    let crc = mbtap_core::proto::crc16(&answer[..11]).to_le_bytes();
     assert_eq!(answer[11..], crc, "a valid RTU frame back");
 }
 

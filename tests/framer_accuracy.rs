@@ -3,8 +3,8 @@
 //! these are regression tests of the framer's decisions, not statistics.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap::framer::{FramerConfig, LineSettings, Parity};
-use mbtap::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
+use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
 
 fn check(line: LineSettings, model: Observation, seed: u64, min_good: f64, min_corrupted: f64, max_false: usize) {
     let wire = generate(&TrafficConfig { seed, line, transactions: 3000, ..TrafficConfig::default() });

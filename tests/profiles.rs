@@ -2,12 +2,12 @@
 //! register and bit values (scaling, enums, bits, 32-bit pairs, blocks, findings).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap::profile::annotate::{Note, Shown, annotate_bits, annotate_registers};
-use mbtap::profile::{Table, load};
+use mbtap_core::profile::annotate::{Note, Shown, annotate_bits, annotate_registers};
+use mbtap_core::profile::{Table, load};
 
 const EXAMPLE: &str = include_str!("fixtures/example-profile.toml");
 
-fn example() -> mbtap::profile::Profile {
+fn example() -> mbtap_core::profile::Profile {
     load("example-profile.toml", EXAMPLE).unwrap()
 }
 

@@ -6,12 +6,12 @@
 
 use std::sync::Arc;
 
-use mbtap::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap::chunk::{Chunk, PortId, Timestamp};
-use mbtap::framer::{FramerConfig, LineSettings};
-use mbtap::sim::Slave;
-use mbtap::sim::bus::{Fault, VirtualBus};
 use mbtap::tui::{App, Model};
+use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_core::chunk::{Chunk, PortId, Timestamp};
+use mbtap_core::framer::{FramerConfig, LineSettings};
+use mbtap_core::sim::Slave;
+use mbtap_core::sim::bus::{Fault, VirtualBus};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -21,12 +21,12 @@ const START_NS: u64 = 10 * 3600 * 1_000_000_000;
 
 /// The demo's three devices after `transactions` polls, with `faults` injected.
 fn model(transactions: usize, faults: &[Fault]) -> Model {
-    let profiles = mbtap::demo_cmd::profiles().unwrap();
+    let profiles = mbtap_core::sim::demo_profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let line = LineSettings::default();
     let mut bus = VirtualBus::new(slaves, line);
     bus.faults = faults.to_vec();
-    let mut model = Model::new(profiles, mbtap::profile::annotate::Lang::En, line, 1000);
+    let mut model = Model::new(profiles, mbtap_core::profile::annotate::Lang::En, line, 1000);
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
     for _ in 0..transactions {
@@ -171,11 +171,11 @@ fn help_overlay_lists_every_key() {
 
 #[test]
 fn scroll_back_is_bounded_and_says_so() {
-    let profiles = mbtap::demo_cmd::profiles().unwrap();
+    let profiles = mbtap_core::sim::demo_profiles().unwrap();
     let line = LineSettings::default();
-    let mut small = Model::new(profiles, mbtap::profile::annotate::Lang::En, line, 10);
+    let mut small = Model::new(profiles, mbtap_core::profile::annotate::Lang::En, line, 10);
     let slaves =
-        mbtap::demo_cmd::profiles().unwrap().iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
+        mbtap_core::sim::demo_profiles().unwrap().iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let mut bus = VirtualBus::new(slaves, line);
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
@@ -201,8 +201,8 @@ fn scroll_back_is_bounded_and_says_so() {
 fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
     let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-ascii.pcapng");
     let model = mbtap::tui::model::Model::new(
-        mbtap::decode_cmd::Profiles::new(),
-        mbtap::profile::annotate::Lang::En,
+        mbtap_core::decode::Profiles::new(),
+        mbtap_core::profile::annotate::Lang::En,
         LineSettings::default(),
         1000,
     );
@@ -210,8 +210,13 @@ fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
     let mut writer = mbtap::replay_cmd::EventWriter::new(std::io::sink(), mbtap::replay_cmd::EventFormat::Text);
     writer.tui = Some(shared.clone());
     let input = std::fs::File::open(capture).unwrap();
-    mbtap::replay_cmd::replay(input, mbtap::line_args::LineOverrides::default(), &mut writer, &mut std::io::sink())
-        .unwrap();
+    mbtap::replay_cmd::replay(
+        input,
+        mbtap_core::line_args::LineOverrides::default(),
+        &mut writer,
+        &mut std::io::sink(),
+    )
+    .unwrap();
     assert_eq!(shared.model().line, "19200 7E1".parse::<LineSettings>().unwrap());
     assert!(shared.model().total_rows() > 0);
 }

@@ -14,11 +14,11 @@ use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
 
 use super::metrics::Metrics;
 use super::queue::{ClientId, FairQueue, Full};
-use super::response::{Verdict, judge_ascii, judge_rtu};
-use crate::analyzer::SerialMode;
-use crate::chunk::{PortId, Timestamp};
-use crate::framer::LineSettings;
-use crate::proto::{encode_ascii, encode_rtu};
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::chunk::{PortId, Timestamp};
+use mbtap_core::framer::LineSettings;
+use mbtap_core::proto::answer_end::{Verdict, judge_ascii, judge_rtu};
+use mbtap_core::proto::{encode_ascii, encode_rtu};
 
 /// Exception 0x0A: the gateway has no path to the target (MAP v1.1b3 §7).
 pub const GATEWAY_PATH_UNAVAILABLE: u8 = 0x0A;
@@ -315,7 +315,7 @@ impl Master<'_> {
                         SerialMode::Rtu => frame.get(1..len.saturating_sub(2)).map(<[u8]>::to_vec),
                         SerialMode::Ascii => {
                             let start = frame.iter().position(|&b| b == b':').unwrap_or(0);
-                            crate::proto::parse_ascii(frame.get(start..).unwrap_or_default())
+                            mbtap_core::proto::parse_ascii(frame.get(start..).unwrap_or_default())
                                 .ok()
                                 .map(|f| f.pdu().to_vec())
                         }

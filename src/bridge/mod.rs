@@ -8,6 +8,5 @@
 pub mod line;
 pub mod metrics;
 pub mod queue;
-pub mod response;
 pub mod reverse;
 pub mod server;

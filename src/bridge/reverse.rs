@@ -2,7 +2,7 @@
 //! request to a Modbus TCP server, so an RTU (or ASCII) master can reach TCP devices.
 //!
 //! Requests are framed from the serial bytes the way a slave's UART sees them (structure and
-//! CRC, the silence for functions of unknown length: [`crate::sim::RequestAssembler`]). The TCP
+//! CRC, the silence for functions of unknown length: [`mbtap_core::sim::RequestAssembler`]). The TCP
 //! side is a plain MBAP client kept open and reconnected on failure; PDUs pass through
 //! unchanged in both directions, vendor codes included — which is why it is not tokio-modbus's
 //! client, whose typed responses would have to be re-encoded. A TCP server that cannot be
@@ -19,12 +19,12 @@ use tokio_serial::{SerialPortBuilderExt, SerialStream};
 
 use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, MonitorChunk};
 use super::metrics::Metrics;
-use crate::analyzer::SerialMode;
-use crate::chunk::PortId;
-use crate::framer::LineSettings;
-use crate::proto::tcp::{Streaming, parse_tcp_frame};
-use crate::proto::{encode_ascii, encode_rtu, encode_tcp};
-use crate::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::chunk::PortId;
+use mbtap_core::framer::LineSettings;
+use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
+use mbtap_core::proto::{encode_ascii, encode_rtu, encode_tcp};
+use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
 
 /// Reverse-mode settings.
 #[derive(Debug, Clone)]

@@ -18,8 +18,8 @@ use tokio::time::Instant;
 
 use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, Job, LineShared, Reply, SERVER_DEVICE_BUSY};
 use super::queue::ClientId;
-use crate::proto::tcp::{Streaming, parse_tcp_frame};
-use crate::proto::{encode_rtu, encode_tcp};
+use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
+use mbtap_core::proto::{encode_rtu, encode_tcp};
 
 /// A pause that ends an RTU-over-TCP frame of unknown length.
 const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
@@ -189,7 +189,7 @@ async fn connection(stream: TcpStream, peer: SocketAddr, client: ClientId, route
     let mut buf = Vec::with_capacity(600);
     let mut chunk = [0u8; 1024];
     let mut bucket = opts.rate_limit.map(|r| (r.max(1.0), Instant::now()));
-    let mut rtu_frames = crate::sim::RequestAssembler::default();
+    let mut rtu_frames = mbtap_core::sim::RequestAssembler::default();
     'read: loop {
         // RTU over TCP: a frame whose function does not fix its length ends when the client
         // pauses, as on a serial line.

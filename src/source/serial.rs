@@ -4,8 +4,8 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use tokio_serial::{DataBits, Parity as SParity, SerialPortBuilder, StopBits};
 
-use crate::chunk::Timestamp;
-use crate::framer::{LineSettings, Parity};
+use mbtap_core::chunk::Timestamp;
+use mbtap_core::framer::{LineSettings, Parity};
 
 /// Now, as a [`Timestamp`] (the only clock read in mbtap is here and in the other sources).
 #[must_use]

@@ -17,7 +17,7 @@ pub struct Field {
 #[must_use]
 pub fn binary(wire: &[u8]) -> Vec<u8> {
     if wire.first() == Some(&b':') {
-        crate::proto::parse_ascii(wire).map_or_else(
+        mbtap_core::proto::parse_ascii(wire).map_or_else(
             |_| wire.to_vec(),
             |f| {
                 let mut b = vec![f.unit()];
@@ -35,9 +35,9 @@ pub fn binary(wire: &[u8]) -> Vec<u8> {
 #[must_use]
 pub fn wire_pdu(wire: &[u8]) -> Option<Vec<u8>> {
     if wire.first() == Some(&b':') {
-        crate::proto::parse_ascii(wire).ok().map(|f| f.pdu().to_vec())
+        mbtap_core::proto::parse_ascii(wire).ok().map(|f| f.pdu().to_vec())
     } else {
-        crate::proto::parse_rtu(wire).ok().map(|f| f.pdu.to_vec())
+        mbtap_core::proto::parse_rtu(wire).ok().map(|f| f.pdu.to_vec())
     }
 }
 

@@ -4,11 +4,11 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use crate::analyzer::Event;
-use crate::decode_cmd::Profiles;
-use crate::framer::LineSettings;
-use crate::pairing::Outcome;
-use crate::profile::annotate::{Annotation, Lang};
+use mbtap_core::analyzer::Event;
+use mbtap_core::framer::LineSettings;
+use mbtap_core::pairing::Outcome;
+use mbtap_core::profile::Profiles;
+use mbtap_core::profile::annotate::{Annotation, Lang};
 
 use super::registers::Registers;
 use super::stats::{BusStats, DeviceStats};
@@ -108,7 +108,7 @@ pub struct Model {
     /// The producer's latest message (a port lost and reopened, a warning about the input).
     pub notice: Option<String>,
     /// The bus health findings, live (the devices view shows them).
-    pub health: crate::health::Health,
+    pub health: mbtap_core::health::Health,
 }
 
 impl Model {
@@ -130,7 +130,7 @@ impl Model {
             pending: TimingFlags::default(),
             finished: None,
             notice: None,
-            health: crate::health::Health::new(profiles_for_health),
+            health: mbtap_core::health::Health::new(profiles_for_health),
         }
     }
 
@@ -170,7 +170,9 @@ impl Model {
             }
             Event::Transaction(t) => {
                 let annotations = match (t.outcome, t.request, self.profiles.get(&t.unit)) {
-                    (Outcome::Ok, Some(req), Some(p)) => crate::profile::transaction::annotate_wire(p, req, t.response),
+                    (Outcome::Ok, Some(req), Some(p)) => {
+                        mbtap_core::profile::transaction::annotate_wire(p, req, t.response)
+                    }
                     _ => Vec::new(),
                 };
                 self.health.event_annotated(e, Some(&annotations));
@@ -227,12 +229,12 @@ impl Model {
 }
 
 /// One line for a transaction: the annotated values, else what was asked and answered.
-fn summary(t: &crate::pairing::Transaction<'_>, annotations: &[Annotation], lang: Lang) -> String {
+fn summary(t: &mbtap_core::pairing::Transaction<'_>, annotations: &[Annotation], lang: Lang) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
     match t.outcome {
         Outcome::Exception(code) => {
-            let _ = write!(s, "exception {}", crate::proto::ExceptionCode::from(code));
+            let _ = write!(s, "exception {}", mbtap_core::proto::ExceptionCode::from(code));
         }
         Outcome::NoResponse => s.push_str("no response"),
         Outcome::BadResponse => s.push_str("response failed its check"),
@@ -266,9 +268,9 @@ fn summary(t: &crate::pairing::Transaction<'_>, annotations: &[Annotation], lang
 
 /// What a request asks, briefly: `430 ×4`, `100 := 7`.
 fn request_brief(wire: &[u8]) -> Option<String> {
-    use crate::proto::Request as R;
+    use mbtap_core::proto::Request as R;
     let pdu = super::layout::wire_pdu(wire)?;
-    let (_, req) = crate::proto::parse_request(&pdu).ok()?;
+    let (_, req) = mbtap_core::proto::parse_request(&pdu).ok()?;
     Some(match req {
         R::ReadCoils { address, quantity }
         | R::ReadDiscreteInputs { address, quantity }

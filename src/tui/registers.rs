@@ -4,9 +4,9 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use crate::profile::Table;
-use crate::profile::annotate::{Annotation, Lang, Shown};
-use crate::profile::image::RegisterImage;
+use mbtap_core::profile::Table;
+use mbtap_core::profile::annotate::{Annotation, Lang, Shown};
+use mbtap_core::profile::image::RegisterImage;
 
 /// Values kept per register for its sparkline.
 pub const HISTORY: usize = 48;
@@ -137,12 +137,12 @@ mod tests {
         let mut resp1 = vec![0x09, 0x03, 0x04, 0x00, 0x01, 0x00, 0x02];
         let mut resp2 = vec![0x09, 0x03, 0x04, 0x00, 0x01, 0x00, 0x03];
         for r in [&mut resp1, &mut resp2] {
-            let crc = crate::proto::crc16(r);
+            let crc = mbtap_core::proto::crc16(r);
             r.extend_from_slice(&crc.to_le_bytes());
         }
         let mut req = req.to_vec();
         req.truncate(6);
-        let crc = crate::proto::crc16(&req);
+        let crc = mbtap_core::proto::crc16(&req);
         req.extend_from_slice(&crc.to_le_bytes());
         r.update(9, 10, &req, Some(&resp1), &[], Lang::En);
         r.update(9, 20, &req, Some(&resp2), &[], Lang::En);

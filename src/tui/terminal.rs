@@ -184,7 +184,7 @@ fn export(rows: &[&Row], model: &Model, pcap: bool) -> anyhow::Result<(String, u
 }
 
 fn hex(b: Option<&[u8]>) -> Option<String> {
-    b.map(crate::report::format::hex_compact)
+    b.map(mbtap_core::report::format::hex_compact)
 }
 
 /// One exported row (the same keys as `sniff --format jsonl` transactions and noise).
@@ -211,14 +211,15 @@ pub fn row_json(r: &Row, model: &Model) -> serde_json::Value {
 
 /// The rows' frames as a capture `mbtap replay` reads back (line settings in the interface).
 fn write_pcapng(rows: &[&Row], model: &Model, out: &mut dyn Write) -> std::io::Result<()> {
-    let mut w = crate::capture::writer::PcapNgWriter::new(out)?;
-    let description = crate::line_args::LineOverrides::describe(crate::analyzer::SerialMode::Rtu, model.line, 0);
+    let mut w = mbtap_core::capture::writer::PcapNgWriter::new(out)?;
+    let description =
+        mbtap_core::line_args::LineOverrides::describe(mbtap_core::analyzer::SerialMode::Rtu, model.line, 0);
     let port = w.add_serial_interface("export", &description)?;
     for r in rows {
         let mut t = r.t_ns;
         for frame in [r.request.as_deref(), r.response.as_deref()].into_iter().flatten() {
             let end = t.saturating_add(model.line.char_ns().saturating_mul(frame.len() as u64));
-            w.write_packet(port, crate::chunk::Timestamp(end), frame)?;
+            w.write_packet(port, mbtap_core::chunk::Timestamp(end), frame)?;
             t = end.saturating_add(r.latency_ns.unwrap_or(0));
         }
     }

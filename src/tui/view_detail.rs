@@ -12,7 +12,7 @@ use super::app::{App, Side};
 use super::layout::{Field, binary, fields};
 use super::model::{Model, Row};
 use super::render::{clock, duration, status_style};
-use crate::proto::FunctionCode;
+use mbtap_core::proto::FunctionCode;
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
     let Some(row) = app.selected.and_then(|s| model.row(s)) else {
@@ -81,7 +81,7 @@ fn decoded(row: &Row, model: &Model) -> Vec<Line<'static>> {
         if wire.first() == Some(&b':') {
             String::from_utf8_lossy(wire).trim_end().to_owned()
         } else {
-            crate::report::format::hex_spaced(wire)
+            mbtap_core::report::format::hex_spaced(wire)
         }
     };
     let lines: Vec<String> =
@@ -91,10 +91,10 @@ fn decoded(row: &Row, model: &Model) -> Vec<Line<'static>> {
     }
     let mut out = Vec::new();
     let mut err = Vec::new();
-    let _ = crate::decode_cmd::run_with_profiles(
+    let _ = mbtap_core::decode::run_with_profiles(
         &lines,
         None,
-        crate::decode_cmd::Format::Text,
+        mbtap_core::decode::Format::Text,
         &model.profiles,
         model.lang,
         &mut out,

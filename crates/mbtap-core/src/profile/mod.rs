@@ -12,4 +12,7 @@ pub mod transaction;
 
 pub use format::Table;
 pub use loader::{ProfileError, load};
+
+/// Profiles by unit address, for annotation.
+pub type Profiles = std::collections::BTreeMap<u8, Profile>;
 pub use model::Profile;

@@ -4,7 +4,7 @@
 //! Each function must not panic on any input; `roundtrip` additionally asserts the
 //! parse → encode identity, which is the one place a panic here is the point.
 
-use crate::decode_cmd::{self, Format};
+use crate::decode::{self, Format};
 use crate::proto::{
     DirectionHint, Mode, PduDecode, Streaming, decode_pdu, parse_adu, parse_ascii, parse_request, parse_response,
     parse_rtu, parse_tcp_frame, request_len, response_len,
@@ -94,7 +94,7 @@ pub fn decode_text(data: &[u8]) {
     let text = String::from_utf8_lossy(data);
     let lines: Vec<String> = text.lines().map(str::to_owned).collect();
     for format in [Format::Text, Format::Jsonl] {
-        let _ = decode_cmd::run(&lines, None, format, &mut std::io::sink(), &mut std::io::sink());
+        let _ = decode::run(&lines, None, format, &mut std::io::sink(), &mut std::io::sink());
     }
 }
 
@@ -146,13 +146,23 @@ pub fn framer(data: &[u8]) {
 
 /// Any bytes as a capture file, replayed through the analyzer in both output formats.
 pub fn capture(data: &[u8]) {
+    use crate::analyzer::{Event, Sink};
     use crate::line_args::LineOverrides;
-    use crate::replay_cmd::{EventFormat, EventWriter, replay};
-    for format in [EventFormat::Jsonl, EventFormat::Text] {
-        let mut w = EventWriter::new(std::io::sink(), format);
-        let _ = replay(data, LineOverrides::default(), &mut w, &mut std::io::sink());
-        let _ = w.finish();
+    use crate::report::events::{Stats, json, text_line};
+    /// Renders every event both ways, as `replay` does for text and JSON lines.
+    struct Render(Stats);
+    impl Sink for Render {
+        fn event(&mut self, e: &Event<'_>) {
+            self.0.add(e);
+            let _ = (text_line(e), json(e).to_string());
+        }
+        fn warning(&mut self, message: &str) {
+            let _ = serde_json::json!({"event": "warning", "message": message}).to_string();
+        }
     }
+    let mut sink = Render(Stats::default());
+    let _ = crate::replay::replay_into(data, LineOverrides::default(), &mut sink);
+    let _ = (sink.0.text(), sink.0.json());
 }
 
 /// Any text as a profile; when it loads, annotate a sweep of values with it.
@@ -238,7 +248,7 @@ pub fn uart(data: &[u8]) {
 /// # Panics
 /// When an answer claims more bytes than were read: that is the bug the fuzzer is looking for.
 pub fn bridge_response(data: &[u8]) {
-    use crate::bridge::response::{Verdict, judge_ascii, judge_rtu};
+    use crate::proto::answer_end::{Verdict, judge_ascii, judge_rtu};
     let [unit, function, buf @ ..] = data else { return };
     for silent in [false, true] {
         for v in [judge_rtu(buf, *unit, *function, silent), judge_ascii(buf, *unit, silent)] {
@@ -256,8 +266,8 @@ pub fn health(data: &[u8]) {
     use crate::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
     use crate::chunk::{Chunk, PortId, Timestamp};
     use crate::framer::{FramerConfig, LineSettings};
-    static PROFILES: std::sync::OnceLock<crate::decode_cmd::Profiles> = std::sync::OnceLock::new();
-    let profiles = PROFILES.get_or_init(|| crate::demo_cmd::profiles().unwrap_or_default());
+    static PROFILES: std::sync::OnceLock<crate::profile::Profiles> = std::sync::OnceLock::new();
+    let profiles = PROFILES.get_or_init(|| crate::sim::demo_profiles().unwrap_or_default());
     let mode = if data.first().is_some_and(|b| b & 1 == 1) { SerialMode::Ascii } else { SerialMode::Rtu };
     let line = LineSettings::default();
     let mut analyzer =

@@ -21,8 +21,8 @@ use std::collections::BTreeMap;
 pub use report::{BINS, Bin, Finding, LATENCY_POINTS, LatencyPoint, Report, UnitHealth, clock};
 
 use crate::analyzer::Event;
-use crate::decode_cmd::Profiles;
 use crate::pairing::{Outcome, Role};
+use crate::profile::Profiles;
 use crate::profile::annotate::{Annotation, Note};
 
 /// Evidence kept per finding: the first few times, enough to show a customer.

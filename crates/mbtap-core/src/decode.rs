@@ -1,11 +1,11 @@
-//! `mbtap decode`: frames given as hex or ASCII text, explained. A request followed by the
+//! Frames given as hex or ASCII text, explained (the work of `mbtap decode`). A request followed by the
 //! response that answers it is shown as one transaction.
 
 use std::io::{self, Write};
 
 use serde_json::json;
 
-use crate::hexinput::parse_frame_text;
+use crate::proto::hexinput::parse_frame_text;
 use crate::proto::{
     Adu, DecodedPdu, DirectionHint, Mode, Pdu, PduDecode, Request, decode_pdu, pair_findings, parse_adu,
 };
@@ -53,8 +53,7 @@ pub fn run(
     run_with_profiles(lines, mode, format, &Profiles::new(), crate::profile::annotate::Lang::En, out, err)
 }
 
-/// Profiles by unit address, for annotation.
-pub type Profiles = std::collections::BTreeMap<u8, crate::profile::Profile>;
+pub use crate::profile::Profiles;
 
 /// As [`run`], annotating the values of transactions of units that have a profile.
 ///

@@ -6,7 +6,7 @@
 //! v1.02 §2.5.1.1) and stands or falls by its CRC. ASCII frames end with CR LF and carry an LRC
 //! (§2.5.2). Pure: the caller says when the line has been silent.
 
-use crate::proto::{PduLength, crc16, response_len};
+use crate::{PduLength, crc16, response_len};
 
 /// What the bytes read so far are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -81,7 +81,7 @@ pub fn judge_ascii(buf: &[u8], unit: u8, silent: bool) -> Verdict {
     let Some(end) = buf[start..].windows(2).position(|w| w == b"\r\n").map(|p| start + p + 2) else {
         return if silent { Verdict::BadCheck } else { Verdict::Pending };
     };
-    match crate::proto::parse_ascii(&buf[start..end]) {
+    match crate::parse_ascii(&buf[start..end]) {
         Ok(f) if f.unit() != unit => Verdict::Foreign,
         Ok(f) if f.check_ok() => Verdict::Answer { len: end },
         _ => Verdict::BadCheck,
@@ -149,7 +149,7 @@ mod tests {
     #[test]
     fn ascii_frames_end_with_cr_lf_and_their_lrc() {
         let mut f = Vec::new();
-        crate::proto::encode_ascii(1, &[0x03, 0x02, 0x00, 0x07], &mut f);
+        crate::encode_ascii(1, &[0x03, 0x02, 0x00, 0x07], &mut f);
         assert_eq!(judge_ascii(&f[..f.len() - 1], 1, false), Verdict::Pending);
         assert_eq!(judge_ascii(&f, 1, false), Verdict::Answer { len: f.len() });
         assert_eq!(judge_ascii(&f, 2, false), Verdict::Foreign);

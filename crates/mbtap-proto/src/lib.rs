@@ -7,8 +7,15 @@
 //!
 //! Layers: [`checksum`] (CRC-16, LRC) → [`rtu`] / [`ascii`] / [`tcp`] (ADU) →
 //! [`request`] / [`response`] (PDU) → [`decode`] (direction hint) and [`findings`].
+//! [`length`] says how long a frame of a function code must be; [`answer_end`] uses it to find
+//! where an answer arriving byte by byte ends (the bridge's question); [`hexinput`] reads frames
+//! that people paste as text.
+//!
+//! This crate depends on `nom` and `thiserror` only: every parser here is fuzzed from
+//! `fuzz/` without compiling the analysis, the terminal or an async runtime.
 
 pub mod adu;
+pub mod answer_end;
 pub mod ascii;
 pub mod checksum;
 pub mod data;
@@ -16,6 +23,7 @@ pub mod decode;
 pub mod error;
 pub mod findings;
 pub mod function;
+pub mod hexinput;
 pub mod length;
 pub mod request;
 pub mod response;
