@@ -1,39 +1,25 @@
-//! mbtap — a Modbus RTU/ASCII bus analyzer.
+//! mbtap — a Modbus RTU/ASCII bus analyzer: the binary's edges. The analysis itself is pure and
+//! lives in the workspace's libraries: `mbtap-proto` (frames and PDUs) and `mbtap-core`
+//! (framers, pairing, profiles, health, captures, the simulated bus), which import no tokio,
+//! terminal, command line or serial crate and read no clock.
 //!
 //! Module map (dependencies point down, never up):
-//!
-//! Pure core (no tokio, no terminal, no clock — time is an input):
-//! - [`proto`] — frames and PDUs of every function code: parse, encode, findings.
-//! - [`chunk`] — bytes as a read delivered them, with their [`chunk::Timestamp`].
-//! - [`framer`] — chunks into frames and noise (RTU by structure + CRC + timing; ASCII).
-//! - [`pairing`] — requests with their responses on a half-duplex bus.
-//! - [`analyzer`] — framers + pairing: one path for live capture, replay and tests.
-//! - [`profile`] — device register maps: format, loader, annotation.
-//! - [`traffic`] — synthetic traffic with ground truth and adapter observation models.
-//!
-//! Around it:
-//! - [`capture`] — pcap/pcapng reading and writing, Wireshark export.
-//! - [`report`] — text and JSON-lines rendering.
-//! - [`health`] — the bus health report (findings with evidence; text, JSON, HTML) and [`scan`]
-//!   line-settings detection.
-//! - [`source`] — live serial ports and the clock (the edge).
-//! - [`cli`], [`commands`] and the `*_cmd` modules — the commands; `hexinput`, `line_args` —
-//!   what users type.
-//! - [`fuzzing`] — the bodies of the fuzz targets, also run over the seeds by `cargo test`.
+//! - [`cmd`] — one file per command: its options and its `run`; `main` parses and dispatches.
+//! - [`args`] — command-line pieces several commands share (line settings, output options).
+//! - [`bridge`] — Modbus TCP ⇄ serial: server, line masters, reverse mode, metrics, its config file.
+//! - [`tui`] — the terminal UI (ratatui), rendered from the model the events build.
+//! - [`source`] — live serial ports, pseudo-terminals and the clock: the I/O loops.
+//! - [`output`] — the output sink: events as text or JSON lines, the UI feed, reports.
+//! - [`devices`] — device profiles by the names users give them (built-in, user dir, file).
+//! - [`config`] — the user configuration file.
+//! - [`signals`] — Ctrl-C, SIGTERM and the UI's `q`: one stop for every loop.
 
+pub mod args;
 pub mod bridge;
-pub mod bridge_cmd;
-pub mod bridge_config;
-pub mod cli;
-pub mod commands;
+pub mod cmd;
 pub mod config;
-pub mod demo_cmd;
-pub mod generate_cmd;
-pub mod play_cmd;
-pub mod replay_cmd;
-pub mod scan_cmd;
-pub mod simulate_cmd;
-pub mod sniff_cmd;
+pub mod devices;
+pub mod output;
+pub mod signals;
 pub mod source;
-pub mod tap_cmd;
 pub mod tui;

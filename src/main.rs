@@ -4,20 +4,16 @@
 use std::io;
 use std::process::ExitCode;
 
-use clap::Parser;
-use mbtap::cli::Cli;
+use clap::{CommandFactory, FromArgMatches};
+use mbtap::cmd::{self, Cli};
 
 fn main() -> ExitCode {
-    // `bridge --config FILE`: the file's settings become options the command line overrides.
-    let args = match mbtap::bridge_config::expand(std::env::args_os().collect()) {
-        Ok(args) => args,
-        Err(e) => {
-            eprintln!("mbtap: {e}");
-            return ExitCode::from(2);
-        }
+    let matches = Cli::command().get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
     };
-    let cli = Cli::parse_from(args);
-    match mbtap::commands::run(cli.command) {
+    match cmd::run(cli.command, &matches) {
         Ok(code) => code,
         Err(e) => {
             // A closed pipe (`mbtap decode ... | head`) is not a failure.

@@ -3,7 +3,7 @@
 //! in what mbtap sees on a recorded bus shows up here as a diff to review.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap::replay_cmd::{EventFormat, EventWriter, replay};
+use mbtap::output::{EventFormat, EventWriter, replay};
 use mbtap_core::line_args::LineOverrides;
 
 /// Warnings, then every event, then the summary, as one text. A capture with a `.devices`

@@ -207,10 +207,10 @@ fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
         1000,
     );
     let shared = mbtap::tui::terminal::Shared::new(model);
-    let mut writer = mbtap::replay_cmd::EventWriter::new(std::io::sink(), mbtap::replay_cmd::EventFormat::Text);
+    let mut writer = mbtap::output::EventWriter::new(std::io::sink(), mbtap::output::EventFormat::Text);
     writer.tui = Some(shared.clone());
     let input = std::fs::File::open(capture).unwrap();
-    mbtap::replay_cmd::replay(
+    mbtap::output::replay(
         input,
         mbtap_core::line_args::LineOverrides::default(),
         &mut writer,

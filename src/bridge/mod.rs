@@ -5,8 +5,10 @@
 //! lost port), [`server`] (the TCP side, each connection on its own), [`metrics`] (Prometheus
 //! text); [`reverse`] (an RTU slave on the serial side, a Modbus TCP client behind).
 
+pub mod config;
 pub mod line;
 pub mod metrics;
 pub mod queue;
 pub mod reverse;
+pub mod run;
 pub mod server;

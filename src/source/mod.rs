@@ -1,4 +1,12 @@
-//! Sources at the edge: live serial ports (tokio-serial) and the host clock. Everything here
-//! produces [`Chunk`](mbtap_core::chunk::Chunk)s for the pure core.
+//! Sources at the edge: live serial ports (tokio-serial), pseudo-terminals and the host clock —
+//! the I/O loops of `sniff`, `tap`, `scan`, `play`, `simulate` and `demo`. Everything here
+//! produces [`Chunk`](mbtap_core::chunk::Chunk)s for the pure core (or, for `play` and
+//! `simulate`, writes bytes a peer reads).
 
+pub mod demo;
+pub mod play;
+pub mod scan;
 pub mod serial;
+pub mod simulate;
+pub mod sniff;
+pub mod tap;

@@ -10,6 +10,7 @@ pub mod layout;
 pub mod model;
 pub mod registers;
 pub mod render;
+pub mod source;
 pub mod stats;
 pub mod terminal;
 mod view_detail;

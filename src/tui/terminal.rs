@@ -1,7 +1,7 @@
 //! The edge of the UI: the real terminal (raw mode, alternate screen, restored on quit, error,
 //! panic and signals), the key loop, pacing of recorded input, and exports of what the filter
 //! shows. The producer (sniffer, replay, demo) runs on its own thread and feeds the shared
-//! model through [`crate::replay_cmd::EventWriter`].
+//! model through [`crate::output::EventWriter`].
 
 use std::io::Write;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -121,7 +121,7 @@ where
     let mut terminal = ratatui::init();
     let ui = ui_loop(&mut terminal, shared, source, pacing);
     ratatui::restore();
-    crate::sniff_cmd::request_stop();
+    crate::signals::request_stop();
     let produced = handle.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the producer thread panicked")));
     ui?;
     produced
@@ -134,7 +134,7 @@ fn ui_loop(terminal: &mut ratatui::DefaultTerminal, shared: &Shared, source: &st
             let model = shared.model();
             terminal.draw(|f| super::render::draw(f, &mut app, &model, source)).context("drawing the terminal")?;
         }
-        if crate::sniff_cmd::signalled() {
+        if crate::signals::signalled() {
             return Ok(());
         }
         // Redraw at most every 50 ms: smooth, and cheap on a busy bus.

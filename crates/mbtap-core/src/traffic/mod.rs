@@ -2,6 +2,7 @@
 //! hardware, and scoring against the truth. Deterministic for a seed; used by tests, benchmarks
 //! and the accuracy report in BENCHMARKS.md.
 
+pub mod capture;
 pub mod generate;
 pub mod observe;
 pub mod rng;

@@ -17,7 +17,7 @@ use crate::bridge::line::{self, LineOptions, LineShared, MonitorChunk};
 use crate::bridge::metrics::Metrics;
 use crate::bridge::reverse::ReverseOptions;
 use crate::bridge::server::{self, Route, ServerOptions};
-use crate::replay_cmd::EventWriter;
+use crate::output::EventWriter;
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::FramerConfig;
@@ -227,7 +227,7 @@ pub async fn bridge<W: Write>(
         .is_some()
         .then(|| Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(settings, 0), pairing }));
     let mut writer = writer;
-    let stop = crate::sniff_cmd::shutdown_signal();
+    let stop = crate::signals::shutdown_signal();
     tokio::pin!(stop);
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     let mut tick = tokio::time::interval(Duration::from_millis(100));

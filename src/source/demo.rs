@@ -6,7 +6,7 @@ use std::io::Write;
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::replay_cmd::EventWriter;
+use crate::output::EventWriter;
 use crate::source::serial::now;
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
 use mbtap_core::chunk::{Chunk, PortId, Timestamp};
@@ -47,7 +47,7 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(heard_at, 0), ..AnalyzerConfig::default() });
     let start = tokio::time::Instant::now();
     let start_t = now();
-    let mut stop = Box::pin(crate::sniff_cmd::shutdown_signal());
+    let mut stop = Box::pin(crate::signals::shutdown_signal());
     let mut pacer = crate::tui::terminal::Pacer::default();
     'run: loop {
         for frame in bus.next_transaction() {

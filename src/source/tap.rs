@@ -15,7 +15,7 @@ use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
 
-use crate::replay_cmd::EventWriter;
+use crate::output::EventWriter;
 use crate::source::serial::{builder, now};
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
 use mbtap_core::capture::PcapNgWriter;
@@ -82,7 +82,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { mode: opts.mode, framer: FramerConfig::new(opts.line, latency_ns), pairing });
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
-    let mut stop = Box::pin(crate::sniff_cmd::shutdown_signal());
+    let mut stop = Box::pin(crate::signals::shutdown_signal());
     let (mut from_app, mut from_bus) = (vec![0u8; 4096], vec![0u8; 4096]);
     let mut last_flush = tokio::time::Instant::now();
     loop {

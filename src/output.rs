@@ -1,5 +1,6 @@
-//! `mbtap replay FILE`: a line capture through the analyzer, exactly as a live session would
-//! have seen it.
+//! The output sink every analyzing command writes through: events as text, JSON lines or only
+//! counted (the terminal UI takes them instead when it runs), the register image, the health
+//! report at the end or every so often; and a capture replayed into it.
 
 use std::io::{self, Read, Write};
 
@@ -216,7 +217,7 @@ fn event_time(e: &Event<'_>) -> u64 {
 /// Waits (this thread) until `e` is due at the UI's speed; a stop request ends all waiting.
 fn pace(pacer: &mut crate::tui::terminal::Pacer, shared: &crate::tui::terminal::Shared, e: &Event<'_>) {
     let t = event_time(e);
-    while !crate::sniff_cmd::stop_requested() {
+    while !crate::signals::stop_requested() {
         match pacer.delay(t, shared.speed(), std::time::Instant::now()) {
             None => break,
             Some(d) => std::thread::sleep(d),
@@ -258,4 +259,23 @@ impl<W: Write> mbtap_core::analyzer::Sink for WriterSink<'_, W> {
             shared.model().line = line;
         }
     }
+}
+
+/// The event writer `sniff`, `tap` and `replay` print through, as their output options say.
+pub fn event_writer<W: io::Write>(out: W, o: &crate::args::OutputArgs) -> anyhow::Result<EventWriter<W>> {
+    let mut writer = EventWriter::new(out, o.format.into());
+    writer.profiles = crate::devices::load_devices(&o.devices)?;
+    writer.lang = o.lang.into();
+    if let Some(every) = o.report_every {
+        anyhow::ensure!(
+            every.is_finite() && every > 0.0,
+            "--report-every {every}: expected a number of seconds above 0, e.g. 60"
+        );
+        // Capped at a year: the report then comes at the end only.
+        writer.report_every_ns = Some(std::time::Duration::from_secs_f64(every.min(3.2e7)).as_nanos().try_into()?);
+    }
+    if o.report || o.report_every.is_some() {
+        writer.health = Some(mbtap_core::health::Health::new(writer.profiles.clone()));
+    }
+    Ok(writer)
 }

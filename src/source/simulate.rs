@@ -237,7 +237,7 @@ async fn drive_line(
     duration: Option<Duration>,
 ) -> anyhow::Result<()> {
     let mut start = tokio::time::Instant::now();
-    let mut stop = Box::pin(crate::sniff_cmd::shutdown_signal());
+    let mut stop = Box::pin(crate::signals::shutdown_signal());
     let mut batch = Vec::with_capacity(64);
     let began = Instant::now();
     let mut scratch = [0u8; 256];

@@ -1,13 +1,13 @@
-//! `mbtap generate`: a synthetic line capture from the traffic generator.
+//! Synthetic traffic written as a line capture (the work of `mbtap generate`).
 
 use std::io::Write;
 
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::capture::PcapNgWriter;
-use mbtap_core::chunk::Timestamp;
-use mbtap_core::framer::LineSettings;
-use mbtap_core::line_args::LineOverrides;
-use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe};
+use crate::analyzer::SerialMode;
+use crate::capture::PcapNgWriter;
+use crate::chunk::Timestamp;
+use crate::framer::LineSettings;
+use crate::line_args::LineOverrides;
+use crate::traffic::{Observation, TrafficConfig, generate, observe};
 
 /// Transactions generated at a time: memory stays bounded however long the capture.
 const BATCH: usize = 100_000;

@@ -1,0 +1,184 @@
+//! Command-line pieces more than one command takes: line settings, output options, languages,
+//! faults, and how their values become the library's types. Each command's own options live in
+//! its file under `cmd/`.
+
+use clap::{Args, ValueEnum};
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::framer::Parity;
+use mbtap_core::line_args::LineOverrides;
+
+use crate::output::EventFormat;
+
+/// Language of names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LangArg {
+    /// English.
+    En,
+    /// The document's original (Russian) names.
+    Ru,
+}
+
+impl From<LangArg> for mbtap_core::profile::annotate::Lang {
+    fn from(l: LangArg) -> Self {
+        match l {
+            LangArg::En => Self::En,
+            LangArg::Ru => Self::Ru,
+        }
+    }
+}
+
+/// Serial mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SerialModeArg {
+    Rtu,
+    Ascii,
+}
+
+/// Parity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ParityArg {
+    None,
+    Even,
+    Odd,
+}
+
+/// Output of analyzer commands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum EventFormatArg {
+    /// One line per frame, noise burst and transaction.
+    Text,
+    /// One JSON object per line (`event`: frame, noise, transaction, warning, summary).
+    Jsonl,
+    /// Only the summary at the end.
+    Summary,
+    /// The terminal UI: traffic, detail, devices and registers views (needs a terminal).
+    Tui,
+}
+
+/// Line settings (each one overrides what a capture file stores).
+#[derive(Debug, Clone, Args)]
+pub struct LineArgs {
+    /// RTU or ASCII framing [default: rtu, or what the capture says].
+    #[arg(long, value_enum)]
+    pub mode: Option<SerialModeArg>,
+    /// Baud rate [default: 19200, or what the capture says].
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Parity [default: even, as the serial-line spec says].
+    #[arg(long, value_enum)]
+    pub parity: Option<ParityArg>,
+    /// Stop bits (1 or 2) [default: 1].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub stop_bits: Option<u8>,
+    /// Data bits (7 or 8) [default: 8 for RTU, 7 for ASCII].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(7..=8))]
+    pub data_bits: Option<u8>,
+    /// How late the adapter may deliver a byte, in ms (FTDI default latency timer: 16).
+    /// Timing gaps shorter than this are not trusted. [default: live ports: the adapter's
+    /// latency timer, at least 1 ms; captures: what they were recorded with; else 0]
+    #[arg(long)]
+    pub latency_ms: Option<f64>,
+}
+
+impl LineArgs {
+    /// These settings over whatever a capture or a default supplies.
+    #[must_use]
+    pub fn overrides(&self) -> LineOverrides {
+        let a = self;
+        LineOverrides {
+            mode: a.mode.map(|m| match m {
+                SerialModeArg::Rtu => SerialMode::Rtu,
+                SerialModeArg::Ascii => SerialMode::Ascii,
+            }),
+            baud: a.baud,
+            data_bits: a.data_bits,
+            parity: a.parity.map(|p| match p {
+                ParityArg::None => Parity::None,
+                ParityArg::Even => Parity::Even,
+                ParityArg::Odd => Parity::Odd,
+            }),
+            stop_bits: a.stop_bits,
+            // Milliseconds given by a person; negative or absurd values clamp to 0..=10 s.
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
+        }
+    }
+}
+
+/// What `sniff`, `tap` and `replay` show, and how.
+#[derive(Debug, Args)]
+pub struct OutputArgs {
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = EventFormatArg::Text)]
+    pub format: EventFormatArg,
+    /// Annotate unit UNIT's values with a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
+    #[arg(long = "device", value_name = "UNIT=PROFILE")]
+    pub devices: Vec<String>,
+    /// Language of register names in annotations.
+    #[arg(long, value_enum, default_value_t = LangArg::En)]
+    pub lang: LangArg,
+    /// End (end of file, Ctrl-C or --duration) with the bus health report, as `mbtap report`
+    /// gives it.
+    #[arg(long)]
+    pub report: bool,
+    /// Also give the report so far every SECONDS of bus time, while it runs (implies --report).
+    #[arg(long, value_name = "SECONDS")]
+    pub report_every: Option<f64>,
+}
+
+/// A fault to inject on the simulated line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FaultArg {
+    /// A flipped bit in a response: bad CRC.
+    Corrupt,
+    /// A burst of random bytes on the idle line.
+    Noise,
+    /// A slave pausing in the middle of its answer (gap inside a frame).
+    SlowSlave,
+    /// A slave that does not answer (the master times out).
+    SilentSlave,
+    /// A second device on the first unit's address answering with it.
+    Collision,
+    /// A master polling again before t3.5 of silence.
+    FastMaster,
+    /// A second master sending its own request while the first one's answer is due.
+    SecondMaster,
+    /// The MK4's running pump trips on overcurrent; its alarm log records it.
+    PumpTrip,
+    /// All of the above, taking turns.
+    All,
+}
+
+impl From<EventFormatArg> for EventFormat {
+    fn from(f: EventFormatArg) -> Self {
+        match f {
+            EventFormatArg::Text => Self::Text,
+            EventFormatArg::Jsonl => Self::Jsonl,
+            // The UI is set up by the command itself; its writer only counts.
+            EventFormatArg::Summary | EventFormatArg::Tui => Self::Summary,
+        }
+    }
+}
+
+/// `--duration SECONDS` as a duration (negative as 0, absurdly large capped).
+pub fn seconds(s: Option<f64>) -> Option<std::time::Duration> {
+    s.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)))
+}
+
+/// The faults named on the command line (`all`: every one, taking turns).
+pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_core::sim::bus::Fault> {
+    use mbtap_core::sim::bus::Fault;
+    args.iter()
+        .flat_map(|f| match f {
+            FaultArg::Corrupt => vec![Fault::Corrupt],
+            FaultArg::Noise => vec![Fault::Noise],
+            FaultArg::SlowSlave => vec![Fault::SlowSlave],
+            FaultArg::SilentSlave => vec![Fault::SilentSlave],
+            FaultArg::Collision => vec![Fault::Collision],
+            FaultArg::FastMaster => vec![Fault::FastMaster],
+            FaultArg::SecondMaster => vec![Fault::SecondMaster],
+            FaultArg::PumpTrip => vec![Fault::PumpTrip],
+            FaultArg::All => Fault::ALL.to_vec(),
+        })
+        .collect()
+}

@@ -1,0 +1,239 @@
+//! `mbtap bridge`: Modbus TCP clients to serial devices (or, `--reverse`, an RTU master to a
+//! TCP device). Settings come from `--config FILE` merged under the command line here, in the
+//! command: an option given on the command line replaces the file's value, lists included.
+
+use std::io;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::ArgMatches;
+
+use crate::args::{EventFormatArg, LineArgs, seconds};
+use crate::cmd::runtime;
+use crate::output::EventWriter;
+use crate::tui::source::TuiSource;
+
+/// Modbus TCP clients to serial devices: a TCP server in front of a serial master.
+#[derive(Debug, Clone, clap::Args)]
+pub struct Args {
+    /// Read settings from this TOML file ([bridge] table; the command line wins).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The serial port of the line (all units; see --route for several lines).
+    #[arg(long)]
+    pub serial: Option<String>,
+    #[command(flatten)]
+    pub line: LineArgs,
+    /// Modbus TCP (MBAP) listening address, e.g. 0.0.0.0:502 (port 0 picks a free port).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen: Option<String>,
+    /// Raw RTU frames over TCP on this address too (or instead).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen_rtu: Option<String>,
+    /// Units FIRST-LAST on another serial port (repeatable): --route 11-20=/dev/ttyUSB1.
+    #[arg(long = "route", value_name = "UNITS=PORT")]
+    pub routes: Vec<String>,
+    /// Response timeout per request, ms; then retries, then exception 0x0B.
+    #[arg(long, default_value_t = 1000)]
+    pub timeout_ms: u64,
+    /// Retries after a timeout or a failed CRC.
+    #[arg(long, default_value_t = 0)]
+    pub retries: u32,
+    /// Extra quiet time after t3.5 before the next request, ms.
+    #[arg(long, default_value_t = 0.0)]
+    pub turnaround_ms: f64,
+    /// Answer broadcast writes (unit 0) at once instead of not at all.
+    #[arg(long)]
+    pub broadcast_reply: bool,
+    /// Refuse writes (exception 0x01); they never reach the line.
+    #[arg(long)]
+    pub read_only: bool,
+    /// Only these function codes pass (repeatable; 3 or 0x03).
+    #[arg(long = "allow-function", value_name = "CODE")]
+    pub allow_functions: Vec<String>,
+    /// Only these clients may connect (repeatable; 10.0.0.5 or 10.0.0.0/24).
+    #[arg(long = "allow-ip", value_name = "NET")]
+    pub allow_ips: Vec<String>,
+    /// Connections open at once; more are refused.
+    #[arg(long, default_value_t = 64)]
+    pub max_connections: usize,
+    /// Close a connection silent this long, s.
+    #[arg(long, default_value_t = 300.0)]
+    pub idle_timeout: f64,
+    /// Requests per second per connection; above it exception 0x06 (busy).
+    #[arg(long)]
+    pub rate_limit: Option<f64>,
+    /// Requests a client may have waiting; more get exception 0x06.
+    #[arg(long, default_value_t = 32)]
+    pub queue_per_client: usize,
+    /// TCP unit id → serial address (repeatable): --map-unit 10=1.
+    #[arg(long = "map-unit", value_name = "TCP=SERIAL")]
+    pub unit_map: Vec<String>,
+    /// Serve Prometheus metrics on this address (GET /metrics).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub metrics: Option<String>,
+    /// Reverse: answer as serial slaves (--answer-as) and forward to the Modbus TCP server
+    /// --target, so an RTU master reaches TCP devices.
+    #[arg(long, requires = "target")]
+    pub reverse: bool,
+    /// Reverse mode: the Modbus TCP server to forward to.
+    #[arg(long, value_name = "HOST:PORT")]
+    pub target: Option<String>,
+    /// Reverse mode: serial addresses to answer as, e.g. 1,5,10-20 (default: all).
+    #[arg(long, value_name = "UNITS")]
+    pub answer_as: Option<String>,
+    /// Show the bridged traffic: text, jsonl or tui.
+    #[arg(long, value_enum)]
+    pub monitor: Option<EventFormatArg>,
+    /// Annotate unit UNIT's values in the monitor: `UNIT=NAME` or `UNIT=FILE.toml`.
+    #[arg(long = "device", value_name = "UNIT=PROFILE")]
+    pub devices: Vec<String>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+/// Runs the bridge; `matches` tells which options the command line gave, for `--config`.
+pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode> {
+    let args = match &args.config {
+        Some(path) => crate::bridge::config::merge(path, args.clone(), matches)?,
+        None => args,
+    };
+    let Args {
+        config: _,
+        serial,
+        line,
+        listen,
+        listen_rtu,
+        routes,
+        timeout_ms,
+        retries,
+        turnaround_ms,
+        broadcast_reply,
+        read_only,
+        allow_functions,
+        allow_ips,
+        max_connections,
+        idle_timeout,
+        rate_limit,
+        queue_per_client,
+        unit_map,
+        metrics,
+        reverse,
+        target,
+        answer_as,
+        monitor,
+        devices,
+        duration,
+    } = args;
+    let (mode, settings, latency_ns) = line.overrides().resolve();
+    let reverse = if reverse {
+        let port = serial.clone().context("--reverse needs --serial PORT: the line to answer on")?;
+        let target = target.context("--reverse needs --target HOST:PORT: the Modbus TCP server to reach")?;
+        Some(crate::bridge::reverse::ReverseOptions {
+            port,
+            line: settings,
+            mode,
+            units: crate::bridge::run::parse_units(answer_as.as_deref().unwrap_or(""))?,
+            target,
+            timeout: std::time::Duration::from_millis(timeout_ms),
+            turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
+        })
+    } else {
+        None
+    };
+    anyhow::ensure!(
+        reverse.is_some() || listen.is_some() || listen_rtu.is_some(),
+        "nothing to listen on: give --listen ADDR:PORT (Modbus TCP) and/or --listen-rtu ADDR:PORT"
+    );
+    anyhow::ensure!(
+        turnaround_ms.is_finite() && turnaround_ms >= 0.0,
+        "--turnaround-ms {turnaround_ms}: expected 0 or more"
+    );
+    anyhow::ensure!(
+        idle_timeout.is_finite() && idle_timeout > 0.0,
+        "--idle-timeout {idle_timeout}: expected seconds above 0"
+    );
+    let line_for = |port: String| crate::bridge::line::LineOptions {
+        port,
+        line: settings,
+        mode,
+        timeout: std::time::Duration::from_millis(timeout_ms),
+        retries,
+        turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
+        broadcast_reply,
+        latency: std::time::Duration::from_nanos(latency_ns),
+    };
+    let mut lines = Vec::new();
+    for r in &routes {
+        let (units, port) = crate::bridge::run::parse_route(r)?;
+        lines.push((units, line_for(port)));
+    }
+    if let (Some(port), None) = (serial, &reverse) {
+        // The plain --serial line serves every unit the routes do not.
+        lines.push((1..=247, line_for(port)));
+    }
+    anyhow::ensure!(reverse.is_some() || !lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
+    let allow_functions = if allow_functions.is_empty() {
+        None
+    } else {
+        Some(
+            allow_functions
+                .iter()
+                .map(|f| {
+                    let parsed = match f.strip_prefix("0x").or_else(|| f.strip_prefix("0X")) {
+                        Some(hex) => u8::from_str_radix(hex, 16).ok(),
+                        None => f.parse().ok(),
+                    };
+                    parsed.with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
+                })
+                .collect::<anyhow::Result<Vec<u8>>>()?,
+        )
+    };
+    let allow_ips = allow_ips
+        .iter()
+        .map(|s| s.parse().map_err(|e: String| anyhow::anyhow!("--allow-ip: {e}")))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let opts = crate::bridge::run::BridgeOptions {
+        lines,
+        listen,
+        listen_rtu,
+        server: crate::bridge::server::ServerOptions {
+            rtu_over_tcp: false,
+            read_only,
+            allow_functions,
+            allow_ips,
+            max_connections,
+            idle_timeout: std::time::Duration::from_secs_f64(idle_timeout),
+            rate_limit,
+            unit_map: crate::bridge::run::parse_unit_map(&unit_map)?,
+        },
+        queue_per_client,
+        metrics,
+        duration: seconds(duration),
+        reverse,
+    };
+    let profiles = crate::devices::load_devices(&devices)?;
+    match monitor {
+        Some(EventFormatArg::Tui) => {
+            let ui =
+                TuiSource { profiles, lang: mbtap_core::profile::annotate::Lang::En, line: settings, pacing: false };
+            ui.run("bridge", move |writer, err| {
+                runtime()?.block_on(crate::bridge::run::bridge(opts, Some(writer), err))
+            })
+        }
+        Some(format) => {
+            let stdout = io::stdout();
+            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), format.into());
+            writer.profiles = profiles;
+            runtime()?.block_on(crate::bridge::run::bridge(opts, Some(&mut writer), &mut io::stderr()))?;
+            writer.finish()?;
+            Ok(ExitCode::SUCCESS)
+        }
+        None => {
+            runtime()?.block_on(crate::bridge::run::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}

@@ -1,0 +1,61 @@
+//! `mbtap demo`: the whole job with no hardware — simulated MK4, Display and MKZP-0.4 on a
+//! virtual line ([`mbtap_core::sim::bus`]), polled by a built-in master, heard by the same
+//! analyzer `sniff` uses and shown annotated by their profiles, in real time.
+
+use std::io::{self, IsTerminal};
+use std::process::ExitCode;
+
+use mbtap_core::framer::LineSettings;
+
+use crate::args::{EventFormatArg, FaultArg, LangArg, fault_list, seconds};
+use crate::cmd::runtime;
+use crate::output::EventWriter;
+use crate::tui::source::TuiSource;
+
+#[derive(Debug, clap::Args)]
+/// The whole job with no hardware: simulated MK4, Display and MKZP-0.4 polled on a virtual
+/// line, heard and shown annotated as `sniff` would.
+pub struct Args {
+    /// Output format [default: tui on a terminal, text otherwise].
+    #[arg(long, value_enum)]
+    pub format: Option<EventFormatArg>,
+    /// Language of register names in annotations.
+    #[arg(long, value_enum, default_value_t = LangArg::En)]
+    pub lang: LangArg,
+    /// Stop after this many seconds (of line time).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Inject a fault into every fourth transaction, faults taking turns (repeatable).
+    #[arg(long = "fault", value_enum)]
+    pub faults: Vec<FaultArg>,
+    /// Line time per wall-clock time: 1 is real time, 10 ten times faster, 0 as fast as it goes.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Listen through a UART at these settings instead of the line's 19200 8E1 ("9600 8N1"):
+    /// what a sniffer set up wrong gets.
+    #[arg(long, value_name = "SETTINGS")]
+    pub heard_at: Option<LineSettings>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let Args { format, lang, duration, faults, speed, heard_at } = args;
+    let faults = fault_list(&faults);
+    anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
+    let duration = seconds(duration);
+    let opts = crate::source::demo::DemoOptions { duration, faults, speed, heard_at };
+    let format =
+        format.unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });
+    if format == EventFormatArg::Tui {
+        let line = heard_at.unwrap_or_default();
+        let ui = TuiSource { profiles: mbtap_core::sim::demo_profiles()?, lang: lang.into(), line, pacing: true };
+        return ui.run("demo (simulated bus)", move |writer, _| {
+            runtime()?.block_on(crate::source::demo::demo(opts, writer))
+        });
+    }
+    let stdout = io::stdout();
+    let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), format.into());
+    writer.lang = lang.into();
+    runtime()?.block_on(crate::source::demo::demo(opts, &mut writer))?;
+    writer.finish()?;
+    Ok(ExitCode::SUCCESS)
+}

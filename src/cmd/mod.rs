@@ -1,0 +1,81 @@
+//! The commands, one file each: its options (clap derive) and its `run`. The work itself is in
+//! the libraries (`mbtap-core`, `mbtap-proto`) and the edge modules (`bridge`, `source`, `tui`,
+//! `output`); a command file glues them to the command line. Adding a command is adding a file
+//! here and a line to [`Command`] and [`run`].
+
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{ArgMatches, Parser, Subcommand};
+
+pub mod bridge;
+pub mod decode;
+pub mod demo;
+pub mod export;
+pub mod generate;
+pub mod generate_config;
+pub mod play;
+pub mod profiles;
+pub mod replay;
+pub mod report;
+pub mod scan;
+pub mod simulate;
+pub mod sniff;
+pub mod tap;
+
+/// mbtap — a Modbus RTU/ASCII bus analyzer: sniff, decode, record, replay, bridge.
+#[derive(Debug, Parser)]
+#[command(name = "mbtap", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    Decode(decode::Args),
+    Replay(replay::Args),
+    Generate(generate::Args),
+    Export(export::Args),
+    Sniff(sniff::Args),
+    Play(play::Args),
+    Tap(tap::Args),
+    Demo(demo::Args),
+    Simulate(simulate::Args),
+    #[command(args_override_self = true)]
+    Bridge(Box<bridge::Args>),
+    GenerateConfig(generate_config::Args),
+    Scan(scan::Args),
+    Report(report::Args),
+    #[command(subcommand)]
+    Profiles(profiles::Command),
+}
+
+/// Runs one command; the exit code on success. `matches` is the whole command line as parsed,
+/// for the commands that need to know which options were given (`bridge --config`).
+///
+/// # Errors
+/// What went wrong, with context, for `main` to print once.
+pub fn run(command: Command, matches: &ArgMatches) -> anyhow::Result<ExitCode> {
+    match command {
+        Command::Decode(args) => decode::run(args),
+        Command::Replay(args) => replay::run(args),
+        Command::Generate(args) => generate::run(&args),
+        Command::Export(args) => export::run(args),
+        Command::Sniff(args) => sniff::run(args),
+        Command::Play(args) => play::run(&args),
+        Command::Tap(args) => tap::run(args),
+        Command::Demo(args) => demo::run(args),
+        Command::Simulate(args) => simulate::run(args),
+        Command::Bridge(args) => bridge::run(*args, matches.subcommand_matches("bridge")),
+        Command::GenerateConfig(args) => generate_config::run(&args),
+        Command::Scan(args) => scan::run(&args),
+        Command::Report(args) => report::run(args),
+        Command::Profiles(command) => profiles::run(command),
+    }
+}
+
+/// A single-threaded runtime for one command's I/O.
+pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")
+}

@@ -1,0 +1,67 @@
+//! `mbtap replay FILE`: a line capture through the analyzer, exactly as a live session would
+//! have seen it.
+
+use std::io;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+
+use crate::args::{EventFormatArg, LineArgs, OutputArgs};
+use crate::output::event_writer;
+use crate::tui::source::TuiSource;
+
+#[derive(Debug, clap::Args)]
+/// Replay a line capture (pcap/pcapng, link type 147) through the analyzer.
+///
+/// Each packet is one chunk as a serial read delivered it, with its timestamp; frames are
+/// rebuilt, paired and shown exactly as a live session would have.
+pub struct Args {
+    /// The capture file.
+    pub file: PathBuf,
+    /// Write the register image (latest value of every unit/table/address seen, when, and
+    /// from which transaction) to this file: `.json` for JSON, anything else CSV.
+    #[arg(long)]
+    pub image: Option<PathBuf>,
+    #[command(flatten)]
+    pub line: LineArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let Args { file, image, line, output } = args;
+    let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+    if output.format == EventFormatArg::Tui {
+        let (_, settings, _) = line.overrides().resolve();
+        let source = file.display().to_string();
+        let ui = TuiSource {
+            profiles: crate::devices::load_devices(&output.devices)?,
+            lang: output.lang.into(),
+            line: settings,
+            pacing: true,
+        };
+        return ui.run(&source, move |writer, err| {
+            writer.pacer = Some(crate::tui::terminal::Pacer::default());
+            crate::output::replay(input, line.overrides(), writer, err)
+                .with_context(|| format!("replaying {}", file.display()))
+        });
+    }
+    let stdout = io::stdout();
+    let mut writer = event_writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()), &output)?;
+    if image.is_some() {
+        writer.image = Some(mbtap_core::profile::image::RegisterImage::default());
+    }
+    crate::output::replay(input, line.overrides(), &mut writer, &mut io::stderr())
+        .with_context(|| format!("replaying {}", file.display()))?;
+    if let (Some(path), Some(img)) = (&image, writer.image.take()) {
+        let text = if path.extension().is_some_and(|e| e == "json") {
+            serde_json::to_string_pretty(&img.to_json(&writer.profiles))?
+        } else {
+            img.to_csv(&writer.profiles)
+        };
+        std::fs::write(path, text).with_context(|| format!("writing the register image {}", path.display()))?;
+    }
+    writer.finish()?;
+    Ok(ExitCode::SUCCESS)
+}

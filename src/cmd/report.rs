@@ -1,0 +1,75 @@
+//! `mbtap report FILE`: the bus health report of a capture, as text, JSON or an HTML page.
+
+use std::io::{self, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::ValueEnum;
+
+use crate::args::LineArgs;
+
+#[derive(Debug, clap::Args)]
+/// A bus health report from a capture: per unit and per bus, and findings with evidence.
+pub struct Args {
+    /// The capture file (pcap or pcapng, as `sniff --record` writes).
+    pub file: PathBuf,
+    #[command(flatten)]
+    pub line: LineArgs,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = ReportFormatArg::Text)]
+    pub format: ReportFormatArg,
+    /// Check unit UNIT's values against a profile: `UNIT=NAME` or `UNIT=FILE.toml` (repeatable).
+    #[arg(long = "device", value_name = "UNIT=PROFILE")]
+    pub devices: Vec<String>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let Args { file, line, format, devices } = args;
+    let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+    let mut health = mbtap_core::health::Health::new(crate::devices::load_devices(&devices)?);
+    let mut warnings = Vec::new();
+    {
+        let mut sink = HealthSink { health: &mut health, warnings: &mut warnings };
+        mbtap_core::replay::replay_into(input, line.overrides(), &mut sink)
+            .context("reading the capture")
+            .with_context(|| format!("reading {}", file.display()))?;
+    }
+    for w in &warnings {
+        eprintln!("mbtap: warning: {w}");
+    }
+    let report = health.report();
+    let text = match format {
+        ReportFormatArg::Text => report.text(),
+        ReportFormatArg::Json => serde_json::to_string_pretty(&report.json())? + "\n",
+        ReportFormatArg::Html => mbtap_core::health::html::render(&report, &file.display().to_string()),
+    };
+    io::stdout().lock().write_all(text.as_bytes())?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Output of `report`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ReportFormatArg {
+    Text,
+    /// One JSON document with a top-level `findings` list.
+    Json,
+    /// A self-contained HTML page with plots (latency, errors over time, availability).
+    Html,
+}
+
+/// The health report as an analyzer sink.
+struct HealthSink<'a> {
+    health: &'a mut mbtap_core::health::Health,
+    warnings: &'a mut Vec<String>,
+}
+
+impl mbtap_core::analyzer::Sink for HealthSink<'_> {
+    fn event(&mut self, event: &mbtap_core::analyzer::Event<'_>) {
+        self.health.event(event);
+    }
+
+    fn warning(&mut self, message: &str) {
+        self.warnings.push(message.to_owned());
+    }
+}

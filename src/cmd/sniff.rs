@@ -1,0 +1,59 @@
+//! `mbtap sniff PORT`: a live serial port through the analyzer (the I/O loop: [`crate::source::sniff`]).
+
+use std::io;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use crate::args::{EventFormatArg, LineArgs, OutputArgs, seconds};
+use crate::cmd::runtime;
+use crate::output::event_writer;
+use crate::tui::source::TuiSource;
+
+#[derive(Debug, clap::Args)]
+/// Listen to a live serial port: rebuild, pair and show every frame.
+///
+/// Stops on Ctrl-C or SIGTERM (or after --duration) and prints a summary. With --record,
+/// every read is written to a pcapng line capture (flushed each second) that `replay`
+/// shows exactly as this session did.
+pub struct Args {
+    /// The serial port (e.g. /dev/ttyUSB0).
+    pub port: String,
+    #[command(flatten)]
+    pub line: LineArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
+    /// Record every read to this pcapng file.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let Args { port, line, output, record, duration } = args;
+    let (mode, settings, latency_ns) = line.overrides().resolve();
+    let opts = crate::source::sniff::SniffOptions {
+        port,
+        mode,
+        line: settings,
+        latency_ns: line.latency_ms.is_some().then_some(latency_ns),
+        record,
+        duration: seconds(duration),
+    };
+    if output.format == EventFormatArg::Tui {
+        let source = opts.port.clone();
+        let ui = TuiSource {
+            profiles: crate::devices::load_devices(&output.devices)?,
+            lang: output.lang.into(),
+            line: settings,
+            pacing: false,
+        };
+        return ui.run(&source, move |writer, err| runtime()?.block_on(crate::source::sniff::sniff(opts, writer, err)));
+    }
+    let stdout = io::stdout();
+    let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
+    runtime()?.block_on(crate::source::sniff::sniff(opts, &mut writer, &mut io::stderr()))?;
+    writer.finish()?;
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,64 @@
+//! `mbtap tap PORT --link PTY`: relay an application's port through a pseudo-terminal and
+//! analyse both directions (the relay: [`crate::source::tap`]).
+
+use std::io;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use crate::args::{EventFormatArg, LineArgs, OutputArgs, seconds};
+use crate::cmd::runtime;
+use crate::output::event_writer;
+use crate::tui::source::TuiSource;
+
+#[derive(Debug, clap::Args)]
+/// Tap a port used by an application on this computer: relay through a pseudo-terminal.
+///
+/// mbtap opens PORT and offers a pseudo-terminal at --link for the application (a SCADA,
+/// a configuration tool) to open instead; bytes are relayed untouched both ways and both
+/// directions are analysed with the direction known.
+pub struct Args {
+    /// The real serial port.
+    pub port: String,
+    /// Where to create the pseudo-terminal link for the application.
+    #[arg(long)]
+    pub link: PathBuf,
+    #[command(flatten)]
+    pub line: LineArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
+    /// Record both directions to this pcapng file.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let Args { port, link, line, output, record, duration } = args;
+    let (mode, settings, latency_ns) = line.overrides().resolve();
+    let opts = crate::source::tap::TapOptions {
+        port,
+        link,
+        mode,
+        line: settings,
+        latency_ns: line.latency_ms.is_some().then_some(latency_ns),
+        record,
+        duration: seconds(duration),
+    };
+    if output.format == EventFormatArg::Tui {
+        let source = format!("{} ⇄ {}", opts.port, opts.link.display());
+        let ui = TuiSource {
+            profiles: crate::devices::load_devices(&output.devices)?,
+            lang: output.lang.into(),
+            line: settings,
+            pacing: false,
+        };
+        return ui.run(&source, move |writer, err| runtime()?.block_on(crate::source::tap::tap(opts, writer, err)));
+    }
+    let stdout = io::stdout();
+    let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
+    runtime()?.block_on(crate::source::tap::tap(opts, &mut writer, &mut io::stderr()))?;
+    writer.finish()?;
+    Ok(ExitCode::SUCCESS)
+}
