@@ -1,17 +1,23 @@
 //! Framer accuracy per observation model, against plain gap cutting, on generated traffic with
 //! ground truth. Prints a Markdown table for BENCHMARKS.md.
 //!
-//! Run: `cargo run --release --example framer_accuracy [transactions]`
+//! Run: `cargo run --release --example framer_accuracy [transactions] [glitch] [lookalike]`
+//! (glitch: share of frames followed by a turnaround glitch byte; lookalike: share of register
+//! answers made CRC look-alikes; both 0 by default).
 
 use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
 use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
 
 fn main() {
-    let transactions: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(20_000);
+    let arg = |i: usize| std::env::args().nth(i);
+    let transactions: usize = arg(1).and_then(|s| s.parse().ok()).unwrap_or(20_000);
+    let glitch: f64 = arg(2).and_then(|s| s.parse().ok()).unwrap_or(0.0);
+    let lookalike: f64 = arg(3).and_then(|s| s.parse().ok()).unwrap_or(0.0);
+    println!("{transactions} transactions per line setting, glitch {glitch}, look-alikes {lookalike}\n");
     println!(
-        "| line | observation | mbtap good | mbtap false valid | mbtap corrupted exact | gap-cut good | gap-cut false valid | gap-cut corrupted exact |"
+        "| line | observation | mbtap good | mbtap false valid | mbtap corrupted exact | mbtap glitches | gap-cut good | gap-cut false valid | gap-cut corrupted exact |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     let lines = [
         LineSettings { baud: 9600, parity: Parity::Even, ..LineSettings::default() },
         LineSettings { baud: 19_200, parity: Parity::Even, ..LineSettings::default() },
@@ -21,7 +27,8 @@ fn main() {
     // Per observation model, summed over the line settings: (good, total, false valid, exact, corrupted).
     let mut per_model = [(0usize, 0usize, 0usize, 0usize, 0usize); 4];
     for (i, line) in lines.into_iter().enumerate() {
-        let cfg = TrafficConfig { seed: 42 + i as u64, line, transactions, ..TrafficConfig::default() };
+        let cfg =
+            TrafficConfig { seed: 42 + i as u64, line, transactions, glitch, lookalike, ..TrafficConfig::default() };
         let wire = generate(&cfg);
         for (mi, model) in models.into_iter().enumerate() {
             let chunks = observe(&wire, model, line.char_ns());
@@ -37,7 +44,7 @@ fn main() {
                 a.4 + m.corrupted_total,
             );
             println!(
-                "| {line} | {} | {:.3} % ({}/{}) | {} | {:.1} % ({}/{}) | {:.3} % | {} | {:.1} % |",
+                "| {line} | {} | {:.3} % ({}/{}) | {} | {:.1} % ({}/{}) | {}/{} | {:.3} % | {} | {:.1} % |",
                 model.name(),
                 m.good_ratio() * 100.0,
                 m.good_recovered,
@@ -46,6 +53,8 @@ fn main() {
                 m.corrupted_ratio() * 100.0,
                 m.corrupted_exact,
                 m.corrupted_total,
+                m.glitch_reported,
+                m.glitch_total,
                 g.good_ratio() * 100.0,
                 g.false_valid,
                 g.corrupted_ratio() * 100.0,

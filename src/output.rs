@@ -209,7 +209,7 @@ impl<W: Write> EventWriter<W> {
 fn event_time(e: &Event<'_>) -> u64 {
     match e {
         Event::Frame { frame, .. } => frame.t_end.0,
-        Event::Noise(n) => n.t_end.0,
+        Event::Noise(n) | Event::Glitch(n) => n.t_end.0,
         Event::Transaction(t) => t.t_start.0,
     }
 }

@@ -210,13 +210,8 @@ fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
     let mut writer = mbtap::output::EventWriter::new(std::io::sink(), mbtap::output::EventFormat::Text);
     writer.tui = Some(shared.clone());
     let input = std::fs::File::open(capture).unwrap();
-    mbtap::output::replay(
-        input,
-        mbtap_core::line_args::LineOverrides::default(),
-        &mut writer,
-        &mut std::io::sink(),
-    )
-    .unwrap();
+    mbtap::output::replay(input, mbtap_core::line_args::LineOverrides::default(), &mut writer, &mut std::io::sink())
+        .unwrap();
     assert_eq!(shared.model().line, "19200 7E1".parse::<LineSettings>().unwrap());
     assert!(shared.model().total_rows() > 0);
 }

@@ -24,7 +24,7 @@ impl Sink for Collect {
         match e {
             Event::Frame { frame, .. } => self.frames.push((frame.port.0, frame.t_end.0)),
             Event::Transaction(t) => self.outcomes.push(t.outcome),
-            Event::Noise(_) => {}
+            Event::Noise(_) | Event::Glitch(_) => {}
         }
     }
 }

@@ -151,6 +151,9 @@ impl Model {
                 self.pending.gap_inside |= frame.gap_violation_ns.is_some();
                 self.pending.short_gap |= frame.short_gap_before_ns.is_some();
             }
+            // A turnaround glitch is not traffic: the devices view shows it as a finding
+            // (the health collector above counted it), the traffic view shows no row.
+            Event::Glitch(_) => {}
             Event::Noise(n) => {
                 self.bus.noise(n.bytes.len(), n.t_end.0, self.line);
                 let summary = format!("{} byte(s) of noise", n.bytes.len());

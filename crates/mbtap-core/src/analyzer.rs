@@ -48,6 +48,8 @@ pub enum Event<'a> {
         pdu: Option<&'a [u8]>,
     },
     Noise(&'a Noise<'a>),
+    /// A turnaround glitch byte after a frame ([`FrameEvent::Glitch`]).
+    Glitch(&'a Noise<'a>),
     Transaction(&'a Transaction<'a>),
 }
 
@@ -156,6 +158,7 @@ impl Analyzer {
 fn route<S: Sink>(pairing: &mut Pairing, scratch: &mut Vec<u8>, e: FrameEvent<'_>, sink: &mut S) {
     match e {
         FrameEvent::Noise(n) => sink.event(&Event::Noise(&n)),
+        FrameEvent::Glitch(n) => sink.event(&Event::Glitch(&n)),
         FrameEvent::Frame(f) => {
             let decoded: Option<(u8, &[u8])> = if f.bytes.first() == Some(&b':') {
                 match parse_ascii(f.bytes) {

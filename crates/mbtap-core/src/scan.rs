@@ -82,7 +82,8 @@ fn count(s: &mut Score, mode: SerialMode, framer: FramerConfig, heard: &[(u64, V
         }
         Event::Frame { .. } => s.bad_frames += 1,
         Event::Noise(n) => s.noise_bytes += n.bytes.len() as u64,
-        Event::Transaction(_) => {}
+        // A glitch sits after a frame: it says nothing about the settings on its own.
+        Event::Glitch(_) | Event::Transaction(_) => {}
     };
     for (t, bytes) in heard {
         analyzer.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut sink);

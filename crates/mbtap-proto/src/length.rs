@@ -121,6 +121,42 @@ pub fn response_len(prefix: &[u8]) -> PduLength {
     }
 }
 
+/// Length of the normal (non-exception) answer PDU to the whole request PDU `request`: what a
+/// half-duplex bus's next frame must be when it answers. Exceptions are always 2 bytes
+/// (MAP v1.1b3 §7).
+///
+/// Layouts from MAP v1.1b3 §6: reads answer `fc, byte count, data` (01/02: one bit each,
+/// §6.1–6.2; 03/04: two bytes a register, §6.3–6.4; 17: the read quantity, §6.17); single
+/// and multiple writes answer `fc, address, value|quantity` (§6.5, 6.6, 6.11, 6.12); 07 answers
+/// one status byte (§6.7); 08 echoes its request for the sub-functions a bus carries (§6.8);
+/// 0B a status and a count (§6.9); 16 echoes its request (§6.16).
+#[must_use]
+pub fn answer_len(request: &[u8]) -> PduLength {
+    let Some(&fc) = request.first() else {
+        return PduLength::AtLeast(1);
+    };
+    let quantity = |at: usize| request.get(at..at + 2).map(|q| usize::from(u16::from_be_bytes([q[0], q[1]])));
+    match F::from(fc) {
+        F::ReadCoils | F::ReadDiscreteInputs => match quantity(3) {
+            Some(q) => PduLength::Exact(2 + q.div_ceil(8)),
+            None => PduLength::AtLeast(5),
+        },
+        // 17 answers its read quantity, which stands where 03/04 keep theirs.
+        F::ReadHoldingRegisters | F::ReadInputRegisters | F::ReadWriteMultipleRegisters => match quantity(3) {
+            Some(q) => PduLength::Exact(2 + 2 * q),
+            None => PduLength::AtLeast(5),
+        },
+        F::WriteSingleCoil | F::WriteSingleRegister | F::WriteMultipleCoils | F::WriteMultipleRegisters => {
+            PduLength::Exact(5)
+        }
+        F::ReadExceptionStatus => PduLength::Exact(2),
+        F::GetCommEventCounter => PduLength::Exact(5),
+        F::MaskWriteRegister => PduLength::Exact(7),
+        F::Diagnostics => PduLength::Exact(request.len()),
+        _ => PduLength::Unknown,
+    }
+}
+
 /// fc, MEI, read code, conformity, more follows, next object id, object count, then per object:
 /// id, length, value (MAP v1.1b3 §6.21).
 fn device_id_response_len(prefix: &[u8]) -> PduLength {
@@ -166,6 +202,19 @@ mod tests {
         assert_eq!(response_len(&[0x18, 0, 6]), PduLength::Exact(9));
         assert_eq!(response_len(&[0x08, 0, 0]), PduLength::Unknown);
         assert_eq!(response_len(&[0x08, 0, 0x0B]), PduLength::Exact(5));
+    }
+
+    #[test]
+    fn answers_are_sized_by_their_requests() {
+        // Read 3 holding registers from 0x006B: fc, byte count 6, six data bytes.
+        assert_eq!(answer_len(&[0x03, 0x00, 0x6B, 0x00, 0x03]), PduLength::Exact(8));
+        // Read 19 coils: fc, byte count 3, three data bytes.
+        assert_eq!(answer_len(&[0x01, 0x00, 0x13, 0x00, 0x13]), PduLength::Exact(5));
+        assert_eq!(answer_len(&[0x06, 0x00, 0x01, 0x00, 0x03]), PduLength::Exact(5));
+        assert_eq!(answer_len(&[0x08, 0x00, 0x00, 0xA5, 0x37]), PduLength::Exact(5));
+        assert_eq!(answer_len(&[0x03, 0x00]), PduLength::AtLeast(5));
+        assert_eq!(answer_len(&[0x41, 1, 2]), PduLength::Unknown);
+        assert_eq!(answer_len(&[0x03, 0x00, 0x00, 0xFF, 0xFF]), PduLength::Exact(2 + 2 * 65_535), "no overflow");
     }
 
     #[test]

@@ -1,4 +1,5 @@
-//! What the framers produce: frames (good or failed check, with their timing) and noise.
+//! What the framers produce: frames (good or failed check, with their timing), noise, and
+//! turnaround glitches.
 
 use crate::chunk::{PortId, Timestamp};
 
@@ -37,6 +38,10 @@ pub struct Noise<'a> {
 pub enum FrameEvent<'a> {
     Frame(Frame<'a>),
     Noise(Noise<'a>),
+    /// One byte right after a frame, with no silence between: the garbage a transceiver
+    /// leaves when its driver switches off on a line without fail-safe biasing. Not part of
+    /// the frame, not a frame of its own, not interference.
+    Glitch(Noise<'a>),
 }
 
 impl FrameEvent<'_> {
@@ -45,7 +50,7 @@ impl FrameEvent<'_> {
     pub const fn bytes(&self) -> &[u8] {
         match self {
             Self::Frame(f) => f.bytes,
-            Self::Noise(n) => n.bytes,
+            Self::Noise(n) | Self::Glitch(n) => n.bytes,
         }
     }
 }

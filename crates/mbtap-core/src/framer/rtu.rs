@@ -15,6 +15,19 @@
 //!
 //! A corrupted frame is reported with its boundaries (it ends where the next valid frame
 //! begins, where its structural length ends, or at a known silence), with `check_ok = false`.
+//!
+//! Direction and expectation: on a half-duplex bus the next frame is nearly always determined —
+//! after an answer or a broadcast, a request; after a request, that unit's answer, whose length
+//! the request fixes (`proto::answer_len`). When two readings of the same bytes both pass the
+//! CRC (a frame F ending in `00` also validates one byte shorter, and F followed by a `00`
+//! glitch validates one byte longer — CRC-16/MODBUS's shift property), the expected one wins;
+//! only when nothing is expected do structure and timing decide.
+//!
+//! Turnaround glitches: RS-485 transceivers on a line without fail-safe biasing leave one
+//! garbage byte when their driver switches off (`00` with a framing error after the master,
+//! `FE`/`FF` after a slave), within a character of the frame's last byte. A lone byte right
+//! after a frame that begins no frame is reported as a [`FrameEvent::Glitch`], never as part of
+//! the frame, a frame of its own, or noise.
 
 use super::event::{Frame, FrameEvent, Noise};
 use super::timing::LineSettings;
@@ -69,8 +82,37 @@ enum Flush {
 /// Bytes of garbage kept before the oldest are given up as noise, to bound memory.
 const MAX_GARBAGE: usize = 2 * RTU_MAX_LEN;
 
+/// How a valid frame was read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Reading {
+    Request,
+    Response,
+    /// Both readings, at the same length (echo shapes: 05, 06, 08, 0F, 10 answers).
+    Either,
+    /// Neither reading fixes the length (vendor codes): the CRC and what follows ended it.
+    Unknown,
+}
+
+/// What the next frame on the bus should be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Expect {
+    /// Nothing known yet (start of input, after damage nobody can place).
+    Unknown,
+    /// A request: the last transaction is complete.
+    Request,
+    /// The answer of `unit` to `fc`: `len` bytes (RTU ADU) when the request fixes it; an
+    /// exception answer is 5 bytes whatever the request.
+    Response { unit: u8, fc: u8, len: Option<usize> },
+}
+
+/// The highest unicast address (Modbus over Serial Line v1.02 §2.2: 1–247; 0 broadcast).
+const MAX_ADDRESS: u8 = 247;
+
+/// Frames after the last glitch for which the line still counts as glitch-prone.
+const GLITCHY_FOR: u32 = 64;
+
 enum Try {
-    Found(usize),
+    Found(usize, Reading),
     NotHere,
     /// Nothing can change until this many bytes (from the candidate start) are buffered.
     NeedMore(usize),
@@ -108,6 +150,14 @@ pub struct RtuFramer {
     /// Addresses seen in frames with a valid CRC: a failed piece that starts with one is a
     /// corrupted frame even when the corruption hit its function code.
     known_units: [bool; 256],
+    /// What the next frame should be.
+    expect: Expect,
+    /// Absolute buffer index right after the last frame: a lone byte there is a glitch.
+    glitch_at: Option<usize>,
+    /// Frames since the last glitch (`u32::MAX`: none seen).
+    since_glitch: u32,
+    /// Byte values this line's glitches have taken (`00`, `FE`, `FF` on most transceivers).
+    glitch_values: [bool; 256],
 }
 
 impl RtuFramer {
@@ -132,6 +182,41 @@ impl RtuFramer {
             wait_at: usize::MAX,
             wait_for: 0,
             known_units: [false; 256],
+            expect: Expect::Unknown,
+            glitch_at: None,
+            since_glitch: u32::MAX,
+            glitch_values: [false; 256],
+        }
+    }
+
+    /// Has this line shown turnaround glitches lately?
+    fn glitchy(&self) -> bool {
+        self.since_glitch < GLITCHY_FOR
+    }
+
+    /// Does reading `l` bytes at live index `g` as `reading` give what the bus expects next?
+    fn expected(&self, g: usize, l: usize, reading: Reading) -> bool {
+        let s = &self.buf[self.head + g..];
+        // Bytes before `g` that are not a lone glitch are a frame nobody could read: what was
+        // expected may have been that frame.
+        let expect = if g == 0 || (g == 1 && self.at_glitch(self.head)) {
+            self.expect
+        } else {
+            next_expect(self.expect, &[], None)
+        };
+        match expect {
+            Expect::Unknown => false,
+            Expect::Request => reading == Reading::Request,
+            Expect::Response { unit, fc, len } => {
+                reading == Reading::Response
+                    && s.first() == Some(&unit)
+                    && match s.get(1) {
+                        Some(&f) if f == fc => len.is_none_or(|n| n == l),
+                        // Exception: unit, function | 0x80, code, CRC (MAP v1.1b3 §7).
+                        Some(&f) => f == fc | EXCEPTION_FLAG && l == 5,
+                        None => false,
+                    }
+            }
         }
     }
 
@@ -151,8 +236,10 @@ impl RtuFramer {
         }
         let n = chunk.bytes.len();
         let c = self.char_ns;
-        if self.pending() == 0 && Self::whole_frame(chunk.bytes) {
-            self.emit_whole_chunk(chunk, emit);
+        if self.pending() == 0
+            && let Some(reading) = Self::whole_frame(chunk.bytes)
+        {
+            self.emit_whole_chunk(chunk, reading, emit);
             return;
         }
         if n > 0 {
@@ -188,36 +275,42 @@ impl RtuFramer {
     /// Is `bytes` exactly one frame that the general path would accept at once: every reading
     /// of its structure resolved within it, exactly one with a valid CRC, and that one the
     /// whole chunk? (Gap-cutting sniffers write one frame per packet; this skips buffering.)
-    fn whole_frame(bytes: &[u8]) -> bool {
-        let [_, fc, ..] = *bytes else { return false };
+    /// The reading it was, if so.
+    fn whole_frame(bytes: &[u8]) -> Option<Reading> {
+        let [_, fc, ..] = *bytes else { return None };
         let pdu = &bytes[1..];
         let req = if fc & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
-        let mut whole = 0;
-        for cand in [req, response_len(pdu)] {
+        let mut found = [false; 2];
+        for (slot, cand) in [req, response_len(pdu)].into_iter().enumerate() {
             match cand {
                 PduLength::Exact(k) if k + 3 <= RTU_MAX_LEN => match bytes.get(..k + 3) {
                     Some(f) if Self::crc_ok(f) => {
                         if f.len() != bytes.len() {
-                            return false;
+                            return None;
                         }
-                        // An echo shape validates both ways at the same length: still one frame.
-                        whole = 1;
+                        found[slot] = true;
                     }
                     Some(_) => {}
-                    None => return false,
+                    None => return None,
                 },
                 PduLength::Exact(_) => {}
                 // An exception's request reading is no reading at all.
                 PduLength::Unknown if fc & EXCEPTION_FLAG != 0 => {}
-                PduLength::AtLeast(_) | PduLength::Unknown => return false,
+                PduLength::AtLeast(_) | PduLength::Unknown => return None,
             }
         }
-        whole == 1
+        match found {
+            // An echo shape validates both ways at the same length: still one frame.
+            [true, true] => Some(Reading::Either),
+            [true, false] => Some(Reading::Request),
+            [false, true] => Some(Reading::Response),
+            [false, false] => None,
+        }
     }
 
     /// Emits a chunk that [`Self::whole_frame`] accepted, with the same timing the buffered
     /// path would give it.
-    fn emit_whole_chunk<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
+    fn emit_whole_chunk<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, reading: Reading, emit: &mut F) {
         let c = self.char_ns;
         let n = u64::try_from(chunk.bytes.len()).unwrap_or(u64::MAX);
         let mut e0 = chunk.t.0.saturating_sub((n - 1).saturating_mul(c));
@@ -244,6 +337,10 @@ impl RtuFramer {
         self.last_read = self.last_read.max(chunk.t.0);
         self.after_frame = true;
         self.wait_at = usize::MAX;
+        self.expect = next_expect(self.expect, chunk.bytes, Some(reading));
+        self.since_glitch = self.since_glitch.saturating_add(1);
+        // The next byte buffered lands at the end of the (empty) live buffer.
+        self.glitch_at = Some(self.buf.len());
     }
 
     fn first_end_estimate(&self, chunk: &Chunk<'_>) -> Option<u64> {
@@ -303,6 +400,11 @@ impl RtuFramer {
         let live = &self.buf[self.head..];
         let s = &live[g..];
         let [addr, fc, ..] = *s else { return if flushing { Try::NotHere } else { Try::NeedMore(2) } };
+        // Addresses 248–255 are reserved (Modbus over Serial Line v1.02 §2.2): no frame starts
+        // with one, whatever its CRC says.
+        if addr > MAX_ADDRESS {
+            return Try::NotHere;
+        }
         // While resynchronising through garbage, a chance CRC match (1 in 65 536 per
         // candidate) is likelier than the first frame of a never-seen unit with no silence
         // before it.
@@ -361,15 +463,22 @@ impl RtuFramer {
                 found[slot] = Some((l, is_request));
             }
         }
+        let reading_of = |is_request: bool| if is_request { Reading::Request } else { Reading::Response };
         match found {
             // A valid reading need not wait for another reading that could only be malformed
-            // (a 0x10 response read as a request: its byte count disagrees with its quantity).
-            [Some((l, _)), None] | [None, Some((l, _))] if !need_more || flushing || !wait_worth => {
-                return Try::Found(l);
+            // (a 0x10 response read as a request: its byte count disagrees with its quantity),
+            // nor for one the bus does not expect now.
+            [Some((l, r)), None] | [None, Some((l, r))]
+                if !need_more || flushing || !wait_worth || self.expected(g, l, reading_of(r)) =>
+            {
+                return Try::Found(l, reading_of(r));
             }
             // Echo shapes (05, 06, 08, 15, 16) read the same length both ways: one frame.
-            [Some(a), Some(b)] if a.0 == b.0 => return Try::Found(a.0),
-            [Some(a), Some(b)] => return Try::Found(self.best(g, a, b)),
+            [Some(a), Some(b)] if a.0 == b.0 => return Try::Found(a.0, Reading::Either),
+            [Some(a), Some(b)] => {
+                let (l, r) = self.best(g, a, b);
+                return Try::Found(l, reading_of(r));
+            }
             [Some(_), None] | [None, Some(_)] => return Try::NeedMore(need),
             [None, None] => {}
         }
@@ -379,7 +488,7 @@ impl RtuFramer {
                     need_more = true;
                     need = need.min(n);
                 }
-                t @ Try::Found(_) => return t,
+                t @ Try::Found(..) => return t,
                 Try::NotHere => {}
             }
         }
@@ -387,17 +496,33 @@ impl RtuFramer {
     }
 
     /// Two readings with valid CRCs (the CRC shift property makes a valid frame followed by
-    /// 0x00 validate one byte longer too): prefer the one that fits its function's structure
-    /// without findings, then the one the next bytes confirm, then the shorter.
-    fn best(&self, g: usize, a: (usize, bool), b: (usize, bool)) -> usize {
+    /// 0x00 validate one byte longer too): prefer the one the bus expects, then the one that
+    /// fits its function's structure without findings, then the one the next bytes confirm (a
+    /// silence, a valid frame, or a lone glitch byte before either), then the shorter.
+    fn best(&self, g: usize, a: (usize, bool), b: (usize, bool)) -> (usize, bool) {
         let score = |(l, is_request): (usize, bool)| {
-            let confirmed = self.boundary_at(g + l) || self.exact_frame_at(g + l);
+            let reading = if is_request { Reading::Request } else { Reading::Response };
+            let confirmed = self.ends_at(g + l) || self.glitch_then_end(g + l);
             let s = &self.buf[self.head + g..self.head + g + l];
             let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
             let clean = matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty());
-            (clean, confirmed, std::cmp::Reverse(l))
+            (self.expected(g, l, reading), clean, confirmed, std::cmp::Reverse(l))
         };
-        if score(b) > score(a) { b.0 } else { a.0 }
+        if score(b) > score(a) { b } else { a }
+    }
+
+    /// Does a frame end before live index `i`: a known silence or a valid frame starts there?
+    fn ends_at(&self, i: usize) -> bool {
+        self.boundary_at(i) || self.exact_frame_at(i)
+    }
+
+    /// Is the byte at live index `i` a lone byte — a frame's turnaround glitch — with a known
+    /// silence, a valid frame or the end of what has arrived right after it? (Not known to be
+    /// separated from the frame by 1.5 characters of silence.)
+    fn glitch_then_end(&self, i: usize) -> bool {
+        i < self.buf.len() - self.head
+            && self.gap_lb[self.head + i] < self.t15
+            && (self.boundary_at(i + 1) || self.exact_frame_at(i + 1))
     }
 
     /// The structure cannot say where this frame ends: accept a CRC match only where something
@@ -435,10 +560,13 @@ impl RtuFramer {
                 // matches need stronger evidence, because over hundreds of lengths a chance
                 // match becomes likely.
                 let next_starts = !at_end && self.looks_like_frame_start(g + l);
+                // A lone byte and then a silence or a frame: this frame's turnaround glitch.
+                let glitch_after = self.glitch_then_end(g + l) || (flushing && g + l + 1 == live_len);
                 if self.boundary_at(g + l)
                     || (flushing && at_end)
                     || self.exact_frame_at(g + l)
                     || (first_match && next_starts)
+                    || glitch_after
                 {
                     // CRC shift property: a frame whose CRC high byte is 0x00 also validates
                     // one byte shorter. When the byte after this match is 0x00 and the longer
@@ -449,12 +577,13 @@ impl RtuFramer {
                             || self.boundary_at(g + l + 1)
                             || self.exact_frame_at(g + l + 1)
                             || self.looks_like_frame_start(g + l + 1);
-                        let shorter_strong = self.boundary_at(g + l) || self.exact_frame_at(g + l);
+                        // On a line that glitches, the `00` is likelier a glitch than a CRC byte.
+                        let shorter_strong = self.boundary_at(g + l) || self.exact_frame_at(g + l) || self.glitchy();
                         if longer_ok && !shorter_strong {
-                            return Try::Found(l + 1);
+                            return Try::Found(l + 1, Reading::Unknown);
                         }
                     }
-                    return Try::Found(l);
+                    return Try::Found(l, Reading::Unknown);
                 }
                 first_match = false;
             }
@@ -488,9 +617,9 @@ impl RtuFramer {
                 break;
             }
             match self.try_frame_at(self.garbage, flushing) {
-                Try::Found(len) => {
+                Try::Found(len, reading) => {
                     self.emit_garbage(self.garbage, emit);
-                    self.emit_frame(len, true, emit);
+                    self.emit_frame(len, Some(reading), emit);
                 }
                 Try::NotHere => {
                     self.garbage += 1;
@@ -528,6 +657,7 @@ impl RtuFramer {
             self.end.drain(..self.head);
             self.gap_lb.drain(..self.head);
             self.gap_ub.drain(..self.head);
+            self.glitch_at = self.glitch_at.and_then(|g| g.checked_sub(self.head));
             self.head = 0;
         }
     }
@@ -560,13 +690,19 @@ impl RtuFramer {
     /// The exact length the structure gives a frame starting at absolute `a`, if it fits
     /// before `stop`.
     fn structural_len(&self, a: usize, stop: usize) -> Option<usize> {
+        self.structural_lens(a, stop).into_iter().flatten().next()
+    }
+
+    /// Both readings' exact lengths (response first) for a frame at absolute `a`, where they
+    /// fit before `stop`.
+    fn structural_lens(&self, a: usize, stop: usize) -> [Option<usize>; 2] {
         let f = &self.buf[a..stop];
         if !self.looks_like_frame(f) {
-            return None;
+            return [None, None];
         }
         let pdu = &f[1..];
         let req = if f[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
-        [response_len(pdu), req].into_iter().find_map(|c| match c {
+        [response_len(pdu), req].map(|c| match c {
             PduLength::Exact(k) if k + 3 <= f.len() => Some(k + 3),
             _ => None,
         })
@@ -618,8 +754,19 @@ impl RtuFramer {
     fn emit_piece<F: FnMut(FrameEvent<'_>)>(&mut self, mut a: usize, b: usize, emit: &mut F) {
         while a < b {
             let piece = &self.buf[a..b];
+            // A frame of a length the structure cannot tell with its `00` glitch also passes the
+            // CRC (the shift property): on a line known to glitch, the glitch is the likelier.
+            if self.glitchy()
+                && piece.len() > RTU_MIN_LEN
+                && piece.last() == Some(&0)
+                && self.plausible_frame(&piece[..piece.len() - 1])
+            {
+                self.emit_frame(b - a - 1, Some(Reading::Unknown), emit);
+                self.emit_unframed(b - 1, b, emit);
+                return;
+            }
             if self.plausible_frame(piece) {
-                self.emit_frame(b - a, true, emit);
+                self.emit_frame(b - a, Some(Reading::Unknown), emit);
                 return;
             }
             if let Some(e) = (RTU_MIN_LEN..piece.len()).find(|&e| {
@@ -627,7 +774,7 @@ impl RtuFramer {
                     && self.plausible_frame(&piece[..e])
                     && self.looks_like_frame(&piece[e..])
             }) {
-                self.emit_frame(e, true, emit);
+                self.emit_frame(e, Some(Reading::Unknown), emit);
                 a += e;
                 continue;
             }
@@ -635,7 +782,7 @@ impl RtuFramer {
                 .find(|&s| self.known_units[usize::from(piece[s])] && self.plausible_frame(&piece[s..]))
             {
                 self.emit_unframed(a, a + s, emit);
-                self.emit_frame(b - a - s, true, emit);
+                self.emit_frame(b - a - s, Some(Reading::Unknown), emit);
                 return;
             }
             self.emit_unframed(a, b, emit);
@@ -671,17 +818,40 @@ impl RtuFramer {
         cands.into_iter().find(|&l| self.looks_like_frame_start(a - self.head + l))
     }
 
-    /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise.
+    /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise;
+    /// a lone byte right after a frame is its turnaround glitch.
     fn emit_unframed<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, b: usize, emit: &mut F) {
+        // Glued to what follows (no silence seen between them), the glitch is split off when
+        // the bytes start like a frame of a known unit only after it.
+        let i = a - self.head;
+        if self.at_glitch(a) && (b - a == 1 || (!self.looks_like_frame_start(i) && self.looks_like_frame_start(i + 1)))
+        {
+            self.emit_glitch(a, emit);
+            if b > a + 1 {
+                self.emit_unframed(a + 1, b, emit);
+            }
+            return;
+        }
+        // A damaged frame with its turnaround glitch: the structure ends the frame a byte early,
+        // or (a damaged length) the last byte is one this line's glitches take.
+        if b - a > RTU_MIN_LEN
+            && self.glitchy()
+            && (self.structural_lens(a, b).contains(&Some(b - a - 1))
+                || self.glitch_values[usize::from(self.buf[b - 1])])
+        {
+            self.emit_frame(b - a - 1, None, emit);
+            self.emit_unframed(b - 1, b, emit);
+            return;
+        }
         // Two damaged frames back to back (no silence between them to go by): cut the first
         // at its structural length when what follows starts like a frame of a known unit.
         if let Some(l) = self.split_damaged(a, b) {
-            self.emit_frame(l, false, emit);
+            self.emit_frame(l, None, emit);
             self.emit_unframed(a + l, b, emit);
             return;
         }
         if self.looks_like_frame(&self.buf[a..b]) {
-            self.emit_frame(b - a, false, emit);
+            self.emit_frame(b - a, None, emit);
         } else {
             emit(FrameEvent::Noise(Noise {
                 port: self.port,
@@ -695,8 +865,9 @@ impl RtuFramer {
         }
     }
 
-    /// Emits the first `len` live bytes as a frame.
-    fn emit_frame<F: FnMut(FrameEvent<'_>)>(&mut self, len: usize, check_ok: bool, emit: &mut F) {
+    /// Emits the first `len` live bytes as a frame: valid, read as `reading`, or failed (`None`).
+    fn emit_frame<F: FnMut(FrameEvent<'_>)>(&mut self, len: usize, reading: Option<Reading>, emit: &mut F) {
+        let check_ok = reading.is_some();
         let a = self.head;
         let b = a + len;
         let inner_gap = self.gap_lb[a + 1..b].iter().copied().max().unwrap_or(0);
@@ -715,9 +886,33 @@ impl RtuFramer {
         if check_ok {
             self.known_units[usize::from(self.buf[a])] = true;
         }
+        self.expect = next_expect(self.expect, &self.buf[a..b], reading);
+        self.since_glitch = self.since_glitch.saturating_add(1);
+        self.glitch_at = Some(b);
         self.head = b;
         self.wait_at = usize::MAX;
         self.after_frame = true;
+    }
+
+    /// Emits the live byte at absolute `a` (`== self.head`) as a turnaround glitch.
+    fn emit_glitch<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, emit: &mut F) {
+        emit(FrameEvent::Glitch(Noise {
+            port: self.port,
+            bytes: &self.buf[a..=a],
+            t_start: Timestamp(self.end[a].saturating_sub(self.char_ns)),
+            t_end: Timestamp(self.end[a]),
+        }));
+        self.since_glitch = 0;
+        self.glitch_values[usize::from(self.buf[a])] = true;
+        self.glitch_at = None;
+        self.head = a + 1;
+        self.wait_at = usize::MAX;
+    }
+
+    /// Is the live byte at absolute `a` where a turnaround glitch would be: right after a
+    /// frame, not known to be separated from it by 1.5 characters of silence?
+    fn at_glitch(&self, a: usize) -> bool {
+        self.glitch_at == Some(a) && self.gap_lb.get(a).is_some_and(|&g| g < self.t15)
     }
 }
 
@@ -742,5 +937,36 @@ fn consistent(pdu: &[u8], is_request: bool) -> bool {
             0x0C => byte(1).is_none_or(|bc| bc >= 6),
             _ => true,
         }
+    }
+}
+
+/// The expectation after a frame `f` read as `reading` (valid) or failed (`None`), given what
+/// was expected before it.
+fn next_expect(expect: Expect, f: &[u8], reading: Option<Reading>) -> Expect {
+    let as_request = |f: &[u8]| {
+        let [unit, fc, ..] = *f else { return Expect::Unknown };
+        if unit == 0 {
+            // Broadcasts are not answered (Serial Line v1.02 §2.1).
+            return Expect::Request;
+        }
+        let pdu = &f[1..f.len().saturating_sub(2).max(1)];
+        let len = match crate::proto::answer_len(pdu) {
+            PduLength::Exact(k) => k.checked_add(3),
+            _ => None,
+        };
+        Expect::Response { unit, fc, len }
+    };
+    let answers_pending = |e: Expect| match (e, f) {
+        (Expect::Response { unit, fc, .. }, [u, f, ..]) => *u == unit && (*f == fc || *f == fc | EXCEPTION_FLAG),
+        _ => false,
+    };
+    match reading {
+        // A failed frame ends the transaction it answered; otherwise nobody can say.
+        None if matches!(expect, Expect::Response { .. }) => Expect::Request,
+        Some(Reading::Request) => as_request(f),
+        Some(Reading::Response) => Expect::Request,
+        Some(Reading::Either | Reading::Unknown) if answers_pending(expect) => Expect::Request,
+        Some(Reading::Either | Reading::Unknown) if expect == Expect::Request => as_request(f),
+        None | Some(_) => Expect::Unknown,
     }
 }

@@ -82,6 +82,25 @@ impl Health {
             &self.fast_master,
             "requests sent less than t3.5 after the previous frame (Serial Line v1.02 §2.5.1.1): slaves may merge or drop them".into(),
         );
+        let glitch_summary = |who: &str, n: u64, sent: u64| {
+            format!(
+                "a garbage byte follows {n} of {sent} frames from {who} at driver turnaround: missing or weak fail-safe biasing (Serial Line v1.02 §3.4: polarize the line, e.g. 450–650 Ω pull-up/pull-down at one point)"
+            )
+        };
+        push(
+            "turnaround_glitch",
+            None,
+            &self.master_glitches,
+            glitch_summary("the master", self.master_glitches.count, self.master_sent),
+        );
+        for (&unit, u) in &self.units {
+            push(
+                "turnaround_glitch",
+                Some(unit),
+                &u.glitches,
+                glitch_summary(&format!("unit {unit}"), u.glitches.count, u.sent),
+            );
+        }
         let mut units = Vec::new();
         for (&unit, u) in &self.units {
             if !bus_wide && !garbage {

@@ -10,7 +10,8 @@
 //! after the master moved on), `duplicate_address` (answers that come twice, or garbled the
 //! way two answers on top of each other garble), `implausible_jump` (a reading moving over half
 //! its documented range between two reads), `exception_storm`, `value_out_of_range` (outside
-//! the profile's range). Check errors say whether they come in bursts or steadily.
+//! the profile's range), `turnaround_glitch` (a garbage byte right after the frames of one
+//! sender: the line is not biased). Check errors say whether they come in bursts or steadily.
 
 mod findings;
 pub mod html;
@@ -105,6 +106,9 @@ struct UnitState {
     master_wait_min: Option<u64>,
     /// Readings that moved more than half their documented range from one read to the next.
     jumps: Tally,
+    /// Valid frames this unit sent, and the turnaround glitches right after them.
+    sent: u64,
+    glitches: Tally,
     /// The last raw reading of each documented value with a range.
     last_values: BTreeMap<(crate::profile::Table, u16), i64>,
     latencies: Vec<u64>,
@@ -150,6 +154,12 @@ pub struct Health {
     bad_frames: u64,
     fast_master: Tally,
     second_master: Tally,
+    /// Valid requests the master sent, and the turnaround glitches right after them.
+    master_sent: u64,
+    master_glitches: Tally,
+    /// Who sent the last valid frame (a glitch right after it is that sender's driver
+    /// switching off): the master, or a unit answering.
+    last_sender: Option<Sender>,
     transactions: u64,
     first: Option<u64>,
     last: Option<u64>,
@@ -176,6 +186,13 @@ pub struct Health {
 /// v1.02 §2.5.2.1): garbage up to this much before the first good frame is a frame the
 /// listener joined halfway.
 const JOINED_MID_FRAME: u64 = 513;
+
+/// The sender of a frame on a half-duplex bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Sender {
+    Master,
+    Unit(u8),
+}
 
 /// How a transaction ended, for the plots and the clustering of errors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -219,6 +236,16 @@ impl Health {
                 self.seen(n.t_end.0);
                 self.garbage(n.t_start.0, n.bytes.len());
             }
+            Event::Glitch(n) => {
+                self.seen(n.t_end.0);
+                match self.last_sender {
+                    Some(Sender::Unit(u)) => self.units.entry(u).or_default().glitches.add(n.t_start.0),
+                    Some(Sender::Master) => self.master_glitches.add(n.t_start.0),
+                    // The framer reports a glitch only right after a frame; without a valid one
+                    // before it, it is a byte of noise.
+                    None => self.garbage(n.t_start.0, n.bytes.len()),
+                }
+            }
             Event::Transaction(t) => self.transaction(t, annotations),
         }
     }
@@ -242,6 +269,17 @@ impl Health {
         self.frames += 1;
         self.frame_bytes += frame.bytes.len() as u64;
         self.in_step |= frame.check_ok;
+        self.last_sender = match (frame.check_ok, role, unit) {
+            (true, Role::Request, _) => {
+                self.master_sent += 1;
+                Some(Sender::Master)
+            }
+            (true, Role::Response | Role::Unknown, Some(u)) => {
+                self.units.entry(u).or_default().sent += 1;
+                Some(Sender::Unit(u))
+            }
+            _ => None,
+        };
         if !frame.check_ok {
             self.bad_frames += 1;
             self.last_ok = None;

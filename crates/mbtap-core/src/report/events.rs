@@ -112,6 +112,9 @@ pub fn text_line(e: &Event<'_>) -> String {
         Event::Noise(n) => {
             format!("{} p{} NOISE {} byte(s) | {}", clock_us(n.t_start.0), n.port.0, n.bytes.len(), wire(n.bytes))
         }
+        Event::Glitch(n) => {
+            format!("{} p{} GLITCH at turnaround | {}", clock_us(n.t_start.0), n.port.0, wire(n.bytes))
+        }
         Event::Transaction(t) => transaction_text(t),
     }
 }
@@ -181,6 +184,15 @@ pub fn json(e: &Event<'_>) -> J {
             }
             J::Object(m)
         }
+        Event::Glitch(n) => json!({
+            "event": "glitch",
+            "t_ns": n.t_start.0,
+            "t_end_ns": n.t_end.0,
+            "port": n.port.0,
+            "hex": hex_compact(n.bytes),
+            "check_ok": false,
+            "len": n.bytes.len(),
+        }),
         Event::Noise(n) => json!({
             "event": "noise",
             "t_ns": n.t_start.0,
@@ -232,6 +244,8 @@ pub struct Stats {
     pub bad_frames: u64,
     pub noise_events: u64,
     pub noise_bytes: u64,
+    /// Turnaround glitch bytes.
+    pub glitches: u64,
     pub gap_violations: u64,
     /// Frames that followed the previous one after less than t3.5 of silence.
     pub short_gaps: u64,
@@ -260,6 +274,7 @@ impl Stats {
                 self.noise_events += 1;
                 self.noise_bytes += n.bytes.len() as u64;
             }
+            Event::Glitch(_) => self.glitches += 1,
             Event::Transaction(t) => {
                 self.transactions += 1;
                 match t.outcome {
@@ -281,7 +296,8 @@ impl Stats {
         json!({
             "event": "summary",
             "frames": self.frames, "frame_bytes": self.frame_bytes, "bad_frames": self.bad_frames,
-            "noise_events": self.noise_events, "noise_bytes": self.noise_bytes, "gap_violations": self.gap_violations,
+            "noise_events": self.noise_events, "noise_bytes": self.noise_bytes, "glitches": self.glitches,
+            "gap_violations": self.gap_violations,
             "short_gaps": self.short_gaps, "transactions": self.transactions, "ok": self.ok, "exceptions": self.exceptions,
             "no_response": self.no_response, "broadcasts": self.broadcasts, "bad_responses": self.bad_responses,
             "orphan_responses": self.orphans, "wrong_unit": self.wrong_unit,
@@ -291,8 +307,11 @@ impl Stats {
     /// The summary as text.
     #[must_use]
     pub fn text(&self) -> String {
+        // Glitches are named only where there are some: a well-biased line's summary is as it was.
+        let glitches =
+            if self.glitches > 0 { format!(", {} turnaround glitches", self.glitches) } else { String::new() };
         format!(
-            "summary: {} frames ({} bytes, {} failed check, {} with gaps inside, {} after less than t3.5), {} noise bursts ({} bytes); {} transactions: {} ok, {} exceptions, {} no response, {} broadcasts, {} bad responses, {} orphan responses, {} from the wrong unit",
+            "summary: {} frames ({} bytes, {} failed check, {} with gaps inside, {} after less than t3.5), {} noise bursts ({} bytes){glitches}; {} transactions: {} ok, {} exceptions, {} no response, {} broadcasts, {} bad responses, {} orphan responses, {} from the wrong unit",
             self.frames,
             self.frame_bytes,
             self.bad_frames,

@@ -1,7 +1,12 @@
 //! Synthetic bus traffic with ground truth: a master polling several slaves with a varied mix of
 //! function codes, exceptions, broadcasts, absent slaves and a vendor code; with noise bursts,
-//! corrupted bytes and slow slaves that leave gaps inside responses. The output is the wire:
-//! every byte with the time its last bit left, plus what each stretch of bytes really was.
+//! corrupted bytes and slow slaves that leave gaps inside responses; and the physics of real
+//! RS-485 lines that our own framer would otherwise never meet: turnaround glitches (a garbage
+//! byte within a character of a frame's end, where a transceiver's driver switches off without
+//! fail-safe biasing: `00` with a framing error after the master, `FE`/`FF` after a slave) and
+//! CRC look-alikes (answers whose CRC high byte is `00`, so one byte shorter also passes the
+//! CRC). The output is the wire: every byte with the time its last bit left, plus what each
+//! stretch of bytes really was.
 
 use super::rng::Rng;
 use crate::framer::LineSettings;
@@ -16,6 +21,8 @@ pub enum TruthKind {
     Corrupted,
     /// Bytes that belong to no frame.
     Noise,
+    /// One garbage byte at a driver's turnaround, right after a frame.
+    Glitch,
 }
 
 /// One stretch of the wire: bytes `start..end` of [`Wire::bytes`].
@@ -48,6 +55,12 @@ pub struct TrafficConfig {
     pub corrupt: f64,
     /// Probability that a response has a gap (> t1.5) inside it.
     pub slow: f64,
+    /// Probability that a frame is followed by a turnaround glitch byte (0 on a well-biased
+    /// line; 1 where every driver switch leaves one).
+    pub glitch: f64,
+    /// Probability that a register-read answer is made a CRC look-alike: its last data byte
+    /// chosen so the CRC's high byte is `00` (1 in 256 answers are, by chance, anyway).
+    pub lookalike: f64,
     /// Start time, ns since the epoch.
     pub start_ns: u64,
 }
@@ -61,6 +74,8 @@ impl Default for TrafficConfig {
             noise: 0.02,
             corrupt: 0.02,
             slow: 0.02,
+            glitch: 0.0,
+            lookalike: 0.0,
             start_ns: 1_700_000_000_000_000_000,
         }
     }
@@ -101,6 +116,11 @@ impl Builder {
     fn frame(&mut self, unit: u8, pdu: &[u8], is_request: bool, slow: bool) {
         let mut wire = Vec::with_capacity(pdu.len() + 3);
         encode_rtu(unit, pdu, &mut wire);
+        // Draws only when asked for, so every seed without the new physics gives the same
+        // traffic it always gave (the regression captures were made from it).
+        if !is_request && self.cfg.lookalike > 0.0 && self.rng.chance(self.cfg.lookalike) {
+            make_lookalike(&mut wire);
+        }
         let mut kind = TruthKind::Good;
         if self.rng.chance(self.cfg.corrupt) {
             let at = usize::try_from(self.rng.below(wire.len() as u64)).unwrap_or(0);
@@ -117,11 +137,44 @@ impl Builder {
             None
         };
         self.send(&wire, kind, is_request, gap);
+        if self.cfg.glitch > 0.0 && self.rng.chance(self.cfg.glitch) {
+            // Within one character of the frame's last byte: no silence separates them.
+            let glitch = if is_request {
+                0x00
+            } else if self.rng.chance(0.5) {
+                0xFE
+            } else {
+                0xFF
+            };
+            self.t += self.rng.below(self.char_ns / 2);
+            self.send(&[glitch], TruthKind::Glitch, is_request, None);
+        }
     }
 
     fn idle(&mut self, min_ns: u64, max_ns: u64) {
         self.t += self.rng.range(min_ns, max_ns);
     }
+}
+
+/// Makes a register-read answer (`unit 03|04 count data… crc`) a CRC look-alike: its last data
+/// byte is chosen so the CRC's high byte is `00`, which makes the frame one byte shorter valid
+/// too (CRC-16/MODBUS: for a valid F ending in `00`, F without it checks). Other frames are left
+/// as they are.
+fn make_lookalike(wire: &mut [u8]) {
+    let n = wire.len();
+    if n < 7 || !matches!(wire[1], 0x03 | 0x04) {
+        return;
+    }
+    for v in 0..=255u8 {
+        wire[n - 3] = v;
+        let crc = crate::proto::crc16(&wire[..n - 2]).to_le_bytes();
+        if crc[1] == 0 {
+            wire[n - 2..].copy_from_slice(&crc);
+            return;
+        }
+    }
+    let crc = crate::proto::crc16(&wire[..n - 2]).to_le_bytes();
+    wire[n - 2..].copy_from_slice(&crc);
 }
 
 /// One transaction of the poll mix: the request PDU and the response PDU (`None`: no answer).

@@ -10,12 +10,14 @@ use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::{FrameEvent, FramerConfig, RtuFramer};
 use crate::proto::crc16;
 
-/// One decided stretch: bytes `range` of the wire, a frame (with its check) or noise.
+/// One decided stretch: bytes `range` of the wire, a frame (with its check), noise or a
+/// turnaround glitch.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Decided {
     pub range: Range<usize>,
     pub frame: bool,
     pub check_ok: bool,
+    pub glitch: bool,
 }
 
 /// How well a framer did.
@@ -26,6 +28,9 @@ pub struct Score {
     pub false_valid: usize,
     pub corrupted_total: usize,
     pub corrupted_exact: usize,
+    /// Turnaround glitch bytes on the wire, and those reported as glitches.
+    pub glitch_total: usize,
+    pub glitch_reported: usize,
 }
 
 impl Score {
@@ -54,8 +59,13 @@ pub fn score(wire: &Wire, decided: &[Decided]) -> Score {
     let mut s = Score {
         good_total: wire.truth.iter().filter(|t| t.kind == TruthKind::Good).count(),
         corrupted_total: wire.truth.iter().filter(|t| t.kind == TruthKind::Corrupted).count(),
+        glitch_total: wire.truth.iter().filter(|t| t.kind == TruthKind::Glitch).count(),
         ..Score::default()
     };
+    s.glitch_reported = decided
+        .iter()
+        .filter(|d| d.glitch && truth.get(&(d.range.start, d.range.end)) == Some(&TruthKind::Glitch))
+        .count();
     for d in decided.iter().filter(|d| d.frame) {
         let t = truth.get(&(d.range.start, d.range.end)).copied();
         match (d.check_ok, t) {
@@ -76,11 +86,12 @@ pub fn run_framer(wire: &Wire, chunks: &[ChunkSpan], config: FramerConfig) -> Ve
     let mut offset = 0usize;
     let mut emit = |e: FrameEvent<'_>| {
         let n = e.bytes().len();
-        let (frame, check_ok) = match e {
-            FrameEvent::Frame(f) => (true, f.check_ok),
-            FrameEvent::Noise(_) => (false, false),
+        let (frame, check_ok, glitch) = match e {
+            FrameEvent::Frame(f) => (true, f.check_ok, false),
+            FrameEvent::Noise(_) => (false, false, false),
+            FrameEvent::Glitch(_) => (false, false, true),
         };
-        out.push(Decided { range: offset..offset + n, frame, check_ok });
+        out.push(Decided { range: offset..offset + n, frame, check_ok, glitch });
         offset += n;
     };
     for (t, r) in chunks {
@@ -103,7 +114,7 @@ pub fn run_gap_cutter(wire: &Wire, chunks: &[ChunkSpan], config: FramerConfig) -
         if end > start {
             let b = &wire.bytes[start..end];
             let ok = b.len() >= 4 && crc16(&b[..b.len() - 2]) == u16::from_le_bytes([b[b.len() - 2], b[b.len() - 1]]);
-            out.push(Decided { range: start..end, frame: true, check_ok: ok });
+            out.push(Decided { range: start..end, frame: true, check_ok: ok, glitch: false });
         }
     };
     for (t, r) in chunks {
