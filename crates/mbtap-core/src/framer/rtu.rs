@@ -561,7 +561,12 @@ impl RtuFramer {
                 // match becomes likely.
                 let next_starts = !at_end && self.looks_like_frame_start(g + l);
                 // A lone byte and then a silence or a frame: this frame's turnaround glitch.
-                let glitch_after = self.glitch_then_end(g + l) || (flushing && g + l + 1 == live_len);
+                let glitch_after = self.glitch_then_end(g + l)
+                    || (flushing && g + l + 1 == live_len)
+                    || (self.glitchy()
+                        && s.get(l).is_some_and(|&v| self.glitch_values[usize::from(v)])
+                        && s.get(l + 1).is_some_and(|&a| a != 0)
+                        && self.looks_like_frame_start(g + l + 1));
                 if self.boundary_at(g + l)
                     || (flushing && at_end)
                     || self.exact_frame_at(g + l)
@@ -573,12 +578,16 @@ impl RtuFramer {
                     // frame validates too, take the longer unless only the shorter is followed
                     // by something that looks like a frame.
                     if s.get(l) == Some(&0) && l < RTU_MAX_LEN && s.len() > l && Self::crc_ok(&s[..=l]) {
+                        // The longer frame followed by its own glitch byte is the longer frame.
+                        let longer_glitch = self.glitch_then_end(g + l + 1);
                         let longer_ok = g + l + 1 == live_len
                             || self.boundary_at(g + l + 1)
                             || self.exact_frame_at(g + l + 1)
-                            || self.looks_like_frame_start(g + l + 1);
+                            || self.looks_like_frame_start(g + l + 1)
+                            || longer_glitch;
                         // On a line that glitches, the `00` is likelier a glitch than a CRC byte.
-                        let shorter_strong = self.boundary_at(g + l) || self.exact_frame_at(g + l) || self.glitchy();
+                        let shorter_strong =
+                            self.boundary_at(g + l) || self.exact_frame_at(g + l) || (self.glitchy() && !longer_glitch);
                         if longer_ok && !shorter_strong {
                             return Try::Found(l + 1, Reading::Unknown);
                         }
@@ -781,8 +790,16 @@ impl RtuFramer {
             if let Some(s) = (1..piece.len().saturating_sub(RTU_MIN_LEN - 1))
                 .find(|&s| self.known_units[usize::from(piece[s])] && self.plausible_frame(&piece[s..]))
             {
+                // With its `00` glitch the frame passes the CRC too: on a glitching line, trim it.
+                let trim =
+                    self.glitchy() && piece.last() == Some(&0) && self.plausible_frame(&piece[s..piece.len() - 1]);
                 self.emit_unframed(a, a + s, emit);
-                self.emit_frame(b - a - s, Some(Reading::Unknown), emit);
+                if trim {
+                    self.emit_frame(b - a - s - 1, Some(Reading::Unknown), emit);
+                    self.emit_unframed(b - 1, b, emit);
+                } else {
+                    self.emit_frame(b - a - s, Some(Reading::Unknown), emit);
+                }
                 return;
             }
             self.emit_unframed(a, b, emit);
