@@ -407,10 +407,11 @@ impl RtuFramer {
         }
         // While resynchronising through garbage, a chance CRC match (1 in 65 536 per
         // candidate) is likelier than the first frame of a never-seen unit with no silence
-        // before it.
-        if g > 0 && !self.known_units[usize::from(addr)] && !self.boundary_at(g) {
-            return Try::NotHere;
-        }
+        // before it — unless what follows confirms it too (a silence, another valid frame, its
+        // glitch): then a damaged start does not hide the valid frames after it. Right after a
+        // frame's glitch byte a frame may start anyway.
+        let after_glitch = g == 1 && self.at_glitch(self.head);
+        let unconfirmed_start = g > 0 && !self.known_units[usize::from(addr)] && !self.boundary_at(g) && !after_glitch;
         let pdu = &s[1..];
         let resp = response_len(pdu);
         let req = if fc & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
@@ -464,6 +465,32 @@ impl RtuFramer {
             }
         }
         let reading_of = |is_request: bool| if is_request { Reading::Request } else { Reading::Response };
+        if unconfirmed_start {
+            // Confirmed by what follows, and well formed: no findings in its decode.
+            let confirmed = |(l, is_request): (usize, bool)| {
+                let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
+                (self.ends_at(g + l) || self.glitch_then_end(g + l) || (flushing && g + l == live.len()))
+                    && consistent(&s[1..l - 2], is_request)
+                    && matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty())
+            };
+            let found_any = found.iter().any(Option::is_some);
+            for slot in &mut found {
+                if slot.is_some_and(|r| !confirmed(r)) {
+                    *slot = None;
+                }
+            }
+            return match found {
+                [Some((a, _)), Some((b, _))] if a == b => Try::Found(a, Reading::Either),
+                [Some(a), Some(b)] => {
+                    let (l, r) = self.best(g, a, b);
+                    Try::Found(l, reading_of(r))
+                }
+                [Some((l, r)), None] | [None, Some((l, r))] => Try::Found(l, reading_of(r)),
+                // Not yet confirmed: wait for what follows, unless nothing more can come.
+                [None, None] if !flushing && (need_more || found_any) => Try::NeedMore(s.len() + 1),
+                [None, None] => Try::NotHere,
+            };
+        }
         match found {
             // A valid reading need not wait for another reading that could only be malformed
             // (a 0x10 response read as a request: its byte count disagrees with its quantity),
@@ -561,8 +588,10 @@ impl RtuFramer {
                 // match becomes likely.
                 let next_starts = !at_end && self.looks_like_frame_start(g + l);
                 // A lone byte and then a silence or a frame: this frame's turnaround glitch.
-                let glitch_after = self.glitch_then_end(g + l)
-                    || (flushing && g + l + 1 == live_len)
+                // Only on a line seen to glitch: elsewhere a CRC match with one stray byte after it
+                // is a chance match inside damage (1 in 65 536 per length tried) as often as not.
+                let glitch_after = self.glitchy()
+                    && (self.glitch_then_end(g + l) || (flushing && g + l + 1 == live_len))
                     || (self.glitchy()
                         && s.get(l).is_some_and(|&v| self.glitch_values[usize::from(v)])
                         && s.get(l + 1).is_some_and(|&a| a != 0)
@@ -838,10 +867,20 @@ impl RtuFramer {
     /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise;
     /// a lone byte right after a frame is its turnaround glitch.
     fn emit_unframed<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, b: usize, emit: &mut F) {
-        // Glued to what follows (no silence seen between them), the glitch is split off when
-        // the bytes start like a frame of a known unit only after it.
+        // Glued to what follows (no silence seen between them), the glitch is split off when it
+        // cannot start a frame, takes a value this line's glitches take, or the bytes start like
+        // a frame of a known unit only after it.
         let i = a - self.head;
-        if self.at_glitch(a) && (b - a == 1 || (!self.looks_like_frame_start(i) && self.looks_like_frame_start(i + 1)))
+        let v = self.buf[a];
+        if self.at_glitch(a)
+            && (b - a == 1
+                // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line
+                // is known to glitch, only the values drivers leave (`FE`, `FF`) count.
+                || (v > MAX_ADDRESS && (self.glitchy() || v >= 0xFE))
+                || (self.glitchy() && self.glitch_values[usize::from(v)])
+                || ((self.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
+                    && !self.looks_like_frame_start(i)
+                    && self.looks_like_frame_start(i + 1)))
         {
             self.emit_glitch(a, emit);
             if b > a + 1 {
