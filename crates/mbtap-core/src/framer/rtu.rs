@@ -197,13 +197,9 @@ impl RtuFramer {
     /// Does reading `l` bytes at live index `g` as `reading` give what the bus expects next?
     fn expected(&self, g: usize, l: usize, reading: Reading) -> bool {
         let s = &self.buf[self.head + g..];
-        // Bytes before `g` that are not a lone glitch are a frame nobody could read: what was
-        // expected may have been that frame.
-        let expect = if g == 0 || (g == 1 && self.at_glitch(self.head)) {
-            self.expect
-        } else {
-            next_expect(self.expect, &[], None)
-        };
+        // Bytes before `g` that are not a lone glitch are damage nobody can read — one frame or
+        // several, requests or answers: after them nothing is expected.
+        let expect = if g == 0 || (g == 1 && self.at_glitch(self.head)) { self.expect } else { Expect::Unknown };
         match expect {
             Expect::Unknown => false,
             Expect::Request => reading == Reading::Request,
