@@ -17,7 +17,8 @@ const L115200: LineSettings = LineSettings { baud: 115_200, data_bits: 8, parity
 /// What the analyzer said, in order: `F+` valid frame, `F-` failed frame, `N` noise, `G`
 /// glitch, with the bytes.
 fn events(chunks: &[(u64, Vec<u8>)], line: LineSettings, latency_ns: u64) -> Vec<(String, Vec<u8>)> {
-    let mut a = Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, latency_ns), ..AnalyzerConfig::default() });
+    let mut a =
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, latency_ns), ..AnalyzerConfig::default() });
     let mut out = Vec::new();
     let mut sink = |e: &Event<'_>| match e {
         Event::Frame { frame, .. } => {
@@ -135,11 +136,17 @@ fn glitches_after_every_frame_invent_and_lose_no_frame() {
 /// Answers made CRC look-alikes (their CRC high byte 00): no shorter twin reported.
 #[test]
 fn crc_lookalike_answers_are_not_cut_short() {
-    let wire =
-        generate(&TrafficConfig { seed: 34, line: L19200, transactions: 3000, lookalike: 1.0, ..TrafficConfig::default() });
+    let wire = generate(&TrafficConfig {
+        seed: 34,
+        line: L19200,
+        transactions: 3000,
+        lookalike: 1.0,
+        ..TrafficConfig::default()
+    });
     for model in [Observation::PerByte, Observation::USB_16MS] {
         let chunks = observe(&wire, model, L19200.char_ns());
-        let s = score(&wire, &run_framer(&wire, &chunks, FramerConfig::new(L19200, model.latency_ns(L19200.char_ns()))));
+        let s =
+            score(&wire, &run_framer(&wire, &chunks, FramerConfig::new(L19200, model.latency_ns(L19200.char_ns()))));
         assert_eq!(s.false_valid, 0, "{}: {s:?}", model.name());
         assert!(s.good_ratio() >= 0.999, "{}: {s:?}", model.name());
     }

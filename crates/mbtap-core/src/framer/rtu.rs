@@ -539,6 +539,16 @@ impl RtuFramer {
         self.boundary_at(i) || self.exact_frame_at(i)
     }
 
+    /// On a line that glitches, is the byte at live index `i` one of its glitch values, with a
+    /// frame of a known unit (not a broadcast, which a glitch `00` would fake) starting after it?
+    fn glitch_then_start(&self, i: usize) -> bool {
+        let live = &self.buf[self.head..];
+        self.glitchy()
+            && live.get(i).is_some_and(|&v| self.glitch_values[usize::from(v)])
+            && live.get(i + 1).is_some_and(|&a| a != 0)
+            && self.looks_like_frame_start(i + 1)
+    }
+
     /// Is the byte at live index `i` a lone byte — a frame's turnaround glitch — with a known
     /// silence, a valid frame or the end of what has arrived right after it? (Not known to be
     /// separated from the frame by 1.5 characters of silence.)
@@ -588,10 +598,7 @@ impl RtuFramer {
                 // is a chance match inside damage (1 in 65 536 per length tried) as often as not.
                 let glitch_after = self.glitchy()
                     && (self.glitch_then_end(g + l) || (flushing && g + l + 1 == live_len))
-                    || (self.glitchy()
-                        && s.get(l).is_some_and(|&v| self.glitch_values[usize::from(v)])
-                        && s.get(l + 1).is_some_and(|&a| a != 0)
-                        && self.looks_like_frame_start(g + l + 1));
+                    || self.glitch_then_start(g + l);
                 if self.boundary_at(g + l)
                     || (flushing && at_end)
                     || self.exact_frame_at(g + l)
@@ -604,7 +611,7 @@ impl RtuFramer {
                     // by something that looks like a frame.
                     if s.get(l) == Some(&0) && l < RTU_MAX_LEN && s.len() > l && Self::crc_ok(&s[..=l]) {
                         // The longer frame followed by its own glitch byte is the longer frame.
-                        let longer_glitch = self.glitch_then_end(g + l + 1);
+                        let longer_glitch = self.glitch_then_end(g + l + 1) || self.glitch_then_start(g + l + 1);
                         let longer_ok = g + l + 1 == live_len
                             || self.boundary_at(g + l + 1)
                             || self.exact_frame_at(g + l + 1)
@@ -724,19 +731,13 @@ impl RtuFramer {
     /// The exact length the structure gives a frame starting at absolute `a`, if it fits
     /// before `stop`.
     fn structural_len(&self, a: usize, stop: usize) -> Option<usize> {
-        self.structural_lens(a, stop).into_iter().flatten().next()
-    }
-
-    /// Both readings' exact lengths (response first) for a frame at absolute `a`, where they
-    /// fit before `stop`.
-    fn structural_lens(&self, a: usize, stop: usize) -> [Option<usize>; 2] {
         let f = &self.buf[a..stop];
         if !self.looks_like_frame(f) {
-            return [None, None];
+            return None;
         }
         let pdu = &f[1..];
         let req = if f[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
-        [response_len(pdu), req].map(|c| match c {
+        [response_len(pdu), req].into_iter().find_map(|c| match c {
             PduLength::Exact(k) if k + 3 <= f.len() => Some(k + 3),
             _ => None,
         })
@@ -884,13 +885,9 @@ impl RtuFramer {
             }
             return;
         }
-        // A damaged frame with its turnaround glitch: the structure ends the frame a byte early,
-        // or (a damaged length) the last byte is one this line's glitches take.
-        if b - a > RTU_MIN_LEN
-            && self.glitchy()
-            && (self.structural_lens(a, b).contains(&Some(b - a - 1))
-                || self.glitch_values[usize::from(self.buf[b - 1])])
-        {
+        // A damaged frame with its turnaround glitch, on a line that glitches: the last byte
+        // takes a value this line's glitches take.
+        if b - a > RTU_MIN_LEN && self.glitchy() && self.glitch_values[usize::from(self.buf[b - 1])] {
             self.emit_frame(b - a - 1, None, emit);
             self.emit_unframed(b - 1, b, emit);
             return;
