@@ -190,7 +190,7 @@ fn health_of(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSet
         framer: FramerConfig::new(line, model.latency_ns(line.char_ns())),
         ..AnalyzerConfig::default()
     });
-    let mut health = Health::new(Default::default());
+    let mut health = Health::new(mbtap_core::profile::Profiles::new());
     for (t, r) in &chunks {
         a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes: &wire.bytes[r.clone()] }, &mut |e: &Event<'_>| {
             health.event(e);
