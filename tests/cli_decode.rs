@@ -258,3 +258,54 @@ fn the_config_file_assigns_devices_and_the_command_line_overrides_it() {
     let err = String::from_utf8(o.stderr).unwrap();
     assert!(err.contains("config.toml:3:1: device unit \"999\""), "{err}");
 }
+
+/// Issue 14: `010304050001953B00` passed its CRC as a 9-byte response (byte count 4); it is a
+/// request (read 1 register from 0x0405) followed by the `00` a transceiver leaves at turnaround
+/// — CRC-16/MODBUS validates any valid frame with a `00` appended.
+#[test]
+fn decode_010304050001953b00_is_a_request_and_a_glitch() {
+    let o = mbtap(&["decode", "010304050001953B00"], None);
+    let s = stdout(&o);
+    assert!(s.contains("request · CRC ok"), "{s}");
+    assert!(s.contains("glitch: 00"), "{s}");
+    assert!(!s.contains("response"), "{s}");
+    assert_eq!(o.status.code(), Some(1), "a line that is more than its frame is a problem");
+    let j = stdout(&mbtap(&["decode", "--format", "jsonl", "010304050001953B00"], None));
+    let events: Vec<serde_json::Value> = j.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(events.len(), 2, "{j}");
+    assert_eq!(events[0]["event"], "frame");
+    assert_eq!(events[0]["hex"], "010304050001953b");
+    assert_eq!(events[1]["event"], "glitch");
+    assert_eq!(events[1]["hex"], "00");
+}
+
+/// Issue 14: three valid frames pasted glued from a sniffer log were one frame with the CRC
+/// taken from the end of the line ("CRC FAILED"). Split as a replay splits them.
+#[test]
+fn glued_frames_on_one_line_are_split_into_them() {
+    // Read 3 registers from 101 (unit 1), its answer, then an exception from unit 1 to FC 03.
+    const GLUED: &str = concat!(
+        "01030065000315D4",       // unit 1, read 3 holding registers from 101, CRC
+        "0103060000000001902089", // its answer: 0, 0, 400, CRC
+        "0183030131",             // unit 1, exception 03 to function 03, CRC
+    );
+    let o = mbtap(&["decode", GLUED], None);
+    let s = stdout(&o);
+    assert_eq!(s.matches("CRC ok").count(), 3, "{s}");
+    assert!(!s.contains("CRC FAILED"), "{s}");
+    assert!(s.contains("transaction: unit 1"), "{s}");
+    assert!(s.contains("Exception to Read Holding Registers"), "{s}");
+    assert_eq!(o.status.code(), Some(0), "{s}");
+}
+
+/// Issue 14: a truncated answer after its request was shown as a request with absurd
+/// quantities; `replay` calls the same bytes a bad response. Now `decode` does too.
+#[test]
+fn a_truncated_answer_after_its_request_is_a_truncated_response() {
+    let o = mbtap(&["decode", "01030065000315D4", "010306000000"], None);
+    let s = stdout(&o);
+    assert!(s.contains("transaction: unit 1"), "{s}");
+    assert!(s.contains("too short"), "{s}");
+    assert!(!s.contains("quantity: 0"), "{s}");
+    assert_eq!(o.status.code(), Some(1));
+}

@@ -1,5 +1,11 @@
 //! Frames given as hex or ASCII text, explained (the work of `mbtap decode`). A request followed by the
 //! response that answers it is shown as one transaction.
+//!
+//! An RTU line that is not exactly one frame — frames pasted glued together from a sniffer log,
+//! a frame with the turnaround glitch byte a logic analyser caught after it — is split the way
+//! `replay` splits the same bytes: by the RTU framer, which knows each function's structure and
+//! the CRC's look-alikes. A failed frame right after a request from the same unit is read as that
+//! request's (damaged or truncated) answer.
 
 use std::io::{self, Write};
 
@@ -38,6 +44,51 @@ struct Input {
     adu: Adu,
 }
 
+/// What an input line holds, piece by piece.
+#[derive(Debug)]
+enum Entry {
+    Frame(Input),
+    /// Not a frame at all: the input number and why.
+    Unreadable(usize, String),
+    /// A turnaround glitch byte after a frame (input number, bytes).
+    Glitch(usize, Vec<u8>),
+    /// Bytes between frames that belong to none (input number, bytes).
+    Noise(usize, Vec<u8>),
+}
+
+/// A piece of an RTU line as the framer cut it.
+#[derive(Debug)]
+enum Piece {
+    /// A frame, valid or not (its check is shown when it is decoded).
+    Frame(Vec<u8>),
+    Glitch(Vec<u8>),
+    Noise(Vec<u8>),
+}
+
+/// The pieces of one RTU line, as the framer cuts the same bytes in a replay: `None` when the
+/// line is one frame, or holds no valid frame at all (then it is shown whole, as it always was).
+fn split_rtu(wire: &[u8]) -> Option<Vec<Piece>> {
+    use crate::chunk::{Chunk, PortId, Timestamp};
+    use crate::framer::{FrameEvent, FramerConfig, RtuFramer};
+    // Pasted text has no timing: one read, nothing known about silences.
+    let mut framer = RtuFramer::new(PortId(0), FramerConfig::default());
+    let mut pieces = Vec::new();
+    let mut valid = 0usize;
+    let mut emit = |e: FrameEvent<'_>| {
+        pieces.push(match e {
+            FrameEvent::Frame(f) => {
+                valid += usize::from(f.check_ok);
+                Piece::Frame(f.bytes.to_vec())
+            }
+            FrameEvent::Glitch(n) => Piece::Glitch(n.bytes.to_vec()),
+            FrameEvent::Noise(n) => Piece::Noise(n.bytes.to_vec()),
+        });
+    };
+    framer.push(&Chunk { port: PortId(0), t: Timestamp(0), bytes: wire }, &mut emit);
+    framer.finish(&mut emit);
+    (pieces.len() >= 2 && valid > 0).then_some(pieces)
+}
+
 /// Decodes `lines` (one frame each) and writes the result to `out`; unreadable lines are
 /// reported on `err` (text) or as `"event":"error"` objects (JSON lines).
 ///
@@ -69,22 +120,49 @@ pub fn run_with_profiles(
     err: &mut dyn Write,
 ) -> io::Result<Outcome> {
     let mut outcome = Outcome::Clean;
-    // Unreadable lines stay in the sequence (as `Err`) so output keeps the input's order.
-    let mut entries: Vec<Result<Input, (usize, String)>> = Vec::with_capacity(lines.len());
+    // Unreadable lines stay in the sequence so output keeps the input's order.
+    let mut entries: Vec<Entry> = Vec::with_capacity(lines.len());
     for (i, line) in lines.iter().enumerate() {
         let number = i + 1;
-        let parsed = parse_frame_text(line)
-            .map_err(|e| e.to_string())
-            .and_then(|wire| parse_adu(&wire, mode).map(|adu| (wire, adu)).map_err(|e| e.to_string()));
-        entries.push(parsed.map(|(wire, adu)| Input { number, wire, adu }).map_err(|reason| (number, reason)));
+        let wire = match parse_frame_text(line) {
+            Ok(wire) => wire,
+            Err(e) => {
+                entries.push(Entry::Unreadable(number, e.to_string()));
+                continue;
+            }
+        };
+        let adu = parse_adu(&wire, mode);
+        let rtu = mode == Some(Mode::Rtu) || (mode.is_none() && adu.as_ref().is_ok_and(|a| a.mode == Mode::Rtu));
+        if let Some(pieces) = rtu.then(|| split_rtu(&wire)).flatten() {
+            for piece in pieces {
+                entries.push(match piece {
+                    Piece::Frame(bytes) => match parse_adu(&bytes, Some(Mode::Rtu)) {
+                        Ok(adu) => Entry::Frame(Input { number, wire: bytes, adu }),
+                        Err(e) => Entry::Unreadable(number, e.to_string()),
+                    },
+                    Piece::Glitch(bytes) => Entry::Glitch(number, bytes),
+                    Piece::Noise(bytes) => Entry::Noise(number, bytes),
+                });
+            }
+            continue;
+        }
+        entries.push(match adu {
+            Ok(adu) => Entry::Frame(Input { number, wire, adu }),
+            Err(e) => Entry::Unreadable(number, e.to_string()),
+        });
     }
-    let decodes: Vec<Option<PduDecode<'_>>> =
-        entries.iter().map(|e| e.as_ref().ok().map(|i| decode_pdu(&i.adu.pdu, DirectionHint::Unknown))).collect();
+    let decodes: Vec<Option<PduDecode<'_>>> = entries
+        .iter()
+        .map(|e| match e {
+            Entry::Frame(i) => Some(decode_pdu(&i.adu.pdu, DirectionHint::Unknown)),
+            _ => None,
+        })
+        .collect();
     let mut i = 0;
     while i < entries.len() {
         let (this, decode) = match (&entries[i], &decodes[i]) {
-            (Ok(this), Some(decode)) => (this, decode),
-            (Err((number, reason)), _) => {
+            (Entry::Frame(this), Some(decode)) => (this, decode),
+            (Entry::Unreadable(number, reason), _) => {
                 outcome = Outcome::Unreadable;
                 let shown = lines[number - 1].trim();
                 match format {
@@ -100,8 +178,28 @@ pub fn run_with_profiles(
                 i += 1;
                 continue;
             }
-            // `decodes[i]` is `Some` exactly when `entries[i]` is `Ok`; nothing to show otherwise.
-            (Ok(_), None) => {
+            (Entry::Glitch(number, bytes) | Entry::Noise(number, bytes), _) => {
+                let glitch = matches!(entries[i], Entry::Glitch(..));
+                // Not part of any frame: the line held more than its frames.
+                outcome = outcome.max(if glitch { Outcome::Problems } else { Outcome::Unreadable });
+                let hex = crate::report::format::hex_spaced(bytes);
+                match format {
+                    Format::Text if glitch => writeln!(
+                        out,
+                        "glitch: {hex} right after the frame — a transceiver's turnaround byte, not part of the frame (missing fail-safe biasing)"
+                    )?,
+                    Format::Text => writeln!(out, "noise: {hex} ({} byte(s) that belong to no frame)", bytes.len())?,
+                    Format::Jsonl => writeln!(
+                        out,
+                        "{}",
+                        json!({"event": if glitch { "glitch" } else { "noise" }, "input": number, "hex": crate::report::format::hex_compact(bytes), "len": bytes.len()})
+                    )?,
+                }
+                i += 1;
+                continue;
+            }
+            // `decodes[i]` is `Some` exactly for frames; nothing to show otherwise.
+            (Entry::Frame(_), None) => {
                 i += 1;
                 continue;
             }
@@ -109,7 +207,7 @@ pub fn run_with_profiles(
         if !this.adu.check.ok() {
             outcome = outcome.max(Outcome::Problems);
         }
-        if let Some(Ok(next)) = entries.get(i + 1)
+        if let Some(Entry::Frame(next)) = entries.get(i + 1)
             && let Some((req, req_decoded)) = request_reading(decode)
             && answers(&this.adu, &req, &next.adu)
         {
@@ -162,14 +260,20 @@ fn request_reading<'d, 'a>(d: &'d PduDecode<'a>) -> Option<(Request<'a>, &'d Dec
 }
 
 /// Does `resp` read as the answer to `req`: same mode and unit (and transaction id on TCP),
-/// the same function or its exception, and a response reading with nothing left over.
+/// the same function or its exception, and a response reading with nothing left over — or,
+/// failing its check, the damaged or truncated answer a replay would call a bad response.
 fn answers(req_adu: &Adu, req: &Request<'_>, resp: &Adu) -> bool {
     let Some(&fc) = resp.pdu.first() else { return false };
     req_adu.mode == resp.mode
         && req_adu.unit == resp.unit
         && req_adu.transaction_id == resp.transaction_id
         && fc & 0x7F == req.function_byte()
-        && matches!(decode_pdu(&resp.pdu, DirectionHint::Response), PduDecode::One(DecodedPdu { trailing: [], .. }))
+        && req_adu.check.ok()
+        && (!resp.check.ok()
+            || matches!(
+                decode_pdu(&resp.pdu, DirectionHint::Response),
+                PduDecode::One(DecodedPdu { trailing: [], .. })
+            ))
 }
 
 #[allow(clippy::too_many_arguments)]
