@@ -199,3 +199,109 @@ fn health_of(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSet
     a.finish(&mut |e: &Event<'_>| health.event(e));
     health.report()
 }
+
+/// The report of chunks `(read time ns, bytes)`.
+fn report_of(chunks: &[(u64, Vec<u8>)], line: LineSettings, latency_ns: u64) -> Report {
+    let mut a =
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, latency_ns), ..AnalyzerConfig::default() });
+    let mut health = Health::new(mbtap_core::profile::Profiles::new());
+    for (t, bytes) in chunks {
+        a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut |e: &Event<'_>| health.event(e));
+    }
+    a.finish(&mut |e: &Event<'_>| health.event(e));
+    health.report()
+}
+
+/// Junk only, or nothing: the report ended "findings: none — the bus looks healthy".
+#[test]
+fn nothing_that_frames_is_never_healthy() {
+    // Bytes with the top bit set and no structure: what a listener at the wrong settings reads.
+    let junk: Vec<(u64, Vec<u8>)> = (0..50u8)
+        .map(|i| {
+            let bytes = (0..40u8).map(|j| i.wrapping_mul(37).wrapping_add(j.wrapping_mul(11)) | 0x80).collect();
+            (1_000_000_000 + u64::from(i) * 10_000_000, bytes)
+        })
+        .collect();
+    for chunks in [junk, Vec::new()] {
+        let r = report_of(&chunks, L19200, 0);
+        let kinds: Vec<_> = r.findings.iter().map(|f| f.kind).collect();
+        assert!(kinds.contains(&"no_valid_frames"), "{}", r.text());
+        assert!(kinds.iter().all(|k| matches!(*k, "no_valid_frames" | "wrong_line_settings")), "{}", r.text());
+        assert!(!r.text().contains("healthy"), "{}", r.text());
+    }
+}
+
+/// A failed frame starting with 02 in place of unit 1's answer was counted against unit 1.
+#[test]
+fn a_damaged_answer_with_another_address_counts_against_the_bus() {
+    let c = L19200.char_ns();
+    let mut chunks = Vec::new();
+    let mut t = 1_000_000_000u64;
+    for i in 0..40u8 {
+        let req = rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]);
+        let mut answer = rtu(1, &[0x03, 0x02, 0x00, i]);
+        if i % 10 == 3 {
+            // Address and data hit: `02 …`, CRC wrong.
+            answer[0] = 0x02;
+            answer[4] ^= 0x10;
+        }
+        t += 8 * c;
+        chunks.push((t, req));
+        t += 5 * c + 7 * c;
+        chunks.push((t, answer));
+        t += 50_000_000;
+    }
+    let r = report_of(&chunks, L19200, 0);
+    let unit1 = r.units.iter().find(|u| u.unit == 1).unwrap();
+    assert_eq!(unit1.bad_responses, 0, "{}", r.text());
+    let bus = r.findings.iter().find(|f| f.kind == "check_errors").unwrap();
+    assert_eq!((bus.unit, bus.count), (None, 4), "{}", r.text());
+}
+
+/// Request and answer delivered in one read (a 16 ms USB latency timer): the latency was
+/// reported as 0.000 ms and the p50 as 0.0 ms.
+#[test]
+fn a_latency_no_read_can_resolve_is_not_measurable() {
+    let mut chunks = Vec::new();
+    for i in 0..20u64 {
+        let mut read = rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]);
+        read.extend(rtu(1, &[0x03, 0x02, 0x12, 0x34]));
+        chunks.push((1_000_000_000 + i * 100_000_000, read));
+    }
+    let mut latencies = Vec::new();
+    let mut a =
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(L9600, 16_000_000), ..AnalyzerConfig::default() });
+    for (t, bytes) in &chunks {
+        a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut |e: &Event<'_>| {
+            if let Event::Transaction(t) = e {
+                latencies.push(t.latency_ns);
+            }
+        });
+    }
+    assert_eq!(latencies.len(), 20);
+    assert!(latencies.iter().all(Option::is_none), "{latencies:?}");
+    let r = report_of(&chunks, L9600, 16_000_000);
+    assert_eq!(r.units[0].latency_p50_ns, None, "{}", r.text());
+}
+
+/// `replay` flagged answers sooner than t3.5 after the request ("only N µs after previous
+/// frame"); `report` said nothing. Now it names them.
+#[test]
+fn an_answer_sooner_than_t35_is_a_fast_answer() {
+    let c = L19200.char_ns();
+    let mut chunks = Vec::new();
+    let mut t = 1_000_000_000u64;
+    for _ in 0..10 {
+        let req = rtu(5, &[0x04, 0x00, 0x00, 0x00, 0x01]);
+        let answer = rtu(5, &[0x04, 0x02, 0x00, 0x2A]);
+        t += 8 * c;
+        chunks.push((t, req));
+        // One character of silence, not 3.5.
+        t += c + 7 * c;
+        chunks.push((t, answer));
+        t += 30_000_000;
+    }
+    let r = report_of(&chunks, L19200, 0);
+    let fast = r.findings.iter().find(|f| f.kind == "fast_answer").unwrap_or_else(|| panic!("{}", r.text()));
+    assert_eq!((fast.unit, fast.count), (Some(5), 10));
+}

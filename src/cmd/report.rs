@@ -45,6 +45,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         ReportFormatArg::Html => mbtap_core::health::html::render(&report, &file.display().to_string()),
     };
     io::stdout().lock().write_all(text.as_bytes())?;
+    // Nothing that frames was heard: not a healthy bus, and scripts must see it.
+    if report.findings.iter().any(|f| f.kind == "no_valid_frames") {
+        return Ok(ExitCode::from(1));
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -67,7 +67,8 @@ pub struct Transaction<'a> {
     pub response: Option<&'a [u8]>,
     /// Start of the first frame.
     pub t_start: Timestamp,
-    /// End of the request to start of the response.
+    /// End of the request to start of the response; `None` without one, or when the reads'
+    /// timing cannot resolve it (request and answer delivered in one read).
     pub latency_ns: Option<u64>,
     /// The input ended (end of file, the sniffer stopped) while this request still waited:
     /// "no response" only as far as anyone heard — the answer may have come.
@@ -331,7 +332,8 @@ impl Pairing {
             request: Some(&p.bytes[..p.len]),
             response: response.map(|f| f.bytes),
             t_start: p.t_start,
-            latency_ns: response.map(|f| f.t_start.since(p.t_end)),
+            // Not measurable when the answer began inside a read: its start time is a guess.
+            latency_ns: response.filter(|f| f.gap_before_known).map(|f| f.t_start.since(p.t_end)),
             input_ended: false,
         }
     }
@@ -378,6 +380,7 @@ mod tests {
                 check_ok: true,
                 gap_violation_ns: None,
                 short_gap_before_ns: None,
+                gap_before_known: true,
                 bad_chars: false,
             };
             let len = bytes.len().saturating_sub(2);

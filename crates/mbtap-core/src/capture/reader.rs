@@ -26,6 +26,9 @@ pub enum CaptureError {
     Io(#[from] io::Error),
     #[error("{0}")]
     Format(#[from] FormatError),
+    /// Fewer bytes than any capture's header: an empty file, or a recording that never began.
+    #[error("the file holds {0} byte(s), less than a pcap or pcapng header: it is empty, nothing was recorded")]
+    TooShort(usize),
 }
 
 /// One thing read from a capture.
@@ -168,7 +171,7 @@ impl<R: Read> CaptureReader<R> {
                     }
                     Ok(Next::Continue)
                 }
-                Step::NeedMore(_) => Ok(Next::End),
+                Step::NeedMore(_) => Err(CaptureError::TooShort(self.end - self.start)),
             };
         };
         let avail = self.end - self.start;

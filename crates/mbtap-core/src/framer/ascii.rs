@@ -86,6 +86,8 @@ impl AsciiFramer {
             check_ok,
             gap_violation_ns: (self.max_gap > ASCII_CHAR_TIMEOUT_NS).then_some(self.max_gap),
             short_gap_before_ns: None,
+            // ASCII frames are cut at their ':' and CR LF; the read time of the ':' bounds the start.
+            gap_before_known: true,
             bad_chars,
         }));
         self.buf.clear();

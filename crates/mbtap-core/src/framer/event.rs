@@ -20,6 +20,10 @@ pub struct Frame<'a> {
     pub gap_violation_ns: Option<u64>,
     /// The silence before this frame, known to be shorter than t3.5 after the previous frame, in ns.
     pub short_gap_before_ns: Option<u64>,
+    /// The silence before this frame is bounded by the reads' timing: its first byte began a
+    /// read after an earlier one. False when it came in the same read as the bytes before it —
+    /// then nobody can say when it started, and a latency measured to it would be invented.
+    pub gap_before_known: bool,
     /// ASCII only: characters that are not hex digits where digits belong.
     pub bad_chars: bool,
 }

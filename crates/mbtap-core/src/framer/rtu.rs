@@ -326,6 +326,7 @@ impl RtuFramer {
             check_ok: true,
             gap_violation_ns: None,
             short_gap_before_ns: (self.after_frame && ub < self.t35).then_some(ub),
+            gap_before_known: ub != u64::MAX,
             bad_chars: false,
         }));
         self.known_units[usize::from(chunk.bytes[0])] = true;
@@ -930,6 +931,7 @@ impl RtuFramer {
             check_ok,
             gap_violation_ns: (inner_gap >= self.t15).then_some(inner_gap),
             short_gap_before_ns,
+            gap_before_known: ub != u64::MAX,
             bad_chars: false,
         }));
         if check_ok {

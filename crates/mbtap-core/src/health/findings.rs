@@ -33,6 +33,24 @@ impl Health {
             }
         };
         let pattern = |unit: Option<u8>| self.clustering(unit).map_or_else(String::new, |p| format!("; {p}"));
+        // Nothing heard is not a healthy bus: say what was heard, and nothing else.
+        if !self.in_step {
+            let heard = self.noise_bytes + self.frame_bytes + self.cut_at_start;
+            let summary = if heard == 0 {
+                "no valid frame: nothing was heard at all — a silent line (no master polling, the wrong port, A and B swapped or unconnected, the adapter's receiver off)".to_owned()
+            } else {
+                format!(
+                    "no valid frame in {heard} byte(s) heard: the wrong baud rate, parity or mode (try mbtap scan), A and B swapped, or something that does not speak Modbus RTU/ASCII"
+                )
+            };
+            let t = Tally {
+                count: heard.max(1),
+                first: self.first.unwrap_or(0),
+                last: self.last.unwrap_or(0),
+                evidence: self.first.into_iter().collect(),
+            };
+            push("no_valid_frames", None, &t, summary);
+        }
         let total_bytes = self.noise_bytes + self.frame_bytes;
         let garbage = total_bytes > 64 && ratio(self.noise_bytes, total_bytes) > GARBAGE_SHARE;
         if garbage {
@@ -59,13 +77,25 @@ impl Health {
         let failing: Vec<u8> = self.units.iter().filter(|(_, u)| u.bad_response.count > 0).map(|(&k, _)| k).collect();
         let bus_wide = answering.len() > 1 && answering.iter().all(|u| failing.contains(u));
         if bus_wide && !garbage {
-            let all = self.units.values().fold(Tally::default(), |all, u| all.merged(&u.bad_response));
+            let all = self.units.values().fold(self.bus_bad.clone(), |all, u| all.merged(&u.bad_response));
             push(
                 "check_errors",
                 None,
                 &all,
                 format!(
                     "answers with failed checks from every unit: the cabling, termination or grounding of the bus{}",
+                    pattern(None)
+                ),
+            );
+        }
+        if !bus_wide && !garbage {
+            push(
+                "check_errors",
+                None,
+                &self.bus_bad,
+                format!(
+                    "{} frame(s) in place of an answer failed their check with a damaged address: the bus garbled them, no unit can be named{}",
+                    self.bus_bad.count,
                     pattern(None)
                 ),
             );
@@ -149,6 +179,14 @@ impl Health {
                 );
             }
             push(
+                "fast_answer",
+                Some(unit),
+                &u.fast_answers,
+                format!(
+                    "unit {unit} answers less than t3.5 after the request (Serial Line v1.02 §2.5.1.1): other devices may take its answer for part of the request"
+                ),
+            );
+            push(
                 "gap_inside_frame",
                 Some(unit),
                 &u.gaps,
@@ -200,13 +238,18 @@ impl Health {
                 availability_percent: if u.transactions == 0 {
                     0.0
                 } else {
-                    100.0 - ratio(u.no_response.count + u.bad_response.count, u.transactions) * 100.0
+                    100.0 - ratio(u.no_response.count + u.bad_response.count + u.unclear, u.transactions) * 100.0
                 },
                 latency_p50_ns: pct(50),
                 latency_p99_ns: pct(99),
                 latency_max_ns: latencies.last().copied(),
                 poll_period_ns: periods.get(periods.len() / 2).copied(),
             });
+        }
+        if !self.in_step {
+            // Noise or check errors would only restate it; mostly garbage still points at the
+            // line settings.
+            findings.retain(|f| matches!(f.kind, "no_valid_frames" | "wrong_line_settings"));
         }
         findings.sort_by_key(|f| (f.first_t_ns, f.kind));
         let (timeline, latencies) = self.plots();

@@ -11,7 +11,10 @@
 //! way two answers on top of each other garble), `implausible_jump` (a reading moving over half
 //! its documented range between two reads), `exception_storm`, `value_out_of_range` (outside
 //! the profile's range), `turnaround_glitch` (a garbage byte right after the frames of one
-//! sender: the line is not biased). Check errors say whether they come in bursts or steadily.
+//! sender: the line is not biased), `fast_answer` (a unit answering less than t3.5 after the
+//! request), `no_valid_frames` (nothing heard, or nothing that frames: never "healthy").
+//! Check errors say whether they come in bursts or steadily; a damaged answer counts against a
+//! unit only when its address byte is the unit's.
 
 mod findings;
 pub mod html;
@@ -51,7 +54,7 @@ const DOUBLED_WITHIN_NS: u64 = 500_000_000;
 /// Below this share of bytes in valid frames, the line settings are suspect.
 const GARBAGE_SHARE: f64 = 0.5;
 
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 struct Tally {
     count: u64,
     first: u64,
@@ -109,6 +112,10 @@ struct UnitState {
     /// Valid frames this unit sent, and the turnaround glitches right after them.
     sent: u64,
     glitches: Tally,
+    /// Answers that began less than t3.5 after the request (Serial Line v1.02 §2.5.1.1).
+    fast_answers: Tally,
+    /// Requests answered only by a damaged frame whose address is not this unit's.
+    unclear: u64,
     /// The last raw reading of each documented value with a range.
     last_values: BTreeMap<(crate::profile::Table, u16), i64>,
     latencies: Vec<u64>,
@@ -154,6 +161,9 @@ pub struct Health {
     bad_frames: u64,
     fast_master: Tally,
     second_master: Tally,
+    /// Failed frames taking a request's place whose address is not the asked unit's: damage
+    /// the bus suffered, not evidence against a unit.
+    bus_bad: Tally,
     /// Valid requests the master sent, and the turnaround glitches right after them.
     master_sent: u64,
     master_glitches: Tally,
@@ -302,8 +312,14 @@ impl Health {
         {
             self.units.entry(u).or_default().gaps.add(frame.t_start.0);
         }
-        if frame.short_gap_before_ns.is_some() && role == Role::Request {
-            self.fast_master.add(frame.t_start.0);
+        if frame.short_gap_before_ns.is_some() {
+            match (role, unit) {
+                (Role::Request, _) => self.fast_master.add(frame.t_start.0),
+                (Role::Response, Some(u)) if frame.check_ok => {
+                    self.units.entry(u).or_default().fast_answers.add(frame.t_start.0);
+                }
+                _ => {}
+            }
         }
     }
 
@@ -326,8 +342,15 @@ impl Health {
             // Addressed to everyone, answered by no one: not a unit's figures.
             return;
         }
+        // A damaged answer counts against the unit only when its address byte says it is the
+        // unit's: otherwise the bus damaged something nobody can name.
+        let unclear = t.outcome == Outcome::BadResponse && t.response.and_then(<[u8]>::first) != Some(&t.unit);
+        if unclear {
+            self.bus_bad.add(at);
+        }
         let u = self.units.entry(t.unit).or_default();
         u.transactions += 1;
+        u.unclear += u64::from(unclear);
         let previous = self.last_ok.take();
         let answered = matches!(t.outcome, Outcome::Ok | Outcome::Exception(_));
         match t.outcome {
@@ -349,8 +372,8 @@ impl Health {
                 u.exception_tally.add(at);
             }
             Outcome::NoResponse => u.no_response.add(at),
-            Outcome::BadResponse => u.bad_response.add(at),
-            Outcome::Broadcast | Outcome::Orphan | Outcome::WrongUnit(_) => {}
+            Outcome::BadResponse if t.response.and_then(<[u8]>::first) == Some(&t.unit) => u.bad_response.add(at),
+            Outcome::BadResponse | Outcome::Broadcast | Outcome::Orphan | Outcome::WrongUnit(_) => {}
         }
         if let (Some(l), Some(p), true) = (t.latency_ns, overtaken, answered) {
             // Answered after another request went out: which master sent that one?

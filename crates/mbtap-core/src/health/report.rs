@@ -121,7 +121,7 @@ impl Report {
             "bus: {span} of traffic, {} frames ({} failed checks), {} transactions, {} bytes of noise",
             self.frames, self.bad_frames, self.transactions, self.noise_bytes
         );
-        if self.cut_at_start_bytes > 0 {
+        if self.cut_at_start_bytes > 0 && self.frames > self.bad_frames {
             let _ = writeln!(
                 s,
                 "     ({} byte(s) before the first good frame: listening began mid-frame; not counted as noise)",
@@ -138,6 +138,11 @@ impl Report {
             let _ = writeln!(s, "findings:");
             for f in &self.findings {
                 let who = f.unit.map_or_else(|| "bus".to_owned(), |u| format!("unit {u}"));
+                if f.evidence.is_empty() {
+                    // Nothing to point at in time (nothing was heard at all).
+                    let _ = writeln!(s, "  [{}] {who}: {}", f.kind, f.summary);
+                    continue;
+                }
                 let _ = writeln!(
                     s,
                     "  [{}] {who}: {} ({}×, from {} to {})",

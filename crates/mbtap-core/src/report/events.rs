@@ -136,6 +136,8 @@ fn transaction_text(t: &Transaction<'_>) -> String {
     }
     if let Some(l) = t.latency_ns {
         let _ = write!(line, " latency {}.{:03} ms", l / 1_000_000, (l / 1000) % 1000);
+    } else if t.response.is_some() && matches!(t.outcome, Outcome::Ok | Outcome::Exception(_)) {
+        line.push_str(" latency not measurable (request and answer in one read)");
     }
     if t.input_ended {
         line.push_str(" (input ended while waiting)");
@@ -221,6 +223,13 @@ pub fn json(e: &Event<'_>) -> J {
                     m.insert("responder".into(), json!(u));
                 }
                 _ => {}
+            }
+            if t.latency_ns.is_none()
+                && t.response.is_some()
+                && matches!(t.outcome, Outcome::Ok | Outcome::Exception(_))
+            {
+                // Request and answer came in one read: no latency rather than an invented 0.
+                m.insert("latency_measurable".into(), json!(false));
             }
             if let Some(l) = t.latency_ns {
                 m.insert("latency_ns".into(), json!(l));
