@@ -36,6 +36,13 @@ pub struct Args {
     /// Probability that a response pauses inside (a slow slave).
     #[arg(long, default_value_t = 0.02)]
     pub slow: f64,
+    /// Probability that a frame is followed by a turnaround glitch byte (`00` after the
+    /// master, `FE`/`FF` after a slave): a line without fail-safe biasing.
+    #[arg(long, default_value_t = 0.0)]
+    pub glitch: f64,
+    /// Probability that a register-read answer is a CRC look-alike (its CRC's high byte 00).
+    #[arg(long, default_value_t = 0.0)]
+    pub lookalike: f64,
     /// Instead of random traffic, send these frames (one per line, hex or `:ASCII`, as
     /// `decode` reads them) back to back with a 5 ms turnaround, one read per byte.
     #[arg(long)]
@@ -51,7 +58,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
 
 /// `--frames LIST`: the listed frames back to back.
 fn frames(args: &Args, list: &Path) -> anyhow::Result<ExitCode> {
-    let Args { out, line, .. } = args;
+    let Args { out, line, observe, .. } = args;
     let (mode, settings, _) = line.overrides().resolve();
     let text = std::fs::read_to_string(list).with_context(|| format!("reading {}", list.display()))?;
     let mut frames = Vec::new();
@@ -71,6 +78,7 @@ fn frames(args: &Args, list: &Path) -> anyhow::Result<ExitCode> {
         mode,
         settings,
         1_700_000_000_000_000_000,
+        model(*observe),
     )
     .with_context(|| format!("writing {}", out.display()))?;
     eprintln!("mbtap: wrote {} ({} frames, {n} bytes, {settings} {})", out.display(), frames.len(), mode.name());
@@ -79,17 +87,26 @@ fn frames(args: &Args, list: &Path) -> anyhow::Result<ExitCode> {
 
 /// Random traffic with noise, corruption and slow slaves, as the observation model reads it.
 fn random(args: &Args) -> anyhow::Result<ExitCode> {
-    let Args { out, transactions, seed, line, observe, noise, corrupt, slow, .. } = args;
-    let (transactions, seed, noise, corrupt, slow) = (*transactions, *seed, *noise, *corrupt, *slow);
+    let Args { out, transactions, seed, line, observe, noise, corrupt, slow, glitch, lookalike, .. } = args;
+    let (transactions, seed) = (*transactions, *seed);
+    for (name, p) in
+        [("noise", noise), ("corrupt", corrupt), ("slow", slow), ("glitch", glitch), ("lookalike", lookalike)]
+    {
+        anyhow::ensure!((0.0..=1.0).contains(p), "--{name} {p}: expected a probability from 0 to 1");
+    }
     let (_, settings, _) = line.overrides().resolve();
-    let cfg = TrafficConfig { seed, line: settings, transactions, noise, corrupt, slow, ..TrafficConfig::default() };
-    let model = match observe {
-        ObserveArg::PerByte => Observation::PerByte,
-        ObserveArg::PerFrame => Observation::PerFrame,
-        ObserveArg::Fifo => Observation::FIFO_16550,
-        ObserveArg::Usb1 => Observation::USB_1MS,
-        ObserveArg::Usb16 => Observation::USB_16MS,
+    let cfg = TrafficConfig {
+        seed,
+        line: settings,
+        transactions,
+        noise: *noise,
+        corrupt: *corrupt,
+        slow: *slow,
+        glitch: *glitch,
+        lookalike: *lookalike,
+        ..TrafficConfig::default()
     };
+    let model = model(*observe);
     let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
     let (chunks, bytes) = mbtap_core::traffic::capture::write_capture(io::BufWriter::new(file), &cfg, model)
         .with_context(|| format!("writing {}", out.display()))?;
@@ -114,4 +131,15 @@ pub enum ObserveArg {
     Usb1,
     /// USB adapter, 16 ms latency timer (FTDI default).
     Usb16,
+}
+
+/// The observation model an `--observe` value names.
+fn model(o: ObserveArg) -> Observation {
+    match o {
+        ObserveArg::PerByte => Observation::PerByte,
+        ObserveArg::PerFrame => Observation::PerFrame,
+        ObserveArg::Fifo => Observation::FIFO_16550,
+        ObserveArg::Usb1 => Observation::USB_1MS,
+        ObserveArg::Usb16 => Observation::USB_16MS,
+    }
 }

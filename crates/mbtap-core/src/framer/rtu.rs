@@ -158,6 +158,9 @@ pub struct RtuFramer {
     since_glitch: u32,
     /// Byte values this line's glitches have taken (`00`, `FE`, `FF` on most transceivers).
     glitch_values: [bool; 256],
+    /// While the garbage before a found frame goes out: where that frame starts (a lone byte
+    /// glued to its start is the sender's driver switching on).
+    frame_next_at: Option<usize>,
 }
 
 impl RtuFramer {
@@ -186,6 +189,7 @@ impl RtuFramer {
             glitch_at: None,
             since_glitch: u32::MAX,
             glitch_values: [false; 256],
+            frame_next_at: None,
         }
     }
 
@@ -410,7 +414,13 @@ impl RtuFramer {
         let after_glitch = g == 1 && self.at_glitch(self.head);
         let unconfirmed_start = g > 0 && !self.known_units[usize::from(addr)] && !self.boundary_at(g) && !after_glitch;
         let pdu = &s[1..];
-        let resp = response_len(pdu);
+        // Address 0 is a broadcast: a request, of a write, never answered (Serial Line v1.02
+        // §2.1) — no other reading of it is worth waiting for.
+        let broadcast = addr == 0;
+        if broadcast && !matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16) {
+            return Try::NotHere;
+        }
+        let resp = if broadcast { PduLength::Unknown } else { response_len(pdu) };
         let req = if fc & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
         let mut need_more = false;
         let mut need = usize::MAX;
@@ -660,7 +670,9 @@ impl RtuFramer {
             }
             match self.try_frame_at(self.garbage, flushing) {
                 Try::Found(len, reading) => {
+                    self.frame_next_at = Some(self.head + self.garbage);
                     self.emit_garbage(self.garbage, emit);
+                    self.frame_next_at = None;
                     self.emit_frame(len, Some(reading), emit);
                 }
                 Try::NotHere => {
@@ -870,6 +882,21 @@ impl RtuFramer {
         // a frame of a known unit only after it.
         let i = a - self.head;
         let v = self.buf[a];
+        // A lone byte glued to the start of a frame, after a silence: the glitch of the driver
+        // switching on (seen as a `00` before answers on real lines).
+        if b - a == 1
+            && self.frame_next_at == Some(b)
+            && self.gap_lb[b] < self.t15
+            && self.gap_lb[a] >= self.t35
+            && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitch_values[usize::from(v)])
+            && !self.at_glitch(a)
+        {
+            // The silence before the glitch is the silence before the frame.
+            self.gap_lb[b] = self.gap_lb[a];
+            self.gap_ub[b] = self.gap_ub[a];
+            self.emit_glitch(a, emit);
+            return;
+        }
         if self.at_glitch(a)
             && (b - a == 1
                 // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line

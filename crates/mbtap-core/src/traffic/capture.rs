@@ -7,7 +7,8 @@ use crate::capture::PcapNgWriter;
 use crate::chunk::Timestamp;
 use crate::framer::LineSettings;
 use crate::line_args::LineOverrides;
-use crate::traffic::{Observation, TrafficConfig, generate, observe};
+use crate::traffic::generate::{Truth, TruthKind};
+use crate::traffic::{Observation, TrafficConfig, Wire, generate, observe};
 
 /// Transactions generated at a time: memory stays bounded however long the capture.
 const BATCH: usize = 100_000;
@@ -49,8 +50,9 @@ pub fn write_capture<W: Write>(out: W, cfg: &TrafficConfig, model: Observation) 
     Ok((chunks_total, bytes_total))
 }
 
-/// Writes `frames` (wire bytes) to `out` as a per-byte capture: each frame sent at the line's
-/// character rate, 5 ms of silence between frames. Returns the bytes written.
+/// Writes `frames` (wire bytes; a line may hold glitch bytes around its frame) to `out` as
+/// `model` reads them: each frame sent at the line's character rate, 5 ms of silence between
+/// frames. Returns the bytes written.
 ///
 /// # Errors
 /// I/O errors.
@@ -60,20 +62,26 @@ pub fn write_frames<W: Write>(
     mode: SerialMode,
     line: LineSettings,
     start_ns: u64,
+    model: Observation,
 ) -> std::io::Result<usize> {
-    let mut w = PcapNgWriter::new(out)?;
-    w.add_serial_interface("frames", &LineOverrides::describe(mode, line, 0))?;
     let c = line.char_ns();
+    let mut wire = Wire::default();
     let mut t = start_ns;
-    let mut n = 0;
     for f in frames {
-        for b in f {
+        let start = wire.bytes.len();
+        for &b in f {
             t += c;
-            w.write_packet(0, Timestamp(t), std::slice::from_ref(b))?;
-            n += 1;
+            wire.bytes.push(b);
+            wire.end_ns.push(t);
         }
+        wire.truth.push(Truth { kind: TruthKind::Good, start, end: wire.bytes.len(), is_request: false });
         t += 5_000_000;
     }
+    let mut w = PcapNgWriter::new(out)?;
+    w.add_serial_interface("frames", &LineOverrides::describe(mode, line, model.latency_ns(c)))?;
+    for (t, r) in observe(&wire, model, c) {
+        w.write_packet(0, Timestamp(t), &wire.bytes[r])?;
+    }
     w.flush()?;
-    Ok(n)
+    Ok(wire.bytes.len())
 }
