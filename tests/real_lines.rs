@@ -305,3 +305,20 @@ fn an_answer_sooner_than_t35_is_a_fast_answer() {
     let fast = r.findings.iter().find(|f| f.kind == "fast_answer").unwrap_or_else(|| panic!("{}", r.text()));
     assert_eq!((fast.unit, fast.count), (Some(5), 10));
 }
+
+/// `cat /dev/ttyUSB0 > dump.bin` starts wherever the line was: mid-frame, as a rule. `scan`
+/// of such a dump found nothing at all; the frames after the cut are found now.
+#[test]
+fn scan_of_a_raw_dump_that_starts_mid_frame_finds_the_frames() {
+    let wire = generate(&TrafficConfig { seed: 36, line: L19200, transactions: 300, ..TrafficConfig::default() });
+    let good = wire.truth.iter().filter(|t| t.kind == mbtap_core::traffic::generate::TruthKind::Good).count() as u64;
+    for cut in [1, 3, 5] {
+        // A raw dump: no timing at all, one chunk.
+        let dump = vec![(0u64, wire.bytes[cut..].to_vec())];
+        let scores = mbtap_core::scan::scan_stored(&dump, L19200);
+        let best = &scores[0];
+        assert_eq!(best.mode, mbtap_core::analyzer::SerialMode::Rtu);
+        // All but the cut one, less a few vendor frames that only timing could have ended.
+        assert!(best.score.valid_frames * 100 >= good * 99, "cut {cut}: {} of {good} frames", best.score.valid_frames);
+    }
+}
