@@ -156,8 +156,11 @@ pub struct RtuFramer {
     glitch_at: Option<usize>,
     /// Frames since the last glitch (`u32::MAX`: none seen).
     since_glitch: u32,
-    /// Byte values this line's glitches have taken (`00`, `FE`, `FF` on most transceivers).
-    glitch_values: [bool; 256],
+    /// How often each byte value was a glitch (`00`, `FE`, `FF` on most transceivers); see
+    /// [`Self::glitch_value`].
+    glitch_counts: [u32; 256],
+    /// The count of the commonest glitch value.
+    glitch_top: u32,
     /// While the garbage before a found frame goes out: where that frame starts (a lone byte
     /// glued to its start is the sender's driver switching on).
     frame_next_at: Option<usize>,
@@ -188,7 +191,8 @@ impl RtuFramer {
             expect: Expect::Unknown,
             glitch_at: None,
             since_glitch: u32::MAX,
-            glitch_values: [false; 256],
+            glitch_counts: [0; 256],
+            glitch_top: 0,
             frame_next_at: None,
         }
     }
@@ -196,6 +200,15 @@ impl RtuFramer {
     /// Has this line shown turnaround glitches lately?
     fn glitchy(&self) -> bool {
         self.since_glitch < GLITCHY_FOR
+    }
+
+    /// Is `v` a value this line's glitches take? A transceiver leaves the same one or two values
+    /// again and again; a byte taken for a glitch by mistake is a value seen now and then.
+    /// Counted values become glitch values from the fourth time, and only while they are at
+    /// least an eighth as common as the commonest.
+    fn glitch_value(&self, v: u8) -> bool {
+        let n = self.glitch_counts[usize::from(v)];
+        n >= 4 && n.saturating_mul(8) >= self.glitch_top
     }
 
     /// Does reading `l` bytes at live index `g` as `reading` give what the bus expects next?
@@ -417,7 +430,7 @@ impl RtuFramer {
         // Address 0 is a broadcast: a request, of a write, never answered (Serial Line v1.02
         // §2.1) — no other reading of it is worth waiting for.
         let broadcast = addr == 0;
-        if broadcast && !matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16) {
+        if !sane_header(s) {
             return Try::NotHere;
         }
         let resp = if broadcast { PduLength::Unknown } else { response_len(pdu) };
@@ -555,7 +568,7 @@ impl RtuFramer {
     fn glitch_then_start(&self, i: usize) -> bool {
         let live = &self.buf[self.head..];
         self.glitchy()
-            && live.get(i).is_some_and(|&v| self.glitch_values[usize::from(v)])
+            && live.get(i).is_some_and(|&v| self.glitch_value(v))
             && live.get(i + 1).is_some_and(|&a| a != 0)
             && self.looks_like_frame_start(i + 1)
     }
@@ -586,7 +599,7 @@ impl RtuFramer {
         }
         // Broadcasts carry writes only (Modbus over Serial Line v1.02 §2.1), and every write has
         // a fixed layout: address 0 with a length the structure cannot tell is garbage.
-        if s[0] == 0 {
+        if s[0] == 0 || !sane_header(s) {
             return Try::NotHere;
         }
         let max = s.len().min(RTU_MAX_LEN);
@@ -783,7 +796,14 @@ impl RtuFramer {
 
     /// A whole frame: it looks like one, its CRC holds, and its length is one its structure allows.
     fn plausible_frame(&self, f: &[u8]) -> bool {
-        if !self.looks_like_frame(f) || !Self::crc_ok(f) {
+        // A code with no public layout that is not a user-defined one either (MAP v1.1b3 §5):
+        // from garbage, a chance CRC match is likelier than such a frame.
+        let base = FunctionCode::from(f.get(1).map_or(0, |fc| fc & !EXCEPTION_FLAG));
+        if !self.looks_like_frame(f)
+            || !sane_header(f)
+            || !(base.name().is_some() || base.is_user_defined())
+            || !Self::crc_ok(f)
+        {
             return false;
         }
         let pdu = &f[1..];
@@ -888,7 +908,7 @@ impl RtuFramer {
             && self.frame_next_at == Some(b)
             && self.gap_lb[b] < self.t15
             && self.gap_lb[a] >= self.t35
-            && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitch_values[usize::from(v)])
+            && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitch_value(v))
             && !self.at_glitch(a)
         {
             // The silence before the glitch is the silence before the frame.
@@ -902,7 +922,7 @@ impl RtuFramer {
                 // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line
                 // is known to glitch, only the values drivers leave (`FE`, `FF`) count.
                 || (v > MAX_ADDRESS && (self.glitchy() || v >= 0xFE))
-                || (self.glitchy() && self.glitch_values[usize::from(v)])
+                || (self.glitchy() && self.glitch_value(v))
                 || ((self.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
                     && !self.looks_like_frame_start(i)
                     && self.looks_like_frame_start(i + 1)))
@@ -915,7 +935,7 @@ impl RtuFramer {
         }
         // A damaged frame with its turnaround glitch, on a line that glitches: the last byte
         // takes a value this line's glitches take.
-        if b - a > RTU_MIN_LEN && self.glitchy() && self.glitch_values[usize::from(self.buf[b - 1])] {
+        if b - a > RTU_MIN_LEN && self.glitchy() && self.glitch_value(self.buf[b - 1]) {
             self.emit_frame(b - a - 1, None, emit);
             self.emit_unframed(b - 1, b, emit);
             return;
@@ -981,7 +1001,9 @@ impl RtuFramer {
             t_end: Timestamp(self.end[a]),
         }));
         self.since_glitch = 0;
-        self.glitch_values[usize::from(self.buf[a])] = true;
+        let n = &mut self.glitch_counts[usize::from(self.buf[a])];
+        *n = n.saturating_add(1);
+        self.glitch_top = self.glitch_top.max(*n);
         self.glitch_at = None;
         self.head = a + 1;
         self.wait_at = usize::MAX;
@@ -1046,5 +1068,17 @@ fn next_expect(expect: Expect, f: &[u8], reading: Option<Reading>) -> Expect {
         Some(Reading::Either | Reading::Unknown) if answers_pending(expect) => Expect::Request,
         Some(Reading::Either | Reading::Unknown) if expect == Expect::Request => as_request(f),
         None | Some(_) => Expect::Unknown,
+    }
+}
+
+/// Could a frame start with these bytes at all? Function code 0 does not exist (MAP v1.1b3
+/// §5: codes 1–127), nor its exception 0x80; a broadcast (address 0) carries a write only
+/// (Serial Line v1.02 §2.1). A CRC that matches by chance over damage (1 in 65 536) is taken
+/// only where the header is possible.
+fn sane_header(f: &[u8]) -> bool {
+    match *f {
+        [_, fc, ..] if fc & !EXCEPTION_FLAG == 0 => false,
+        [0, fc, ..] => matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16),
+        _ => true,
     }
 }
