@@ -261,6 +261,47 @@ fn read_only_allowlists_exceptions_and_broadcasts() {
     }
 }
 
+/// Issue 15: `--read-only` let diagnostics (restart, listen-only — also broadcast), 2B/0D,
+/// vendor codes, 0x00, 0x7F and 0x80+ onto the line; a broadcast read went out as `00 03 …`.
+/// Each is now answered 01 and nothing reaches the line; an explicitly allowed vendor read passes.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn read_only_refuses_everything_that_could_change_a_device() {
+    let d = dir("read-only-list");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, others) =
+        bridge(&d.join("bus"), &["--read-only", "--allow-function", "0x46", "--metrics", "127.0.0.1:0"]);
+    let mut c = Client::connect(&addr);
+    let refused: [&[u8]; 9] = [
+        &[0x08, 0x00, 0x01, 0x00, 0x00], // diagnostics: restart communications
+        &[0x08, 0x00, 0x04, 0x00, 0x00], // diagnostics: force listen-only mode
+        &[0x2B, 0x0D, 0x00, 0x00],       // CANopen general reference
+        &[0x41, 0x01, 0x02],             // vendor code
+        &[0x64, 0x00],                   // vendor code
+        &[0x00],                         // no such function
+        &[0x7F],                         // no such function
+        &[0x90, 0x00],                   // exception-shaped
+        &[0x17, 0x00, 0x00, 0x00, 0x01, 0x00, 0x68, 0x00, 0x01, 0x02, 0x00, 0x07], // read/write
+    ];
+    for (tid, pdu) in (10u16..).zip(refused) {
+        let answer = c.call(tid, 1, pdu);
+        assert_eq!(answer, [pdu[0] | 0x80, 0x01], "{pdu:02X?}");
+    }
+    // The same restart as a broadcast to every unit: refused too.
+    assert_eq!(c.call(30, 0, &[0x08, 0x00, 0x01, 0x00, 0x00]), [0x88, 0x01]);
+    // A broadcast read: the serial-line spec allows broadcast for writes only.
+    assert_eq!(c.call(31, 0, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x83, 0x01]);
+    // Diagnostics 0000 is an echo: it passes (the MK4 has no FC 08 and says so itself).
+    let echo = c.call(32, 1, &[0x08, 0x00, 0x00, 0x12, 0x34]);
+    assert_eq!(echo[0] & 0x7F, 0x08, "{echo:02X?}");
+    let text = metrics(&others[0]);
+    assert!(text.lines().any(|l| l == "mbtap_bridge_refused_total{reason=\"read_only\"} 10"), "{text}");
+    assert!(text.lines().any(|l| l == "mbtap_bridge_refused_total{reason=\"broadcast_not_write\"} 1"), "{text}");
+    // Only the echo reached the line.
+    assert!(text.lines().any(|l| l == "mbtap_bridge_requests_total{unit=\"1\"} 1"), "{text}");
+    assert!(!text.contains("requests_total{unit=\"0\"}"), "{text}");
+}
+
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn rtu_over_tcp_carries_raw_frames() {

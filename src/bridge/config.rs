@@ -158,6 +158,13 @@ pub fn options(text: &str) -> Result<Vec<String>, String> {
             toml::Value::Boolean(false) => {}
             // `--key=value` in one token: a value such as `-5` stays a value, and clap's
             // refusal then names the key and the value.
+            // An empty allow-list would let everyone in (the lists restrict only when given):
+            // refuse it rather than fail open.
+            toml::Value::Array(items) if items.is_empty() && matches!(long.as_str(), "allow-ip" | "allow-function") => {
+                return Err(format!(
+                    "{key} = []: an empty allow-list would let every client (or function) through; list what is allowed, or remove the key to allow all"
+                ));
+            }
             toml::Value::Array(items) => {
                 for item in items {
                     out.push(format!("{flag}={}", scalar(item)?));
@@ -232,6 +239,14 @@ mod tests {
         let e = merge(&file, cli, Some(&m)).unwrap_err().to_string();
         assert!(e.contains(file.to_str().unwrap()) && e.contains("timeout-ms") && e.contains("-5"), "{e}");
         assert!(!e.contains("unexpected argument"), "{e}");
+    }
+
+    #[test]
+    fn an_empty_allow_list_refuses_to_start() {
+        let file = file("empty-allow", "[bridge]\nallow-ip = []\n");
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", file.to_str().unwrap()]);
+        let e = format!("{:#}", merge(&file, cli, Some(&m)).unwrap_err());
+        assert!(e.contains("allow-ip = []") && e.contains(file.to_str().unwrap()), "{e}");
     }
 
     #[test]

@@ -39,6 +39,12 @@ pub struct ReverseOptions {
     pub timeout: Duration,
     /// Time from the end of a request to the answer (a slave's turnaround).
     pub turnaround: Duration,
+    /// As on the forward bridge: only what cannot change a device is forwarded
+    /// ([`super::server::read_only_safe`], plus `allow_functions`); the rest is answered 01.
+    pub read_only: bool,
+    /// Without `read_only`: only these function codes are forwarded (None: all); with it, these
+    /// are forwarded too.
+    pub allow_functions: Option<Vec<u8>>,
 }
 
 /// Runs until the future is dropped; the serial port is reopened when it goes away. With
@@ -118,15 +124,32 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
                 continue;
             }
             metrics.request(r.unit);
-            let answer = forward(opts, side.tcp, side.tid, r.unit, &r.pdu).await;
-            let pdu = match answer {
-                Ok(pdu) => {
-                    metrics.response(r.unit, &pdu);
-                    pdu
-                }
-                Err(code) => {
-                    metrics.gateway_exception(r.unit, code);
-                    vec![r.pdu.first().copied().unwrap_or(0) | 0x80, code]
+            let fc = r.pdu.first().copied().unwrap_or(0);
+            let listed = opts.allow_functions.as_ref().map(|a| a.contains(&fc));
+            let refused = if opts.read_only {
+                (!super::server::read_only_safe(&r.pdu) && listed != Some(true)).then_some("read_only")
+            } else if listed == Some(false) {
+                Some("function_not_allowed")
+            } else if broadcast && !matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16) {
+                // Broadcasts carry writes only (Serial Line v1.02 §2.1).
+                Some("broadcast_not_write")
+            } else {
+                None
+            };
+            let pdu = if let Some(reason) = refused {
+                // Refused here: never forwarded, answered 01 (MAP v1.1b3 §7: Illegal Function).
+                metrics.refused(reason);
+                vec![fc | 0x80, super::server::ILLEGAL_FUNCTION]
+            } else {
+                match forward(opts, side.tcp, side.tid, r.unit, &r.pdu).await {
+                    Ok(pdu) => {
+                        metrics.response(r.unit, &pdu);
+                        pdu
+                    }
+                    Err(code) => {
+                        metrics.gateway_exception(r.unit, code);
+                        vec![fc | 0x80, code]
+                    }
                 }
             };
             if broadcast {

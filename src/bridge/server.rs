@@ -25,7 +25,7 @@ use mbtap_core::proto::{encode_rtu, encode_tcp};
 const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
 
 /// Exception 0x01: the function is not allowed here (MAP v1.1b3 §7).
-const ILLEGAL_FUNCTION: u8 = 0x01;
+pub(crate) const ILLEGAL_FUNCTION: u8 = 0x01;
 
 /// Units served by one serial line.
 #[derive(Debug, Clone)]
@@ -39,9 +39,11 @@ pub struct Route {
 pub struct ServerOptions {
     /// Raw RTU frames (address, PDU, CRC) over TCP instead of MBAP.
     pub rtu_over_tcp: bool,
-    /// Writes are answered with exception 01 and never reach the line.
+    /// Only requests that cannot change a device pass ([`read_only_safe`]); everything else is
+    /// answered with exception 01 and never reaches the line.
     pub read_only: bool,
-    /// Only these function codes pass (None: all).
+    /// Without `read_only`: only these function codes pass (None: all). With it: these pass
+    /// too, on top of the read-only set — how a vendor read such as 0x46 is let through.
     pub allow_functions: Option<Vec<u8>>,
     /// Only these client addresses may connect (empty: all).
     pub allow_ips: Vec<IpNet>,
@@ -73,6 +75,14 @@ impl std::str::FromStr for IpNet {
             Some(p) => p.trim().parse::<u8>().ok().filter(|&p| p <= max).ok_or_else(bad)?,
             None => max,
         };
+        // An IPv4-mapped IPv6 address (::ffff:10.0.0.5) is that IPv4 address: peers are compared
+        // in their IPv4 form, so the net must be too, or it would match no one.
+        if let IpAddr::V6(v6) = addr
+            && let Some(v4) = v6.to_ipv4_mapped()
+            && prefix >= 96
+        {
+            return Ok(Self { addr: IpAddr::V4(v4), prefix: prefix - 96 });
+        }
         Ok(Self { addr, prefix })
     }
 }
@@ -98,9 +108,28 @@ impl IpNet {
     }
 }
 
-/// Function codes that write (MAP v1.1b3 §6): refused in read-only mode.
-fn is_write(fc: u8) -> bool {
-    matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16 | 0x17)
+/// Can this request not change a device? The read-only allow-list — everything not on it,
+/// vendor and unknown codes included, is refused in read-only mode. From MAP v1.1b3 §6: reads
+/// of bits and registers (01, 02, 03, 04, §6.1–6.4), Read Exception Status (07, §6.7), Get Comm
+/// Event Counter / Log (0B, 0C, §6.9–6.10), Report Server ID (11, §6.13), Read File Record (14,
+/// §6.14), Read FIFO Queue (18, §6.18), Read Device Identification (2B / MEI 0E, §6.21), and
+/// Diagnostics only as sub-function 0000 Return Query Data (08, §6.8: an echo; every other
+/// sub-function restarts, silences or clears something — 0001 restarts communications, 0004
+/// forces listen-only mode, 000A clears counters).
+#[must_use]
+pub fn read_only_safe(pdu: &[u8]) -> bool {
+    matches!(
+        *pdu,
+        [0x01 | 0x02 | 0x03 | 0x04 | 0x07 | 0x0B | 0x0C | 0x11 | 0x14 | 0x18, ..]
+            | [0x08, 0x00, 0x00, ..]
+            | [0x2B, 0x0E, ..]
+    )
+}
+
+/// Function codes a broadcast may carry (Serial Line v1.02 §2.1: broadcasts are writes only,
+/// MAP v1.1b3 §6.5, 6.6, 6.11, 6.12, 6.15, 6.16).
+fn broadcastable(fc: u8) -> bool {
+    matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16)
 }
 
 /// Accepts connections forever.
@@ -264,10 +293,13 @@ fn request(
         }
         reply(Answer::Now(Reply::Gateway(code)))
     };
-    if opts.read_only && is_write(function) {
-        return refuse("read_only", ILLEGAL_FUNCTION);
-    }
-    if opts.allow_functions.as_ref().is_some_and(|a| !a.contains(&function)) {
+    let listed = opts.allow_functions.as_ref().map(|a| a.contains(&function));
+    if opts.read_only {
+        // An allow-list: what is not known to be harmless is refused, unless explicitly allowed.
+        if !read_only_safe(&pdu) && listed != Some(true) {
+            return refuse("read_only", ILLEGAL_FUNCTION);
+        }
+    } else if listed == Some(false) {
         return refuse("function_not_allowed", ILLEGAL_FUNCTION);
     }
     if let (Some(rate), Some((tokens, at))) = (opts.rate_limit, bucket.as_mut()) {
@@ -281,6 +313,11 @@ fn request(
         *tokens -= 1.0;
     }
     let target = opts.unit_map.get(&unit).copied().unwrap_or(unit);
+    if target == 0 && !broadcastable(function) {
+        // A broadcast read would make every device on the line answer at once (or none): the
+        // serial-line spec allows broadcast for writes only. Nothing goes on the line.
+        return refuse("broadcast_not_write", ILLEGAL_FUNCTION);
+    }
     let Some(route) = routes.iter().find(|r| r.units.contains(&target) || target == 0) else {
         return refuse("no_route", GATEWAY_PATH_UNAVAILABLE);
     };
@@ -308,12 +345,58 @@ mod tests {
         let all: IpNet = "0.0.0.0/0".parse().unwrap();
         assert!(all.contains("10.1.2.3".parse().unwrap()));
         assert!("10.0.0.0/33".parse::<IpNet>().is_err());
+        // Issue 15: a mapped address on the allow-list matched no client.
+        let mapped: IpNet = "::ffff:127.0.0.1".parse().unwrap();
+        assert!(mapped.contains("127.0.0.1".parse().unwrap()));
+        assert!(mapped.contains("::ffff:127.0.0.1".parse().unwrap()));
+        let mapped_net: IpNet = "::ffff:10.0.0.0/120".parse().unwrap();
+        assert!(mapped_net.contains("10.0.0.77".parse().unwrap()));
+        assert!(!mapped_net.contains("10.0.1.1".parse().unwrap()));
         assert!("nonsense".parse::<IpNet>().is_err());
     }
 
     #[test]
-    fn writes_are_the_functions_that_change_a_device() {
-        assert!([0x05, 0x06, 0x0F, 0x10, 0x16, 0x17].into_iter().all(is_write));
-        assert!(![0x01, 0x02, 0x03, 0x04, 0x08, 0x2B].into_iter().any(is_write));
+    fn read_only_is_an_allow_list_of_what_cannot_change_a_device() {
+        // Reads and reports pass.
+        for pdu in [
+            &[0x01, 0, 0, 0, 8][..],
+            &[0x03, 0, 0, 0, 1],
+            &[0x04, 0, 0, 0, 1],
+            &[0x07],
+            &[0x0B],
+            &[0x0C],
+            &[0x11],
+            &[0x14, 7, 6, 0, 4, 0, 1, 0, 2],
+            &[0x18, 0, 4],
+            &[0x2B, 0x0E, 1, 0],
+            &[0x08, 0x00, 0x00, 0xA5, 0x37], // Return Query Data: an echo
+        ] {
+            assert!(read_only_safe(pdu), "{pdu:02X?} should pass");
+        }
+        // Everything else is refused: writes, the diagnostics that restart or silence a device,
+        // CANopen (2B/0D), vendor and unknown codes, 0x00, 0x7F and exception-shaped codes.
+        for pdu in [
+            &[0x05, 0, 1, 0xFF, 0][..],
+            &[0x06, 0, 1, 0, 3],
+            &[0x0F, 0, 1, 0, 1, 1, 1],
+            &[0x10, 0, 1, 0, 1, 2, 0, 1],
+            &[0x15, 6, 6, 0, 4, 0, 1, 0, 1, 0, 0],
+            &[0x16, 0, 4, 0, 0xF2, 0, 0x25],
+            &[0x17, 0, 0, 0, 1, 0, 0, 0, 1, 2, 0, 1],
+            &[0x08, 0x00, 0x01, 0x00, 0x00], // restart communications
+            &[0x08, 0x00, 0x04, 0x00, 0x00], // force listen-only mode
+            &[0x08, 0x00, 0x0A, 0x00, 0x00], // clear counters
+            &[0x2B, 0x0D, 0, 0],
+            &[0x41, 1, 2],
+            &[0x46, 0, 0],
+            &[0x64],
+            &[0x00],
+            &[0x7F],
+            &[0x80],
+            &[0x83, 0x02],
+            &[],
+        ] {
+            assert!(!read_only_safe(pdu), "{pdu:02X?} should be refused");
+        }
     }
 }

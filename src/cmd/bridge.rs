@@ -100,6 +100,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         Some(path) => crate::bridge::config::merge(path, args.clone(), matches)?,
         None => args,
     };
+    check_values(&args, matches)?;
     let Args {
         config: _,
         serial,
@@ -128,6 +129,22 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         duration,
     } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
+    let allow_functions = if allow_functions.is_empty() {
+        None
+    } else {
+        Some(
+            allow_functions
+                .iter()
+                .map(|f| {
+                    let parsed = match f.strip_prefix("0x").or_else(|| f.strip_prefix("0X")) {
+                        Some(hex) => u8::from_str_radix(hex, 16).ok(),
+                        None => f.parse().ok(),
+                    };
+                    parsed.with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
+                })
+                .collect::<anyhow::Result<Vec<u8>>>()?,
+        )
+    };
     let reverse = if reverse {
         let port = serial.clone().context("--reverse needs --serial PORT: the line to answer on")?;
         let target = target.context("--reverse needs --target HOST:PORT: the Modbus TCP server to reach")?;
@@ -139,6 +156,8 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             target,
             timeout: std::time::Duration::from_millis(timeout_ms),
             turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
+            read_only,
+            allow_functions: allow_functions.clone(),
         })
     } else {
         None
@@ -175,22 +194,6 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         lines.push((1..=247, line_for(port)));
     }
     anyhow::ensure!(reverse.is_some() || !lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
-    let allow_functions = if allow_functions.is_empty() {
-        None
-    } else {
-        Some(
-            allow_functions
-                .iter()
-                .map(|f| {
-                    let parsed = match f.strip_prefix("0x").or_else(|| f.strip_prefix("0X")) {
-                        Some(hex) => u8::from_str_radix(hex, 16).ok(),
-                        None => f.parse().ok(),
-                    };
-                    parsed.with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
-                })
-                .collect::<anyhow::Result<Vec<u8>>>()?,
-        )
-    };
     let allow_ips = allow_ips
         .iter()
         .map(|s| s.parse().map_err(|e: String| anyhow::anyhow!("--allow-ip: {e}")))
@@ -236,4 +239,35 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// Values no bridge can run with are refused before it starts, naming where they came from —
+/// the command line's option or the configuration file's key — and the value: a bridge that
+/// accepts no connection, queues no request or times out at once fails closed, not silently.
+fn check_values(args: &Args, matches: Option<&ArgMatches>) -> anyhow::Result<()> {
+    use clap::parser::ValueSource;
+    let origin = |id: &str, key: &str, value: String| {
+        let on_command_line = matches
+            .is_some_and(|m| m.ids().any(|i| i.as_str() == id) && m.value_source(id) == Some(ValueSource::CommandLine));
+        match (&args.config, on_command_line) {
+            (Some(file), false) => format!("{}: {key} = {value}", file.display()),
+            _ => format!("--{key} {value}"),
+        }
+    };
+    let at_least_one = [
+        ("max_connections", "max-connections", args.max_connections as u64),
+        ("queue_per_client", "queue-per-client", args.queue_per_client as u64),
+        ("timeout_ms", "timeout-ms", args.timeout_ms),
+    ];
+    for (id, key, value) in at_least_one {
+        anyhow::ensure!(value > 0, "{}: expected 1 or more", origin(id, key, value.to_string()));
+    }
+    if let Some(rate) = args.rate_limit {
+        anyhow::ensure!(
+            rate.is_finite() && rate > 0.0,
+            "{}: expected requests per second above 0 (leave it out for no limit)",
+            origin("rate_limit", "rate-limit", rate.to_string())
+        );
+    }
+    Ok(())
 }

@@ -1,0 +1,65 @@
+//! The real `mbtap bridge` refuses to start on settings that would fail open or make no sense,
+//! naming where each came from (issue 15): nothing here opens a port or a socket.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::process::{Command, Output};
+
+fn bridge(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .env("MBTAP_CONFIG", "/nonexistent/mbtap-config.toml")
+        .arg("bridge")
+        .args(["--serial", "/nonexistent/ttyUSB-test", "--listen", "127.0.0.1:0", "--duration", "0"])
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn config(name: &str, text: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("mbtap-bridge-config-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("bridge.toml");
+    std::fs::write(&f, text).unwrap();
+    f
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn zero_connections_queue_or_timeout_are_refused_on_the_command_line() {
+    for (opt, key) in [
+        ("--max-connections", "max-connections"),
+        ("--queue-per-client", "queue-per-client"),
+        ("--timeout-ms", "timeout-ms"),
+    ] {
+        let o = bridge(&[opt, "0"]);
+        assert_eq!(o.status.code(), Some(2), "{opt}: {}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("--{key} 0: expected 1 or more")), "{}", stderr(&o));
+    }
+}
+
+/// `timeout-ms = -5` in a file said `unexpected argument '-5' found`.
+#[test]
+fn nonsense_in_the_file_names_the_file_the_key_and_the_value() {
+    let f = config("negative", "[bridge]\ntimeout-ms = -5\n");
+    let o = bridge(&["--config", f.to_str().unwrap()]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains(f.to_str().unwrap()) && e.contains("timeout-ms") && e.contains("-5"), "{e}");
+    assert!(!e.contains("unexpected argument"), "{e}");
+    let f = config("zero", "[bridge]\nmax-connections = 0\n");
+    let e = stderr(&bridge(&["--config", f.to_str().unwrap()]));
+    assert!(e.contains(&format!("{}: max-connections = 0: expected 1 or more", f.display())), "{e}");
+}
+
+/// `allow-ip = []` opened the bridge to everyone.
+#[test]
+fn an_empty_allow_list_in_the_file_refuses_to_start() {
+    for key in ["allow-ip", "allow-function"] {
+        let f = config(key, &format!("[bridge]\n{key} = []\n"));
+        let o = bridge(&["--config", f.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("{key} = []")), "{}", stderr(&o));
+    }
+}
