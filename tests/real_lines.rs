@@ -167,7 +167,7 @@ fn a_healthy_line_with_glitches_reports_only_turnaround_glitches() {
         slow: 0.0,
         ..TrafficConfig::default()
     });
-    for model in [Observation::PerByte, Observation::USB_16MS] {
+    for model in [Observation::PerByte, Observation::FIFO_16550, Observation::USB_1MS, Observation::USB_16MS] {
         let report = health_of(&wire, model, line);
         let kinds: Vec<_> = report.findings.iter().map(|f| (f.kind, f.unit)).collect();
         // The generator polls one address nobody answers (33): that one is real.
