@@ -319,6 +319,40 @@ fn rtu_over_tcp_carries_raw_frames() {
     assert_eq!(answer[11..], crc, "a valid RTU frame back");
 }
 
+/// Issue 15: an RTU-over-TCP client streaming bytes that never form a request (`0x41`, a
+/// function only silence can end, with no pause) kept the bridge rescanning its whole buffer on
+/// every read. Now the garbage is held to one frame's length, the client is cut off after 4 KiB
+/// without a request, and a good client is answered all along.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn an_rtu_over_tcp_garbage_stream_is_cut_off_and_stalls_no_one() {
+    let d = dir("rtu-garbage");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, others) = bridge(&d.join("bus"), &["--listen-rtu", "127.0.0.1:0", "--metrics", "127.0.0.1:0"]);
+    let mut attacker = TcpStream::connect(&others[0]).unwrap();
+    attacker.set_write_timeout(Some(Duration::from_secs(10))).unwrap();
+    let flood = std::thread::spawn(move || {
+        // At most 16 MiB: the bridge must close the connection long before.
+        let junk = [0x41u8; 4096];
+        let mut sent = 0usize;
+        while sent < 16 << 20 {
+            match attacker.write(&junk) {
+                Ok(n) if n > 0 => sent += n,
+                _ => return sent,
+            }
+        }
+        sent
+    });
+    let mut c = Client::connect(&addr);
+    for tid in 0..20u16 {
+        assert_eq!(c.call(tid, 17, &[0x03, 0x00, 0x32, 0x00, 0x01])[..2], [0x03, 0x02], "request {tid}");
+    }
+    let sent = flood.join().unwrap();
+    assert!(sent < 16 << 20, "the garbage stream was never cut off");
+    let text = metrics(&others[1]);
+    assert!(text.lines().any(|l| l == "mbtap_bridge_refused_total{reason=\"garbage\"} 1"), "{text}");
+}
+
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn the_serial_side_pulled_mid_load_gives_0x0a_then_recovers_by_itself() {

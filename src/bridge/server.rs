@@ -26,6 +26,9 @@ const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
 
 /// Exception 0x01: the function is not allowed here (MAP v1.1b3 §7).
 pub(crate) const ILLEGAL_FUNCTION: u8 = 0x01;
+/// Bytes an RTU-over-TCP client may send without a request among them before it is cut off:
+/// sixteen of the longest frames.
+const RTU_GARBAGE_LIMIT: u64 = 16 * 256;
 
 /// Units served by one serial line.
 #[derive(Debug, Clone)]
@@ -243,7 +246,18 @@ async fn connection(stream: TcpStream, peer: SocketAddr, client: ClientId, route
             let (transaction_id, unit, pdu) = if rtu {
                 rtu_frames.push(&buf);
                 buf.clear();
-                let Some(f) = rtu_frames.next_request() else { break };
+                let Some(f) = rtu_frames.next_request() else {
+                    // Kilobytes that hold no request are not a Modbus client: end this
+                    // connection only.
+                    if rtu_frames.discarded > RTU_GARBAGE_LIMIT {
+                        if let Some(r) = routes.first() {
+                            r.line.metrics.refused("garbage");
+                        }
+                        break 'read;
+                    }
+                    break;
+                };
+                rtu_frames.discarded = 0;
                 (0, f.unit, f.pdu)
             } else {
                 match parse_tcp_frame(&buf) {

@@ -22,6 +22,8 @@ pub struct RequestAssembler {
 
 /// Address byte and CRC around the PDU (Serial Line v1.02 §2.5.1).
 const OVERHEAD: usize = 3;
+/// The longest RTU frame (Serial Line v1.02 §2.5.1: 256 bytes).
+const RTU_MAX_LEN: usize = crate::proto::rtu::RTU_MAX_LEN;
 
 impl RequestAssembler {
     /// Adds bytes as they were read.
@@ -39,7 +41,15 @@ impl RequestAssembler {
                 PduLength::Unknown => {
                     // A function only silence can end — or noise in front of a request. When a
                     // whole request with a good CRC starts further on, the bytes before it are noise.
-                    let skip = (1..self.buf.len()).find(|&k| exact_request_at(&self.buf[k..]))?;
+                    let Some(skip) = (1..self.buf.len()).find(|&k| exact_request_at(&self.buf[k..])) else {
+                        // No frame is longer than 256 bytes (Serial Line v1.02 §2.5.1): what lies
+                        // further back can start none. Dropping it bounds both the memory and the
+                        // rescan of every later read — a stream of garbage costs linear time.
+                        let excess = self.buf.len().saturating_sub(RTU_MAX_LEN);
+                        self.buf.drain(..excess);
+                        self.discarded += excess as u64;
+                        return None;
+                    };
                     self.buf.drain(..skip);
                     self.discarded += skip as u64;
                     continue;
@@ -124,6 +134,22 @@ mod tests {
         assert_eq!(a.silence(), None);
         assert_eq!(a.discarded, 3);
         assert_eq!(a.pending(), 0);
+    }
+
+    /// Issue 15: a client streaming `0x41` (a function whose length only silence ends) kept
+    /// every byte and rescanned all of them on every read: quadratic, the bridge at 100 % CPU.
+    #[test]
+    fn a_stream_of_garbage_is_held_to_one_frame_and_scanned_once() {
+        let mut a = RequestAssembler::default();
+        for _ in 0..1000 {
+            a.push(&[0x41; 1024]);
+            assert_eq!(a.next_request(), None);
+            assert!(a.pending() <= RTU_MAX_LEN, "{} bytes held", a.pending());
+        }
+        assert!(a.discarded >= 1000 * 1024 - RTU_MAX_LEN as u64);
+        // A real request after it is still found.
+        a.push(&READ_VOLTAGES);
+        assert_eq!(a.next_request(), Some(RequestFrame { unit: 1, pdu: READ_VOLTAGES[1..6].to_vec() }));
     }
 
     #[test]
