@@ -108,3 +108,11 @@ fn decode_rtu_unknown_direction(bencher: Bencher) {
         n
     });
 }
+
+/// What `bytes` would save the bridge: the one copy of a request PDU (at most 253 bytes, MAP
+/// v1.1b3 §4.1) out of the connection's read buffer into the job that crosses to the line's task.
+#[divan::bench(args = [5, 253])]
+fn pdu_copy_to_owned(bencher: Bencher, len: usize) {
+    let data = buffer(len);
+    bencher.counter(ItemsCount::new(1usize)).bench(|| black_box(&data[..]).to_vec());
+}
