@@ -58,7 +58,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     let stdout = io::stdout();
     let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
-    runtime()?.block_on(crate::source::tap::tap(opts, &mut writer, &mut io::stderr()))?;
+    let result = runtime()?.block_on(crate::source::tap::tap(opts, &mut writer, &mut io::stderr()));
+    // The summary is written even when the recording failed; the exit status says it did.
     writer.finish()?;
+    result?;
     Ok(ExitCode::SUCCESS)
 }

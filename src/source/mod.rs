@@ -4,7 +4,9 @@
 //! `simulate`, writes bytes a peer reads).
 
 pub mod demo;
+pub mod link;
 pub mod play;
+pub mod record;
 pub mod scan;
 pub mod serial;
 pub mod simulate;

@@ -115,9 +115,7 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
     let slave_path = slave.name().context("the pseudo-terminal has no name")?;
     // Our handle on the far end holds an exclusive lock: let it go so the master can open it.
     drop(slave);
-    let _ = std::fs::remove_file(&opts.link);
-    std::os::unix::fs::symlink(&slave_path, &opts.link)
-        .with_context(|| format!("creating the link {} -> {slave_path}", opts.link.display()))?;
+    super::link::make(&opts.link, &slave_path)?;
     let mut slaves: Vec<Slave> = opts.devices.into_iter().map(|(p, a)| Slave::new(Arc::new(p), a)).collect();
     for s in &slaves {
         let _ = writeln!(err, "mbtap: simulating {} at address {}", s.profile().meta.name, s.address());
@@ -138,7 +136,7 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
         let listener = Listener::new(opts.line, poll.heard_at.unwrap_or(opts.line));
         let follow = poll.follow_baud.then_some(opts.line);
         let result = drive_line(&mut master_side, bus, listener, follow, opts.duration).await;
-        let _ = std::fs::remove_file(&opts.link);
+        super::link::remove(&opts.link, &slave_path);
         return result;
     }
     let started = Instant::now();
@@ -214,7 +212,7 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
             }
         }
     }
-    let _ = std::fs::remove_file(&opts.link);
+    super::link::remove(&opts.link, &slave_path);
     let _ = master_side.clear(tokio_serial::ClearBuffer::All);
     Ok(())
 }

@@ -14,9 +14,9 @@ use tokio_serial::SerialPortBuilderExt;
 
 use crate::output::EventWriter;
 use crate::signals::shutdown_signal;
+use crate::source::record::Recorder;
 use crate::source::serial::{builder, now};
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
-use mbtap_core::capture::PcapNgWriter;
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
 use mbtap_core::line_args::LineOverrides;
@@ -49,13 +49,9 @@ pub async fn sniff<W: Write>(
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
     let latency_ns = crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err);
+    let description = LineOverrides::describe(opts.mode, opts.line, latency_ns);
     let mut recorder = match &opts.record {
-        Some(path) => {
-            let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-            let mut w = PcapNgWriter::new(std::io::BufWriter::new(file))?;
-            w.add_serial_interface(&opts.port, &LineOverrides::describe(opts.mode, opts.line, latency_ns))?;
-            Some(w)
-        }
+        Some(path) => Some(Recorder::create(path, &[(&opts.port, &description)])?),
         None => None,
     };
     let config = AnalyzerConfig {
@@ -89,8 +85,8 @@ pub async fn sniff<W: Write>(
                 Ok(Ok(n)) if n > 0 => {
                     let t = now();
                     let chunk = Chunk { port: PortId(0), t, bytes: &buf[..n] };
-                    if let Some(w) = recorder.as_mut() {
-                        w.write_packet(0, t, chunk.bytes).context("writing the recording")?;
+                    if let Some(r) = recorder.as_mut() {
+                        r.write(0, t, chunk.bytes, err);
                     }
                     analyzer.push(&chunk, &mut |e: &Event<'_>| writer.write(e));
                 }
@@ -99,14 +95,11 @@ pub async fn sniff<W: Write>(
                     analyzer.tick(now(), &mut |e: &Event<'_>| writer.write(e));
                     stream = loop {
                         tokio::select! {
-                            () = &mut stop => {
-                                finish(&mut analyzer, writer, recorder.as_mut())?;
-                                return Ok(());
-                            }
+                            () = &mut stop => return finish(&mut analyzer, writer, recorder, err),
                             () = tokio::time::sleep(Duration::from_secs(1)) => {}
                         }
-                        if let Some(w) = recorder.as_mut() {
-                            w.flush()?;
+                        if let Some(r) = recorder.as_mut() {
+                            r.flush(err);
                         }
                         if let Ok(s) = builder(&opts.port, opts.line).open_native_async() {
                             let _ = writeln!(err, "mbtap: {} is back", opts.port);
@@ -119,23 +112,23 @@ pub async fn sniff<W: Write>(
         }
         if last_flush.elapsed() >= FLUSH {
             last_flush = tokio::time::Instant::now();
-            if let Some(w) = recorder.as_mut() {
-                w.flush().context("flushing the recording")?;
+            if let Some(r) = recorder.as_mut() {
+                r.flush(err);
             }
             let _ = writer.out.flush();
         }
     }
-    finish(&mut analyzer, writer, recorder.as_mut())
+    finish(&mut analyzer, writer, recorder, err)
 }
 
-fn finish<W: Write, R: Write>(
+/// The analysis to its end; then the recording's verdict (the summary is written either way,
+/// by the caller, before a failed recording's error reaches the exit status).
+fn finish<W: Write>(
     analyzer: &mut Analyzer,
     writer: &mut EventWriter<W>,
-    recorder: Option<&mut PcapNgWriter<R>>,
+    recorder: Option<Recorder>,
+    err: &mut dyn Write,
 ) -> anyhow::Result<()> {
     analyzer.finish(&mut |e: &Event<'_>| writer.write(e));
-    if let Some(w) = recorder {
-        w.flush().context("flushing the recording")?;
-    }
-    Ok(())
+    recorder.map_or(Ok(()), |r| r.finish(err))
 }

@@ -16,9 +16,9 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
 
 use crate::output::EventWriter;
+use crate::source::record::Recorder;
 use crate::source::serial::{builder, now};
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
-use mbtap_core::capture::PcapNgWriter;
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
 use mbtap_core::line_args::LineOverrides;
@@ -55,9 +55,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
     // Our handle on the application's end holds an exclusive lock: let it go, so the
     // application can open the path. The pty lives as long as we hold the master.
     drop(slave);
-    let _ = std::fs::remove_file(&opts.link);
-    std::os::unix::fs::symlink(&slave_path, &opts.link)
-        .with_context(|| format!("creating the link {} -> {slave_path}", opts.link.display()))?;
+    super::link::make(&opts.link, &slave_path)?;
     let _ = writeln!(
         err,
         "mbtap: tapping {} at {}; point the application at {} ({slave_path})",
@@ -68,12 +66,10 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
 
     let mut recorder = match &opts.record {
         Some(path) => {
-            let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-            let mut w = PcapNgWriter::new(std::io::BufWriter::new(file))?;
             let d = LineOverrides::describe(opts.mode, opts.line, latency_ns);
-            w.add_serial_interface(&format!("{} (application)", opts.link.display()), &format!("{d} role=requests"))?;
-            w.add_serial_interface(&opts.port, &format!("{d} role=responses"))?;
-            Some(w)
+            let app_name = format!("{} (application)", opts.link.display());
+            let (requests, responses) = (format!("{d} role=requests"), format!("{d} role=responses"));
+            Some(Recorder::create(path, &[(&app_name, &requests), (&opts.port, &responses)])?)
         }
         None => None,
     };
@@ -108,31 +104,82 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
                     let _ = AsyncWriteExt::write_all(&mut app, &from_bus[..n]).await;
                     (BUS_PORT, n)
                 }
-                _ => anyhow::bail!("lost serial port {}", opts.port),
+                // The real port went away (an adapter pulled): the application's side stays
+                // open — it sees a quiet line, not a vanished device — while the port is
+                // reopened as `sniff` does.
+                _ => {
+                    let _ = writeln!(err, "mbtap: lost {}; the application's side stays open, waiting for the port to come back", opts.port);
+                    match reopen(&opts, &mut app, &mut stop, recorder.as_mut(), err).await {
+                        Some(b) => {
+                            let _ = writeln!(err, "mbtap: {} is back", opts.port);
+                            bus = b;
+                            continue;
+                        }
+                        None => break,
+                    }
+                }
             },
             () = tokio::time::sleep(Duration::from_millis(10)) => {
                 analyzer.tick(now(), &mut |e: &Event<'_>| writer.write(e));
-                continue;
+                (APP_PORT, 0)
             }
         };
-        let t = now();
-        let bytes = if port == APP_PORT { &from_app[..n] } else { &from_bus[..n] };
-        if let Some(w) = recorder.as_mut() {
-            w.write_packet(u32::from(port.0), t, bytes).context("writing the recording")?;
+        if n > 0 {
+            let t = now();
+            let bytes = if port == APP_PORT { &from_app[..n] } else { &from_bus[..n] };
+            if let Some(r) = recorder.as_mut() {
+                r.write(u32::from(port.0), t, bytes, err);
+            }
+            analyzer.push(&Chunk { port, t, bytes }, &mut |e: &Event<'_>| writer.write(e));
         }
-        analyzer.push(&Chunk { port, t, bytes }, &mut |e: &Event<'_>| writer.write(e));
+        // At least once a second, traffic or not: a killed process loses at most a second.
         if last_flush.elapsed() >= Duration::from_secs(1) {
             last_flush = tokio::time::Instant::now();
-            if let Some(w) = recorder.as_mut() {
-                w.flush()?;
+            if let Some(r) = recorder.as_mut() {
+                r.flush(err);
             }
             let _ = writer.out.flush();
         }
     }
     analyzer.finish(&mut |e: &Event<'_>| writer.write(e));
-    if let Some(w) = recorder.as_mut() {
-        w.flush()?;
+    if let Some(r) = recorder {
+        r.finish(err)?;
     }
-    let _ = std::fs::remove_file(&opts.link);
+    super::link::remove(&opts.link, &slave_path);
     Ok(())
+}
+
+/// Waits for the real port to come back, trying once a second, while the application's side
+/// stays open (what it writes meanwhile has no line to go to: read and dropped, so it does not
+/// block). `None` when a stop was asked for.
+async fn reopen(
+    opts: &TapOptions,
+    app: &mut SerialStream,
+    stop: &mut std::pin::Pin<Box<impl std::future::Future<Output = ()>>>,
+    mut recorder: Option<&mut Recorder>,
+    err: &mut dyn Write,
+) -> Option<SerialStream> {
+    let mut scratch = [0u8; 1024];
+    // One timer for the whole wait: the application's reads must not restart it.
+    let mut retry = tokio::time::interval(Duration::from_secs(1));
+    retry.tick().await;
+    loop {
+        tokio::select! {
+            () = &mut *stop => return None,
+            r = app.read(&mut scratch) => {
+                if !matches!(r, Ok(n) if n > 0) {
+                    // The application closed its end (EIO on the master): nothing to drain.
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
+            }
+            _ = retry.tick() => {
+                if let Some(r) = recorder.as_deref_mut() {
+                    r.flush(err);
+                }
+                if let Ok(b) = builder(&opts.port, opts.line).open_native_async() {
+                    return Some(b);
+                }
+            }
+        }
+    }
 }

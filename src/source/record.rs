@@ -1,0 +1,101 @@
+//! `--record FILE` for `sniff` and `tap`: every read to a pcapng line capture, flushed at least
+//! once a second whatever the traffic. A recording that fails (a full disk, a pulled stick)
+//! stops recording, says so once — naming the file — and leaves the analysis and the relay
+//! running; the command's exit status still reports it.
+
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use mbtap_core::capture::PcapNgWriter;
+use mbtap_core::chunk::Timestamp;
+
+/// A recording in progress, or one that failed.
+#[derive(Debug)]
+pub struct Recorder {
+    path: PathBuf,
+    writer: Option<PcapNgWriter<BufWriter<std::fs::File>>>,
+    /// What made the recording stop, kept for the exit status.
+    failed: Option<String>,
+}
+
+impl Recorder {
+    /// Creates `path` with one serial interface per `(name, description)`.
+    ///
+    /// # Errors
+    /// The file cannot be created or its header written (at start, nothing is lost yet).
+    pub fn create(path: &Path, interfaces: &[(&str, &str)]) -> anyhow::Result<Self> {
+        let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut w = PcapNgWriter::new(BufWriter::new(file)).with_context(|| format!("writing {}", path.display()))?;
+        for (name, description) in interfaces {
+            w.add_serial_interface(name, description).with_context(|| format!("writing {}", path.display()))?;
+        }
+        Ok(Self { path: path.to_owned(), writer: Some(w), failed: None })
+    }
+
+    /// Records one read; on failure stops recording and says so on `err`.
+    pub fn write(&mut self, port: u32, t: Timestamp, bytes: &[u8], err: &mut dyn Write) {
+        if let Some(w) = self.writer.as_mut()
+            && let Err(e) = w.write_packet(port, t, bytes)
+        {
+            self.fail(&e, err);
+        }
+    }
+
+    /// Pushes what is buffered to the file; on failure stops recording and says so.
+    pub fn flush(&mut self, err: &mut dyn Write) {
+        if let Some(w) = self.writer.as_mut()
+            && let Err(e) = w.flush()
+        {
+            self.fail(&e, err);
+        }
+    }
+
+    fn fail(&mut self, e: &std::io::Error, err: &mut dyn Write) {
+        let message = format!("recording to {} failed: {e}", self.path.display());
+        let _ = writeln!(err, "mbtap: {message}; recording stopped, the analysis goes on");
+        self.writer = None;
+        self.failed = Some(message);
+    }
+
+    /// Flushes and closes; the error if the recording failed at any time.
+    ///
+    /// # Errors
+    /// The recording failed (the message names the file).
+    pub fn finish(mut self, err: &mut dyn Write) -> anyhow::Result<()> {
+        self.flush(err);
+        match self.failed {
+            Some(message) => anyhow::bail!("{message} (what came before it is in the file)"),
+            None => Ok(()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 15: a full disk ended `sniff` and `tap`; the message did not name the file.
+    #[test]
+    fn a_full_disk_stops_the_recording_not_the_caller_and_names_the_file() {
+        // /dev/full accepts the open and fails every write with ENOSPC, as a full disk does.
+        let mut r = match Recorder::create(Path::new("/dev/full"), &[("p", "19200 8E1")]) {
+            Ok(r) => r,
+            // The header is buffered; if this system's /dev/full refused even that, the failure
+            // at start is named too.
+            Err(e) => {
+                assert!(e.to_string().contains("/dev/full"), "{e}");
+                return;
+            }
+        };
+        let mut err = Vec::new();
+        for i in 0..10_000u64 {
+            r.write(0, Timestamp(i), &[0x01, 0x03, 0x00, 0x00], &mut err);
+        }
+        r.flush(&mut err);
+        let said = String::from_utf8_lossy(&err).into_owned();
+        assert_eq!(said.matches("recording to /dev/full failed").count(), 1, "said once: {said}");
+        let e = r.finish(&mut err).unwrap_err().to_string();
+        assert!(e.contains("/dev/full"), "{e}");
+    }
+}
