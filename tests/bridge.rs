@@ -319,6 +319,57 @@ fn rtu_over_tcp_carries_raw_frames() {
     assert_eq!(answer[11..], crc, "a valid RTU frame back");
 }
 
+/// Issue 15: the idle timer reset on every byte, so connections sending one byte a second held
+/// `--max-connections` forever; and idle sockets refused every newcomer. Now a request begun
+/// must end within 2 s, and a full table evicts its idlest connection for a newcomer.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn slowloris_and_idle_sockets_lock_no_one_out() {
+    let d = dir("slowloris");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, others) = bridge(&d.join("bus"), &["--max-connections", "4", "--metrics", "127.0.0.1:0"]);
+    // Four slow clients: one byte of an MBAP header every 300 ms.
+    let slow: Vec<_> = (0..4)
+        .map(|_| {
+            let addr = addr.clone();
+            std::thread::spawn(move || {
+                let mut s = TcpStream::connect(&addr).unwrap();
+                s.set_read_timeout(Some(Duration::from_millis(300))).unwrap();
+                let header = [0x00, 0x01, 0x00, 0x00, 0x00, 0x06, 0x01, 0x03, 0x00, 0x00, 0x00, 0x01];
+                for b in header.iter().cycle().take(100) {
+                    if s.write_all(&[*b]).is_err() {
+                        return true;
+                    }
+                    let mut one = [0u8; 16];
+                    match s.read(&mut one) {
+                        // Closed by the bridge: EOF or a reset.
+                        Ok(0) => return true,
+                        Err(e)
+                            if !matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) =>
+                        {
+                            return true;
+                        }
+                        _ => {}
+                    }
+                }
+                false
+            })
+        })
+        .collect();
+    for t in slow {
+        assert!(t.join().unwrap(), "a slow client kept its connection for 100 bytes (30 s)");
+    }
+    // Four idle sockets fill the table; a newcomer still gets in.
+    let idle: Vec<TcpStream> = (0..4).map(|_| TcpStream::connect(&addr).unwrap()).collect();
+    std::thread::sleep(Duration::from_millis(1500));
+    let mut c = Client::connect(&addr);
+    assert_eq!(c.call(1, 17, &[0x03, 0x00, 0x32, 0x00, 0x01])[..2], [0x03, 0x02]);
+    let text = metrics(&others[0]);
+    assert!(text.lines().any(|l| l == "mbtap_bridge_refused_total{reason=\"slow_request\"} 4"), "{text}");
+    assert!(text.lines().any(|l| l.starts_with("mbtap_bridge_refused_total{reason=\"evicted_idle\"}")), "{text}");
+    drop(idle);
+}
+
 /// Issue 15: an RTU-over-TCP client streaming bytes that never form a request (`0x41`, a
 /// function only silence can end, with no pause) kept the bridge rescanning its whole buffer on
 /// every read. Now the garbage is held to one frame's length, the client is cut off after 4 KiB

@@ -23,6 +23,50 @@ use mbtap_core::proto::{encode_rtu, encode_tcp};
 
 /// A pause that ends an RTU-over-TCP frame of unknown length.
 const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
+/// A request must arrive whole this soon after its first byte (at most 260 bytes: one TCP
+/// segment on any network a Modbus client uses): a client dribbling bytes holds no slot longer.
+const REQUEST_DEADLINE: Duration = Duration::from_secs(2);
+/// When every slot is taken, a connection that has sent no request for this long gives its slot
+/// to the newcomer; one busier than that is never evicted.
+const EVICT_AFTER_IDLE: Duration = Duration::from_secs(1);
+
+/// The open connections of one listener: when each last sent a whole request, and how to end
+/// it — so a full table evicts its idlest member instead of refusing everyone new.
+type Table = std::sync::Mutex<std::collections::HashMap<ClientId, (Instant, tokio::task::AbortHandle)>>;
+
+/// Ends a connection's bookkeeping however it ends — closed, failed or evicted (an aborted
+/// task runs its destructors, not its remaining code).
+struct Cleanup {
+    client: ClientId,
+    routes: Arc<Vec<Route>>,
+    table: Arc<Table>,
+}
+
+impl Drop for Cleanup {
+    fn drop(&mut self) {
+        for r in self.routes.iter() {
+            r.line.forget(self.client);
+        }
+        if let Some(r) = self.routes.first() {
+            r.line.metrics.connection_closed();
+        }
+        self.table.lock().unwrap_or_else(std::sync::PoisonError::into_inner).remove(&self.client);
+    }
+}
+
+/// The idlest connection of `table` that has been quiet at least [`EVICT_AFTER_IDLE`]: ended,
+/// and its slot free. False when every connection is busy.
+fn evict_idlest(table: &Table) -> bool {
+    let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let idlest = table.values().filter(|(last, _)| last.elapsed() >= EVICT_AFTER_IDLE).min_by_key(|(last, _)| *last);
+    match idlest {
+        Some((_, handle)) => {
+            handle.abort();
+            true
+        }
+        None => false,
+    }
+}
 
 /// Exception 0x01: the function is not allowed here (MAP v1.1b3 §7).
 pub(crate) const ILLEGAL_FUNCTION: u8 = 0x01;
@@ -139,6 +183,7 @@ fn broadcastable(fc: u8) -> bool {
 pub async fn serve(listener: TcpListener, routes: Arc<Vec<Route>>, opts: Arc<ServerOptions>) {
     static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1);
     let metrics_line = routes.first().map(|r| Arc::clone(&r.line));
+    let table: Arc<Table> = Arc::default();
     loop {
         let Ok((stream, peer)) = listener.accept().await else {
             // Out of file descriptors or similar: back off a little, keep serving.
@@ -153,26 +198,41 @@ pub async fn serve(listener: TcpListener, routes: Arc<Vec<Route>>, opts: Arc<Ser
             continue;
         }
         if metrics.is_some_and(|m| m.open_connections() >= i64::try_from(opts.max_connections).unwrap_or(i64::MAX)) {
-            if let Some(m) = metrics {
-                m.refused("max_connections");
+            // Full: the idlest connection makes room (idle sockets must not lock everyone
+            // out); when all are busy, the newcomer is refused.
+            if evict_idlest(&table) {
+                if let Some(m) = metrics {
+                    m.refused("evicted_idle");
+                }
+                // Its slot frees when its task has run its cleanup.
+                tokio::task::yield_now().await;
+            } else {
+                if let Some(m) = metrics {
+                    m.refused("max_connections");
+                }
+                continue;
             }
-            continue;
         }
         if let Some(m) = metrics {
             m.connection_opened();
         }
         let client = NEXT_CLIENT.fetch_add(1, Ordering::Relaxed);
-        let (routes, opts, line) = (Arc::clone(&routes), Arc::clone(&opts), metrics_line.clone());
-        tokio::spawn(async move {
+        let (routes, opts, table_for_task) = (Arc::clone(&routes), Arc::clone(&opts), Arc::clone(&table));
+        // Registered before the task runs, so its cleanup always finds (and removes) it.
+        let mut entries = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let handle = tokio::spawn(async move {
+            let cleanup = Cleanup { client, routes: Arc::clone(&routes), table: Arc::clone(&table_for_task) };
             let _ = stream.set_nodelay(true);
-            connection(stream, peer, client, &routes, &opts).await;
-            for r in routes.iter() {
-                r.line.forget(client);
-            }
-            if let Some(l) = line {
-                l.metrics.connection_closed();
-            }
+            let seen = |c| {
+                if let Some(e) = table_for_task.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get_mut(&c) {
+                    e.0 = Instant::now();
+                }
+            };
+            connection(stream, peer, client, &routes, &opts, &seen).await;
+            drop(cleanup);
         });
+        entries.insert(client, (Instant::now(), handle.abort_handle()));
+        drop(entries);
     }
 }
 
@@ -189,7 +249,16 @@ enum Answer {
     Later(oneshot::Receiver<Reply>),
 }
 
-async fn connection(stream: TcpStream, peer: SocketAddr, client: ClientId, routes: &[Route], opts: &ServerOptions) {
+/// One client's connection until it closes, misbehaves or idles out; `seen` is told of every
+/// whole request (for eviction).
+async fn connection(
+    stream: TcpStream,
+    peer: SocketAddr,
+    client: ClientId,
+    routes: &[Route],
+    opts: &ServerOptions,
+    seen: &(dyn Fn(ClientId) + Sync),
+) {
     let _ = peer;
     let (mut rd, mut wr) = stream.into_split();
     let (tx, mut rx) = mpsc::channel::<Pending>(64);
@@ -222,21 +291,41 @@ async fn connection(stream: TcpStream, peer: SocketAddr, client: ClientId, route
     let mut chunk = [0u8; 1024];
     let mut bucket = opts.rate_limit.map(|r| (r.max(1.0), Instant::now()));
     let mut rtu_frames = mbtap_core::sim::RequestAssembler::default();
+    // The idle timer counts from the last whole request, not the last byte: bytes that never
+    // make a request do not keep a connection alive. A request begun must end within
+    // REQUEST_DEADLINE.
+    let mut last_request = Instant::now();
+    let mut partial_since: Option<Instant> = None;
     'read: loop {
         // RTU over TCP: a frame whose function does not fix its length ends when the client
         // pauses, as on a serial line.
         let rtu_waiting = rtu && rtu_frames.pending() > 0;
-        let wait = if rtu_waiting { RTU_OVER_TCP_SILENCE } else { opts.idle_timeout };
+        let idle_left = opts.idle_timeout.saturating_sub(last_request.elapsed());
+        let wait = match partial_since {
+            _ if rtu_waiting => RTU_OVER_TCP_SILENCE,
+            Some(t) => REQUEST_DEADLINE.saturating_sub(t.elapsed()).min(idle_left),
+            None => idle_left,
+        };
         let n = match tokio::time::timeout(wait, rd.read(&mut chunk)).await {
             Ok(Ok(n)) if n > 0 => n,
-            Err(_) if rtu_waiting => {
+            Err(_) if rtu_waiting && partial_since.is_none_or(|t| t.elapsed() < REQUEST_DEADLINE) => {
                 if let Some(f) = rtu_frames.silence() {
+                    last_request = Instant::now();
+                    seen(client);
                     let pending = request(client, 0, f.unit, f.pdu, routes, opts, &mut bucket);
                     if tx.send(pending).await.is_err() {
                         break;
                     }
                 }
+                partial_since = None;
                 continue;
+            }
+            Err(_) if partial_since.is_some() => {
+                // Slowloris: a request begun and never finished ends this connection only.
+                if let Some(r) = routes.first() {
+                    r.line.metrics.refused("slow_request");
+                }
+                break;
             }
             // EOF, an error, or idle too long: the connection ends.
             _ => break,
@@ -276,11 +365,16 @@ async fn connection(stream: TcpStream, peer: SocketAddr, client: ClientId, route
                     }
                 }
             };
+            last_request = Instant::now();
+            seen(client);
             let pending = request(client, transaction_id, unit, pdu, routes, opts, &mut bucket);
             if tx.send(pending).await.is_err() {
                 break 'read;
             }
         }
+        // Bytes of a request still to come: its deadline runs from its first byte.
+        let partial = if rtu { rtu_frames.pending() > 0 } else { !buf.is_empty() };
+        partial_since = if partial { partial_since.or(Some(Instant::now())) } else { None };
     }
     drop(tx);
     // Answers already on their way still go out (the client may only have half-closed);
