@@ -258,22 +258,42 @@ pub async fn bridge<W: Write>(
 }
 
 /// Serves `GET /metrics` (any path, really) in the Prometheus text format.
+/// Scrapes served at once; more are closed unanswered (a scraper needs one).
+const METRICS_CONNECTIONS: usize = 8;
+/// How long a scrape may take to send its request, and to take the answer.
+const METRICS_TIMEOUT: Duration = Duration::from_millis(500);
+
 async fn serve_metrics(listener: TcpListener, served: Arc<Served>) {
+    let slots = Arc::new(tokio::sync::Semaphore::new(METRICS_CONNECTIONS));
     loop {
-        let Ok((mut stream, _)) = listener.accept().await else { continue };
+        let Ok((mut stream, _)) = listener.accept().await else {
+            // Out of file descriptors (EMFILE) or similar: back off instead of spinning on the
+            // error while the Modbus listeners need the CPU and the descriptors.
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            continue;
+        };
+        // A flood of scrapes holds at most METRICS_CONNECTIONS descriptors, each briefly.
+        let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
+            drop(stream);
+            continue;
+        };
         let served = Arc::clone(&served);
         tokio::spawn(async move {
+            let _slot = slot;
             let mut req = [0u8; 1024];
             // The request line and headers; the answer does not depend on them.
-            let _ = tokio::time::timeout(Duration::from_secs(2), stream.read(&mut req)).await;
+            let _ = tokio::time::timeout(METRICS_TIMEOUT, stream.read(&mut req)).await;
             let body = served.render();
             let head = format!(
                 "HTTP/1.1 200 OK\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
                 body.len()
             );
-            let _ = stream.write_all(head.as_bytes()).await;
-            let _ = stream.write_all(body.as_bytes()).await;
-            let _ = stream.shutdown().await;
+            let _ = tokio::time::timeout(METRICS_TIMEOUT, async {
+                let _ = stream.write_all(head.as_bytes()).await;
+                let _ = stream.write_all(body.as_bytes()).await;
+                let _ = stream.shutdown().await;
+            })
+            .await;
         });
     }
 }
