@@ -394,6 +394,57 @@ fn a_metrics_flood_holds_few_descriptors_and_stalls_no_one() {
     assert!(metrics(&others[0]).contains("mbtap_bridge_responses_total"), "scrapes are answered again");
 }
 
+/// Issue 15: eight clients polling a unit that never answers cost the line `--timeout-ms`
+/// each, round after round; a good client got 3 answers in 8. Now the dead unit's circuit
+/// breaker answers 0x0B at once between probes, and the good client is served.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_dead_unit_does_not_starve_the_line() {
+    let d = dir("dead-unit");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, others) = bridge(&d.join("bus"), &["--timeout-ms", "300", "--metrics", "127.0.0.1:0"]);
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let hammers: Vec<_> = (0..8)
+        .map(|_| {
+            let (addr, stop) = (addr.clone(), std::sync::Arc::clone(&stop));
+            std::thread::spawn(move || {
+                let mut c = Client::connect(&addr);
+                let mut n = 0u16;
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) && n < 2000 {
+                    // Unit 9: nobody there.
+                    assert_eq!(c.call(n, 9, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x83, 0x0B]);
+                    n += 1;
+                }
+                n
+            })
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let mut good = Client::connect(&addr);
+    for tid in 0..20u16 {
+        assert_eq!(good.call(tid, 17, &[0x03, 0x00, 0x32, 0x00, 0x01])[..2], [0x03, 0x02], "request {tid}");
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let asked: u16 = hammers.into_iter().map(|h| h.join().unwrap()).sum();
+    let text = metrics(&others[0]);
+    let open = text
+        .lines()
+        .find_map(|l| l.strip_prefix("mbtap_bridge_circuit_open_total{unit=\"9\"} "))
+        .and_then(|n| n.parse::<u64>().ok())
+        .unwrap_or(0);
+    let timeouts = text
+        .lines()
+        .find_map(|l| l.strip_prefix("mbtap_bridge_timeouts_total{unit=\"9\"} "))
+        .and_then(|n| n.parse::<u64>().ok())
+        .unwrap_or(0);
+    // Most of the dead unit's requests never reached the line: only the first failures and the
+    // probes did.
+    assert!(
+        open > 0 && timeouts < u64::from(asked) / 2,
+        "{asked} asked, {timeouts} timed out, {open} answered at once"
+    );
+}
+
 /// Issue 15: an RTU-over-TCP client streaming bytes that never form a request (`0x41`, a
 /// function only silence can end, with no pause) kept the bridge rescanning its whole buffer on
 /// every read. Now the garbage is held to one frame's length, the client is cut off after 4 KiB

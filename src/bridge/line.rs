@@ -119,6 +119,44 @@ impl LineShared {
 /// Bytes seen on the line, for `--monitor`: port 0 carries requests, port 1 responses.
 pub type MonitorChunk = (PortId, Timestamp, Vec<u8>);
 
+/// A unit that failed to answer this many requests in a row gets its circuit breaker opened.
+const BREAK_AFTER: u32 = 3;
+/// How long an open breaker answers 0x0B at once before one probe request goes through;
+/// doubled after each failed probe, up to [`BREAKER_MAX`].
+const BREAKER_START: Duration = Duration::from_secs(2);
+const BREAKER_MAX: Duration = Duration::from_secs(30);
+
+/// Per unit: a dead unit must not cost every client its timeout of line time. After
+/// [`BREAK_AFTER`] consecutive failures its requests are answered 0x0B (Gateway Target Device
+/// Failed to Respond, MAP v1.1b3 §7) at once until `open_until`; then one request probes it.
+#[derive(Debug, Default)]
+struct Breaker {
+    failures: u32,
+    open_until: Option<Instant>,
+    backoff: Duration,
+}
+
+impl Breaker {
+    /// Should this request be answered 0x0B without using the line?
+    fn refuses(&self, now: Instant) -> bool {
+        self.open_until.is_some_and(|until| now < until)
+    }
+
+    /// The outcome of a request that went to the unit.
+    fn record(&mut self, answered: bool, now: Instant) {
+        if answered {
+            *self = Self::default();
+            return;
+        }
+        self.failures = self.failures.saturating_add(1);
+        if self.failures >= BREAK_AFTER {
+            // A failed probe doubles the wait; the first opening starts it.
+            self.backoff = if self.open_until.is_some() { (self.backoff * 2).min(BREAKER_MAX) } else { BREAKER_START };
+            self.open_until = Some(now + self.backoff);
+        }
+    }
+}
+
 /// Runs the line forever.
 pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mpsc::UnboundedSender<MonitorChunk>>) {
     let mut port: Option<SerialStream> = None;
@@ -128,6 +166,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
     // last byte, Serial Line v1.02 §2.5.1.1).
     let mut free_at = Instant::now();
     let mut master = Master { opts: &opts, shared: &shared, monitor: monitor.as_ref(), buf: Vec::with_capacity(600) };
+    let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
     loop {
         let Some((_, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
@@ -157,9 +196,20 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             let _ = job.reply.send(Reply::Gateway(GATEWAY_PATH_UNAVAILABLE));
             continue;
         };
+        let breaker = breakers.entry(job.unit).or_default();
+        if job.unit != 0 && breaker.refuses(Instant::now()) {
+            shared.metrics.circuit_open(job.unit);
+            shared.metrics.gateway_exception(job.unit, GATEWAY_TARGET_FAILED);
+            let _ = job.reply.send(Reply::Gateway(GATEWAY_TARGET_FAILED));
+            continue;
+        }
         wait_until(free_at).await;
         match master.transact(p, &job).await {
             Ok((reply, last_byte)) => {
+                if job.unit != 0 {
+                    let answered = !matches!(reply, Reply::Gateway(GATEWAY_TARGET_FAILED));
+                    breakers.entry(job.unit).or_default().record(answered, Instant::now());
+                }
                 free_at = last_byte + opts.line_guard();
                 shared.metrics.latency(job.unit, job.queued.elapsed());
                 let _ = job.reply.send(reply);
@@ -344,5 +394,40 @@ fn echo_reply(pdu: &[u8]) -> Reply {
 impl Metrics {
     fn port_lost(&self, e: &std::io::Error) {
         self.note(&format!("serial port lost: {e}; reopening"));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 15: eight clients polling a dead unit cost the line a timeout each; a good unit's
+    /// client got 3 answers in 8. The breaker opens after three failures, probes once per
+    /// backoff (doubling to 30 s), and closes on the first answer.
+    #[test]
+    fn a_dead_unit_is_answered_at_once_between_probes() {
+        let t0 = Instant::now();
+        let mut b = Breaker::default();
+        for i in 0..BREAK_AFTER {
+            assert!(!b.refuses(t0), "failure {i}: still tried");
+            b.record(false, t0);
+        }
+        assert!(b.refuses(t0 + Duration::from_millis(1)));
+        assert!(b.refuses(t0 + BREAKER_START - Duration::from_millis(1)));
+        // The probe goes through, fails: twice as long now.
+        let probe = t0 + BREAKER_START;
+        assert!(!b.refuses(probe));
+        b.record(false, probe);
+        assert!(b.refuses(probe + BREAKER_START * 2 - Duration::from_millis(1)));
+        assert!(!b.refuses(probe + BREAKER_START * 2));
+        // Never longer than the cap.
+        for _ in 0..10 {
+            b.record(false, probe);
+        }
+        assert_eq!(b.backoff, BREAKER_MAX);
+        // An answer closes it.
+        b.record(true, probe);
+        assert!(!b.refuses(probe));
+        assert_eq!(b.failures, 0);
     }
 }

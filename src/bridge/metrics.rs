@@ -18,6 +18,8 @@ struct Unit {
     gateway_exceptions: BTreeMap<u8, u64>,
     timeouts: u64,
     crc_errors: u64,
+    /// Requests answered 0x0B at once while the unit's circuit breaker was open.
+    circuit_open: u64,
     buckets: [u64; BUCKETS.len()],
     latency_count: u64,
     latency_sum: f64,
@@ -67,6 +69,11 @@ impl Metrics {
 
     pub fn timeout(&self, unit: u8) {
         self.with(|m| m.units.entry(unit).or_default().timeouts += 1);
+    }
+
+    /// A request answered at once because the unit's circuit breaker is open.
+    pub fn circuit_open(&self, unit: u8) {
+        self.with(|m| m.units.entry(unit).or_default().circuit_open += 1);
     }
 
     pub fn crc_error(&self, unit: u8) {
@@ -169,6 +176,14 @@ impl Metrics {
             counter(&mut s, "mbtap_bridge_timeouts_total", "Requests with no answer in time.");
             for (u, v) in &m.units {
                 let _ = writeln!(s, "mbtap_bridge_timeouts_total{{unit=\"{u}\"}} {}", v.timeouts);
+            }
+            counter(
+                &mut s,
+                "mbtap_bridge_circuit_open_total",
+                "Requests answered 0x0B at once: the unit's circuit breaker was open after consecutive timeouts.",
+            );
+            for (u, v) in m.units.iter().filter(|(_, v)| v.circuit_open > 0) {
+                let _ = writeln!(s, "mbtap_bridge_circuit_open_total{{unit=\"{u}\"}} {}", v.circuit_open);
             }
             counter(&mut s, "mbtap_bridge_crc_errors_total", "Answers whose CRC or LRC failed.");
             for (u, v) in &m.units {
