@@ -116,8 +116,10 @@ impl LineShared {
     }
 }
 
-/// Bytes seen on the line, for `--monitor`: port 0 carries requests, port 1 responses.
-pub type MonitorChunk = (PortId, Timestamp, Vec<u8>);
+/// Bytes seen on the line, for `--monitor`: port 0 carries requests, port 1 responses; the
+/// flag says the bytes are exactly one frame this program wrote (stamped when its last
+/// character left), not a read that may hold part of one.
+pub type MonitorChunk = (PortId, Timestamp, Vec<u8>, bool);
 
 /// A unit that failed to answer this many requests in a row gets its circuit breaker opened.
 const BREAK_AFTER: u32 = 3;
@@ -263,9 +265,21 @@ struct Master<'a> {
 }
 
 impl Master<'_> {
+    /// Bytes read from the line, stamped when the read returned.
     fn observe(&self, port: u8, bytes: &[u8]) {
         if let Some(m) = self.monitor {
-            let _ = m.send((PortId(port), crate::source::serial::now(), bytes.to_vec()));
+            let _ = m.send((PortId(port), crate::source::serial::now(), bytes.to_vec(), false));
+        }
+    }
+
+    /// A frame this program wrote, stamped when its last character leaves the wire (the write
+    /// returns as soon as the bytes are queued; stamping them then back-dated the request by
+    /// its own transmission time, and the monitor saw a gap shorter than the line's).
+    fn observe_sent(&self, port: u8, bytes: &[u8]) {
+        if let Some(m) = self.monitor {
+            let on_wire = self.opts.line.char_ns().saturating_mul(bytes.len() as u64);
+            let t = Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
+            let _ = m.send((PortId(port), t, bytes.to_vec(), true));
         }
     }
 
@@ -285,7 +299,7 @@ impl Master<'_> {
             // this request's answer.
             let _ = port.clear(tokio_serial::ClearBuffer::Input);
             port.write_all(&adu).await?;
-            self.observe(0, &adu);
+            self.observe_sent(0, &adu);
             // The request is on the wire when its last character has left.
             let sent = Instant::now() + self.opts.char_time() * u32::try_from(adu.len()).unwrap_or(u32::MAX);
             if job.unit == 0 {

@@ -77,9 +77,19 @@ struct Side<'a> {
 }
 
 impl Side<'_> {
+    /// Bytes read from the line (the master's requests), stamped when the read returned.
     fn monitor(&self, port: PortId, bytes: &[u8]) {
         if let Some(m) = self.monitor {
-            let _ = m.send((port, crate::source::serial::now(), bytes.to_vec()));
+            let _ = m.send((port, crate::source::serial::now(), bytes.to_vec(), false));
+        }
+    }
+
+    /// An answer this program wrote: one whole frame, stamped when its last character leaves.
+    fn monitor_sent(&self, port: PortId, bytes: &[u8], char_ns: u64) {
+        if let Some(m) = self.monitor {
+            let on_wire = char_ns.saturating_mul(bytes.len() as u64);
+            let t = mbtap_core::chunk::Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
+            let _ = m.send((port, t, bytes.to_vec(), true));
         }
     }
 }
@@ -163,7 +173,7 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
                 SerialMode::Ascii => encode_ascii(r.unit, &pdu, &mut out),
             }
             port.write_all(&out).await?;
-            side.monitor(PortId(1), &out);
+            side.monitor_sent(PortId(1), &out, opts.line.char_ns());
         }
     }
 }

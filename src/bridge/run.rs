@@ -235,9 +235,15 @@ pub async fn bridge<W: Write>(
         tokio::select! {
             () = &mut stop => break,
             () = async { if let Some(d) = deadline { tokio::time::sleep_until(d).await } else { std::future::pending().await } } => break,
-            Some((port, t, bytes)) = monitor_rx.recv(), if monitoring => {
+            Some((port, t, bytes, whole)) = monitor_rx.recv(), if monitoring => {
                 if let (Some(a), Some(w)) = (analyzer.as_mut(), writer.as_deref_mut()) {
-                    a.push(&Chunk { port, t, bytes: &bytes }, &mut |e: &Event<'_>| w.write(e));
+                    let chunk = Chunk { port, t, bytes: &bytes };
+                    // What the bridge wrote is one frame, shown at once (before its answer).
+                    if whole {
+                        a.push_frame(&chunk, &mut |e: &Event<'_>| w.write(e));
+                    } else {
+                        a.push(&chunk, &mut |e: &Event<'_>| w.write(e));
+                    }
                 }
             }
             _ = tick.tick() => {

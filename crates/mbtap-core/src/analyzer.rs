@@ -127,6 +127,31 @@ impl Analyzer {
         }
     }
 
+    /// Feeds a chunk known to be exactly one frame (bytes this program wrote itself): it is
+    /// framed at once, so it is shown — and paired — before anything that comes after it.
+    pub fn push_frame<S: Sink>(&mut self, chunk: &Chunk<'_>, sink: &mut S) {
+        let i = self.port_index(chunk.port);
+        // On a half-duplex line what this program wrote follows everything heard before it (a
+        // request goes out after the last answer ended; an answer after its whole request):
+        // the other ports' pending bytes are complete now.
+        for (j, (_, framer)) in self.ports.iter_mut().enumerate() {
+            if j != i {
+                let (pairing, scratch) = (&mut self.pairing, &mut self.scratch);
+                let mut emit = |e: FrameEvent<'_>| route(pairing, scratch, e, sink);
+                match framer {
+                    PortFramer::Rtu(f) => f.finish(&mut emit),
+                    PortFramer::Ascii(f) => f.finish(&mut emit),
+                }
+            }
+        }
+        let (pairing, scratch) = (&mut self.pairing, &mut self.scratch);
+        let mut emit = |e: FrameEvent<'_>| route(pairing, scratch, e, sink);
+        match &mut self.ports[i].1 {
+            PortFramer::Rtu(f) => f.push_whole(chunk, &mut emit),
+            PortFramer::Ascii(f) => f.push(chunk, &mut emit),
+        }
+    }
+
     /// The time is `now` and nothing arrived: framers flush what silence decides, pairing
     /// times out what waited too long.
     pub fn tick<S: Sink>(&mut self, now: Timestamp, sink: &mut S) {

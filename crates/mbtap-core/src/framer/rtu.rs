@@ -285,6 +285,23 @@ impl RtuFramer {
         self.process(Flush::No, emit);
     }
 
+    /// Feeds a chunk known to be exactly one frame — bytes this program wrote itself (the
+    /// bridge's requests and answers, for `--monitor`): what was buffered on this port is
+    /// complete before it, and it goes out whole at once, whatever its function code (a vendor
+    /// frame need not wait for the silence after it). A chunk that fails its CRC takes the
+    /// general path.
+    pub fn push_whole<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
+        if chunk.bytes.len() < RTU_MIN_LEN || !Self::crc_ok(chunk.bytes) {
+            self.push(chunk, emit);
+            return;
+        }
+        if self.pending() > 0 {
+            self.process(Flush::All, emit);
+        }
+        let reading = Self::whole_frame(chunk.bytes).unwrap_or(Reading::Unknown);
+        self.emit_whole_chunk(chunk, reading, emit);
+    }
+
     /// Is `bytes` exactly one frame that the general path would accept at once: every reading
     /// of its structure resolved within it, exactly one with a valid CRC, and that one the
     /// whole chunk? (Gap-cutting sniffers write one frame per packet; this skips buffering.)
