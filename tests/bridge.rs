@@ -486,6 +486,26 @@ fn the_monitor_shows_the_line_in_order_with_its_real_gaps() {
     assert!(outcomes.iter().all(|o| matches!(*o, "ok" | "exception")), "{outcomes:?}");
 }
 
+/// Issue 15: a CRC-valid request whose byte count disagrees with its quantity was dropped on
+/// `--listen-rtu` (and in reverse mode): the master timed out where the device answers 03.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_request_whose_byte_count_lies_reaches_the_device() {
+    let d = dir("lying-count");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, _, others) = bridge(&d.join("bus"), &["--listen-rtu", "127.0.0.1:0"]);
+    // Unit 1 (MK4), write 0 registers from 0x0160, byte count 0, then six data bytes anyway.
+    let mut frame = vec![0x01, 0x10, 0x01, 0x60, 0x00, 0x00, 0x00, 0x02, 0x2B, 0x00, 0x01, 0x00, 0x64];
+    let crc = mbtap_core::proto::crc16(&frame).to_le_bytes();
+    frame.extend_from_slice(&crc);
+    let mut s = TcpStream::connect(&others[0]).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    s.write_all(&frame).unwrap();
+    let mut answer = [0u8; 5];
+    s.read_exact(&mut answer).unwrap();
+    assert_eq!(answer[..3], [0x01, 0x90, 0x03], "the device's own exception 03 (Illegal Data Value)");
+}
+
 /// Issue 15: an RTU-over-TCP client streaming bytes that never form a request (`0x41`, a
 /// function only silence can end, with no pause) kept the bridge rescanning its whole buffer on
 /// every read. Now the garbage is held to one frame's length, the client is cut off after 4 KiB

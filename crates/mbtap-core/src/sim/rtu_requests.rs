@@ -61,8 +61,20 @@ impl RequestAssembler {
                 self.buf.drain(..total);
                 return Some(request);
             }
-            self.buf.remove(0);
-            self.discarded += 1;
+            // Not a request at the length its fields give. A whole request further on means the
+            // bytes before it are noise. Otherwise the fields may lie (a byte count that
+            // disagrees with its quantity): such a request still stands or falls by its CRC
+            // over what arrives before the silence ([`Self::silence`]) — the device, not the
+            // gateway, answers it (with exception 03).
+            if let Some(skip) = (1..self.buf.len()).find(|&k| exact_request_at(&self.buf[k..])) {
+                self.buf.drain(..skip);
+                self.discarded += skip as u64;
+                continue;
+            }
+            let excess = self.buf.len().saturating_sub(RTU_MAX_LEN);
+            self.buf.drain(..excess);
+            self.discarded += excess as u64;
+            return None;
         }
     }
 
@@ -134,6 +146,28 @@ mod tests {
         assert_eq!(a.silence(), None);
         assert_eq!(a.discarded, 3);
         assert_eq!(a.pending(), 0);
+    }
+
+    /// Issue 15: a CRC-valid request whose byte count disagrees with its quantity (write 0
+    /// registers from 0x0160 with 6 data bytes) was dropped: the master timed out where the
+    /// device answers exception 03. It is a request: the silence after it ends it.
+    const LYING_BYTE_COUNT: [u8; 15] = [
+        0x11, // unit 17
+        0x10, // write multiple registers
+        0x01, 0x60, // start 0x0160
+        0x00, 0x00, // quantity 0
+        0x00, // byte count 0 …
+        0x02, 0x2B, 0x00, 0x01, 0x00, 0x64, // … and six data bytes
+        0x8C, 0x88, // CRC over all of it
+    ];
+
+    #[test]
+    fn a_request_whose_byte_count_lies_is_forwarded_at_the_silence() {
+        let mut a = RequestAssembler::default();
+        a.push(&LYING_BYTE_COUNT);
+        assert_eq!(a.next_request(), None, "its length is not what its fields say");
+        assert_eq!(a.pending(), LYING_BYTE_COUNT.len(), "kept for the silence");
+        assert_eq!(a.silence(), Some(RequestFrame { unit: 0x11, pdu: LYING_BYTE_COUNT[1..13].to_vec() }));
     }
 
     /// Issue 15: a client streaming `0x41` (a function whose length only silence ends) kept
