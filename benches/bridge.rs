@@ -165,6 +165,10 @@ fn main() {
         line_at_9600(&dir);
         return;
     }
+    if std::env::var("MBTAP_BENCH_ONLY").as_deref() == Ok("attackers") {
+        attackers(&dir);
+        return;
+    }
     let sim = simulator(&link);
     let mut d = direct(&link, 2000, pause);
     drop(sim);
@@ -276,4 +280,170 @@ fn line_at_9600(dir: &Path) {
         percentile(&mut idle, 0.99),
         percentile(&mut idle, 1.0),
     );
+}
+
+/// The bridge with `extra` options; its Modbus TCP address and the other addresses it printed
+/// (RTU over TCP, then metrics), in that order.
+fn bridge_with(link: &Path, extra: &[&str]) -> (Kill, String, Vec<String>) {
+    let mut child = Command::new(BIN)
+        .args(["bridge", "--serial", link.to_str().unwrap(), "--listen", "127.0.0.1:0", "--baud", BAUD])
+        .args(extra)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let (mut tcp, mut rtu, mut metrics) = (None, None, None);
+    while tcp.is_none() || rtu.is_none() || metrics.is_none() {
+        let l = lines.next().unwrap().unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            let addr = rest.split_whitespace().next().unwrap().to_owned();
+            if rest.contains("(Modbus TCP)") { tcp = Some(addr) } else { rtu = Some(addr) }
+        } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
+            metrics = Some(rest.trim_end_matches("/metrics").to_owned());
+        }
+    }
+    std::thread::spawn(move || for _ in lines {});
+    (Kill(child), tcp.unwrap(), vec![rtu.unwrap(), metrics.unwrap()])
+}
+
+/// An attacker: started with a stop flag, its threads returned to be joined.
+type Attack = Box<dyn Fn(std::sync::Arc<std::sync::atomic::AtomicBool>) -> Vec<std::thread::JoinHandle<()>>>;
+
+/// A well-behaved client's round trips (one client pausing 3 ms) with each attacker of issue
+/// 15 running at once, against the quiet figure.
+fn attackers(dir: &Path) {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let link = dir.join("bus-attack");
+    let _sim = simulator(&link);
+    let (_bridge, addr, others) =
+        bridge_with(&link, &["--listen-rtu", "127.0.0.1:0", "--metrics", "127.0.0.1:0", "--timeout-ms", "1000"]);
+    let (rtu_addr, metrics_addr) = (others[0].clone(), others[1].clone());
+    let pause = Duration::from_millis(3);
+    let seconds = 6.0;
+    let report = |name: &str, rtts: &mut Vec<f64>| {
+        println!(
+            "{name:<58} {:>5} answers  p50 {:.3} ms  p99 {:.3} ms  max {:.3} ms",
+            rtts.len(),
+            percentile(rtts, 0.5),
+            percentile(rtts, 0.99),
+            percentile(rtts, 1.0)
+        );
+    };
+    let (mut quiet, _) = through_bridge(&addr, 1, seconds, pause);
+    report("quiet", &mut quiet);
+    let attacks: Vec<(&str, Attack)> = vec![
+        ("RTU-over-TCP garbage stream at full speed (reconnecting)", {
+            let a = rtu_addr.clone();
+            Box::new(move |stop: Arc<AtomicBool>| {
+                let a = a.clone();
+                vec![std::thread::spawn(move || {
+                    let junk = [0x41u8; 4096];
+                    while !stop.load(Ordering::Relaxed) {
+                        if let Ok(mut s) = TcpStream::connect(&a) {
+                            while !stop.load(Ordering::Relaxed) && s.write_all(&junk).is_ok() {}
+                        }
+                    }
+                })]
+            })
+        }),
+        ("2 000 idle sockets opened (held, reconnecting)", {
+            let a = addr.clone();
+            Box::new(move |stop: Arc<AtomicBool>| {
+                let a = a.clone();
+                vec![std::thread::spawn(move || {
+                    let mut held = Vec::new();
+                    while !stop.load(Ordering::Relaxed) {
+                        for _ in 0..2000 {
+                            if let Ok(s) = TcpStream::connect(&a) {
+                                held.push(s);
+                            }
+                        }
+                        std::thread::sleep(Duration::from_millis(500));
+                        held.clear();
+                    }
+                })]
+            })
+        }),
+        ("slowloris: 64 connections, a header byte each 300 ms", {
+            let a = addr.clone();
+            Box::new(move |stop: Arc<AtomicBool>| {
+                (0..64)
+                    .map(|_| {
+                        let (a, stop) = (a.clone(), Arc::clone(&stop));
+                        std::thread::spawn(move || {
+                            while !stop.load(Ordering::Relaxed) {
+                                let Ok(mut s) = TcpStream::connect(&a) else { continue };
+                                while !stop.load(Ordering::Relaxed) && s.write_all(&[0x00]).is_ok() {
+                                    std::thread::sleep(Duration::from_millis(300));
+                                }
+                            }
+                        })
+                    })
+                    .collect()
+            })
+        }),
+        ("metrics flood: connections opened as fast as possible", {
+            let a = metrics_addr.clone();
+            Box::new(move |stop: Arc<AtomicBool>| {
+                (0..4)
+                    .map(|_| {
+                        let (a, stop) = (a.clone(), Arc::clone(&stop));
+                        std::thread::spawn(move || {
+                            let mut held = std::collections::VecDeque::new();
+                            while !stop.load(Ordering::Relaxed) {
+                                if let Ok(s) = TcpStream::connect(&a) {
+                                    held.push_back(s);
+                                }
+                                if held.len() > 200 {
+                                    held.pop_front();
+                                }
+                            }
+                        })
+                    })
+                    .collect()
+            })
+        }),
+        ("8 clients hammering a unit that never answers", {
+            let a = addr.clone();
+            Box::new(move |stop: Arc<AtomicBool>| {
+                (0..8)
+                    .map(|_| {
+                        let (a, stop) = (a.clone(), Arc::clone(&stop));
+                        std::thread::spawn(move || {
+                            let mut s = TcpStream::connect(&a).unwrap();
+                            let mut tid = 0u16;
+                            while !stop.load(Ordering::Relaxed) {
+                                tid = tid.wrapping_add(1);
+                                // Unit 9: nobody there.
+                                let mut f = vec![0u8; 7];
+                                f[..2].copy_from_slice(&tid.to_be_bytes());
+                                f[5] = 6;
+                                f[6] = 9;
+                                f.extend_from_slice(&PDU);
+                                if s.write_all(&f).is_err() {
+                                    return;
+                                }
+                                let mut answer = [0u8; 9];
+                                if s.read_exact(&mut answer).is_err() {
+                                    return;
+                                }
+                            }
+                        })
+                    })
+                    .collect()
+            })
+        }),
+    ];
+    for (name, attack) in attacks {
+        let stop = Arc::new(AtomicBool::new(false));
+        let threads = attack(Arc::clone(&stop));
+        std::thread::sleep(Duration::from_millis(500));
+        let (mut rtts, _) = through_bridge(&addr, 1, seconds, pause);
+        stop.store(true, Ordering::Relaxed);
+        for t in threads {
+            let _ = t.join();
+        }
+        report(name, &mut rtts);
+    }
 }

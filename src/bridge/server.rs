@@ -29,10 +29,21 @@ const REQUEST_DEADLINE: Duration = Duration::from_secs(2);
 /// When every slot is taken, a connection that has sent no request for this long gives its slot
 /// to the newcomer; one busier than that is never evicted.
 const EVICT_AFTER_IDLE: Duration = Duration::from_secs(1);
+/// A connection that has never sent a whole request is evicted first, once it has had this
+/// long to send one (a client connects and asks at once; an idle socket never asks).
+const FIRST_REQUEST_GRACE: Duration = Duration::from_millis(200);
 
-/// The open connections of one listener: when each last sent a whole request, and how to end
-/// it — so a full table evicts its idlest member instead of refusing everyone new.
-type Table = std::sync::Mutex<std::collections::HashMap<ClientId, (Instant, tokio::task::AbortHandle)>>;
+/// One open connection: when it opened, when it last sent a whole request, how to end it.
+#[derive(Debug)]
+struct Conn {
+    opened: Instant,
+    last_request: Option<Instant>,
+    abort: tokio::task::AbortHandle,
+}
+
+/// The open connections of one listener — so a full table evicts a socket that never asked,
+/// or its idlest member, instead of refusing everyone new.
+type Table = std::sync::Mutex<std::collections::HashMap<ClientId, Conn>>;
 
 /// Ends a connection's bookkeeping however it ends — closed, failed or evicted (an aborted
 /// task runs its destructors, not its remaining code).
@@ -54,14 +65,26 @@ impl Drop for Cleanup {
     }
 }
 
-/// The idlest connection of `table` that has been quiet at least [`EVICT_AFTER_IDLE`]: ended,
-/// and its slot free. False when every connection is busy.
+/// Ends one connection to make room: the oldest that never sent a whole request in
+/// [`FIRST_REQUEST_GRACE`], else the idlest quiet at least [`EVICT_AFTER_IDLE`]. False when
+/// every connection is busy (then the newcomer is refused).
 fn evict_idlest(table: &Table) -> bool {
     let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let idlest = table.values().filter(|(last, _)| last.elapsed() >= EVICT_AFTER_IDLE).min_by_key(|(last, _)| *last);
-    match idlest {
-        Some((_, handle)) => {
-            handle.abort();
+    let silent = table
+        .values()
+        .filter(|c| c.last_request.is_none() && c.opened.elapsed() >= FIRST_REQUEST_GRACE)
+        .min_by_key(|c| c.opened);
+    let idlest = || {
+        table
+            .values()
+            .filter_map(|c| c.last_request.map(|l| (l, c)))
+            .filter(|(l, _)| l.elapsed() >= EVICT_AFTER_IDLE)
+            .min_by_key(|(l, _)| *l)
+            .map(|(_, c)| c)
+    };
+    match silent.or_else(idlest) {
+        Some(c) => {
+            c.abort.abort();
             true
         }
         None => false,
@@ -225,13 +248,13 @@ pub async fn serve(listener: TcpListener, routes: Arc<Vec<Route>>, opts: Arc<Ser
             let _ = stream.set_nodelay(true);
             let seen = |c| {
                 if let Some(e) = table_for_task.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get_mut(&c) {
-                    e.0 = Instant::now();
+                    e.last_request = Some(Instant::now());
                 }
             };
             connection(stream, peer, client, &routes, &opts, &seen).await;
             drop(cleanup);
         });
-        entries.insert(client, (Instant::now(), handle.abort_handle()));
+        entries.insert(client, Conn { opened: Instant::now(), last_request: None, abort: handle.abort_handle() });
         drop(entries);
     }
 }
