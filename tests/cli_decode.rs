@@ -309,3 +309,82 @@ fn a_truncated_answer_after_its_request_is_a_truncated_response() {
     assert!(!s.contains("quantity: 0"), "{s}");
     assert_eq!(o.status.code(), Some(1));
 }
+
+/// Issue 16: `decode` read all of stdin before printing anything (`tail -f log | mbtap decode`
+/// printed nothing). Now each line's result comes out as the line comes in.
+#[test]
+fn decode_streams_one_line_in_one_result_out() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .env("MBTAP_CONFIG", "/nonexistent/mbtap-config.toml")
+        .arg("decode")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    // An exception answer: nothing can pair with it, so it is shown at once — stdin still open.
+    stdin.write_all(b"0183030131\n").unwrap();
+    stdin.flush().unwrap();
+    let first = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("no output while stdin stays open");
+    assert!(first.contains("Exception"), "{first}");
+    drop(stdin);
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+}
+
+/// Issue 16: one Latin-1 byte in a comment rejected the whole input ("stream did not contain
+/// valid UTF-8", no line number); a line of megabytes was held whole.
+#[test]
+fn decode_reads_bytes_names_bad_lines_and_cuts_endless_ones() {
+    let mut input = b"# caf\xe9 au lait\n0183030131\n".to_vec();
+    input.extend(std::iter::repeat_n(b'A', 5_000_000));
+    input.extend_from_slice(b"\n01 03 06 00 00 00 00 01 90 20 89\nT\xe9: 01 03\n");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .env("MBTAP_CONFIG", "/nonexistent/mbtap-config.toml")
+        .arg("decode")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let writer = std::thread::spawn(move || stdin.write_all(&input));
+    let o = child.wait_with_output().unwrap();
+    writer.join().unwrap().unwrap();
+    let (out, err) = (stdout(&o), String::from_utf8_lossy(&o.stderr).into_owned());
+    assert!(out.contains("Exception") && out.contains("3 register(s)"), "{out}");
+    assert!(err.contains("line 3 is longer than 4096 characters"), "{err}");
+    assert!(err.contains("input 3") || err.contains("input 4"), "the bad lines are named: {err}");
+    assert_eq!(o.status.code(), Some(2), "some input was not a frame");
+}
+
+/// Issue 16: `decode ":"` said "ASCII frame of 3 bytes".
+#[test]
+fn a_lone_colon_counts_what_was_typed() {
+    let o = mbtap(&["decode", ":"], None);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(err.contains("needs at least 6 characters after ':'") && err.contains("has 0"), "{err}");
+}
+
+/// Issue 16: real log formats were refused; the timestamp and the tag are set aside (and
+/// shown in JSON lines), the tag read as the direction.
+#[test]
+fn log_formats_are_read_and_what_was_stripped_is_shown() {
+    let input = "2024-05-01 12:00:01.123 Tx: 01.03.00.65.00.03.15.D4\n12:00:01.140 Rx: 0x1 0x3 0x6 0x0 0x0 0x0 0x0 0x1 0x90 0x20 0x89\n";
+    let o = mbtap(&["decode"], Some(input));
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout(&o).contains("transaction: unit 1"), "{}", stdout(&o));
+    let o = mbtap(&["decode", "--format", "jsonl", "12:00:01.123 > 0183030131"], None);
+    let j: serde_json::Value = serde_json::from_str(stdout(&o).lines().next().unwrap()).unwrap();
+    assert_eq!((j["timestamp"].as_str(), j["tag"].as_str()), (Some("12:00:01.123"), Some(">")));
+}

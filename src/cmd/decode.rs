@@ -1,6 +1,6 @@
 //! `mbtap decode`: frames typed or pasted as text, explained ([`mbtap_core::decode`]).
 
-use std::io::{self, BufRead, Write};
+use std::io::{self, BufRead, Read, Write};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -40,21 +40,13 @@ pub struct Args {
     pub lang: LangArg,
 }
 
+/// A line longer than this is no frame (the longest, an ASCII frame, is 513 characters; hex
+/// of 256 bytes with separators and a log's timestamp stays well under it): it is cut, and said.
+const MAX_LINE: usize = 4096;
+
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { frames, mode, format, devices, lang } = args;
     let profiles = crate::devices::load_devices(&devices)?;
-    let lines = if frames.is_empty() {
-        io::stdin()
-            .lock()
-            .lines()
-            .collect::<Result<Vec<_>, _>>()
-            .context("reading frames from stdin")?
-            .into_iter()
-            .filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
-            .collect()
-    } else {
-        frames
-    };
     let mode = mode.map(|m| match m {
         ModeArg::Rtu => Mode::Rtu,
         ModeArg::Ascii => Mode::Ascii,
@@ -66,8 +58,55 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     let stdout = io::stdout();
     let mut out = io::BufWriter::new(stdout.lock());
-    let outcome =
-        decode_cmd::run_with_profiles(&lines, mode, format, &profiles, lang.into(), &mut out, &mut io::stderr())?;
+    let mut err = io::stderr();
+    let mut decoder = decode_cmd::Decoder::new(mode, format, &profiles, lang.into());
+    if frames.is_empty() {
+        // Streamed: a line in, its result out, in constant memory (`tail -f log | mbtap decode`).
+        let stdin = io::stdin();
+        let mut reader = io::BufReader::new(stdin.lock());
+        let mut buf = Vec::with_capacity(256);
+        let mut number = 0usize;
+        loop {
+            buf.clear();
+            let n = (&mut reader)
+                .take(MAX_LINE as u64 + 1)
+                .read_until(b'\n', &mut buf)
+                .context("reading frames from stdin")?;
+            if n == 0 {
+                break;
+            }
+            number += 1;
+            if buf.last() != Some(&b'\n') && n > MAX_LINE {
+                // Skip the rest of the line without holding it.
+                let mut rest = Vec::new();
+                loop {
+                    rest.clear();
+                    let m = (&mut reader).take(64 * 1024).read_until(b'\n', &mut rest)?;
+                    if m == 0 || rest.last() == Some(&b'\n') {
+                        break;
+                    }
+                }
+                writeln!(err, "mbtap: line {number} is longer than {MAX_LINE} characters: cut, not read as a frame")?;
+                buf.truncate(MAX_LINE);
+            }
+            // Bytes, not text: a Latin-1 comment must not stop the input (the line is named when
+            // such bytes stand where a frame's digits should).
+            let line = String::from_utf8_lossy(&buf);
+            let line = line.trim_end_matches(['\n', '\r']);
+            if line.trim().is_empty() || line.trim_start().starts_with('#') {
+                continue;
+            }
+            decoder.line(line, &mut out, &mut err)?;
+            if reader.buffer().is_empty() {
+                out.flush()?;
+            }
+        }
+    } else {
+        for f in &frames {
+            decoder.line(f, &mut out, &mut err)?;
+        }
+    }
+    let outcome = decoder.finish(&mut out, &mut err)?;
     out.flush()?;
     Ok(ExitCode::from(outcome as u8))
 }

@@ -11,7 +11,7 @@ use std::io::{self, Write};
 
 use serde_json::json;
 
-use crate::proto::hexinput::parse_frame_text;
+use crate::proto::hexinput::{Tagged, parse_log_line};
 use crate::proto::{
     Adu, DecodedPdu, DirectionHint, Mode, Pdu, PduDecode, Request, decode_pdu, pair_findings, parse_adu,
 };
@@ -42,14 +42,19 @@ struct Input {
     number: usize,
     wire: Vec<u8>,
     adu: Adu,
+    /// The direction a log's tag gave (`Tx:`/`Rx:`), else unknown.
+    hint: DirectionHint,
+    /// What the log line held besides the frame: its timestamp and direction tag.
+    timestamp: Option<String>,
+    tag: Option<String>,
 }
 
 /// What an input line holds, piece by piece.
 #[derive(Debug)]
 enum Entry {
     Frame(Input),
-    /// Not a frame at all: the input number and why.
-    Unreadable(usize, String),
+    /// Not a frame at all: the input number, the line as given, and why.
+    Unreadable(usize, String, String),
     /// A turnaround glitch byte after a frame (input number, bytes).
     Glitch(usize, Vec<u8>),
     /// Bytes between frames that belong to none (input number, bytes).
@@ -119,132 +124,209 @@ pub fn run_with_profiles(
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> io::Result<Outcome> {
-    let mut outcome = Outcome::Clean;
-    // Unreadable lines stay in the sequence so output keeps the input's order.
-    let mut entries: Vec<Entry> = Vec::with_capacity(lines.len());
-    for (i, line) in lines.iter().enumerate() {
-        let number = i + 1;
-        let wire = match parse_frame_text(line) {
-            Ok(wire) => wire,
-            Err(e) => {
-                entries.push(Entry::Unreadable(number, e.to_string()));
-                continue;
-            }
-        };
-        let adu = parse_adu(&wire, mode);
-        let rtu = mode == Some(Mode::Rtu) || (mode.is_none() && adu.as_ref().is_ok_and(|a| a.mode == Mode::Rtu));
-        if let Some(pieces) = rtu.then(|| split_rtu(&wire)).flatten() {
-            for piece in pieces {
-                entries.push(match piece {
-                    Piece::Frame(bytes) => match parse_adu(&bytes, Some(Mode::Rtu)) {
-                        Ok(adu) => Entry::Frame(Input { number, wire: bytes, adu }),
-                        Err(e) => Entry::Unreadable(number, e.to_string()),
-                    },
-                    Piece::Glitch(bytes) => Entry::Glitch(number, bytes),
-                    Piece::Noise(bytes) => Entry::Noise(number, bytes),
-                });
-            }
-            continue;
-        }
-        entries.push(match adu {
-            Ok(adu) => Entry::Frame(Input { number, wire, adu }),
-            Err(e) => Entry::Unreadable(number, e.to_string()),
-        });
+    let mut d = Decoder::new(mode, format, profiles, lang);
+    for line in lines {
+        d.line(line, out, err)?;
     }
-    let decodes: Vec<Option<PduDecode<'_>>> = entries
-        .iter()
-        .map(|e| match e {
-            Entry::Frame(i) => Some(decode_pdu(&i.adu.pdu, DirectionHint::Unknown)),
-            _ => None,
-        })
-        .collect();
-    let mut i = 0;
-    while i < entries.len() {
-        let (this, decode) = match (&entries[i], &decodes[i]) {
-            (Entry::Frame(this), Some(decode)) => (this, decode),
-            (Entry::Unreadable(number, reason), _) => {
-                outcome = Outcome::Unreadable;
-                let shown = lines[number - 1].trim();
-                match format {
-                    Format::Text => writeln!(err, "mbtap: input {number} ({shown:?}) is not a frame: {reason}")?,
-                    Format::Jsonl => {
-                        writeln!(
-                            out,
-                            "{}",
-                            json!({"event": "error", "input": number, "text": shown, "message": reason})
-                        )?;
+    d.finish(out, err)
+}
+
+/// Decodes a stream of lines as they come: one line in, its result out — held back only while
+/// a request may still be answered by the next line, so memory stays constant and
+/// `tail -f log | mbtap decode` shows each frame at once.
+#[derive(Debug)]
+pub struct Decoder<'p> {
+    mode: Option<Mode>,
+    format: Format,
+    profiles: &'p Profiles,
+    lang: crate::profile::annotate::Lang,
+    outcome: Outcome,
+    /// Lines read so far (the next one's number is this plus one).
+    read: usize,
+    /// Pieces not shown yet: at most a request waiting for its answer and what came with it.
+    pending: std::collections::VecDeque<Entry>,
+}
+
+impl<'p> Decoder<'p> {
+    #[must_use]
+    pub fn new(
+        mode: Option<Mode>,
+        format: Format,
+        profiles: &'p Profiles,
+        lang: crate::profile::annotate::Lang,
+    ) -> Self {
+        Self {
+            mode,
+            format,
+            profiles,
+            lang,
+            outcome: Outcome::Clean,
+            read: 0,
+            pending: std::collections::VecDeque::new(),
+        }
+    }
+
+    /// Takes one input line and writes what it can decide.
+    ///
+    /// # Errors
+    /// Only I/O errors writing the output.
+    pub fn line(&mut self, line: &str, out: &mut dyn Write, err: &mut dyn Write) -> io::Result<()> {
+        self.read += 1;
+        let number = self.read;
+        let shown = line.trim().to_owned();
+        match parse_log_line(line) {
+            Err(e) => self.pending.push_back(Entry::Unreadable(number, shown, e.to_string())),
+            Ok(log) => {
+                let hint = match log.tag.as_ref().map(|t| t.1) {
+                    Some(Tagged::Request) => DirectionHint::Request,
+                    Some(Tagged::Response) => DirectionHint::Response,
+                    None => DirectionHint::Unknown,
+                };
+                let (timestamp, tag) = (log.timestamp, log.tag.map(|t| t.0));
+                let wire = log.bytes;
+                let adu = parse_adu(&wire, self.mode);
+                let rtu = self.mode == Some(Mode::Rtu)
+                    || (self.mode.is_none() && adu.as_ref().is_ok_and(|a| a.mode == Mode::Rtu));
+                if let Some(pieces) = rtu.then(|| split_rtu(&wire)).flatten() {
+                    for piece in pieces {
+                        self.pending.push_back(match piece {
+                            Piece::Frame(bytes) => match parse_adu(&bytes, Some(Mode::Rtu)) {
+                                Ok(adu) => Entry::Frame(Input {
+                                    number,
+                                    wire: bytes,
+                                    adu,
+                                    hint,
+                                    timestamp: timestamp.clone(),
+                                    tag: tag.clone(),
+                                }),
+                                Err(e) => Entry::Unreadable(number, shown.clone(), e.to_string()),
+                            },
+                            Piece::Glitch(bytes) => Entry::Glitch(number, bytes),
+                            Piece::Noise(bytes) => Entry::Noise(number, bytes),
+                        });
                     }
+                } else {
+                    self.pending.push_back(match adu {
+                        Ok(adu) => Entry::Frame(Input { number, wire, adu, hint, timestamp, tag }),
+                        Err(e) => Entry::Unreadable(number, shown, e.to_string()),
+                    });
                 }
-                i += 1;
-                continue;
             }
-            (Entry::Glitch(number, bytes) | Entry::Noise(number, bytes), _) => {
-                let glitch = matches!(entries[i], Entry::Glitch(..));
-                // Not part of any frame: the line held more than its frames.
-                outcome = outcome.max(if glitch { Outcome::Problems } else { Outcome::Unreadable });
-                let hex = crate::report::format::hex_spaced(bytes);
-                match format {
-                    Format::Text if glitch => writeln!(
-                        out,
-                        "glitch: {hex} right after the frame — a transceiver's turnaround byte, not part of the frame (missing fail-safe biasing)"
-                    )?,
-                    Format::Text => writeln!(out, "noise: {hex} ({} byte(s) that belong to no frame)", bytes.len())?,
+        }
+        self.drain(false, out, err)
+    }
+
+    /// End of input: writes what was held back; the run's outcome.
+    ///
+    /// # Errors
+    /// Only I/O errors writing the output.
+    pub fn finish(mut self, out: &mut dyn Write, err: &mut dyn Write) -> io::Result<Outcome> {
+        self.drain(true, out, err)?;
+        Ok(self.outcome)
+    }
+
+    /// Writes every piece that can be decided now: all of them at the end, otherwise all but a
+    /// last frame that reads as a request (its answer may be the next line).
+    fn drain(&mut self, at_end: bool, out: &mut dyn Write, err: &mut dyn Write) -> io::Result<()> {
+        while let Some(front) = self.pending.front() {
+            if let Entry::Frame(this) = front
+                && self.pending.len() == 1
+                && !at_end
+                && request_reading(&decode_pdu(&this.adu.pdu, this.hint)).is_some()
+            {
+                return Ok(());
+            }
+            let Some(entry) = self.pending.pop_front() else { return Ok(()) };
+            self.show(entry, out, err)?;
+        }
+        Ok(())
+    }
+
+    /// Bytes of a line that belong to no frame: a turnaround glitch or noise.
+    fn stray(&mut self, number: usize, bytes: &[u8], glitch: bool, out: &mut dyn Write) -> io::Result<()> {
+        // Not part of any frame: the line held more than its frames.
+        self.outcome = self.outcome.max(if glitch { Outcome::Problems } else { Outcome::Unreadable });
+        let hex = crate::report::format::hex_spaced(bytes);
+        match self.format {
+            Format::Text if glitch => writeln!(
+                out,
+                "glitch: {hex} right after the frame — a transceiver's turnaround byte, not part of the frame (missing fail-safe biasing)"
+            ),
+            Format::Text => writeln!(out, "noise: {hex} ({} byte(s) that belong to no frame)", bytes.len()),
+            Format::Jsonl => writeln!(
+                out,
+                "{}",
+                json!({"event": if glitch { "glitch" } else { "noise" }, "input": number, "hex": crate::report::format::hex_compact(bytes), "len": bytes.len()})
+            ),
+        }
+    }
+
+    /// Writes one piece (a frame with the answer after it as one transaction).
+    fn show(&mut self, entry: Entry, out: &mut dyn Write, err: &mut dyn Write) -> io::Result<()> {
+        let format = self.format;
+        let this = match entry {
+            Entry::Frame(this) => this,
+            Entry::Unreadable(number, shown, reason) => {
+                self.outcome = Outcome::Unreadable;
+                return match format {
+                    Format::Text => writeln!(err, "mbtap: input {number} ({shown:?}) is not a frame: {reason}"),
                     Format::Jsonl => writeln!(
                         out,
                         "{}",
-                        json!({"event": if glitch { "glitch" } else { "noise" }, "input": number, "hex": crate::report::format::hex_compact(bytes), "len": bytes.len()})
-                    )?,
-                }
-                i += 1;
-                continue;
+                        json!({"event": "error", "input": number, "text": shown, "message": reason})
+                    ),
+                };
             }
-            // `decodes[i]` is `Some` exactly for frames; nothing to show otherwise.
-            (Entry::Frame(_), None) => {
-                i += 1;
-                continue;
-            }
+            Entry::Glitch(number, bytes) => return self.stray(number, &bytes, true, out),
+            Entry::Noise(number, bytes) => return self.stray(number, &bytes, false, out),
         };
+        let decode = decode_pdu(&this.adu.pdu, this.hint);
         if !this.adu.check.ok() {
-            outcome = outcome.max(Outcome::Problems);
+            self.outcome = self.outcome.max(Outcome::Problems);
         }
-        if let Some(Entry::Frame(next)) = entries.get(i + 1)
-            && let Some((req, req_decoded)) = request_reading(decode)
+        if let Some(Entry::Frame(next)) = self.pending.front()
+            && let Some((req, req_decoded)) = request_reading(&decode)
             && answers(&this.adu, &req, &next.adu)
         {
             if !next.adu.check.ok() {
-                outcome = outcome.max(Outcome::Problems);
+                self.outcome = self.outcome.max(Outcome::Problems);
             }
             let resp = decode_pdu(&next.adu.pdu, DirectionHint::Response);
             let req_decode = PduDecode::One(req_decoded.clone());
-            let annotations = match (profiles.get(&this.adu.unit), &resp) {
+            let annotations = match (self.profiles.get(&this.adu.unit), &resp) {
                 (Some(p), PduDecode::One(DecodedPdu { pdu: Pdu::Response(r), .. })) => {
                     crate::profile::transaction::annotate_transaction(p, &req, Some(r))
                 }
                 _ => Vec::new(),
             };
-            transaction(this, &req_decode, &req, next, &resp, &annotations, lang, format, out)?;
-            i += 2;
-            continue;
+            transaction(&this, &req_decode, &req, next, &resp, &annotations, self.lang, format, out)?;
+            self.pending.pop_front();
+            return Ok(());
         }
         if matches!(decode, PduDecode::Malformed { .. }) {
-            outcome = outcome.max(Outcome::Problems);
+            self.outcome = self.outcome.max(Outcome::Problems);
         }
-        let view = FrameView { wire: &this.wire, adu: &this.adu, decode, request: None };
+        let view = FrameView { wire: &this.wire, adu: &this.adu, decode: &decode, request: None };
         match format {
-            Format::Text => writeln!(out, "{}", text::frame(&view, ""))?,
+            Format::Text => writeln!(out, "{}", text::frame(&view, "")),
             Format::Jsonl => {
                 let mut j = serde_json::Map::new();
                 j.insert("event".into(), json!("frame"));
                 j.insert("input".into(), json!(this.number));
+                // What the log line held besides the frame, set aside and shown.
+                if let Some(t) = &this.timestamp {
+                    j.insert("timestamp".into(), json!(t));
+                }
+                if let Some(t) = &this.tag {
+                    j.insert("tag".into(), json!(t));
+                }
                 if let serde_json::Value::Object(m) = jsonl::frame(&view) {
                     j.extend(m);
                 }
-                writeln!(out, "{}", serde_json::Value::Object(j))?;
+                writeln!(out, "{}", serde_json::Value::Object(j))
             }
         }
-        i += 1;
     }
-    Ok(outcome)
 }
 
 /// The request reading of a decode, when it has no trailing bytes.

@@ -1,5 +1,8 @@
 //! Reading the frames users paste: hex with spaces, `0x` prefixes and separators, or an ASCII
-//! frame given as its characters (`:...`, with or without CR LF, or with a literal `\r\n`).
+//! frame given as its characters (`:...`, with or without CR LF, or with a literal `\r\n`) —
+//! and the lines of the logs people paste them from ([`parse_log_line`]): a leading timestamp
+//! and a direction tag (`Tx:`, `Rx:`, `send:`, `recv:`, `>`, `<`) are set aside, the tag kept as
+//! the frame's direction; bytes written with dots (`F7.03.50.02`, as esphome logs them) read too.
 
 use thiserror::Error;
 
@@ -14,11 +17,133 @@ pub enum HexInputError {
     BadDigit { column: usize, found: char },
     #[error("'{token}' at column {column} has an odd number of hex digits; write bytes as pairs (e.g. 0A, not A0A)")]
     OddDigits { column: usize, token: String },
+    /// An ASCII frame shorter than address, function and LRC (Serial Line v1.02 §2.5.2.1).
+    #[error(
+        "an ASCII frame needs at least 6 characters after ':' (address, function and LRC as hex pairs); this one has {chars}"
+    )]
+    AsciiTooShort { chars: usize },
 }
 
 /// Characters accepted between hex bytes.
 fn is_separator(c: char) -> bool {
-    c.is_whitespace() || matches!(c, ',' | ';' | '-' | '_' | '|' | ':' | '[' | ']' | '{' | '}')
+    c.is_whitespace() || matches!(c, ',' | ';' | '-' | '_' | '|' | ':' | '.' | '[' | ']' | '{' | '}')
+}
+
+/// Which way a logged frame went, as the log's tag says (from the master's side).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tagged {
+    /// `Tx`, `send`, `>`, `-->`: what the master sent.
+    Request,
+    /// `Rx`, `recv`, `<`, `<--`: what came back.
+    Response,
+}
+
+/// One log line read: the frame's bytes, and what was set aside in front of them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LogLine {
+    pub bytes: Vec<u8>,
+    /// The leading timestamp, as written.
+    pub timestamp: Option<String>,
+    /// The direction tag, as written, and what it says.
+    pub tag: Option<(String, Tagged)>,
+}
+
+/// Reads one line of a log: an optional timestamp (`2024-05-01 12:00:01.123`, `12:00:01.123`,
+/// `[12:00:01]`, `1715000000.123`), an optional direction tag, then a frame as
+/// [`parse_frame_text`] reads it. A bare time without fractions or brackets (`01:03:00`) is
+/// taken for bytes, not a time: colons separate bytes too.
+///
+/// # Errors
+/// [`HexInputError`] for the frame part, its column counted in the whole line.
+pub fn parse_log_line(line: &str) -> Result<LogLine, HexInputError> {
+    let start = line.len() - line.trim_start().len();
+    let mut rest = &line[start..];
+    let mut timestamp = None;
+    if let Some((ts, after)) = leading_timestamp(rest) {
+        timestamp = Some(ts.trim().to_owned());
+        rest = after;
+    }
+    let mut tag = None;
+    if let Some((t, dir, after)) = leading_tag(rest.trim_start()) {
+        tag = Some((t.to_owned(), dir));
+        rest = after;
+    }
+    let rest = rest.trim_start();
+    let offset = line.len() - rest.len();
+    let shift = |e: HexInputError| match e {
+        HexInputError::BadDigit { column, found } => {
+            HexInputError::BadDigit { column: column + line[..offset].chars().count(), found }
+        }
+        HexInputError::OddDigits { column, token } => {
+            HexInputError::OddDigits { column: column + line[..offset].chars().count(), token }
+        }
+        other => other,
+    };
+    let bytes = parse_frame_text(rest).map_err(shift)?;
+    Ok(LogLine { bytes, timestamp, tag })
+}
+
+/// A timestamp at the start of `s`, and what follows it.
+fn leading_timestamp(s: &str) -> Option<(&str, &str)> {
+    // Bracketed: `[ … ]` holding digits and ':' or '-' (a time or a date).
+    if let Some(inner) = s.strip_prefix('[') {
+        let end = inner.find(']')?;
+        let body = &inner[..end];
+        let timeish = body.chars().any(|c| c.is_ascii_digit())
+            && body.chars().any(|c| matches!(c, ':' | '-'))
+            && body.chars().all(|c| c.is_ascii_digit() || " :.-T,+Z".contains(c));
+        return timeish.then(|| (&s[..end + 2], &inner[end + 1..]));
+    }
+    let mut used = 0;
+    let mut words = s.split_inclusive(char::is_whitespace);
+    let mut found = false;
+    for _ in 0..2 {
+        let Some(word) = words.next() else { break };
+        let w = word.trim();
+        let date = w.len() >= 10
+            && w.as_bytes()[4] == b'-'
+            && w.as_bytes()[7] == b'-'
+            && w[..4].bytes().all(|b| b.is_ascii_digit());
+        // A time with fractions (12:00:01.123), or an epoch with fractions (1715000000.123).
+        let time = w.contains(':')
+            && w.contains(['.', ','])
+            && w.split([':', '.', ',']).all(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()));
+        let epoch = w.len() > 11
+            && w.split_once('.')
+                .is_some_and(|(a, b)| a.len() >= 9 && a.bytes().chain(b.bytes()).all(|c| c.is_ascii_digit()));
+        if date || time || epoch {
+            used += word.len();
+            found = true;
+            // A date may be followed by its time.
+            if !date {
+                break;
+            }
+        } else {
+            break;
+        }
+    }
+    found.then(|| (&s[..used], &s[used..]))
+}
+
+/// A direction tag at the start of `s` (case-insensitive words ending in ':' or space, or an
+/// arrow), what it says, and what follows it.
+fn leading_tag(s: &str) -> Option<(&str, Tagged, &str)> {
+    for (arrow, dir) in
+        [("-->", Tagged::Request), ("<--", Tagged::Response), (">", Tagged::Request), ("<", Tagged::Response)]
+    {
+        if let Some(after) = s.strip_prefix(arrow) {
+            return Some((&s[..arrow.len()], dir, after));
+        }
+    }
+    let end = s.find([':', ' ', '\t'])?;
+    let word = &s[..end];
+    let dir = match word.to_ascii_lowercase().as_str() {
+        "tx" | "send" | "sent" | "write" | "request" | "req" => Tagged::Request,
+        "rx" | "recv" | "received" | "read" | "response" | "resp" => Tagged::Response,
+        _ => return None,
+    };
+    let after = s[end..].strip_prefix(':').unwrap_or(&s[end..]);
+    Some((word, dir, after))
 }
 
 /// Turns one line of user input into the bytes of a frame as on the wire.
@@ -31,7 +156,13 @@ pub fn parse_frame_text(line: &str) -> Result<Vec<u8>, HexInputError> {
         return Err(HexInputError::Empty);
     }
     if line.starts_with(':') {
-        return Ok(ascii_frame(line));
+        let frame = ascii_frame(line);
+        // ':' and CR LF around the characters the user typed.
+        let chars = frame.len().saturating_sub(3);
+        if chars < 6 {
+            return Err(HexInputError::AsciiTooShort { chars });
+        }
+        return Ok(frame);
     }
     let mut out = Vec::with_capacity(line.len() / 2);
     let mut column = 1;
@@ -117,6 +248,37 @@ mod tests {
     #[test]
     fn odd_digits_are_refused() {
         assert!(matches!(parse_frame_text("010"), Err(HexInputError::OddDigits { column: 1, .. })));
+    }
+
+    /// Issue 16: real log formats were rejected ("'.' is not a hex digit").
+    #[test]
+    fn log_lines_keep_their_bytes_and_set_aside_timestamp_and_tag() {
+        let want = vec![0x01, 0x03, 0x00, 0x65, 0x00, 0x03, 0x15, 0xD4];
+        for (line, ts, tag) in [
+            ("01.03.00.65.00.03.15.D4", None, None),
+            ("2024-05-01 12:00:01.123 Tx: 01 03 00 65 00 03 15 D4", Some("2024-05-01 12:00:01.123"), Some("Tx")),
+            ("12:00:01.123 send: 01 03 00 65 00 03 15 D4", Some("12:00:01.123"), Some("send")),
+            ("[12:00:01] TX 01 03 00 65 00 03 15 D4", Some("[12:00:01]"), Some("TX")),
+            ("1715000000.123 > 01 03 00 65 00 03 15 D4", Some("1715000000.123"), Some(">")),
+            ("0x1 0x3 0x0 0x65 0x0 0x3 0x15 0xd4", None, None),
+            ("01:03:00:65:00:03:15:D4", None, None),
+        ] {
+            let l = parse_log_line(line).unwrap_or_else(|e| panic!("{line}: {e}"));
+            assert_eq!(l.bytes, want, "{line}");
+            assert_eq!(l.timestamp.as_deref(), ts, "{line}");
+            assert_eq!(l.tag.as_ref().map(|(t, _)| t.as_str()), tag, "{line}");
+        }
+        assert_eq!(parse_log_line("Rx: 01 83 02 C0 F1").unwrap().tag.unwrap().1, Tagged::Response);
+        // Columns count in the whole line.
+        assert_eq!(parse_log_line("Tx: 01 0G"), Err(HexInputError::BadDigit { column: 9, found: 'G' }));
+    }
+
+    /// Issue 16: `decode ":"` said "ASCII frame of 3 bytes" (its added CR LF counted).
+    #[test]
+    fn a_short_ascii_frame_counts_what_was_typed() {
+        assert_eq!(parse_frame_text(":"), Err(HexInputError::AsciiTooShort { chars: 0 }));
+        assert_eq!(parse_frame_text(":01"), Err(HexInputError::AsciiTooShort { chars: 2 }));
+        assert!(parse_frame_text(":0103FC").is_ok());
     }
 
     #[test]
