@@ -27,6 +27,10 @@ pub struct Args {
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let Args { port, bauds, dwell_ms } = args;
     let dwell_ms = *dwell_ms;
+    anyhow::ensure!(
+        !std::fs::metadata(port).is_ok_and(|m| m.is_dir()),
+        "{port} is a directory: give a serial port (/dev/ttyUSB0) or a file of stored bytes (a capture or a raw dump)"
+    );
     if std::fs::metadata(port).is_ok_and(|m| m.is_file()) {
         let (text, ok) = crate::source::scan::scan_file(std::path::Path::new(&port))?;
         io::stdout().lock().write_all(text.as_bytes())?;

@@ -22,9 +22,11 @@ use crate::chunk::{PortId, Timestamp};
 /// Errors that end reading.
 #[derive(Debug, Error)]
 pub enum CaptureError {
-    #[error("reading the capture: {0}")]
+    // Transparent: the caller says what it was doing ("reading the capture"); the cause is said
+    // once, not again as this error's source.
+    #[error(transparent)]
     Io(#[from] io::Error),
-    #[error("{0}")]
+    #[error(transparent)]
     Format(#[from] FormatError),
     /// Fewer bytes than any capture's header: an empty file, or a recording that never began.
     #[error("the file holds {0} byte(s), less than a pcap or pcapng header: it is empty, nothing was recorded")]
