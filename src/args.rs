@@ -78,6 +78,10 @@ pub struct LineArgs {
     /// latency timer, at least 1 ms; captures: what they were recorded with; else 0]
     #[arg(long)]
     pub latency_ms: Option<f64>,
+    /// Read a capture's interfaces of this link type as raw serial bytes too (147–162, the
+    /// user link types, always are).
+    #[arg(long, value_name = "DLT")]
+    pub link_type: Option<u16>,
 }
 
 impl LineArgs {
@@ -101,6 +105,7 @@ impl LineArgs {
             // Milliseconds given by a person; negative or absurd values clamp to 0..=10 s.
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
             latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
+            link_type: a.link_type,
         }
     }
 }

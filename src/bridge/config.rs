@@ -93,6 +93,7 @@ pub fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Re
         "stop_bits" => line.stop_bits,
         "data_bits" => line.data_bits,
         "latency_ms" => line.latency_ms,
+        "link_type" => line.link_type,
         "listen" => listen,
         "listen_rtu" => listen_rtu,
         "routes" => routes,

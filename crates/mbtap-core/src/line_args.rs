@@ -13,6 +13,8 @@ pub struct LineOverrides {
     pub parity: Option<Parity>,
     pub stop_bits: Option<u8>,
     pub latency_ns: Option<u64>,
+    /// A capture's link type to read as raw serial bytes besides 147–162 (`--link-type`).
+    pub link_type: Option<u16>,
 }
 
 impl LineOverrides {
@@ -26,6 +28,7 @@ impl LineOverrides {
             parity: self.parity.or(other.parity),
             stop_bits: self.stop_bits.or(other.stop_bits),
             latency_ns: self.latency_ns.or(other.latency_ns),
+            link_type: self.link_type.or(other.link_type),
         }
     }
 

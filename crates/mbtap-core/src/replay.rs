@@ -27,7 +27,7 @@ const REORDER_NS: u64 = 1_000_000_000;
 pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink: &mut S) -> Result<(), CaptureError> {
     use std::cmp::Reverse;
     use std::collections::BinaryHeap;
-    let mut reader = CaptureReader::new(input);
+    let mut reader = CaptureReader::new(input).with_link_type(cli.link_type);
     let mut analyzer: Option<Analyzer> = None;
     let mut file_settings = LineOverrides::default();
     let mut pairing = PairingConfig::default();
@@ -77,6 +77,12 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
                 }
             }
         }
+    }
+    // Nothing read because no interface was raw serial bytes: an error, not an empty success.
+    if reader.packets == 0
+        && let Some(linktype) = reader.skipped_linktype
+    {
+        return Err(CaptureError::UnknownLinkType { linktype });
     }
     if let Some(a) = analyzer.as_mut() {
         while let Some(Reverse((t, _, p, bytes))) = held.pop() {

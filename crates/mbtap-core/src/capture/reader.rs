@@ -28,6 +28,11 @@ pub enum CaptureError {
     Io(#[from] io::Error),
     #[error(transparent)]
     Format(#[from] FormatError),
+    /// Every interface had a link type that is not raw serial bytes: nothing could be read.
+    #[error(
+        "no interface holds raw serial bytes: link type {linktype} is not one mbtap reads (147–162, LINKTYPE_USER0–15, as serial sniffers write them); if its packets are raw serial bytes, say so with --link-type {linktype}"
+    )]
+    UnknownLinkType { linktype: u16 },
     /// Fewer bytes than any capture's header: an empty file, or a recording that never began.
     #[error("the file holds {0} byte(s), less than a pcap or pcapng header: it is empty, nothing was recorded")]
     TooShort(usize),
@@ -62,6 +67,11 @@ pub struct CaptureReader<R> {
     endian: Endianness,
     interfaces: Vec<Interface>,
     warned_linktype: Vec<bool>,
+    /// A link type to read as raw serial bytes besides 147–162.
+    extra_linktype: Option<u16>,
+    /// Packets delivered, and the first link type skipped (for the verdict at the end).
+    pub packets: u64,
+    pub skipped_linktype: Option<u16>,
     last_t: Vec<u64>,
     time_warnings: u32,
     /// Backwards timestamps seen in total.
@@ -79,6 +89,13 @@ enum Next {
 }
 
 impl<R: Read> CaptureReader<R> {
+    /// Also reads interfaces of link type `linktype` as raw serial bytes (`--link-type`).
+    #[must_use]
+    pub fn with_link_type(mut self, linktype: Option<u16>) -> Self {
+        self.extra_linktype = linktype;
+        self
+    }
+
     #[must_use]
     pub fn new(src: R) -> Self {
         Self {
@@ -92,6 +109,9 @@ impl<R: Read> CaptureReader<R> {
             endian: Endianness::Little,
             interfaces: Vec::new(),
             warned_linktype: Vec::new(),
+            extra_linktype: None,
+            packets: 0,
+            skipped_linktype: None,
             last_t: Vec::new(),
             time_warnings: 0,
             backwards_timestamps: 0,
@@ -311,16 +331,22 @@ impl<R: Read> CaptureReader<R> {
     fn packet(&mut self, interface: u32, t: u64, at: usize, len: usize) -> Next {
         let i = interface as usize;
         let Some(iface) = self.interfaces.get(i) else { return Next::Continue };
-        if u32::from(iface.linktype) != LINKTYPE_USER0 {
+        // The user DLTs 147–162 (LINKTYPE_USER0–15): serial sniffers write raw bytes under any
+        // of them.
+        let raw = (LINKTYPE_USER0..=LINKTYPE_USER0 + 15).contains(&u32::from(iface.linktype))
+            || self.extra_linktype == Some(iface.linktype);
+        if !raw {
+            self.skipped_linktype.get_or_insert(iface.linktype);
             if !self.warned_linktype[i] {
                 self.warned_linktype[i] = true;
                 return Next::Warning(format!(
-                    "interface {i} has link type {}, not {LINKTYPE_USER0} (LINKTYPE_USER0, raw serial bytes): its packets are skipped",
-                    iface.linktype
+                    "interface {i} has link type {}, not raw serial bytes (147–162, LINKTYPE_USER0–15): its packets are skipped (--link-type {} reads them as raw serial bytes)",
+                    iface.linktype, iface.linktype
                 ));
             }
             return Next::Continue;
         }
+        self.packets += 1;
         let last = self.last_t[i];
         let t = if t < last {
             self.backwards_timestamps += 1;
