@@ -62,7 +62,7 @@ pub struct LineArgs {
     #[arg(long, value_enum)]
     pub mode: Option<SerialModeArg>,
     /// Baud rate [default: 19200, or what the capture says].
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: Option<u32>,
     /// Parity [default: even, as the serial-line spec says].
     #[arg(long, value_enum)]

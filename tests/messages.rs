@@ -90,3 +90,10 @@ fn user_link_types_are_read_and_an_unknown_one_is_an_error() {
     assert_eq!(o.status.code(), Some(0));
     assert_eq!(String::from_utf8_lossy(&o.stdout).matches("\"event\":\"frame\"").count(), 2);
 }
+
+/// Issue 16: `--baud 0` was accepted.
+#[test]
+fn a_zero_baud_rate_is_refused_on_the_command_line() {
+    let e = stderr_of(&["generate", "/tmp/never-written.pcapng", "--baud", "0"]);
+    assert!(e.contains("--baud") && e.contains('0'), "{e}");
+}

@@ -107,3 +107,28 @@ fn enum_without_labels_and_backwards_ranges_are_refused() {
     .unwrap_err();
     assert!(e.message.contains("runs backwards"), "{e}");
 }
+
+/// Issue 16: `profiles check` accepted `[line] baud = 0`, `framing = "9Z7"`, `mode = "tcp"`,
+/// and `scale = nan` or `inf`. Each is refused at its line and column now.
+#[test]
+fn impossible_line_settings_and_scales_are_refused_where_they_stand() {
+    let head = "[profile]\nname = \"x\"\ndevice = \"y\"\n\n[line]\n";
+    for (line, key) in [("baud = 0", "baud = 0"), ("framing = \"9Z7\"", "9Z7"), ("mode = \"tcp\"", "tcp")] {
+        let src = format!("{head}{line}\n");
+        let e = load("line.toml", &src).unwrap_err();
+        assert_eq!(e.line, 6, "{line}: {e}");
+        assert!(e.column >= 1, "{line}: {e}");
+        assert!(e.message.contains(key), "{line}: {e}");
+    }
+    for scale in ["nan", "inf", "-inf", "0.0"] {
+        let src = format!(
+            "[profile]\nname = \"x\"\ndevice = \"y\"\n\n[[input_registers]]\naddress = 430\nname = \"v\"\nscale = {scale}\n"
+        );
+        let e = load("scale.toml", &src).unwrap_err();
+        assert!(e.message.contains("scale"), "{scale}: {e}");
+        assert!(e.line >= 5, "{scale}: {e}");
+    }
+    // What a document really says still loads.
+    let ok = format!("{head}baud = 9600\nframing = \"8N1\"\nmode = \"rtu\"\n");
+    assert!(load("ok.toml", &ok).is_ok());
+}

@@ -50,6 +50,9 @@ pub fn load(file: &str, src: &str) -> Result<Profile, ProfileError> {
         let span = e.span().unwrap_or(0..0);
         cx.err(span, e.message().trim().to_owned())
     })?;
+    if let Some(line) = &parsed.line {
+        check_line(&cx, line)?;
+    }
     let mut p = Profile {
         meta: parsed.profile,
         line: parsed.line,
@@ -184,7 +187,63 @@ fn int_keys<T: TryFrom<i64> + Ord>(
     Ok(out)
 }
 
+/// The byte range of `key`'s value inside the `[line]` table, to point at it (the table is not
+/// spanned by the parser; the key is found in its lines).
+fn line_key_span(src: &str, key: &str) -> Range<usize> {
+    let Some(table) = src.find("[line]") else { return 0..0 };
+    let mut at = table;
+    for l in src[table..].split_inclusive('\n').skip(1) {
+        at += l.len();
+        let t = l.trim_start();
+        if t.starts_with('[') {
+            break;
+        }
+        if let Some(rest) = t.strip_prefix(key)
+            && rest.trim_start().starts_with('=')
+        {
+            let line_start = at - l.len();
+            let value = l.find('=').map_or(0, |i| i + 1);
+            let skip = l[value..].len() - l[value..].trim_start().len();
+            let v = line_start + value + skip;
+            return v..line_start + l.trim_end().len();
+        }
+    }
+    table..table + "[line]".len()
+}
+
+/// `[line]` values a serial line can have: a baud rate above 0, a character frame like `8E1`,
+/// the mode `rtu` or `ascii` (Modbus over Serial Line v1.02 §2.5).
+fn check_line(cx: &Ctx<'_>, line: &crate::profile::format::LineDefaults) -> Result<(), ProfileError> {
+    if line.baud == Some(0) {
+        return Err(
+            cx.err(line_key_span(cx.src, "baud"), "baud = 0: a line's baud rate is above 0, e.g. 9600 or 19200")
+        );
+    }
+    if let Some(f) = &line.framing
+        && format!("9600 {f}").parse::<crate::framer::LineSettings>().is_err()
+    {
+        return Err(cx.err(
+            line_key_span(cx.src, "framing"),
+            format!("framing = {f:?}: expected data bits, parity and stop bits like \"8E1\", \"8N2\" or \"7E1\""),
+        ));
+    }
+    if let Some(m) = &line.mode
+        && !matches!(m.to_ascii_lowercase().as_str(), "rtu" | "ascii")
+    {
+        return Err(cx.err(
+            line_key_span(cx.src, "mode"),
+            format!("mode = {m:?}: a serial line's mode is \"rtu\" or \"ascii\""),
+        ));
+    }
+    Ok(())
+}
+
 fn compile(cx: &Ctx<'_>, span: &Range<usize>, r: &RegisterDef) -> Result<Def, ProfileError> {
+    if let Some(s) = r.scale
+        && (!s.is_finite() || s == 0.0)
+    {
+        return Err(cx.err(span.clone(), format!("scale = {s}: a scale is a finite number other than 0, e.g. 0.1")));
+    }
     let labels = int_keys::<i64>(cx, span, "enum", &r.labels)?;
     let bits = int_keys::<u8>(cx, span, "bits", &r.bits)?;
     if bits.keys().any(|&b| b > 15) {
