@@ -118,7 +118,9 @@ impl<W: Write> EventWriter<W> {
                     text.push_str("\n      ");
                     text.push_str(&a.line(self.lang));
                 }
-                writeln!(self.out, "{text}")
+                // Names, decoded strings and ASCII frames come from files and the bus: a terminal
+                // must never get their control characters.
+                writeln!(self.out, "{}", mbtap_core::report::format::printable(&text))
             }
             EventFormat::Jsonl => {
                 let mut line = json(e).to_string();
@@ -187,7 +189,7 @@ impl<W: Write> EventWriter<W> {
                     let until = report.last_t_ns.map_or_else(String::new, mbtap_core::health::clock);
                     writeln!(self.out, "--- bus health so far (until {until}) ---")?;
                 }
-                write!(self.out, "{}", report.text())?;
+                write!(self.out, "{}", mbtap_core::report::format::printable(&report.text()))?;
                 if !last {
                     writeln!(self.out, "---")?;
                 }

@@ -388,3 +388,23 @@ fn log_formats_are_read_and_what_was_stripped_is_shown() {
     let j: serde_json::Value = serde_json::from_str(stdout(&o).lines().next().unwrap()).unwrap();
     assert_eq!((j["timestamp"].as_str(), j["tag"].as_str()), (Some("12:00:01.123"), Some(">")));
 }
+
+/// Issue 16: a name with an escape sequence (`^[]0;pwned^G^[[2J`) reached the terminal raw,
+/// retitling and clearing it; an ASCII frame from the bus could do the same.
+#[test]
+fn control_characters_from_profiles_and_frames_never_reach_the_terminal() {
+    let dir = std::env::temp_dir().join(format!("mbtap-escape-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let profile = dir.join("hostile.toml");
+    std::fs::write(
+        &profile,
+        "[profile]\nname = \"hostile\"\ndevice = \"x\"\n\n[[holding_registers]]\naddress = 101\nname = \"pump\\u001b]0;pwned\\u0007\\u001b[2J\"\n",
+    )
+    .unwrap();
+    let device = format!("1={}", profile.display());
+    let o = mbtap(&["decode", "--device", &device, "01030065000315D4", "0103060000000001902089"], None);
+    let s = stdout(&o);
+    assert!(s.contains("pump"), "{s}");
+    assert!(!s.contains('\u{1b}') && !s.contains('\u{7}'), "a control character reached stdout: {s:?}");
+    assert!(s.contains("\\u{1b}"), "shown escaped: {s}");
+}

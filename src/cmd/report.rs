@@ -40,7 +40,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     }
     let report = health.report();
     let text = match format {
-        ReportFormatArg::Text => report.text(),
+        ReportFormatArg::Text => mbtap_core::report::format::printable(&report.text()).into_owned(),
         ReportFormatArg::Json => serde_json::to_string_pretty(&report.json())? + "\n",
         ReportFormatArg::Html => mbtap_core::health::html::render(&report, &file.display().to_string()),
     };

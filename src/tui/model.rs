@@ -186,7 +186,7 @@ impl Model {
                 }
                 self.devices.entry(t.unit).or_default().transaction(t);
                 self.bus.transaction(t.outcome);
-                let summary = summary(t, &annotations, self.lang);
+                let summary = mbtap_core::report::format::printable(&summary(t, &annotations, self.lang)).into_owned();
                 let timing = std::mem::take(&mut self.pending);
                 self.push(Row {
                     seq: 0,

@@ -55,8 +55,10 @@ impl Registers {
         }
         for a in annotations {
             let numeric = matches!(a.shown, Shown::Number { .. } | Shown::Raw | Shown::Bool { .. });
-            let name = a.name_in(lang).map(str::to_owned);
-            self.set((unit, a.table, a.address), name, a.value_text(), a.raw, numeric, t_ns);
+            // Names from profile files and strings from the bus: nothing a terminal would obey.
+            let name = a.name_in(lang).map(|n| mbtap_core::report::format::printable(n).into_owned());
+            let text = mbtap_core::report::format::printable(&a.value_text()).into_owned();
+            self.set((unit, a.table, a.address), name, text, a.raw, numeric, t_ns);
         }
     }
 

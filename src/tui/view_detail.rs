@@ -103,7 +103,7 @@ fn decoded(row: &Row, model: &Model) -> Vec<Line<'static>> {
     String::from_utf8_lossy(&out)
         .lines()
         .chain(String::from_utf8_lossy(&err).lines())
-        .map(|l| Line::raw(l.to_owned()))
+        .map(|l| Line::raw(mbtap_core::report::format::printable(l).into_owned()))
         .collect()
 }
 

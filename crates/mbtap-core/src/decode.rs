@@ -15,6 +15,7 @@ use crate::proto::hexinput::{Tagged, parse_log_line};
 use crate::proto::{
     Adu, DecodedPdu, DirectionHint, Mode, Pdu, PduDecode, Request, decode_pdu, pair_findings, parse_adu,
 };
+use crate::report::format::printable;
 use crate::report::{FrameView, jsonl, text};
 
 /// Output format.
@@ -308,7 +309,7 @@ impl<'p> Decoder<'p> {
         }
         let view = FrameView { wire: &this.wire, adu: &this.adu, decode: &decode, request: None };
         match format {
-            Format::Text => writeln!(out, "{}", text::frame(&view, "")),
+            Format::Text => writeln!(out, "{}", printable(&text::frame(&view, ""))),
             Format::Jsonl => {
                 let mut j = serde_json::Map::new();
                 j.insert("event".into(), json!("frame"));
@@ -379,13 +380,13 @@ fn transaction(
     match format {
         Format::Text => {
             writeln!(out, "transaction: unit {} · {}", req_in.adu.unit, req.function())?;
-            write!(out, "{}", text::frame(&req_view, "  "))?;
-            write!(out, "{}", text::frame(&resp_view, "  "))?;
+            write!(out, "{}", printable(&text::frame(&req_view, "  ")))?;
+            write!(out, "{}", printable(&text::frame(&resp_view, "  ")))?;
             write!(out, "{}", text::pair_findings(&pair, ""))?;
             if !annotations.is_empty() {
                 writeln!(out, "  values:")?;
                 for a in annotations {
-                    writeln!(out, "    {}", a.line(lang))?;
+                    writeln!(out, "    {}", printable(&a.line(lang)))?;
                 }
             }
             writeln!(out)?;

@@ -41,8 +41,37 @@ pub fn hex_compact(bytes: &[u8]) -> String {
     })
 }
 
+/// `text` safe for a terminal: every control character but the line break — an escape
+/// sequence in a profile's name, a device's identification string or an ASCII frame from the
+/// bus would otherwise retitle, clear or reprogram the user's terminal — is written as `\u{1b}`.
+#[must_use]
+pub fn printable(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.chars().any(|c| c.is_control() && c != '\n') {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut out = String::with_capacity(text.len() + 8);
+    for c in text.chars() {
+        if c.is_control() && c != '\n' {
+            let _ = write!(out, "\\u{{{:x}}}", u32::from(c));
+        } else {
+            out.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
 #[cfg(test)]
 mod tests {
+    /// Issue 16: `^[]0;pwned^G^[[2J` in a profile name retitled and cleared the terminal.
+    #[test]
+    fn control_characters_never_reach_the_terminal() {
+        let hostile = "pump \u{1b}]0;pwned\u{7}\u{1b}[2J\u{9b}31m\r";
+        let shown = super::printable(hostile);
+        assert!(!shown.chars().any(char::is_control), "{shown}");
+        assert_eq!(shown, "pump \\u{1b}]0;pwned\\u{7}\\u{1b}[2J\\u{9b}31m\\u{d}");
+        assert_eq!(super::printable("line one\nline two"), "line one\nline two");
+    }
+
     use super::*;
 
     #[test]
