@@ -164,3 +164,54 @@ fn sniff_survives_the_port_disappearing_and_coming_back() {
     assert_eq!(good_frames(&live), want, "live: both halves");
     assert_eq!(good_frames(&replay(&rec)), want, "the recording went on");
 }
+
+/// Issue 16: a +1 h clock step in a capture made `play` wait an hour in silence (a corrupt
+/// timestamp near 2^64, forever). A gap is capped at `--max-gap`, and said.
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn play_caps_a_clock_step_and_says_so() {
+    let dir = std::env::temp_dir().join(format!("mbtap-play-gap-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    let _socat = Kill(
+        Command::new("socat")
+            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
+            .spawn()
+            .expect("socat must be installed for this test"),
+    );
+    wait_for(&a);
+    wait_for(&b);
+    // Two frames an hour apart: a pcap (microseconds, link type 147) written by hand.
+    let frames: [(u32, &[u8]); 2] = [(0, &[0x01, 0x83, 0x03, 0x01, 0x31]), (3600, &[0x01, 0x83, 0x02, 0xC0, 0xF1])];
+    let mut f = Vec::new();
+    f.extend_from_slice(&0xA1B2_C3D4u32.to_le_bytes());
+    f.extend_from_slice(&[2, 0, 4, 0]);
+    f.extend_from_slice(&[0; 8]);
+    f.extend_from_slice(&65_535u32.to_le_bytes());
+    f.extend_from_slice(&147u32.to_le_bytes());
+    for (secs, bytes) in frames {
+        f.extend_from_slice(&(1_700_000_000 + secs).to_le_bytes());
+        f.extend_from_slice(&0u32.to_le_bytes());
+        f.extend_from_slice(&u32::try_from(bytes.len()).unwrap().to_le_bytes());
+        f.extend_from_slice(&u32::try_from(bytes.len()).unwrap().to_le_bytes());
+        f.extend_from_slice(bytes);
+    }
+    let capture = dir.join("step.pcap");
+    std::fs::write(&capture, f).unwrap();
+    let child = Command::new(BIN)
+        .args(["play", capture.to_str().unwrap(), a.to_str().unwrap(), "--max-gap", "0.2"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // A bound for the test's own sake (an uncapped play would take an hour), not a speed figure.
+    let start = Instant::now();
+    let mut child = Kill(child);
+    while child.0.try_wait().unwrap().is_none() {
+        assert!(start.elapsed() < Duration::from_secs(60), "play waited out the hour");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let mut err = String::new();
+    std::io::Read::read_to_string(child.0.stderr.as_mut().unwrap(), &mut err).unwrap();
+    assert!(err.contains("3600.0 s of silence") && err.contains("played as 0.2 s"), "{err}");
+    assert!(err.contains("played 2 packets"), "{err}");
+}

@@ -17,13 +17,19 @@ pub struct Args {
     /// Speed factor (2 = twice as fast).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
+    /// Play a silence in the capture longer than this many seconds as this long (a clock step
+    /// or a corrupt timestamp must not make play wait for hours).
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
+    pub max_gap: f64,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
-    let Args { file, port, line, speed } = args;
-    let speed = *speed;
+    let Args { file, port, line, speed, max_gap } = args;
+    anyhow::ensure!(speed.is_finite() && *speed > 0.0, "--speed {speed}: expected a factor above 0, e.g. 1 or 10");
+    anyhow::ensure!(max_gap.is_finite() && *max_gap >= 0.0, "--max-gap {max_gap}: expected seconds, 0 or more");
     let (_, settings, _) = line.overrides().resolve();
-    let (packets, bytes) = crate::source::play::play(file, port, settings, speed)?;
+    let max_gap = std::time::Duration::from_secs_f64(max_gap.min(1e6));
+    let (packets, bytes) = crate::source::play::play(file, port, settings, *speed, max_gap)?;
     eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
     Ok(ExitCode::SUCCESS)
 }
