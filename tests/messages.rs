@@ -97,3 +97,26 @@ fn a_zero_baud_rate_is_refused_on_the_command_line() {
     let e = stderr_of(&["generate", "/tmp/never-written.pcapng", "--baud", "0"]);
     assert!(e.contains("--baud") && e.contains('0'), "{e}");
 }
+
+/// Issue 16: one flipped bit in one record's length field (a megabyte claimed) ended the
+/// replay — "the file ends in the middle of a block … its last 128 877 bytes are ignored",
+/// 4 of 299 transactions kept. The reader now skips to the next readable record and reads on.
+#[test]
+fn a_damaged_length_field_costs_one_record_not_the_rest_of_the_file() {
+    let frames: Vec<&[u8]> = (0..30).map(|i| if i % 2 == 0 { REQUEST } else { ANSWER }).collect();
+    let p = pcap(147, &frames);
+    let mut bytes = std::fs::read(&p).unwrap();
+    // The 5th record's incl_len (record header: ts_sec, ts_usec, incl_len, orig_len).
+    let fifth = 24 + 2 * (16 + REQUEST.len()) + 2 * (16 + ANSWER.len());
+    bytes[fifth + 8 + 2] ^= 0x10;
+    let damaged = std::env::temp_dir().join(format!("mbtap-damaged-len-{}.pcap", std::process::id()));
+    std::fs::write(&damaged, bytes).unwrap();
+    let o = replay(&damaged, &[]);
+    assert_eq!(o.status.code(), Some(0));
+    let frames_read = String::from_utf8_lossy(&o.stdout).matches("\"event\":\"frame\"").count();
+    assert!(frames_read >= 28, "{frames_read} of 30 frames read");
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("damaged length")
+            || String::from_utf8_lossy(&o.stderr).contains("damaged length")
+    );
+}

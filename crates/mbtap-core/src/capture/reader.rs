@@ -218,9 +218,20 @@ impl<R: Read> CaptureReader<R> {
         Ok(self.end - self.start >= n)
     }
 
+    /// The block or record here claims more bytes than the file has left. Either the file was
+    /// cut short, or its length field is damaged (one flipped bit claims a megabyte): when a
+    /// readable block or record follows, it was the length — skip to that one and read on.
     fn truncated(&mut self) -> Next {
         let left = self.end - self.start;
         let at = self.offset;
+        let window = &self.buf[self.start..self.end];
+        if let Some(skip) = (1..window.len()).find(|&i| self.plausible_at(&window[i..])) {
+            self.consume(skip);
+            return Next::Warning(format!(
+                "the block at offset {at} claims more bytes than the file holds (a damaged length): skipped {skip} bytes to the next readable one at offset {}",
+                at + skip as u64
+            ));
+        }
         self.consume(left);
         Next::Warning(format!(
             "the file ends in the middle of a block at offset {at}: its last {left} bytes are ignored"
