@@ -38,6 +38,8 @@ fn scanning_a_directory_says_it_is_one() {
 
 /// A classic pcap file (microseconds, little-endian) of `frames` with link type `dlt`.
 fn pcap(dlt: u32, frames: &[&[u8]]) -> std::path::PathBuf {
+    // Tests run at once in one process: each file its own name.
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let mut f = Vec::new();
     // magic, version 2.4, thiszone, sigfigs, snaplen, network
     f.extend_from_slice(&0xA1B2_C3D4u32.to_le_bytes());
@@ -55,7 +57,8 @@ fn pcap(dlt: u32, frames: &[&[u8]]) -> std::path::PathBuf {
         f.extend_from_slice(&len.to_le_bytes());
         f.extend_from_slice(frame);
     }
-    let path = std::env::temp_dir().join(format!("mbtap-dlt{dlt}-{}.pcap", std::process::id()));
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("mbtap-dlt{dlt}-{}-{n}.pcap", std::process::id()));
     std::fs::write(&path, f).unwrap();
     path
 }
@@ -119,4 +122,24 @@ fn a_damaged_length_field_costs_one_record_not_the_rest_of_the_file() {
         String::from_utf8_lossy(&o.stdout).contains("damaged length")
             || String::from_utf8_lossy(&o.stderr).contains("damaged length")
     );
+}
+
+/// Issue 16: an ASCII capture replayed as RTU was "16 bytes of noise" with no hint, and a
+/// capture without stored settings was read as 19200 8E1 silently.
+#[test]
+fn a_capture_says_which_settings_it_assumed_and_what_its_bytes_look_like() {
+    // Unit 1, read 3 holding registers from 101, twice (MK4 document §3.1).
+    let p = pcap(147, &[b":01030065000394\r\n", b":01030065000394\r\n"]);
+    // In JSON lines the warnings are `warning` events on stdout.
+    let said = |o: &std::process::Output| {
+        format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+    };
+    let o = replay(&p, &[]);
+    let e = said(&o);
+    assert!(e.contains("stores no line settings") && e.contains("19200 8E1"), "{e}");
+    assert!(e.contains("look like Modbus ASCII") && e.contains("--mode ascii"), "{e}");
+    let o = replay(&p, &["--mode", "ascii", "--baud", "9600"]);
+    let e = said(&o);
+    assert!(!e.contains("stores no line settings") && !e.contains("look like"), "{e}");
+    assert_eq!(String::from_utf8_lossy(&o.stdout).matches("\"check_ok\":true").count(), 2);
 }

@@ -27,6 +27,9 @@ const REORDER_NS: u64 = 1_000_000_000;
 pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink: &mut S) -> Result<(), CaptureError> {
     use std::cmp::Reverse;
     use std::collections::BinaryHeap;
+    let sink = &mut Watch { inner: sink, valid: 0 };
+    // Bytes that make Modbus ASCII (':' opens a frame, CR LF ends it), to hint at the mode.
+    let (mut colons, mut line_ends) = (false, false);
     let mut reader = CaptureReader::new(input).with_link_type(cli.link_type);
     let mut analyzer: Option<Analyzer> = None;
     let mut file_settings = LineOverrides::default();
@@ -34,8 +37,14 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
     let mut ports = 0usize;
     let mut held: BinaryHeap<Reverse<Held>> = BinaryHeap::new();
     let mut seq = 0u64;
-    let make = |file: LineOverrides, pairing: PairingConfig, sink: &mut S| {
+    let make = |file: LineOverrides, pairing: PairingConfig, sink: &mut Watch<'_, S>| {
         let (mode, line, latency_ns) = cli.or(file).resolve();
+        if cli.baud.is_none() && file.baud.is_none() {
+            sink.warning(&format!(
+                "the capture stores no line settings: read as {line} {}, the serial-line defaults (give --baud, --parity and --mode if the line was otherwise)",
+                mode.name()
+            ));
+        }
         sink.settings(line);
         Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(line, latency_ns), pairing })
     };
@@ -57,6 +66,11 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
             }
             Item::Warning(w) => sink.warning(&w),
             Item::Packet { port, t, data } => {
+                // Looked for until both are seen: nothing per byte after that.
+                if !(colons && line_ends) {
+                    colons |= data.contains(&b':');
+                    line_ends |= data.contains(&b'\n');
+                }
                 if analyzer.is_none() {
                     analyzer = Some(make(file_settings, pairing, sink));
                 }
@@ -89,6 +103,44 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
             a.push(&Chunk { port: PortId(p), t: Timestamp(t), bytes: &bytes }, sink);
         }
         a.finish(sink);
+        // Nothing framed: say what the bytes look like, rather than leave "noise" unexplained.
+        if sink.valid == 0 {
+            let rtu = a.config().mode == crate::analyzer::SerialMode::Rtu;
+            if rtu && colons && line_ends {
+                sink.warning(
+                    "no valid RTU frame, and the bytes look like Modbus ASCII (':' … CR LF): try --mode ascii (mbtap scan FILE tells the mode and character size)",
+                );
+            } else {
+                sink.warning(
+                    "no valid frame in the capture: mbtap scan FILE tells which mode and character size the bytes fit",
+                );
+            }
+        }
     }
     Ok(())
+}
+
+/// A sink that counts the valid frames passing through (for the hint at the end).
+struct Watch<'s, S> {
+    inner: &'s mut S,
+    valid: u64,
+}
+
+impl<S: Sink> Sink for Watch<'_, S> {
+    fn event(&mut self, event: &crate::analyzer::Event<'_>) {
+        if let crate::analyzer::Event::Frame { frame, .. } = event
+            && frame.check_ok
+        {
+            self.valid += 1;
+        }
+        self.inner.event(event);
+    }
+
+    fn warning(&mut self, message: &str) {
+        self.inner.warning(message);
+    }
+
+    fn settings(&mut self, line: crate::framer::LineSettings) {
+        self.inner.settings(line);
+    }
 }
