@@ -7,7 +7,7 @@ use mbtap_core::analyzer::SerialMode;
 use mbtap_core::framer::Parity;
 use mbtap_core::line_args::LineOverrides;
 
-use crate::output::EventFormat;
+use crate::output::{EventFormat, EventWriter};
 
 /// Language of names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -186,4 +186,23 @@ pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_core::sim::bus::Fault> {
             FaultArg::All => Fault::ALL.to_vec(),
         })
         .collect()
+}
+
+/// The event writer `sniff`, `tap` and `replay` print through, as their output options say.
+pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result<EventWriter<W>> {
+    let mut writer = EventWriter::new(out, o.format.into());
+    writer.profiles = crate::devices::load_devices(&o.devices)?;
+    writer.lang = o.lang.into();
+    if let Some(every) = o.report_every {
+        anyhow::ensure!(
+            every.is_finite() && every > 0.0,
+            "--report-every {every}: expected a number of seconds above 0, e.g. 60"
+        );
+        // Capped at a year: the report then comes at the end only.
+        writer.report_every_ns = Some(std::time::Duration::from_secs_f64(every.min(3.2e7)).as_nanos().try_into()?);
+    }
+    if o.report || o.report_every.is_some() {
+        writer.health = Some(mbtap_core::health::Health::new(writer.profiles.clone()));
+    }
+    Ok(writer)
 }

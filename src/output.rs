@@ -33,9 +33,9 @@ pub struct EventWriter<W: Write> {
     /// Language of names in text annotations.
     pub lang: mbtap_core::profile::annotate::Lang,
     /// The terminal UI's model: events go there instead of `out`.
-    pub tui: Option<std::sync::Arc<crate::tui::terminal::Shared>>,
-    /// Recorded input shown in the UI: hold each event until its time at the UI's speed.
-    pub pacer: Option<crate::tui::terminal::Pacer>,
+    pub tui: Option<std::sync::Arc<dyn UiFeed>>,
+    /// Recorded input shown in the UI: each event held until its time at the UI's speed.
+    pub paced: bool,
     /// The bus health report, written by [`Self::finish`] when set.
     pub health: Option<mbtap_core::health::Health>,
     /// Also write the report so far each time this much bus time has passed.
@@ -54,7 +54,7 @@ impl<W: Write> EventWriter<W> {
             image: None,
             lang: mbtap_core::profile::annotate::Lang::En,
             tui: None,
-            pacer: None,
+            paced: false,
             health: None,
             report_every_ns: None,
             next_report_ns: None,
@@ -97,11 +97,8 @@ impl<W: Write> EventWriter<W> {
             let resp = if t.outcome == mbtap_core::pairing::Outcome::Ok { t.response } else { None };
             image.update(t.unit, t.t_start.0, req, resp);
         }
-        if let Some(shared) = &self.tui {
-            if let Some(pacer) = self.pacer.as_mut() {
-                pace(pacer, shared, e);
-            }
-            shared.model().event(e);
+        if let Some(feed) = &self.tui {
+            feed.event(e, self.paced);
             return;
         }
         if self.error.is_some() {
@@ -208,7 +205,8 @@ impl<W: Write> EventWriter<W> {
 }
 
 /// The time an event happened (its end for frames and noise, its start for transactions).
-fn event_time(e: &Event<'_>) -> u64 {
+#[must_use]
+pub fn event_time(e: &Event<'_>) -> u64 {
     match e {
         Event::Frame { frame, .. } => frame.t_end.0,
         Event::Noise(n) | Event::Glitch(n) => n.t_end.0,
@@ -216,15 +214,19 @@ fn event_time(e: &Event<'_>) -> u64 {
     }
 }
 
-/// Waits (this thread) until `e` is due at the UI's speed; a stop request ends all waiting.
-fn pace(pacer: &mut crate::tui::terminal::Pacer, shared: &crate::tui::terminal::Shared, e: &Event<'_>) {
-    let t = event_time(e);
-    while !crate::signals::stop_requested() {
-        match pacer.delay(t, shared.speed(), std::time::Instant::now()) {
-            None => break,
-            Some(d) => std::thread::sleep(d),
-        }
-    }
+/// Where events go instead of the text output while the terminal UI runs. The UI implements
+/// it; the sink knows nothing of terminals (and the UI depends on the sink, never the reverse).
+pub trait UiFeed: Send + Sync + std::fmt::Debug {
+    /// Takes one event; with `paced` (recorded input) first waits until it is due at the
+    /// UI's speed.
+    fn event(&self, e: &Event<'_>, paced: bool);
+
+    /// The line settings the events come from (a capture says them after the UI started).
+    fn settings(&self, line: mbtap_core::framer::LineSettings);
+
+    /// How long until line time `t_ns` is due at the UI's speed (`None`: now) — for a producer
+    /// that paces itself (the simulated line of `demo`).
+    fn due_in(&self, t_ns: u64) -> Option<std::time::Duration>;
 }
 
 /// Replays a capture from `input` into `writer`; `cli` overrides the settings stored in the file.
@@ -257,27 +259,8 @@ impl<W: Write> mbtap_core::analyzer::Sink for WriterSink<'_, W> {
 
     fn settings(&mut self, line: mbtap_core::framer::LineSettings) {
         // The UI shows the line the capture was recorded on, not the command line's default.
-        if let Some(shared) = &self.writer.tui {
-            shared.model().line = line;
+        if let Some(feed) = &self.writer.tui {
+            feed.settings(line);
         }
     }
-}
-
-/// The event writer `sniff`, `tap` and `replay` print through, as their output options say.
-pub fn event_writer<W: io::Write>(out: W, o: &crate::args::OutputArgs) -> anyhow::Result<EventWriter<W>> {
-    let mut writer = EventWriter::new(out, o.format.into());
-    writer.profiles = crate::devices::load_devices(&o.devices)?;
-    writer.lang = o.lang.into();
-    if let Some(every) = o.report_every {
-        anyhow::ensure!(
-            every.is_finite() && every > 0.0,
-            "--report-every {every}: expected a number of seconds above 0, e.g. 60"
-        );
-        // Capped at a year: the report then comes at the end only.
-        writer.report_every_ns = Some(std::time::Duration::from_secs_f64(every.min(3.2e7)).as_nanos().try_into()?);
-    }
-    if o.report || o.report_every.is_some() {
-        writer.health = Some(mbtap_core::health::Health::new(writer.profiles.clone()));
-    }
-    Ok(writer)
 }

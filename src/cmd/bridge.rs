@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use clap::ArgMatches;
+use clap::parser::ValueSource;
+use clap::{ArgMatches, FromArgMatches};
+use std::path::Path;
 
 use crate::args::{EventFormatArg, LineArgs, seconds};
 use crate::cmd::runtime;
@@ -97,7 +99,7 @@ pub struct Args {
 /// Runs the bridge; `matches` tells which options the command line gave, for `--config`.
 pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode> {
     let args = match &args.config {
-        Some(path) => crate::bridge::config::merge(path, args.clone(), matches)?,
+        Some(path) => merge(path, args.clone(), matches)?,
         None => args,
     };
     check_values(&args, matches)?;
@@ -270,4 +272,181 @@ fn check_values(args: &Args, matches: Option<&ArgMatches>) -> anyhow::Result<()>
         );
     }
     Ok(())
+}
+
+/// The long names of the bridge's options a configuration file may set (all but `config`).
+fn known_keys() -> Vec<String> {
+    let bridge = <Args as clap::Args>::augment_args(clap::Command::new("bridge"));
+    bridge.get_arguments().filter_map(|a| a.get_long().map(str::to_owned)).filter(|l| l != "config").collect()
+}
+
+/// `--config FILE` under the command line: every option the command line gave (`matches`)
+/// keeps its value, lists included (a `--allow-ip` on the command line replaces the file's list,
+/// it does not add to it); every other option takes the file's value, else its default.
+///
+/// # Errors
+/// The file cannot be read, or a setting is unknown or has a value its option refuses — each
+/// said with the file, the key and the value.
+fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result<Args> {
+    let shown = path.display();
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading the configuration {shown}"))?;
+    let options = crate::bridge::config::options(&text, &known_keys()).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
+    let command = <Args as clap::Args>::augment_args(clap::Command::new("bridge").no_binary_name(true));
+    let file_matches = command.try_get_matches_from(&options).map_err(|e| {
+        let message = e.to_string();
+        let first = message.lines().next().unwrap_or("").trim_start_matches("error: ");
+        anyhow::anyhow!("{shown}: {first}")
+    })?;
+    let mut merged = Args::from_arg_matches(&file_matches).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
+    let given: Vec<&str> = matches.map_or_else(Vec::new, |m| {
+        m.ids().map(clap::Id::as_str).filter(|id| m.value_source(id) == Some(ValueSource::CommandLine)).collect()
+    });
+    macro_rules! command_line_wins {
+        ($($id:literal => $($field:ident).+),* $(,)?) => {
+            $(if given.contains(&$id) { merged.$($field).+ = cli.$($field).+.clone(); })*
+            /// Every option's id, so a test can prove none is forgotten.
+            #[cfg(test)]
+            const MERGED: &[&str] = &[$($id),*];
+            #[cfg(test)]
+            MERGED_IDS.with(|m| m.set(MERGED));
+        };
+    }
+    command_line_wins! {
+        "config" => config,
+        "serial" => serial,
+        "mode" => line.mode,
+        "baud" => line.baud,
+        "parity" => line.parity,
+        "stop_bits" => line.stop_bits,
+        "data_bits" => line.data_bits,
+        "latency_ms" => line.latency_ms,
+        "link_type" => line.link_type,
+        "listen" => listen,
+        "listen_rtu" => listen_rtu,
+        "routes" => routes,
+        "timeout_ms" => timeout_ms,
+        "retries" => retries,
+        "turnaround_ms" => turnaround_ms,
+        "broadcast_reply" => broadcast_reply,
+        "read_only" => read_only,
+        "allow_functions" => allow_functions,
+        "allow_ips" => allow_ips,
+        "max_connections" => max_connections,
+        "idle_timeout" => idle_timeout,
+        "rate_limit" => rate_limit,
+        "queue_per_client" => queue_per_client,
+        "unit_map" => unit_map,
+        "metrics" => metrics,
+        "reverse" => reverse,
+        "target" => target,
+        "answer_as" => answer_as,
+        "monitor" => monitor,
+        "devices" => devices,
+        "duration" => duration,
+    }
+    merged.config = cli.config;
+    Ok(merged)
+}
+
+#[cfg(test)]
+thread_local! {
+    static MERGED_IDS: std::cell::Cell<&'static [&'static str]> = const { std::cell::Cell::new(&[]) };
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::{CommandFactory, Parser};
+
+    use super::*;
+    use crate::bridge::config::{SAMPLE, options};
+    use crate::cmd::{Cli, Command};
+
+    /// The bridge options of a command line, and which it gave.
+    fn parse(args: &[&str]) -> (Args, ArgMatches) {
+        let matches = Cli::command().try_get_matches_from(args).unwrap_or_else(|e| panic!("{e}"));
+        let Command::Bridge(b) = Cli::from_arg_matches(&matches).unwrap().command else { panic!("not the bridge") };
+        let sub = matches.subcommand_matches("bridge").unwrap().clone();
+        (*b, sub)
+    }
+
+    fn file(name: &str, text: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("mbtap-config-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("bridge.toml");
+        std::fs::write(&file, text).unwrap();
+        file
+    }
+
+    #[test]
+    fn the_sample_is_a_valid_configuration() {
+        let mut args = vec!["mbtap".to_owned(), "bridge".to_owned()];
+        args.extend(options(SAMPLE, &known_keys()).unwrap());
+        let cli = Cli::try_parse_from(&args).unwrap_or_else(|e| panic!("{e}"));
+        let Command::Bridge(b) = cli.command else { panic!("not the bridge") };
+        assert_eq!(b.serial.as_deref(), Some("/dev/ttyUSB0"));
+        assert_eq!(b.listen.as_deref(), Some("0.0.0.0:502"));
+        assert_eq!(b.timeout_ms, 1000);
+        assert!(!b.read_only);
+    }
+
+    #[test]
+    fn the_command_line_wins_over_the_file() {
+        let file = file("wins", "[bridge]\nserial = \"/dev/ttyS0\"\nlisten = \"127.0.0.1:1502\"\nread-only = true\n");
+        let path = file.to_str().unwrap();
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", path, "--listen", "127.0.0.1:2502"]);
+        let b = merge(&file, cli, Some(&m)).unwrap();
+        assert_eq!(b.listen.as_deref(), Some("127.0.0.1:2502"));
+        assert_eq!(b.serial.as_deref(), Some("/dev/ttyS0"));
+        assert!(b.read_only);
+    }
+
+    #[test]
+    fn a_list_on_the_command_line_replaces_the_files_list() {
+        let file = file("lists", "[bridge]\nallow-ip = [\"10.0.0.0/8\"]\nroute = [\"11-20=/dev/ttyS1\"]\n");
+        let path = file.to_str().unwrap();
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", path, "--allow-ip", "127.0.0.1"]);
+        let b = merge(&file, cli, Some(&m)).unwrap();
+        assert_eq!(b.allow_ips, ["127.0.0.1"]);
+        assert_eq!(b.routes, ["11-20=/dev/ttyS1"]);
+    }
+
+    #[test]
+    fn a_negative_number_in_the_file_is_refused_naming_the_file_the_key_and_the_value() {
+        let file = file("negative", "[bridge]\ntimeout-ms = -5\n");
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", file.to_str().unwrap()]);
+        let e = merge(&file, cli, Some(&m)).unwrap_err().to_string();
+        assert!(e.contains(file.to_str().unwrap()) && e.contains("timeout-ms") && e.contains("-5"), "{e}");
+        assert!(!e.contains("unexpected argument"), "{e}");
+    }
+
+    #[test]
+    fn an_empty_allow_list_refuses_to_start() {
+        let file = file("empty-allow", "[bridge]\nallow-ip = []\n");
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", file.to_str().unwrap()]);
+        let e = format!("{:#}", merge(&file, cli, Some(&m)).unwrap_err());
+        assert!(e.contains("allow-ip = []") && e.contains(file.to_str().unwrap()), "{e}");
+    }
+
+    #[test]
+    fn every_bridge_option_is_merged() {
+        let file = file("all", "");
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", file.to_str().unwrap()]);
+        merge(&file, cli, Some(&m)).unwrap();
+        let merged = MERGED_IDS.with(std::cell::Cell::get);
+        let bridge = <Args as clap::Args>::augment_args(clap::Command::new("bridge"));
+        for arg in bridge.get_arguments() {
+            assert!(merged.contains(&arg.get_id().as_str()), "--config merge forgets {}", arg.get_id());
+        }
+    }
+
+    #[test]
+    fn mistakes_name_the_file_the_line_and_the_setting() {
+        assert!(options("[bridge]\nlisten = \"x\"\nbaud = \n", &known_keys()).unwrap_err().contains("line 3"));
+        let e = options("[bridge]\nlisten-port = 502\n", &known_keys()).unwrap_err();
+        assert!(e.contains("listen-port") && e.contains("listen"), "{e}");
+        let path = std::path::Path::new("/nonexistent/bridge.toml");
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", "/nonexistent/bridge.toml"]);
+        let e = format!("{:#}", merge(path, cli, Some(&m)).unwrap_err());
+        assert!(e.contains("/nonexistent/bridge.toml"), "{e}");
+    }
 }

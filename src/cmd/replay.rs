@@ -7,8 +7,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 
+use crate::args::event_writer;
 use crate::args::{EventFormatArg, LineArgs, OutputArgs};
-use crate::output::event_writer;
 use crate::tui::source::TuiSource;
 
 #[derive(Debug, clap::Args)]
@@ -42,7 +42,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             pacing: true,
         };
         return ui.run(&source, move |writer, err| {
-            writer.pacer = Some(crate::tui::terminal::Pacer::default());
+            writer.paced = true;
             crate::output::replay(input, line.overrides(), writer, err)
                 .with_context(|| format!("replaying {}", file.display()))
         });

@@ -4,9 +4,9 @@ use std::io;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use crate::args::event_writer;
 use crate::args::{EventFormatArg, LineArgs, OutputArgs, seconds};
 use crate::cmd::runtime;
-use crate::output::event_writer;
 use crate::tui::source::TuiSource;
 
 #[derive(Debug, clap::Args)]

@@ -48,16 +48,15 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     let start = tokio::time::Instant::now();
     let start_t = now();
     let mut stop = Box::pin(crate::signals::shutdown_signal());
-    let mut pacer = crate::tui::terminal::Pacer::default();
     'run: loop {
         for frame in bus.next_transaction() {
             let at = Duration::from_nanos(frame.end_ns);
             if duration.is_some_and(|d| at >= d) {
                 break 'run;
             }
-            if let Some(shared) = writer.tui.clone() {
+            if let Some(feed) = writer.tui.clone() {
                 // The UI sets the pace (space pauses, s changes the speed).
-                while let Some(wait) = pacer.delay(frame.end_ns, shared.speed(), std::time::Instant::now()) {
+                while let Some(wait) = feed.due_in(frame.end_ns) {
                     tokio::select! {
                         () = &mut stop => break 'run,
                         () = tokio::time::sleep(wait) => {}

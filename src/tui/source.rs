@@ -36,7 +36,7 @@ impl TuiSource {
             let mut writer = EventWriter::new(io::sink(), EventFormat::Summary);
             writer.profiles = profiles;
             writer.lang = lang;
-            writer.tui = Some(std::sync::Arc::clone(&feeder));
+            writer.tui = Some(std::sync::Arc::clone(&feeder) as std::sync::Arc<dyn crate::output::UiFeed>);
             let mut notices = NoticeWriter(feeder);
             produce(&mut writer, &mut notices)
         })?;

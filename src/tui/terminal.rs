@@ -18,12 +18,43 @@ use super::model::{Model, Row, RowKind};
 pub struct Shared {
     pub model: Mutex<Model>,
     pub speed: Mutex<Speed>,
+    /// The producer's pacing of recorded input (one producer per UI).
+    pacer: Mutex<Pacer>,
+}
+
+impl crate::output::UiFeed for Shared {
+    fn event(&self, e: &mbtap_core::analyzer::Event<'_>, paced: bool) {
+        if paced {
+            // Wait (the producer's thread) until the event is due; a stop ends all waiting.
+            let t = crate::output::event_time(e);
+            while !crate::signals::stop_requested() {
+                match self.due_in(t) {
+                    None => break,
+                    Some(d) => std::thread::sleep(d),
+                }
+            }
+        }
+        self.model().event(e);
+    }
+
+    fn settings(&self, line: mbtap_core::framer::LineSettings) {
+        self.model().line = line;
+    }
+
+    fn due_in(&self, t_ns: u64) -> Option<Duration> {
+        let speed = self.speed();
+        self.pacer.lock().unwrap_or_else(PoisonError::into_inner).delay(t_ns, speed, Instant::now())
+    }
 }
 
 impl Shared {
     #[must_use]
     pub fn new(model: Model) -> Arc<Self> {
-        Arc::new(Self { model: Mutex::new(model), speed: Mutex::new(Speed::Times(1.0)) })
+        Arc::new(Self {
+            model: Mutex::new(model),
+            speed: Mutex::new(Speed::Times(1.0)),
+            pacer: Mutex::new(Pacer::default()),
+        })
     }
 
     /// The model, even if a producer panicked while holding it (the UI must still restore
