@@ -1,0 +1,108 @@
+//! The tree keeps the architecture (issue 13): no import cycles between the top-level modules
+//! of the binary or of the pure core, at most a dozen entries in `src/`, and no edge crate
+//! named in the pure crates' sources.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// Top-level module → the top-level modules its code (not its comments) names as `crate::X`.
+fn graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    let mut files = Vec::new();
+    rust_files(src, &mut files);
+    let mut g: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for f in files {
+        let rel = f.strip_prefix(src).unwrap();
+        let first = rel.components().next().unwrap().as_os_str().to_string_lossy().trim_end_matches(".rs").to_owned();
+        if matches!(first.as_str(), "lib" | "main") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&f).unwrap();
+        let deps = g.entry(first.clone()).or_default();
+        for line in text.lines().filter(|l| !l.trim_start().starts_with("//")) {
+            for (i, _) in line.match_indices("crate::") {
+                let name: String =
+                    line[i + 7..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+                if !name.is_empty() && name != first {
+                    deps.insert(name);
+                }
+            }
+        }
+    }
+    g
+}
+
+/// A cycle in `g`, if there is one.
+fn cycle(g: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        n: &str,
+        g: &BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(i) = path.iter().position(|p| p == n) {
+            return Some(path[i..].to_vec());
+        }
+        if done.contains(n) {
+            return None;
+        }
+        path.push(n.to_owned());
+        for d in g.get(n).into_iter().flatten() {
+            if let Some(c) = visit(d, g, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(n.to_owned());
+        None
+    }
+    let mut done = BTreeSet::new();
+    g.keys().find_map(|n| visit(n, g, &mut Vec::new(), &mut done))
+}
+
+#[test]
+fn no_import_cycles_between_top_level_modules() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for src in [root.join("src"), root.join("crates/mbtap-core/src"), root.join("crates/mbtap-proto/src")] {
+        let g = graph(&src);
+        assert!(g.len() > 3, "{}: modules not found", src.display());
+        assert_eq!(cycle(&g), None, "an import cycle in {}", src.display());
+    }
+}
+
+#[test]
+fn src_shows_the_design_in_at_most_a_dozen_entries() {
+    let entries = std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("src")).unwrap().count();
+    assert!(entries <= 12, "src/ has {entries} entries");
+}
+
+#[test]
+fn the_pure_crates_name_no_edge_crate() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for krate in ["crates/mbtap-proto", "crates/mbtap-core"] {
+        let mut files = Vec::new();
+        rust_files(&root.join(krate).join("src"), &mut files);
+        for f in files {
+            let text = std::fs::read_to_string(&f).unwrap();
+            for edge in ["tokio", "ratatui", "crossterm", "clap", "serialport", "std::time::Instant", "SystemTime"] {
+                let used = text.lines().filter(|l| !l.trim_start().starts_with("//")).any(|l| l.contains(edge));
+                assert!(!used, "{} names {edge}: the pure crates take time as an input", f.display());
+            }
+        }
+        let manifest = std::fs::read_to_string(root.join(krate).join("Cargo.toml")).unwrap();
+        for edge in ["tokio", "ratatui", "crossterm", "clap", "serialport"] {
+            assert!(!manifest.contains(edge), "{krate}/Cargo.toml depends on {edge}");
+        }
+    }
+}
