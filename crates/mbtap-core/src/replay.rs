@@ -15,6 +15,8 @@ type Held = (u64, u64, u8, Vec<u8>);
 const REORDER_PACKETS: usize = 4096;
 /// ... or this much time between the oldest and newest held packet.
 const REORDER_NS: u64 = 1_000_000_000;
+/// ... or this many bytes held in all: memory must not follow the file.
+const REORDER_BYTES: usize = 4 << 20;
 
 /// Replays a capture into any sink.
 ///
@@ -37,6 +39,7 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
     let mut ports = 0usize;
     let mut held: BinaryHeap<Reverse<Held>> = BinaryHeap::new();
     let mut seq = 0u64;
+    let mut held_bytes = 0usize;
     let make = |file: LineOverrides, pairing: PairingConfig, sink: &mut Watch<'_, S>| {
         let (mode, line, latency_ns) = cli.or(file).resolve();
         if cli.baud.is_none() && file.baud.is_none() {
@@ -80,12 +83,17 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
                     continue;
                 }
                 seq += 1;
+                held_bytes += data.len();
                 held.push(Reverse((t.0, seq, port.0, data.to_vec())));
                 while let Some(Reverse((oldest, ..))) = held.peek() {
-                    if held.len() <= REORDER_PACKETS && t.0.saturating_sub(*oldest) <= REORDER_NS {
+                    if held.len() <= REORDER_PACKETS
+                        && t.0.saturating_sub(*oldest) <= REORDER_NS
+                        && held_bytes <= REORDER_BYTES
+                    {
                         break;
                     }
                     if let Some(Reverse((t, _, p, bytes))) = held.pop() {
+                        held_bytes -= bytes.len();
                         a.push(&Chunk { port: PortId(p), t: Timestamp(t), bytes: &bytes }, sink);
                     }
                 }

@@ -50,6 +50,14 @@ pub enum Item<'a> {
 }
 
 const READ_SIZE: usize = 1 << 20;
+/// The most of one packet handed on: a serial read is never this long (a USB adapter's is 62
+/// bytes, a UART FIFO's 14; a gap-cutting sniffer's one frame, 256). Longer ones are cut, and
+/// said — the framer's memory per byte must not follow a hostile file.
+pub const MAX_SERIAL_READ: usize = 256 * 1024;
+/// Interfaces kept (port ids are one byte); more are said once and their packets skipped.
+const MAX_INTERFACES: usize = 256;
+/// An interface's name and description kept (line settings fit in a fraction of it).
+const MAX_DESCRIPTION: usize = 1024;
 /// Backwards-timestamp warnings shown before they are only counted.
 const MAX_TIME_WARNINGS: u32 = 5;
 
@@ -69,6 +77,11 @@ pub struct CaptureReader<R> {
     warned_linktype: Vec<bool>,
     /// A link type to read as raw serial bytes besides 147–162.
     extra_linktype: Option<u16>,
+    /// Interfaces described beyond [`MAX_INTERFACES`].
+    dropped_interfaces: u64,
+    /// Packets cut to [`MAX_SERIAL_READ`], and the warning about the last one, said next.
+    cut_packets: u64,
+    queued_warning: Option<String>,
     /// Packets delivered, and the first link type skipped (for the verdict at the end).
     pub packets: u64,
     pub skipped_linktype: Option<u16>,
@@ -110,6 +123,9 @@ impl<R: Read> CaptureReader<R> {
             interfaces: Vec::new(),
             warned_linktype: Vec::new(),
             extra_linktype: None,
+            dropped_interfaces: 0,
+            cut_packets: 0,
+            queued_warning: None,
             packets: 0,
             skipped_linktype: None,
             last_t: Vec::new(),
@@ -174,6 +190,9 @@ impl<R: Read> CaptureReader<R> {
     fn step(&mut self) -> Result<Next, CaptureError> {
         if let Some((port, t, at, len)) = self.pending_packet.take() {
             return Ok(Next::Packet { port, t, at, len });
+        }
+        if let Some(w) = self.queued_warning.take() {
+            return Ok(Next::Warning(w));
         }
         let Some(kind) = self.kind else {
             self.fill(24)?;
@@ -331,7 +350,27 @@ impl<R: Read> CaptureReader<R> {
         }
     }
 
-    fn add_interface(&mut self, iface: Interface) -> Next {
+    fn add_interface(&mut self, mut iface: Interface) -> Next {
+        if self.interfaces.len() >= MAX_INTERFACES {
+            // Memory must not follow a flood of descriptions; one more is said, not kept.
+            self.dropped_interfaces += 1;
+            if self.dropped_interfaces == 1 {
+                return Next::Warning(format!(
+                    "more than {MAX_INTERFACES} interfaces described (at offset {}): the rest are not kept and their packets are skipped",
+                    self.offset
+                ));
+            }
+            return Next::Continue;
+        }
+        for text in [&mut iface.name, &mut iface.description].into_iter().flatten() {
+            if text.len() > MAX_DESCRIPTION {
+                let mut cut = MAX_DESCRIPTION;
+                while !text.is_char_boundary(cut) {
+                    cut -= 1;
+                }
+                text.truncate(cut);
+            }
+        }
         let id = u32::try_from(self.interfaces.len()).unwrap_or(u32::MAX);
         self.interfaces.push(iface.clone());
         self.warned_linktype.push(false);
@@ -358,6 +397,19 @@ impl<R: Read> CaptureReader<R> {
             return Next::Continue;
         }
         self.packets += 1;
+        let len = if len > MAX_SERIAL_READ {
+            self.cut_packets += 1;
+            if self.cut_packets <= 3 {
+                self.queued_warning = Some(format!(
+                    "the packet before offset {} holds {len} bytes; no serial read is that long: only its first {MAX_SERIAL_READ} were read{}",
+                    self.offset,
+                    if self.cut_packets == 3 { " (further ones are only cut)" } else { "" }
+                ));
+            }
+            MAX_SERIAL_READ
+        } else {
+            len
+        };
         let last = self.last_t[i];
         let t = if t < last {
             self.backwards_timestamps += 1;

@@ -443,6 +443,12 @@ impl RtuFramer {
         // frame's glitch byte a frame may start anyway.
         let after_glitch = g == 1 && self.at_glitch(self.head);
         let unconfirmed_start = g > 0 && !self.known_units[usize::from(addr)] && !self.boundary_at(g) && !after_glitch;
+        // Inside damage, a never-seen unit's frame must at least carry a function code with a
+        // public layout: checked before any CRC is computed, so a stream of garbage costs a
+        // byte comparison per position, not a CRC over every length.
+        if unconfirmed_start && FunctionCode::from(fc & !EXCEPTION_FLAG).name().is_none() {
+            return Try::NotHere;
+        }
         let pdu = &s[1..];
         // Address 0 is a broadcast: a request, of a write, never answered (Serial Line v1.02
         // §2.1) — no other reading of it is worth waiting for.
