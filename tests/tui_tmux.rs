@@ -65,7 +65,7 @@ impl Drop for Tmux {
 #[ignore = "needs tmux; .ci/run installs it and runs this with --ignored"]
 fn demo_in_a_real_terminal_shows_filters_helps_and_quits_cleanly() {
     // After mbtap exits the shell reports its status and the terminal mode.
-    let command = format!("{BIN} demo; echo \"EXIT=$?\"; stty -a; sleep 60");
+    let command = format!("{BIN} demo; echo \"EXIT=$?\"; stty -a; echo MODES_DONE; sleep 60");
     let tmux = Tmux::start("demo", &command, 100, 30);
 
     // Live traffic from all three devices, annotated.
@@ -87,10 +87,11 @@ fn demo_in_a_real_terminal_shows_filters_helps_and_quits_cleanly() {
     tmux.keys(&["?"]);
     tmux.wait_for(&["keys (any key closes)", "export the filtered rows", "quit"]);
 
-    // q quits: exit status 0 and the terminal back in cooked mode with echo.
+    // q quits: exit status 0 and the terminal back in cooked mode with echo. MODES_DONE is
+    // waited for because `stty -a` prints line by line: seeing "speed" alone raced it.
     tmux.keys(&["Escape"]);
     tmux.keys(&["q"]);
-    let s = tmux.wait_for(&["EXIT=0", "speed"]);
+    let s = tmux.wait_for(&["EXIT=0", "speed", "MODES_DONE"]);
     let modes: Vec<&str> = s.split_whitespace().collect();
     assert!(modes.contains(&"icanon") && modes.contains(&"echo"), "terminal left in raw mode:\n{s}");
     assert!(!s.contains("devices"), "the alternate screen is gone:\n{s}");
@@ -101,12 +102,13 @@ fn demo_in_a_real_terminal_shows_filters_helps_and_quits_cleanly() {
 fn sigterm_closes_the_ui_and_restores_the_terminal() {
     let pidfile = std::env::temp_dir().join(format!("mbtap-tui-pid-{}", std::process::id()));
     let pid_path = pidfile.display();
-    let command = format!("sh -c 'echo $$ > {pid_path}; exec {BIN} demo'; echo \"EXIT=$?\"; stty -a; sleep 60");
+    let command =
+        format!("sh -c 'echo $$ > {pid_path}; exec {BIN} demo'; echo \"EXIT=$?\"; stty -a; echo MODES_DONE; sleep 60");
     let tmux = Tmux::start("term", &command, 100, 30);
     tmux.wait_for(&["Traffic", "mk4"]);
     let pid = std::fs::read_to_string(&pidfile).unwrap();
     assert!(Command::new("kill").args(["-TERM", pid.trim()]).status().unwrap().success());
-    let s = tmux.wait_for(&["EXIT=0", "speed"]);
+    let s = tmux.wait_for(&["EXIT=0", "speed", "MODES_DONE"]);
     let modes: Vec<&str> = s.split_whitespace().collect();
     assert!(modes.contains(&"icanon") && modes.contains(&"echo"), "terminal left in raw mode:\n{s}");
     let _ = std::fs::remove_file(&pidfile);
