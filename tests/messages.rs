@@ -143,3 +143,17 @@ fn a_capture_says_which_settings_it_assumed_and_what_its_bytes_look_like() {
     assert!(!e.contains("stores no line settings") && !e.contains("look like"), "{e}");
     assert_eq!(String::from_utf8_lossy(&o.stdout).matches("\"check_ok\":true").count(), 2);
 }
+
+/// Issue 16 regression: binary garbage holds ':' and LF as often as anything else, and was
+/// told "the bytes look like Modbus ASCII". Only bytes that are mostly hex digits between
+/// ':' and CR LF earn that hint; garbage gets the neutral "mbtap scan" one.
+#[test]
+fn binary_garbage_is_not_called_modbus_ascii() {
+    // Every byte value 0..=250 in turn, so ':' (0x3A) and LF (0x0A) both occur.
+    let garbage: Vec<u8> = (0..2000u32).map(|i| u8::try_from(i % 251).unwrap()).collect();
+    let p = pcap(147, &[&garbage]);
+    let o = replay(&p, &[]);
+    let e = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(!e.contains("look like Modbus ASCII"), "{e}");
+    assert!(e.contains("no valid frame in the capture") && e.contains("mbtap scan"), "{e}");
+}

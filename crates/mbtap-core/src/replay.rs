@@ -30,8 +30,8 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
     use std::cmp::Reverse;
     use std::collections::BinaryHeap;
     let sink = &mut Watch { inner: sink, valid: 0 };
-    // Bytes that make Modbus ASCII (':' opens a frame, CR LF ends it), to hint at the mode.
-    let (mut colons, mut line_ends) = (false, false);
+    // Whether the bytes read like Modbus ASCII, to hint at the mode if nothing frames as RTU.
+    let mut ascii_look = AsciiLook::default();
     let mut reader = CaptureReader::new(input).with_link_type(cli.link_type);
     let mut analyzer: Option<Analyzer> = None;
     let mut file_settings = LineOverrides::default();
@@ -69,11 +69,7 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
             }
             Item::Warning(w) => sink.warning(&w),
             Item::Packet { port, t, data } => {
-                // Looked for until both are seen: nothing per byte after that.
-                if !(colons && line_ends) {
-                    colons |= data.contains(&b':');
-                    line_ends |= data.contains(&b'\n');
-                }
+                ascii_look.feed(data);
                 if analyzer.is_none() {
                     analyzer = Some(make(file_settings, pairing, sink));
                 }
@@ -114,7 +110,7 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
         // Nothing framed: say what the bytes look like, rather than leave "noise" unexplained.
         if sink.valid == 0 {
             let rtu = a.config().mode == crate::analyzer::SerialMode::Rtu;
-            if rtu && colons && line_ends {
+            if rtu && ascii_look.likely() {
                 sink.warning(
                     "no valid RTU frame, and the bytes look like Modbus ASCII (':' … CR LF): try --mode ascii (mbtap scan FILE tells the mode and character size)",
                 );
@@ -126,6 +122,40 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
         }
     }
     Ok(())
+}
+
+/// Whether a capture's bytes read like Modbus ASCII: ':' opens a frame, CR LF ends it, and
+/// everything between is hex digits (Modbus over Serial Line v1.02, 2.5.2.1). Binary garbage
+/// holds ':' and LF too, so most sampled bytes must be of that alphabet. Only the first
+/// [`AsciiLook::SAMPLE`] bytes are looked at: the cost does not follow the file.
+#[derive(Default)]
+struct AsciiLook {
+    sampled: usize,
+    alphabet: usize,
+    colon: bool,
+    line_end: bool,
+}
+
+impl AsciiLook {
+    const SAMPLE: usize = 64 * 1024;
+
+    fn feed(&mut self, data: &[u8]) {
+        let room = Self::SAMPLE.saturating_sub(self.sampled);
+        let data = &data[..data.len().min(room)];
+        for &b in data {
+            self.colon |= b == b':';
+            self.line_end |= b == b'\n';
+            if b.is_ascii_hexdigit() || matches!(b, b':' | b'\r' | b'\n') {
+                self.alphabet += 1;
+            }
+        }
+        self.sampled += data.len();
+    }
+
+    /// Both delimiters seen and at least 90 % of the sampled bytes of the ASCII-frame alphabet.
+    fn likely(&self) -> bool {
+        self.colon && self.line_end && self.alphabet.saturating_mul(10) >= self.sampled.saturating_mul(9)
+    }
 }
 
 /// A sink that counts the valid frames passing through (for the hint at the end).
