@@ -1,6 +1,7 @@
 //! Captures: reading pcap/pcapng line captures (link type 147, one packet per received chunk)
 //! and writing them, with the timing kept; and the Wireshark export.
 
+pub mod clock;
 pub mod export;
 pub mod format;
 pub mod reader;

@@ -4,8 +4,8 @@
 //! Bad input never stops a replay early if anything after it can be read: a corrupt block is
 //! reported with its offset and skipped by searching for the next plausible block; a
 //! truncated file ends with a warning; packets of other link types are skipped with one
-//! warning per interface; timestamps that go backwards are reported and held at the last
-//! good value so the framer's time never runs backwards.
+//! warning per interface; timestamps that go backwards or jump are reported, and the times
+//! handed on never run backwards (see [`super::clock`]).
 
 use std::io::{self, Read};
 
@@ -13,6 +13,7 @@ use nom::number::Endianness;
 use thiserror::Error;
 
 use super::LINKTYPE_USER0;
+use super::clock::{Clock, Verdict};
 use super::format::{
     EPB, FileKind, FormatError, IDB, Interface, MAX_BLOCK, SHB, SPB, Step, parse_block, parse_epb, parse_file_kind,
     parse_idb, parse_pcap_record, parse_shb_endian, parse_spb, ticks_to_ns,
@@ -85,7 +86,8 @@ pub struct CaptureReader<R> {
     /// Packets delivered, and the first link type skipped (for the verdict at the end).
     pub packets: u64,
     pub skipped_linktype: Option<u16>,
-    last_t: Vec<u64>,
+    /// Each interface's clock, and where its last packet ended (to name a bad one).
+    clocks: Vec<(Clock, u64)>,
     time_warnings: u32,
     /// Backwards timestamps seen in total.
     pub backwards_timestamps: u64,
@@ -128,7 +130,7 @@ impl<R: Read> CaptureReader<R> {
             queued_warning: None,
             packets: 0,
             skipped_linktype: None,
-            last_t: Vec::new(),
+            clocks: Vec::new(),
             time_warnings: 0,
             backwards_timestamps: 0,
             pending_packet: None,
@@ -287,7 +289,7 @@ impl<R: Read> CaptureReader<R> {
                         self.endian = e;
                         self.interfaces.clear();
                         self.warned_linktype.clear();
-                        self.last_t.clear();
+                        self.clocks.clear();
                     }
                     Step::NeedMore(n) => {
                         if !self.need(n).map_err(|_| FormatError::Short { what: "section header" })? {
@@ -323,7 +325,7 @@ impl<R: Read> CaptureReader<R> {
                             let iface = self.interfaces.get(p.interface as usize);
                             let t = match (p.ticks, iface) {
                                 (Some(ticks), Some(i)) => ticks_to_ns(ticks, i.ticks_per_sec),
-                                _ => self.last_t.get(p.interface as usize).copied().unwrap_or(0),
+                                _ => self.clocks.get(p.interface as usize).and_then(|(c, _)| c.last_raw()).unwrap_or(0),
                             };
                             if iface.is_none() {
                                 let id = p.interface;
@@ -374,7 +376,7 @@ impl<R: Read> CaptureReader<R> {
         let id = u32::try_from(self.interfaces.len()).unwrap_or(u32::MAX);
         self.interfaces.push(iface.clone());
         self.warned_linktype.push(false);
-        self.last_t.push(0);
+        self.clocks.push((Clock::default(), 0));
         Next::Interface(id, iface)
     }
 
@@ -410,27 +412,39 @@ impl<R: Read> CaptureReader<R> {
         } else {
             len
         };
-        let last = self.last_t[i];
-        let t = if t < last {
-            self.backwards_timestamps += 1;
+        let (clock, bad_before) = &mut self.clocks[i];
+        let (t, verdict) = clock.stamp(t);
+        let prev_end = std::mem::replace(bad_before, self.offset);
+        let w = match verdict {
+            Verdict::InOrder => None,
+            Verdict::Backwards { by_ns } => {
+                self.backwards_timestamps += 1;
+                Some(format!(
+                    "timestamp goes backwards by {} µs at offset {} (interface {i}); held at the previous value, later packets keep their own spacing",
+                    by_ns / 1000,
+                    self.offset
+                ))
+            }
+            Verdict::LoneJump { off_ns, ahead } => Some(format!(
+                "the timestamp of the packet before offset {prev_end} (interface {i}) is {}.{:03} s {} both neighbours: a lone bad timestamp, the packets after it are timed from its neighbours",
+                off_ns / 1_000_000_000,
+                off_ns / 1_000_000 % 1000,
+                if ahead { "ahead of" } else { "behind" }
+            )),
+        };
+        if let Some(w) = w {
             self.time_warnings += 1;
             if self.time_warnings <= MAX_TIME_WARNINGS {
-                let w = format!(
-                    "timestamp goes backwards by {} µs at offset {} (interface {i}); held at the previous value{}",
-                    (last - t) / 1000,
-                    self.offset,
-                    if self.time_warnings == MAX_TIME_WARNINGS { " (further cases are only counted)" } else { "" }
-                );
-                self.last_t[i] = last;
+                let more = if self.time_warnings == MAX_TIME_WARNINGS {
+                    " (further timestamp problems are only counted)"
+                } else {
+                    ""
+                };
                 // The packet itself is still delivered, on the next call.
-                self.pending_packet = Some((interface, last, at, len));
-                return Next::Warning(w);
+                self.pending_packet = Some((interface, t, at, len));
+                return Next::Warning(format!("{w}{more}"));
             }
-            last
-        } else {
-            t
-        };
-        self.last_t[i] = t;
+        }
         Next::Packet { port: interface, t, at, len }
     }
 
@@ -456,7 +470,7 @@ impl<R: Read> CaptureReader<R> {
             },
             Some(FileKind::Pcap { endian, .. }) => match parse_pcap_record(b, endian) {
                 Ok(Step::Item(r, used)) => {
-                    let last_sec = self.last_t.first().copied().unwrap_or(0) / 1_000_000_000;
+                    let last_sec = self.clocks.first().and_then(|(c, _)| c.last_raw()).unwrap_or(0) / 1_000_000_000;
                     r.orig_len as usize >= r.data.len()
                         && r.data.len() <= MAX_BLOCK as usize
                         && (last_sec == 0 || u64::from(r.ts_sec).abs_diff(last_sec) < 86_400)
