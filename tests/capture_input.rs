@@ -236,3 +236,43 @@ fn corrupt_pcap_record_is_skipped() {
     assert_eq!(packets(&got), vec![(0, 5_000_000_000, REQ.to_vec()), (0, 6_000_000_000, RESP.to_vec())]);
     assert!(warnings(&got)[0].contains(&format!("offset {bad_at}")), "{:?}", warnings(&got));
 }
+
+/// Issue 16 regression: 200 000 packets naming an undescribed interface gave 200 000
+/// identical warnings. Now: the first, then one count at the end.
+#[test]
+fn packets_of_an_undescribed_interface_are_said_once_then_counted() {
+    let mut f = shb();
+    f.extend(idb(147, Some(9)));
+    for t in 0..1000 {
+        f.extend(epb(5, t, REQ));
+    }
+    f.extend(epb(0, 2000, REQ));
+    let got = read_all(&f);
+    assert_eq!(packets(&got), vec![(0, 2000, REQ.to_vec())]);
+    let w = warnings(&got);
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(w[0].contains("names interface 5, which was never described"), "{w:?}");
+    assert!(w[1].contains("1000 packets named interfaces never described"), "{w:?}");
+}
+
+/// Issue 16 regression: one corrupt region longer than the read buffer (1 MiB) gave a
+/// "still searching" line per buffer (2 048 for 2 GB). Now one warning with where it began
+/// and how much was skipped.
+#[test]
+fn one_corrupt_region_is_one_warning_however_long() {
+    let mut f = shb();
+    f.extend(idb(147, Some(9)));
+    f.extend(epb(0, 1000, REQ));
+    let bad_at = f.len();
+    // 5 MB that is no block: every 4-byte word 0xFFFFFFFF (never a valid block length).
+    f.extend(std::iter::repeat_n(0xFF, 5_000_000));
+    f.extend(epb(0, 3000, RESP));
+    let got = read_all(&f);
+    assert_eq!(packets(&got), vec![(0, 1000, REQ.to_vec()), (0, 3000, RESP.to_vec())]);
+    let w = warnings(&got);
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].contains(&format!("corrupt data at offset {bad_at}")) && w[0].contains("skipped 5000000 bytes"),
+        "{w:?}"
+    );
+}

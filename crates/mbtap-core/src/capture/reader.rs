@@ -91,6 +91,12 @@ pub struct CaptureReader<R> {
     time_warnings: u32,
     /// Backwards timestamps seen in total.
     pub backwards_timestamps: u64,
+    /// A corrupt region being searched through: where it began and what was wrong there.
+    corrupt_from: Option<(u64, String)>,
+    /// Packets that named an interface never described (the first is said, the rest counted).
+    undescribed_packets: u64,
+    /// The summary of what was only counted has been said (at the end of the file).
+    summarised: bool,
     /// A packet to deliver right after the warning about its timestamp.
     pending_packet: Option<(u32, u64, usize, usize)>,
 }
@@ -134,6 +140,9 @@ impl<R: Read> CaptureReader<R> {
             time_warnings: 0,
             backwards_timestamps: 0,
             pending_packet: None,
+            corrupt_from: None,
+            undescribed_packets: 0,
+            summarised: false,
         }
     }
 
@@ -221,7 +230,7 @@ impl<R: Read> CaptureReader<R> {
         if avail == 0 {
             self.fill(1)?;
             if self.end == self.start {
-                return Ok(Next::End);
+                return Ok(self.end_summary().map_or(Next::End, Next::Warning));
             }
         }
         let parsed = match kind {
@@ -330,8 +339,12 @@ impl<R: Read> CaptureReader<R> {
                             if iface.is_none() {
                                 let id = p.interface;
                                 self.consume(used);
+                                self.undescribed_packets += 1;
+                                if self.undescribed_packets > 1 {
+                                    return Ok(Next::Continue);
+                                }
                                 return Ok(Next::Warning(format!(
-                                    "packet at offset {} names interface {id}, which was never described: skipped",
+                                    "packet at offset {} names interface {id}, which was never described: skipped (further ones are counted)",
                                     self.offset - used as u64
                                 )));
                             }
@@ -450,16 +463,48 @@ impl<R: Read> CaptureReader<R> {
 
     /// After a format error: report it and look for the next plausible block or record.
     fn resync(&mut self, e: &FormatError) -> Next {
-        let at = self.offset;
+        // One corrupt region is one warning, however many buffers its search takes.
+        let (from, what) = self.corrupt_from.take().unwrap_or_else(|| (self.offset, e.to_string()));
         let window = &self.buf[self.start..self.end];
         let found = (1..window.len()).find(|&i| self.plausible_at(&window[i..]));
-        let skip = found.unwrap_or(window.len());
-        self.consume(skip);
+        self.consume(found.unwrap_or(window.len()));
         if found.is_none() && !self.eof {
             // Nothing plausible in the buffer: the next fill brings more to search.
-            return Next::Warning(format!("corrupt data at offset {at} ({e}): {skip} bytes skipped, still searching"));
+            self.corrupt_from = Some((from, what));
+            return Next::Continue;
         }
-        Next::Warning(format!("corrupt data at offset {at} ({e}): skipped {skip} bytes to the next readable block"))
+        let skipped = self.offset - from;
+        Next::Warning(format!(
+            "corrupt data at offset {from} ({what}): skipped {skipped} bytes to the next readable block"
+        ))
+    }
+
+    /// What was only counted, said once at the end of the file.
+    fn end_summary(&mut self) -> Option<String> {
+        if let Some((from, what)) = self.corrupt_from.take() {
+            let skipped = self.offset - from;
+            return Some(format!(
+                "corrupt data at offset {from} ({what}): skipped {skipped} bytes, to the end of the file (no readable block after it)"
+            ));
+        }
+        if self.summarised {
+            return None;
+        }
+        self.summarised = true;
+        let mut said = Vec::new();
+        if self.undescribed_packets > 1 {
+            said.push(format!("{} packets named interfaces never described (skipped)", self.undescribed_packets));
+        }
+        if self.time_warnings > MAX_TIME_WARNINGS {
+            said.push(format!("{} timestamp problems (the first {MAX_TIME_WARNINGS} said above)", self.time_warnings));
+        }
+        if self.cut_packets > 3 {
+            said.push(format!("{} packets cut to {MAX_SERIAL_READ} bytes", self.cut_packets));
+        }
+        if self.dropped_interfaces > 0 {
+            said.push(format!("{} interfaces beyond the first {MAX_INTERFACES} not kept", self.dropped_interfaces));
+        }
+        (!said.is_empty()).then(|| format!("in all: {}", said.join("; ")))
     }
 
     fn plausible_at(&self, b: &[u8]) -> bool {
