@@ -200,8 +200,10 @@ fn ui_loop(terminal: &mut ratatui::DefaultTerminal, shared: &Shared, source: &st
 /// Writes `rows` to a new file in the working directory; its name and the count.
 fn export(rows: &[&Row], model: &Model, pcap: bool) -> anyhow::Result<(String, usize)> {
     let stamp = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let path = format!("mbtap-export-{stamp}.{}", if pcap { "pcapng" } else { "jsonl" });
-    let file = std::fs::File::create(&path).with_context(|| format!("creating {path}"))?;
+    let stem = format!("mbtap-export-{stamp}");
+    let (path, file) = create_unique(std::path::Path::new("."), &stem, if pcap { "pcapng" } else { "jsonl" })
+        .with_context(|| format!("creating {stem}.* in the working directory"))?;
+    let path = path.strip_prefix(".").unwrap_or(&path).display().to_string();
     let mut out = std::io::BufWriter::new(file);
     if pcap {
         write_pcapng(rows, model, &mut out).with_context(|| format!("writing {path}"))?;
@@ -212,6 +214,24 @@ fn export(rows: &[&Row], model: &Model, pcap: bool) -> anyhow::Result<(String, u
     }
     out.flush().with_context(|| format!("writing {path}"))?;
     Ok((path, rows.len()))
+}
+
+/// Creates `dir/stem.ext`, or `stem-2.ext`, `stem-3.ext`… if taken: two exports in the same
+/// second get two files, and an existing file is never truncated (`create_new`).
+fn create_unique(dir: &std::path::Path, stem: &str, ext: &str) -> std::io::Result<(std::path::PathBuf, std::fs::File)> {
+    for n in 1..=1000u32 {
+        let name = if n == 1 { format!("{stem}.{ext}") } else { format!("{stem}-{n}.{ext}") };
+        let path = dir.join(name);
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
+            Ok(file) => return Ok((path, file)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Err(std::io::Error::new(
+        std::io::ErrorKind::AlreadyExists,
+        format!("{stem}.{ext} and 999 numbered names are taken"),
+    ))
 }
 
 fn hex(b: Option<&[u8]>) -> Option<String> {
@@ -274,5 +294,20 @@ mod tests {
         assert_eq!(p.delay(9_000_000_000, Speed::Times(10.0), start), Some(STEP));
         assert_eq!(p.delay(9_000_000_000, Speed::Paused, start), Some(STEP));
         assert_eq!(p.delay(9_000_000_000, Speed::Max, start), None);
+    }
+
+    /// Issue 16 regression: exports within the same second overwrote each other (same name,
+    /// `File::create` truncating).
+    #[test]
+    fn exports_in_the_same_second_get_their_own_files_and_never_truncate() {
+        let dir = std::env::temp_dir().join(format!("mbtap-export-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("mbtap-export-7.jsonl"), "kept\n").unwrap();
+        let (a, _) = create_unique(&dir, "mbtap-export-7", "jsonl").unwrap();
+        let (b, _) = create_unique(&dir, "mbtap-export-7", "jsonl").unwrap();
+        assert_eq!(a, dir.join("mbtap-export-7-2.jsonl"));
+        assert_eq!(b, dir.join("mbtap-export-7-3.jsonl"));
+        assert_eq!(std::fs::read_to_string(dir.join("mbtap-export-7.jsonl")).unwrap(), "kept\n");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
