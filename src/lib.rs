@@ -13,6 +13,7 @@
 //! - [`devices`] — device profiles by the names users give them (built-in, user dir, file).
 //! - [`config`] — the user configuration file.
 //! - [`signals`] — Ctrl-C, SIGTERM and the UI's `q`: one stop for every loop.
+//! - [`progress`] — how far the reading of a capture file has come, on a terminal.
 
 pub mod args;
 pub mod bridge;
@@ -20,6 +21,7 @@ pub mod cmd;
 pub mod config;
 pub mod devices;
 pub mod output;
+pub mod progress;
 pub mod signals;
 pub mod source;
 pub mod tui;

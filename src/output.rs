@@ -143,13 +143,11 @@ impl<W: Write> EventWriter<W> {
 
     /// A warning about the input.
     pub fn warning(&mut self, err: &mut dyn Write, message: &str) {
-        match self.format {
-            EventFormat::Jsonl => {
-                let _ = writeln!(self.out, "{}", serde_json::json!({"event": "warning", "message": message}));
-            }
-            _ => {
-                let _ = writeln!(err, "mbtap: warning: {message}");
-            }
+        if self.format == EventFormat::Jsonl {
+            let _ = writeln!(self.out, "{}", serde_json::json!({"event": "warning", "message": message}));
+        } else {
+            crate::progress::clear_line();
+            let _ = writeln!(err, "mbtap: warning: {message}");
         }
     }
 

@@ -186,7 +186,10 @@ fn polls_with_one_flipped_second(n: u32, bad: u32, bit: u32) -> std::path::PathB
             f.extend_from_slice(frame);
         }
     }
-    let path = std::env::temp_dir().join(format!("mbtap-flipped-second-{bit}-{}.pcap", std::process::id()));
+    // Tests run at once in one process: each file its own name.
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("mbtap-flipped-second-{bit}-{}-{n}.pcap", std::process::id()));
     std::fs::write(&path, f).unwrap();
     path
 }
@@ -218,4 +221,34 @@ fn one_flipped_timestamp_bit_does_not_spoil_the_timing_after_it() {
         assert!(timing <= 1, "bit {bit}: {timing} timing findings\n{report}\n{err}");
         let _ = std::fs::remove_file(&p);
     }
+}
+
+/// Issue 16: long work shows progress on a terminal and never on a pipe. `script` (util-linux,
+/// Essential in Debian) gives the real binary a pseudo-terminal for stderr; the threshold of
+/// one second is set to 0 so the first read draws the line. The line is cleared before the
+/// warnings print (`\r ESC [K`), so they never land on it.
+#[test]
+fn progress_is_drawn_on_a_terminal_and_never_on_a_pipe() {
+    let p = polls_with_one_flipped_second(50, 10, 11);
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let cmd = format!("{bin} report {} --format json > /dev/null", p.display());
+    let o = Command::new("script")
+        .args(["-q", "-c", &cmd, "/dev/null"])
+        .env("MBTAP_PROGRESS_AFTER_MS", "0")
+        .env("MBTAP_CONFIG", "/nonexistent/mbtap-config.toml")
+        .output()
+        .expect("script (util-linux) runs");
+    let tty = String::from_utf8_lossy(&o.stdout);
+    assert!(tty.contains("\r\x1b[Kmbtap: reading ") && tty.contains("s left"), "{tty:?}");
+    assert!(tty.contains("\r\x1b[Kmbtap: warning: "), "the line is cleared before a warning: {tty:?}");
+    // The same on a pipe: no progress line, no control sequences.
+    let o = Command::new(bin)
+        .args(["report", p.to_str().unwrap(), "--format", "json"])
+        .env("MBTAP_PROGRESS_AFTER_MS", "0")
+        .env("MBTAP_CONFIG", "/nonexistent/mbtap-config.toml")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("reading ") && !err.contains('\x1b'), "{err:?}");
+    let _ = std::fs::remove_file(&p);
 }

@@ -27,7 +27,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, out, line } = args;
-    let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+    let input = crate::progress::open_capture(&file, true)?;
     let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
     let export = mbtap_core::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
     let mut sink = ExportSink { export, error: None };
@@ -60,6 +60,7 @@ impl<W: Write> mbtap_core::analyzer::Sink for ExportSink<W> {
     }
 
     fn warning(&mut self, message: &str) {
+        crate::progress::clear_line();
         eprintln!("mbtap: warning: {message}");
     }
 }

@@ -31,7 +31,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, image, line, output } = args;
-    let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+    let input = crate::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
     if output.format == EventFormatArg::Tui {
         let (_, settings, _) = line.overrides().resolve();
         let source = file.display().to_string();

@@ -26,7 +26,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, line, format, devices } = args;
-    let input = std::fs::File::open(&file).with_context(|| format!("opening {}", file.display()))?;
+    let input = crate::progress::open_capture(&file, true)?;
     let mut health = mbtap_core::health::Health::new(crate::devices::load_devices(&devices)?);
     let mut warnings = Vec::new();
     {

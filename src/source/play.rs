@@ -25,7 +25,7 @@ pub fn play(
     speed: f64,
     max_gap: Duration,
 ) -> anyhow::Result<(u64, u64)> {
-    let input = std::fs::File::open(file).with_context(|| format!("opening {}", file.display()))?;
+    let input = crate::progress::open_capture(file, true)?;
     let mut out = builder(port, line).open().with_context(|| format!("opening serial port {port}"))?;
     let mut reader = CaptureReader::new(std::io::BufReader::new(input));
     let start = Instant::now();
@@ -65,7 +65,10 @@ pub fn play(
                 packets += 1;
                 bytes += data.len() as u64;
             }
-            Item::Warning(w) => eprintln!("mbtap: warning: {w}"),
+            Item::Warning(w) => {
+                crate::progress::clear_line();
+                eprintln!("mbtap: warning: {w}");
+            }
             Item::Interface { .. } => {}
         }
     }
