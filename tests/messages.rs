@@ -162,6 +162,8 @@ fn binary_garbage_is_not_called_modbus_ascii() {
 /// `bit` of the seconds flipped in the request of poll `bad` (1 700 000 000 s has bit 11
 /// clear: +2 048 s; bit 12 set: −4 096 s).
 fn polls_with_one_flipped_second(n: u32, bad: u32, bit: u32) -> std::path::PathBuf {
+    // Tests run at once in one process: each file its own name.
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let mut f = Vec::new();
     // magic, version 2.4, thiszone, sigfigs, snaplen, network (147 = USER0)
     f.extend_from_slice(&0xA1B2_C3D4u32.to_le_bytes());
@@ -186,8 +188,6 @@ fn polls_with_one_flipped_second(n: u32, bad: u32, bit: u32) -> std::path::PathB
             f.extend_from_slice(frame);
         }
     }
-    // Tests run at once in one process: each file its own name.
-    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let path = std::env::temp_dir().join(format!("mbtap-flipped-second-{bit}-{}-{n}.pcap", std::process::id()));
     std::fs::write(&path, f).unwrap();
