@@ -139,7 +139,16 @@ struct AsciiLook {
 impl AsciiLook {
     const SAMPLE: usize = 64 * 1024;
 
+    /// Once per packet: nothing but a comparison after the sample is full.
+    #[inline]
     fn feed(&mut self, data: &[u8]) {
+        if self.sampled < Self::SAMPLE {
+            self.sample(data);
+        }
+    }
+
+    #[inline(never)]
+    fn sample(&mut self, data: &[u8]) {
         let room = Self::SAMPLE.saturating_sub(self.sampled);
         let data = &data[..data.len().min(room)];
         for &b in data {

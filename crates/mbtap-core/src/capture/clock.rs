@@ -51,7 +51,25 @@ impl Clock {
     }
 
     /// The time to hand on for a packet stamped `raw`, and what was wrong with it.
+    #[inline]
     pub fn stamp(&mut self, raw: u64) -> (u64, Verdict) {
+        // The common case, once per packet: in order, no jump pending or behind us.
+        if self.offset == 0
+            && self.before_jump.is_none()
+            && let Some(last) = self.last.as_mut()
+            && raw >= last.raw
+            && raw - last.raw <= JUMP_NS
+        {
+            let out = raw.max(last.out);
+            *last = Stamp { raw, out };
+            return (out, Verdict::InOrder);
+        }
+        self.stamp_after_trouble(raw)
+    }
+
+    /// [`Clock::stamp`] for a first packet, a jump, or any packet after one.
+    #[cold]
+    fn stamp_after_trouble(&mut self, raw: u64) -> (u64, Verdict) {
         let Some(last) = self.last else {
             self.last = Some(Stamp { raw, out: raw });
             return (raw, Verdict::InOrder);
