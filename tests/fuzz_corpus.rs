@@ -19,6 +19,7 @@ fn run_dir(dir: &Path) -> usize {
             "pdu_response" => mbtap_core::fuzzing::pdu_response,
             "roundtrip" => mbtap_core::fuzzing::roundtrip,
             "decode_text" => mbtap_core::fuzzing::decode_text,
+            "decode_lines" => mbtap_core::fuzzing::decode_lines,
             "framer" => mbtap_core::fuzzing::framer,
             "capture" => mbtap_core::fuzzing::capture,
             "profile" => mbtap_core::fuzzing::profile,

@@ -1,11 +1,12 @@
 //! `mbtap decode`: frames typed or pasted as text, explained ([`mbtap_core::decode`]).
 
-use std::io::{self, BufRead, Read, Write};
+use std::io::{self, Write};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::ValueEnum;
 use mbtap_core::decode::{self as decode_cmd, Format};
+use mbtap_core::decode_lines::{Line, Lines, MAX_LINE};
 use mbtap_core::proto::Mode;
 
 use crate::args::LangArg;
@@ -40,10 +41,6 @@ pub struct Args {
     pub lang: LangArg,
 }
 
-/// A line longer than this is no frame (the longest, an ASCII frame, is 513 characters; hex
-/// of 256 bytes with separators and a log's timestamp stays well under it): it is cut, and said.
-const MAX_LINE: usize = 4096;
-
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { frames, mode, format, devices, lang } = args;
     let profiles = crate::devices::load_devices(&devices)?;
@@ -63,41 +60,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if frames.is_empty() {
         // Streamed: a line in, its result out, in constant memory (`tail -f log | mbtap decode`).
         let stdin = io::stdin();
-        let mut reader = io::BufReader::new(stdin.lock());
-        let mut buf = Vec::with_capacity(256);
-        let mut number = 0usize;
-        loop {
-            buf.clear();
-            let n = (&mut reader)
-                .take(MAX_LINE as u64 + 1)
-                .read_until(b'\n', &mut buf)
-                .context("reading frames from stdin")?;
-            if n == 0 {
-                break;
-            }
-            number += 1;
-            if buf.last() != Some(&b'\n') && n > MAX_LINE {
-                // Skip the rest of the line without holding it.
-                let mut rest = Vec::new();
-                loop {
-                    rest.clear();
-                    let m = (&mut reader).take(64 * 1024).read_until(b'\n', &mut rest)?;
-                    if m == 0 || rest.last() == Some(&b'\n') {
-                        break;
-                    }
-                }
+        let mut lines = Lines::new(io::BufReader::new(stdin.lock()));
+        while let Some(line) = lines.next_line().context("reading frames from stdin")? {
+            let Line { number, text, cut } = line;
+            if cut {
                 writeln!(err, "mbtap: line {number} is longer than {MAX_LINE} characters: cut, not read as a frame")?;
-                buf.truncate(MAX_LINE);
             }
-            // Bytes, not text: a Latin-1 comment must not stop the input (the line is named when
-            // such bytes stand where a frame's digits should).
-            let line = String::from_utf8_lossy(&buf);
-            let line = line.trim_end_matches(['\n', '\r']);
-            if line.trim().is_empty() || line.trim_start().starts_with('#') {
+            if text.trim().is_empty() || text.trim_start().starts_with('#') {
                 continue;
             }
-            decoder.line(line, &mut out, &mut err)?;
-            if reader.buffer().is_empty() {
+            decoder.line(&text, &mut out, &mut err)?;
+            if lines.get_ref().buffer().is_empty() {
                 out.flush()?;
             }
         }

@@ -98,6 +98,34 @@ pub fn decode_text(data: &[u8]) {
     }
 }
 
+/// Any bytes as `decode`'s standard input: the streaming line reader, then the decoder, as
+/// the command runs them. Lines are numbered 1, 2, 3… with none lost: one per line end, plus
+/// one for a last line without it, however long each line is.
+///
+/// # Panics
+/// When a line is lost, numbered twice or kept longer than the cap.
+pub fn decode_lines(data: &[u8]) {
+    use crate::decode_lines::{Lines, MAX_LINE};
+    let profiles = decode::Profiles::new();
+    for format in [Format::Text, Format::Jsonl] {
+        let mut lines = Lines::new(data);
+        let mut decoder = decode::Decoder::new(None, format, &profiles, crate::profile::annotate::Lang::En);
+        let mut seen = 0usize;
+        while let Ok(Some(line)) = lines.next_line() {
+            seen += 1;
+            assert_eq!(line.number, seen, "lines are numbered in order");
+            // U+FFFD takes 3 bytes for each 1 invalid byte.
+            assert!(line.text.len() <= 3 * MAX_LINE, "a line is held to the cap");
+            let _ = decoder.line(&line.text, &mut std::io::sink(), &mut std::io::sink());
+        }
+        #[allow(clippy::naive_bytecount)] // a fuzz oracle: no crate for speed here
+        let ends = data.iter().filter(|&&b| b == b'\n').count();
+        let last = usize::from(data.last().is_some_and(|&b| b != b'\n'));
+        assert_eq!(seen, ends + last, "every line read, once");
+        let _ = decoder.finish(&mut std::io::sink(), &mut std::io::sink());
+    }
+}
+
 /// Fuzz bytes as timed chunks: each 4-byte header gives a chunk length (its first byte, mod
 /// 64) and a time step (the next three, ×10 ns); the data follows. `(time, step, bytes)`.
 fn chunks(mut rest: &[u8]) -> Vec<(u64, u64, &[u8])> {

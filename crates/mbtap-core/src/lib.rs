@@ -31,6 +31,7 @@ pub mod analyzer;
 pub mod capture;
 pub mod chunk;
 pub mod decode;
+pub mod decode_lines;
 pub mod framer;
 pub mod fuzzing;
 pub mod health;

@@ -151,20 +151,20 @@ mod tests {
 
     #[test]
     fn a_lone_stamp_behind_is_held_then_named() {
-        let (out, v) = run(&[10 * S, 10 * S - 3_600 * S, 10 * S + 4 * MS, 10 * S + 9 * MS]);
+        let (out, v) = run(&[10_000 * S, 10_000 * S - 3_600 * S, 10_000 * S + 4 * MS, 10_000 * S + 9 * MS]);
         assert_eq!(v[1], Verdict::Backwards { by_ns: 3_600 * S });
         assert_eq!(v[2], Verdict::LoneJump { off_ns: 3_600 * S, ahead: false });
-        assert_eq!(out, vec![10 * S, 10 * S, 10 * S + 4 * MS, 10 * S + 9 * MS]);
+        assert_eq!(out, vec![10_000 * S, 10_000 * S, 10_000 * S + 4 * MS, 10_000 * S + 9 * MS]);
     }
 
     #[test]
     fn a_clock_step_back_keeps_later_spacing() {
         // Stepped back an hour for good: held once, then the file's own spacing.
-        let back = 10 * S - 3_600 * S;
-        let (out, v) = run(&[10 * S, back, back + 7 * MS, back + 20 * MS]);
+        let back = 10_000 * S - 3_600 * S;
+        let (out, v) = run(&[10_000 * S, back, back + 7 * MS, back + 20 * MS]);
         assert_eq!(v[1], Verdict::Backwards { by_ns: 3_600 * S });
         assert_eq!(v[2], Verdict::InOrder);
-        assert_eq!(out, vec![10 * S, 10 * S, 10 * S + 7 * MS, 10 * S + 20 * MS]);
+        assert_eq!(out, vec![10_000 * S, 10_000 * S, 10_000 * S + 7 * MS, 10_000 * S + 20 * MS]);
     }
 
     #[test]
