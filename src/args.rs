@@ -188,6 +188,23 @@ pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_core::sim::bus::Fault> {
         .collect()
 }
 
+/// The terminal UI's view of a source read with these output options (`--device`, `--lang`).
+///
+/// # Errors
+/// When a `--device` profile cannot be loaded.
+pub fn tui_source(
+    o: &OutputArgs,
+    line: mbtap_core::framer::LineSettings,
+    pacing: bool,
+) -> anyhow::Result<crate::tui::source::TuiSource> {
+    Ok(crate::tui::source::TuiSource {
+        profiles: crate::devices::load_devices(&o.devices)?,
+        lang: o.lang.into(),
+        line,
+        pacing,
+    })
+}
+
 /// The event writer `sniff`, `tap` and `replay` print through, as their output options say.
 pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result<EventWriter<W>> {
     let mut writer = EventWriter::new(out, o.format.into());

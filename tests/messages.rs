@@ -36,8 +36,9 @@ fn scanning_a_directory_says_it_is_one() {
     assert!(!e.contains("1200 8E1"), "{e}");
 }
 
-/// A classic pcap file (microseconds, little-endian) of `frames` with link type `dlt`.
-fn pcap(dlt: u32, frames: &[&[u8]]) -> std::path::PathBuf {
+/// A classic pcap file (microseconds, little-endian) with link type `dlt` of `records`:
+/// (ts_sec, ts_usec, bytes) each.
+fn pcap_records(dlt: u32, records: &[(u32, u32, &[u8])]) -> std::path::PathBuf {
     // Tests run at once in one process: each file its own name.
     static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let mut f = Vec::new();
@@ -48,11 +49,11 @@ fn pcap(dlt: u32, frames: &[&[u8]]) -> std::path::PathBuf {
     f.extend_from_slice(&[0; 8]);
     f.extend_from_slice(&65_535u32.to_le_bytes());
     f.extend_from_slice(&dlt.to_le_bytes());
-    for (i, frame) in frames.iter().enumerate() {
+    for &(sec, usec, frame) in records {
         let len = u32::try_from(frame.len()).unwrap();
-        // ts_sec, ts_usec (20 ms apart), incl_len, orig_len, bytes
-        f.extend_from_slice(&1_700_000_000u32.to_le_bytes());
-        f.extend_from_slice(&(u32::try_from(i).unwrap() * 20_000).to_le_bytes());
+        // ts_sec, ts_usec, incl_len, orig_len, bytes
+        f.extend_from_slice(&sec.to_le_bytes());
+        f.extend_from_slice(&usec.to_le_bytes());
         f.extend_from_slice(&len.to_le_bytes());
         f.extend_from_slice(&len.to_le_bytes());
         f.extend_from_slice(frame);
@@ -61,6 +62,13 @@ fn pcap(dlt: u32, frames: &[&[u8]]) -> std::path::PathBuf {
     let path = std::env::temp_dir().join(format!("mbtap-dlt{dlt}-{}-{n}.pcap", std::process::id()));
     std::fs::write(&path, f).unwrap();
     path
+}
+
+/// [`pcap_records`] of `frames` 20 ms apart.
+fn pcap(dlt: u32, frames: &[&[u8]]) -> std::path::PathBuf {
+    let records: Vec<(u32, u32, &[u8])> =
+        frames.iter().enumerate().map(|(i, f)| (1_700_000_000, u32::try_from(i).unwrap() * 20_000, *f)).collect();
+    pcap_records(dlt, &records)
 }
 
 /// Unit 1, read 3 holding registers from 101, and its answer (MK4 document §3.3).
@@ -162,16 +170,7 @@ fn binary_garbage_is_not_called_modbus_ascii() {
 /// `bit` of the seconds flipped in the request of poll `bad` (1 700 000 000 s has bit 11
 /// clear: +2 048 s; bit 12 set: −4 096 s).
 fn polls_with_one_flipped_second(n: u32, bad: u32, bit: u32) -> std::path::PathBuf {
-    // Tests run at once in one process: each file its own name.
-    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let mut f = Vec::new();
-    // magic, version 2.4, thiszone, sigfigs, snaplen, network (147 = USER0)
-    f.extend_from_slice(&0xA1B2_C3D4u32.to_le_bytes());
-    f.extend_from_slice(&2u16.to_le_bytes());
-    f.extend_from_slice(&4u16.to_le_bytes());
-    f.extend_from_slice(&[0; 8]);
-    f.extend_from_slice(&65_535u32.to_le_bytes());
-    f.extend_from_slice(&147u32.to_le_bytes());
+    let mut records = Vec::new();
     for k in 0..n {
         for (frame, after_us) in [(REQUEST, 0), (ANSWER, 20_000)] {
             let us = u64::from(k) * 100_000 + after_us;
@@ -179,19 +178,10 @@ fn polls_with_one_flipped_second(n: u32, bad: u32, bit: u32) -> std::path::PathB
             if k == bad && after_us == 0 {
                 sec ^= 1 << bit;
             }
-            let len = u32::try_from(frame.len()).unwrap();
-            // ts_sec, ts_usec, incl_len, orig_len, bytes
-            f.extend_from_slice(&sec.to_le_bytes());
-            f.extend_from_slice(&u32::try_from(us % 1_000_000).unwrap().to_le_bytes());
-            f.extend_from_slice(&len.to_le_bytes());
-            f.extend_from_slice(&len.to_le_bytes());
-            f.extend_from_slice(frame);
+            records.push((sec, u32::try_from(us % 1_000_000).unwrap(), frame));
         }
     }
-    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let path = std::env::temp_dir().join(format!("mbtap-flipped-second-{bit}-{}-{n}.pcap", std::process::id()));
-    std::fs::write(&path, f).unwrap();
-    path
+    pcap_records(147, &records)
 }
 
 /// Issue 16 regression: one flipped bit in one timestamp held every later packet at that

@@ -9,7 +9,6 @@ use anyhow::Context;
 
 use crate::args::event_writer;
 use crate::args::{EventFormatArg, LineArgs, OutputArgs};
-use crate::tui::source::TuiSource;
 
 #[derive(Debug, clap::Args)]
 /// Replay a line capture (pcap/pcapng, link type 147) through the analyzer.
@@ -35,12 +34,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if output.format == EventFormatArg::Tui {
         let (_, settings, _) = line.overrides().resolve();
         let source = file.display().to_string();
-        let ui = TuiSource {
-            profiles: crate::devices::load_devices(&output.devices)?,
-            lang: output.lang.into(),
-            line: settings,
-            pacing: true,
-        };
+        let ui = crate::args::tui_source(&output, settings, true)?;
         return ui.run(&source, move |writer, err| {
             writer.paced = true;
             crate::output::replay(input, line.overrides(), writer, err)

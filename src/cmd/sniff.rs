@@ -7,7 +7,6 @@ use std::process::ExitCode;
 use crate::args::event_writer;
 use crate::args::{EventFormatArg, LineArgs, OutputArgs, seconds};
 use crate::cmd::runtime;
-use crate::tui::source::TuiSource;
 
 #[derive(Debug, clap::Args)]
 /// Listen to a live serial port: rebuild, pair and show every frame.
@@ -43,12 +42,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     if output.format == EventFormatArg::Tui {
         let source = opts.port.clone();
-        let ui = TuiSource {
-            profiles: crate::devices::load_devices(&output.devices)?,
-            lang: output.lang.into(),
-            line: settings,
-            pacing: false,
-        };
+        let ui = crate::args::tui_source(&output, settings, false)?;
         return ui.run(&source, move |writer, err| runtime()?.block_on(crate::source::sniff::sniff(opts, writer, err)));
     }
     let stdout = io::stdout();

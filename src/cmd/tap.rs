@@ -8,7 +8,6 @@ use std::process::ExitCode;
 use crate::args::event_writer;
 use crate::args::{EventFormatArg, LineArgs, OutputArgs, seconds};
 use crate::cmd::runtime;
-use crate::tui::source::TuiSource;
 
 #[derive(Debug, clap::Args)]
 /// Tap a port used by an application on this computer: relay through a pseudo-terminal.
@@ -48,12 +47,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     if output.format == EventFormatArg::Tui {
         let source = format!("{} ⇄ {}", opts.port, opts.link.display());
-        let ui = TuiSource {
-            profiles: crate::devices::load_devices(&output.devices)?,
-            lang: output.lang.into(),
-            line: settings,
-            pacing: false,
-        };
+        let ui = crate::args::tui_source(&output, settings, false)?;
         return ui.run(&source, move |writer, err| runtime()?.block_on(crate::source::tap::tap(opts, writer, err)));
     }
     let stdout = io::stdout();
