@@ -89,8 +89,6 @@ pub struct CaptureReader<R> {
     /// Each interface's clock, and where its last packet ended (to name a bad one).
     clocks: Vec<(Clock, u64)>,
     time_warnings: u32,
-    /// Backwards timestamps seen in total.
-    pub backwards_timestamps: u64,
     /// A corrupt region being searched through: where it began and what was wrong there.
     corrupt_from: Option<(u64, String)>,
     /// Packets that named an interface never described (the first is said, the rest counted).
@@ -138,7 +136,6 @@ impl<R: Read> CaptureReader<R> {
             skipped_linktype: None,
             clocks: Vec::new(),
             time_warnings: 0,
-            backwards_timestamps: 0,
             pending_packet: None,
             corrupt_from: None,
             undescribed_packets: 0,
@@ -430,14 +427,11 @@ impl<R: Read> CaptureReader<R> {
         let prev_end = std::mem::replace(bad_before, self.offset);
         let w = match verdict {
             Verdict::InOrder => None,
-            Verdict::Backwards { by_ns } => {
-                self.backwards_timestamps += 1;
-                Some(format!(
-                    "timestamp goes backwards by {} µs at offset {} (interface {i}); held at the previous value, later packets keep their own spacing",
-                    by_ns / 1000,
-                    self.offset
-                ))
-            }
+            Verdict::Backwards { by_ns } => Some(format!(
+                "timestamp goes backwards by {} µs at offset {} (interface {i}); held at the previous value, later packets keep their own spacing",
+                by_ns / 1000,
+                self.offset
+            )),
             Verdict::LoneJump { off_ns, ahead } => Some(format!(
                 "the timestamp of the packet before offset {prev_end} (interface {i}) is {}.{:03} s {} both neighbours: a lone bad timestamp, the packets after it are timed from its neighbours",
                 off_ns / 1_000_000_000,
