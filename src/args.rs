@@ -58,6 +58,23 @@ pub enum EventFormatArg {
 /// Line settings (each one overrides what a capture file stores).
 #[derive(Debug, Clone, Args)]
 pub struct LineArgs {
+    #[command(flatten)]
+    pub serial: SerialLineArgs,
+    /// How late the adapter may deliver a byte, in ms (FTDI default latency timer: 16).
+    /// Timing gaps shorter than this are not trusted. [default: live ports: the adapter's
+    /// latency timer, at least 1 ms; captures: what they were recorded with; else 0]
+    #[arg(long)]
+    pub latency_ms: Option<f64>,
+    /// Read a capture's interfaces of this link type as raw serial bytes too (147–162, the
+    /// user link types, always are).
+    #[arg(long, value_name = "DLT")]
+    pub link_type: Option<u16>,
+}
+
+/// The settings of a serial line a master speaks on (`read`, `write`, `watch`) or anything
+/// listens to (inside [`LineArgs`]).
+#[derive(Debug, Args, Clone, Default)]
+pub struct SerialLineArgs {
     /// RTU or ASCII framing [default: rtu, or what the capture says].
     #[arg(long, value_enum)]
     pub mode: Option<SerialModeArg>,
@@ -73,18 +90,9 @@ pub struct LineArgs {
     /// Data bits (7 or 8) [default: 8 for RTU, 7 for ASCII].
     #[arg(long, value_parser = clap::value_parser!(u8).range(7..=8))]
     pub data_bits: Option<u8>,
-    /// How late the adapter may deliver a byte, in ms (FTDI default latency timer: 16).
-    /// Timing gaps shorter than this are not trusted. [default: live ports: the adapter's
-    /// latency timer, at least 1 ms; captures: what they were recorded with; else 0]
-    #[arg(long)]
-    pub latency_ms: Option<f64>,
-    /// Read a capture's interfaces of this link type as raw serial bytes too (147–162, the
-    /// user link types, always are).
-    #[arg(long, value_name = "DLT")]
-    pub link_type: Option<u16>,
 }
 
-impl LineArgs {
+impl SerialLineArgs {
     /// These settings over whatever a capture or a default supplies.
     #[must_use]
     pub fn overrides(&self) -> LineOverrides {
@@ -102,10 +110,22 @@ impl LineArgs {
                 ParityArg::Odd => Parity::Odd,
             }),
             stop_bits: a.stop_bits,
+            ..LineOverrides::default()
+        }
+    }
+}
+
+impl LineArgs {
+    /// These settings over whatever a capture or a default supplies.
+    #[must_use]
+    pub fn overrides(&self) -> LineOverrides {
+        let a = self;
+        LineOverrides {
             // Milliseconds given by a person; negative or absurd values clamp to 0..=10 s.
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
             latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
             link_type: a.link_type,
+            ..self.serial.overrides()
         }
     }
 }
@@ -198,7 +218,7 @@ pub fn tui_source(
     pacing: bool,
 ) -> anyhow::Result<crate::tui::source::TuiSource> {
     Ok(crate::tui::source::TuiSource {
-        profiles: crate::devices::load_devices(&o.devices)?,
+        profiles: crate::config::devices::load_devices(&o.devices)?,
         lang: o.lang.into(),
         line,
         pacing,
@@ -208,7 +228,7 @@ pub fn tui_source(
 /// The event writer `sniff`, `tap` and `replay` print through, as their output options say.
 pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result<EventWriter<W>> {
     let mut writer = EventWriter::new(out, o.format.into());
-    writer.profiles = crate::devices::load_devices(&o.devices)?;
+    writer.profiles = crate::config::devices::load_devices(&o.devices)?;
     writer.lang = o.lang.into();
     if let Some(every) = o.report_every {
         anyhow::ensure!(

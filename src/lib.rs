@@ -9,19 +9,22 @@
 //! - [`bridge`] — Modbus TCP ⇄ serial: server, line masters, reverse mode, metrics, its config file.
 //! - [`tui`] — the terminal UI (ratatui), rendered from the model the events build.
 //! - [`source`] — live serial ports, pseudo-terminals and the clock: the I/O loops.
-//! - [`output`] — the output sink: events as text or JSON lines, the UI feed, reports.
-//! - [`devices`] — device profiles by the names users give them (built-in, user dir, file).
-//! - [`config`] — the user configuration file.
+//! - [`master`] — `read`/`write`/`watch`: requests to a device through tokio-modbus (RTU on a
+//!   serial port, TCP, RTU over TCP), planned and checked by `mbtap_core::query`.
+//! - [`publish`] — what the sniffer hears, served to others: a read-only Modbus TCP server of
+//!   the register image (spy mode) and MQTT.
+//! - [`output`] — the output sink: events as text or JSON lines, the UI feed, reports; and the
+//!   progress of reading a capture file.
+//! - [`config`] — the user configuration file, and device profiles by the names users give them.
 //! - [`signals`] — Ctrl-C, SIGTERM and the UI's `q`: one stop for every loop.
-//! - [`progress`] — how far the reading of a capture file has come, on a terminal.
 
 pub mod args;
 pub mod bridge;
 pub mod cmd;
 pub mod config;
-pub mod devices;
+pub mod master;
 pub mod output;
-pub mod progress;
+pub mod publish;
 pub mod signals;
 pub mod source;
 pub mod tui;

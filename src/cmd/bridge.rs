@@ -219,7 +219,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         duration: seconds(duration),
         reverse,
     };
-    let profiles = crate::devices::load_devices(&devices)?;
+    let profiles = crate::config::devices::load_devices(&devices)?;
     match monitor {
         Some(EventFormatArg::Tui) => {
             let ui =
@@ -314,11 +314,11 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
     command_line_wins! {
         "config" => config,
         "serial" => serial,
-        "mode" => line.mode,
-        "baud" => line.baud,
-        "parity" => line.parity,
-        "stop_bits" => line.stop_bits,
-        "data_bits" => line.data_bits,
+        "mode" => line.serial.mode,
+        "baud" => line.serial.baud,
+        "parity" => line.serial.parity,
+        "stop_bits" => line.serial.stop_bits,
+        "data_bits" => line.serial.data_bits,
         "latency_ms" => line.latency_ms,
         "link_type" => line.link_type,
         "listen" => listen,

@@ -43,7 +43,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { frames, mode, format, devices, lang } = args;
-    let profiles = crate::devices::load_devices(&devices)?;
+    let profiles = crate::config::devices::load_devices(&devices)?;
     let mode = mode.map(|m| match m {
         ModeArg::Rtu => Mode::Rtu,
         ModeArg::Ascii => Mode::Ascii,

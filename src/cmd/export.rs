@@ -27,7 +27,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, out, line } = args;
-    let input = crate::progress::open_capture(&file, true)?;
+    let input = crate::output::progress::open_capture(&file, true)?;
     let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
     let export = mbtap_core::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
     let mut sink = ExportSink { export, error: None };
@@ -60,7 +60,7 @@ impl<W: Write> mbtap_core::analyzer::Sink for ExportSink<W> {
     }
 
     fn warning(&mut self, message: &str) {
-        crate::progress::clear_line();
+        crate::output::progress::clear_line();
         eprintln!("mbtap: warning: {message}");
     }
 }

@@ -16,14 +16,17 @@ pub mod generate;
 pub mod generate_config;
 pub mod play;
 pub mod profiles;
+pub mod read;
 pub mod replay;
 pub mod report;
 pub mod scan;
 pub mod simulate;
 pub mod sniff;
 pub mod tap;
+pub mod watch;
+pub mod write;
 
-/// mbtap — a Modbus RTU/ASCII bus analyzer: sniff, decode, record, replay, bridge.
+/// mbtap — a Modbus RTU/ASCII bus analyzer: sniff, decode, record, replay, bridge, read and write.
 #[derive(Debug, Parser)]
 #[command(name = "mbtap", version, about, long_about = None)]
 pub struct Cli {
@@ -49,6 +52,9 @@ pub enum Command {
     Report(report::Args),
     #[command(subcommand)]
     Profiles(profiles::Command),
+    Read(read::Args),
+    Write(write::Args),
+    Watch(watch::Args),
 }
 
 /// Runs one command; the exit code on success. `matches` is the whole command line as parsed,
@@ -72,6 +78,9 @@ pub fn run(command: Command, matches: &ArgMatches) -> anyhow::Result<ExitCode> {
         Command::Scan(args) => scan::run(&args),
         Command::Report(args) => report::run(args),
         Command::Profiles(command) => profiles::run(command),
+        Command::Read(args) => read::run(&args),
+        Command::Write(args) => write::run(&args),
+        Command::Watch(args) => watch::run(&args),
     }
 }
 

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::Subcommand;
 use mbtap_core::profile::Table;
 
-use crate::devices::{load_profile_file, resolve_profile, user_profile_dir};
+use crate::config::devices::{load_profile_file, resolve_profile, user_profile_dir};
 
 /// Device profiles: check a profile file, or show what it defines.
 #[derive(Debug, Subcommand)]

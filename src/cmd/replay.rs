@@ -30,7 +30,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, image, line, output } = args;
-    let input = crate::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
+    let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
     if output.format == EventFormatArg::Tui {
         let (_, settings, _) = line.overrides().resolve();
         let source = file.display().to_string();

@@ -26,8 +26,8 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, line, format, devices } = args;
-    let input = crate::progress::open_capture(&file, true)?;
-    let mut health = mbtap_core::health::Health::new(crate::devices::load_devices(&devices)?);
+    let input = crate::output::progress::open_capture(&file, true)?;
+    let mut health = mbtap_core::health::Health::new(crate::config::devices::load_devices(&devices)?);
     let mut warnings = Vec::new();
     {
         let mut sink = HealthSink { health: &mut health, warnings: &mut warnings };

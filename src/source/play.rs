@@ -25,7 +25,7 @@ pub fn play(
     speed: f64,
     max_gap: Duration,
 ) -> anyhow::Result<(u64, u64)> {
-    let input = crate::progress::open_capture(file, true)?;
+    let input = crate::output::progress::open_capture(file, true)?;
     let mut out = builder(port, line).open().with_context(|| format!("opening serial port {port}"))?;
     let mut reader = CaptureReader::new(std::io::BufReader::new(input));
     let start = Instant::now();
@@ -66,7 +66,7 @@ pub fn play(
                 bytes += data.len() as u64;
             }
             Item::Warning(w) => {
-                crate::progress::clear_line();
+                crate::output::progress::clear_line();
                 eprintln!("mbtap: warning: {w}");
             }
             Item::Interface { .. } => {}

@@ -19,6 +19,8 @@
 //!   Here rather than at the edge because reading a capture is parsing (fuzzed from `fuzz/`
 //!   without the edge) and its timestamps are data, not a clock.
 //! - [`replay`] — a capture through the analyzer into any sink.
+//! - [`query`] — what `read`/`write`/`watch` ask of a device: names resolved, requests split,
+//!   writes checked and encoded, answers named and scaled.
 //! - [`decode`] — frames typed as text, explained (the work of `mbtap decode`).
 //! - [`line_args`] — line settings from a command line or a capture's description, merged.
 //! - [`traffic`] — synthetic traffic with ground truth, observation models, scoring.
@@ -38,6 +40,7 @@ pub mod health;
 pub mod line_args;
 pub mod pairing;
 pub mod profile;
+pub mod query;
 pub mod replay;
 pub mod report;
 pub mod scan;

@@ -49,8 +49,8 @@ pub fn resolve_profile(spec: &str) -> anyhow::Result<mbtap_core::profile::Profil
 /// The configuration file's `[devices]` come first; `--device` replaces them unit by unit.
 pub fn load_devices(devices: &[String]) -> anyhow::Result<Profiles> {
     let mut out = Profiles::new();
-    if let Some(path) = crate::config::default_path() {
-        let config = crate::config::load(&path)?;
+    if let Some(path) = super::default_path() {
+        let config = super::load(&path)?;
         for (unit, profile) in &config.devices {
             let u: u8 = unit.trim().parse().with_context(|| format!("{}: unit {unit:?}", path.display()))?;
             out.insert(

@@ -11,6 +11,8 @@
 //! `~/.config/mbtap/config.toml`. Command-line options override it (`--device 1=…` replaces the
 //! file's unit 1).
 
+pub mod devices;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

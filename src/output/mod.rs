@@ -2,6 +2,8 @@
 //! counted (the terminal UI takes them instead when it runs), the register image, the health
 //! report at the end or every so often; and a capture replayed into it.
 
+pub mod progress;
+
 use std::io::{self, Read, Write};
 
 use anyhow::Context;
@@ -146,7 +148,7 @@ impl<W: Write> EventWriter<W> {
         if self.format == EventFormat::Jsonl {
             let _ = writeln!(self.out, "{}", serde_json::json!({"event": "warning", "message": message}));
         } else {
-            crate::progress::clear_line();
+            crate::output::progress::clear_line();
             let _ = writeln!(err, "mbtap: warning: {message}");
         }
     }

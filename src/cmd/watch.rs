@@ -1,0 +1,117 @@
+//! `mbtap watch`: the same reads as `read`, again every interval — a live table on a terminal,
+//! JSON lines (each with the time of its cycle) in a pipe.
+
+use std::io::{IsTerminal as _, Write as _};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+
+use crate::master::{MasterArgs, MasterFormat, exec, link::Link, show};
+
+/// Read values again and again: a live table on a terminal, JSON lines in a pipe.
+///
+/// Example: `mbtap watch /dev/ttyUSB0 --device mk4 --interval 1s 430..433 "Operating mode"`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub master: MasterArgs,
+    /// What to read, as for `mbtap read`.
+    #[arg(required = true, value_name = "ITEM")]
+    pub items: Vec<String>,
+    /// Time from the start of one round of reads to the next: `1s`, `250ms`, `2` (seconds).
+    /// A round that takes longer starts the next at once.
+    #[arg(long, default_value = "1s", value_parser = parse_interval)]
+    pub interval: Duration,
+    /// Stop after this many rounds [default: until Ctrl-C].
+    #[arg(long)]
+    pub count: Option<u64>,
+}
+
+/// `1s`, `250ms`, `1.5` (seconds).
+fn parse_interval(s: &str) -> Result<Duration, String> {
+    let s = s.trim();
+    let (number, scale) = if let Some(n) = s.strip_suffix("ms") {
+        (n, 1e-3)
+    } else if let Some(n) = s.strip_suffix('s') {
+        (n, 1.0)
+    } else {
+        (s, 1.0)
+    };
+    let v: f64 = number.trim().parse().map_err(|_| format!("{s:?}: expected a time like 1s, 250ms or 2"))?;
+    let secs = v * scale;
+    if !(0.001..=86_400.0).contains(&secs) {
+        return Err(format!("{s:?}: between 1ms and 24h"));
+    }
+    Ok(Duration::from_secs_f64(secs))
+}
+
+pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
+    let m = &args.master;
+    let profile = m.profile()?;
+    let unit = m.unit(profile.as_ref());
+    let (targets, plan) = super::read::prepare(&args.items, profile.as_ref())?;
+    let timeout = Duration::from_millis(m.timeout_ms);
+    let mut link = Link::new(&m.target, &m.line, timeout)?;
+    let format = m.format();
+    let live = format == MasterFormat::Text && std::io::stdout().is_terminal();
+    let rt = crate::cmd::runtime()?;
+    let mut any_failed = false;
+    rt.block_on(async {
+        let stop = crate::signals::shutdown_signal();
+        tokio::pin!(stop);
+        let mut round = 0u64;
+        let mut next = tokio::time::Instant::now();
+        while args.count.is_none_or(|c| round < c) {
+            round += 1;
+            let started = Instant::now();
+            let t_ns = crate::source::serial::now().0;
+            let (rows, failures) =
+                exec::read_all(&mut link, unit, &targets, &plan, profile.as_ref(), timeout, m.retries).await;
+            any_failed |= !failures.is_empty();
+            let took = started.elapsed();
+            let mut out = std::io::stdout().lock();
+            if live {
+                // Redraw in place: home, clear, then the table.
+                write!(out, "\x1b[H\x1b[2J")?;
+                writeln!(
+                    out,
+                    "mbtap watch {} unit {unit} — round {round}, {:.1} ms, every {:?} (Ctrl-C stops)\n",
+                    link.describe(),
+                    took.as_secs_f64() * 1e3,
+                    args.interval
+                )?;
+            } else if format == MasterFormat::Text {
+                writeln!(out, "# round {round}, {:.1} ms", took.as_secs_f64() * 1e3)?;
+            }
+            show::print(format, &rows, &failures, &[("t_ns", t_ns.into()), ("round", round.into())], &mut out)?;
+            drop(out);
+            next += args.interval;
+            let now = tokio::time::Instant::now();
+            if next < now {
+                next = now;
+            }
+            tokio::select! {
+                () = &mut stop => break,
+                () = tokio::time::sleep_until(next) => {}
+            }
+        }
+        anyhow::Ok(())
+    })
+    .context("writing the values")?;
+    Ok(if any_failed { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn intervals_in_the_units_people_write() {
+        assert_eq!(parse_interval("1s"), Ok(Duration::from_secs(1)));
+        assert_eq!(parse_interval("250ms"), Ok(Duration::from_millis(250)));
+        assert_eq!(parse_interval("1.5"), Ok(Duration::from_millis(1500)));
+        assert!(parse_interval("0").is_err());
+        assert!(parse_interval("soon").is_err());
+    }
+}

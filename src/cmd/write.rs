@@ -1,0 +1,160 @@
+//! `mbtap write`: values written by the profile's names, every one checked before anything is
+//! sent, and each echoed back by a read.
+
+use std::io::Write as _;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use mbtap_core::query::encode::{Write, encode_write};
+use mbtap_core::query::plan::{Plan, Read};
+use mbtap_core::query::rows::{rows, short_table};
+use mbtap_core::query::{QueryError, items, resolve};
+
+use crate::master::link::{Endpoint, Link};
+use crate::master::{MasterArgs, MasterFormat, exec, show};
+
+/// Write values to a device by the profile's names or by address.
+///
+/// Every value is checked against the profile before anything is sent (read-only register,
+/// documented range, enumeration labels, what the scale can represent); a refusal says why.
+/// Example: `mbtap write /dev/ttyUSB0 --device mk4 "Level 2 set point=1.50"`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub master: MasterArgs,
+    /// What to write: NAME=VALUE or [TABLE] ADDRESS=VALUE (coils and holding registers); a
+    /// label (`"Operating mode=fill by level sensors"`), a number at the profile's scale
+    /// (`1.50`), on/off for coils, text for strings; without a profile,
+    /// `holding FIRST..LAST=V1,V2,…`.
+    #[arg(required = true, value_name = "ITEM=VALUE")]
+    pub items: Vec<String>,
+    /// Print the frames that would be sent (hex and decoded) and send nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Send values the profile's checks refuse (out of range, read-only, undocumented). Values
+    /// that cannot be encoded at all are refused even so.
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn frame(endpoint: &Endpoint, unit: u8, pdu: &[u8]) -> (Vec<u8>, mbtap_core::proto::Mode) {
+    let mut out = Vec::new();
+    if let Endpoint::Tcp(_) = endpoint {
+        mbtap_core::proto::encode_tcp(1, unit, pdu, &mut out);
+        (out, mbtap_core::proto::Mode::Tcp)
+    } else {
+        mbtap_core::proto::encode_rtu(unit, pdu, &mut out);
+        (out, mbtap_core::proto::Mode::Rtu)
+    }
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
+}
+
+fn describe(w: &Write, target: &resolve::Target, profile: Option<&mbtap_core::profile::Profile>, unit: u8) -> String {
+    let shown = rows(unit, w.table, w.address, &w.words, profile)
+        .first()
+        .map(|r| format!("{} = {}", r.name.as_deref().unwrap_or("-"), r.shown))
+        .unwrap_or_default();
+    let raw = w.words.iter().map(u16::to_string).collect::<Vec<_>>().join(",");
+    format!("{} {} {shown} (raw {raw}, from {:?})", short_table(w.table), w.address, target.item.text)
+}
+
+pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
+    let m = &args.master;
+    let profile = m.profile()?;
+    let p = profile.as_ref();
+    let unit = m.unit(p);
+    let parsed = items::parse_items(&args.items)?;
+    if let Some(i) = parsed.iter().find(|i| i.value.is_none()) {
+        return Err(
+            QueryError::Syntax { item: i.text.clone(), problem: "nothing to write: give NAME=VALUE".into() }.into()
+        );
+    }
+    // Every item checked before the first is sent.
+    let mut writes = Vec::new();
+    for item in &parsed {
+        let target = resolve::resolve(item, p)?;
+        let w = encode_write(&target, p, args.force)?;
+        for o in &w.overridden {
+            eprintln!("mbtap: {}: --force: {o}", item.text);
+        }
+        writes.push((target, w));
+    }
+    let mut out = std::io::stdout().lock();
+    let endpoint = Endpoint::parse(&m.target);
+    if args.dry_run {
+        let profiles: mbtap_core::profile::Profiles = p.map(|p| (unit, p.clone())).into_iter().collect();
+        for (target, w) in &writes {
+            let (bytes, mode) = frame(&endpoint, unit, &w.pdu());
+            writeln!(out, "would send to unit {unit}: {}", describe(w, target, p, unit))?;
+            writeln!(out, "  {}", hex(&bytes))?;
+            mbtap_core::decode::run_with_profiles(
+                &[hex(&bytes)],
+                Some(mode),
+                mbtap_core::decode::Format::Text,
+                &profiles,
+                mbtap_core::profile::annotate::Lang::En,
+                &mut out,
+                &mut std::io::sink(),
+            )?;
+        }
+        writeln!(out, "dry run: nothing sent")?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let timeout = Duration::from_millis(m.timeout_ms);
+    let mut link = Link::new(&m.target, &m.line, timeout)?;
+    let format = m.format();
+    let rt = crate::cmd::runtime()?;
+    let mut failed = false;
+    for (target, w) in &writes {
+        let (answer, _) = rt.block_on(exec::send(&mut link, unit, exec::Op::Write(w), timeout, m.retries));
+        let what = describe(w, target, p, unit);
+        if let Some(problem) = answer.problem() {
+            failed = true;
+            let f = show::Failure {
+                unit,
+                item: target.item.text.clone(),
+                read: None,
+                problem: format!("write refused or lost: {problem}"),
+            };
+            show::print(format, &[], &[f], &[], &mut out)?;
+            continue;
+        }
+        if format == MasterFormat::Text {
+            writeln!(out, "wrote {what}")?;
+        }
+        // The echo: read the same registers back and show what the device kept.
+        let quantity = u16::try_from(w.words.len()).unwrap_or(1);
+        let plan =
+            Plan { reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }], skipped: vec![] };
+        let (back, failures) =
+            rt.block_on(exec::read_all(&mut link, unit, std::slice::from_ref(target), &plan, p, timeout, m.retries));
+        let kept = back.first().map(|r| r.raw);
+        let written = rows(unit, w.table, w.address, &w.words, p).first().map(|r| r.raw);
+        let differs = kept.is_some() && kept != written;
+        failed |= !failures.is_empty();
+        match format {
+            MasterFormat::Text => {
+                for r in &back {
+                    let note = if differs { "  ← the device kept another value" } else { "" };
+                    writeln!(out, "read back {}{note}", r.line())?;
+                }
+            }
+            MasterFormat::Jsonl => {
+                let o = serde_json::json!({
+                    "event": "write", "unit": unit, "table": w.table.name(), "address": w.address,
+                    "function": w.function, "words": w.words, "item": target.item.text,
+                    "read_back": back.iter().map(mbtap_core::query::rows::Row::to_json).collect::<Vec<_>>(),
+                    "kept_as_written": !differs,
+                });
+                writeln!(out, "{o}")?;
+            }
+        }
+        show::print(format, &[], &failures, &[], &mut out)?;
+    }
+    out.flush().context("writing the results")?;
+    Ok(if failed { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+}

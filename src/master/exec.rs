@@ -1,0 +1,131 @@
+//! Requests sent and answers classified: values, an exception (decoded), or a failure (no
+//! answer in time, a broken link, a CRC or framing error as tokio-modbus reports it).
+//! A request that timed out is sent again `retries` times on a reopened link; an exception is
+//! an answer and is never retried.
+
+use std::time::{Duration, Instant};
+
+use mbtap_core::profile::Table;
+use mbtap_core::proto::function::ExceptionCode;
+use mbtap_core::query::encode::Write;
+use mbtap_core::query::plan::Read;
+use tokio_modbus::prelude::{Reader as _, Writer as _};
+
+use super::link::Link;
+
+/// How a request ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Answer {
+    /// Registers, or bits as 0/1.
+    Values(Vec<u16>),
+    /// A write acknowledged.
+    Done,
+    /// An exception answer (MAP v1.1b3 §7).
+    Exception(u8),
+    /// No usable answer: why.
+    Failed(String),
+}
+
+impl Answer {
+    /// The failure as one phrase, `None` for a good answer.
+    #[must_use]
+    pub fn problem(&self) -> Option<String> {
+        match self {
+            Self::Values(_) | Self::Done => None,
+            Self::Exception(c) => Some(format!("exception {c:02X}: {}", ExceptionCode::from(*c))),
+            Self::Failed(why) => Some(why.clone()),
+        }
+    }
+}
+
+/// What to send.
+#[derive(Debug, Clone, Copy)]
+pub enum Op<'a> {
+    Read(Read),
+    Write(&'a Write),
+}
+
+fn bits(v: Vec<bool>) -> Vec<u16> {
+    v.into_iter().map(u16::from).collect()
+}
+
+async fn once(link: &mut Link, unit: u8, op: Op<'_>) -> anyhow::Result<Result<Option<Vec<u16>>, u8>> {
+    let ctx = link.context(unit).await?;
+    let r = match op {
+        Op::Read(r) => match r.table {
+            Table::Coils => ctx.read_coils(r.address, r.quantity).await.map(|a| a.map(|v| Some(bits(v)))),
+            Table::DiscreteInputs => {
+                ctx.read_discrete_inputs(r.address, r.quantity).await.map(|a| a.map(|v| Some(bits(v))))
+            }
+            Table::HoldingRegisters => ctx.read_holding_registers(r.address, r.quantity).await.map(|a| a.map(Some)),
+            Table::InputRegisters => ctx.read_input_registers(r.address, r.quantity).await.map(|a| a.map(Some)),
+        },
+        Op::Write(w) => match w.function {
+            0x05 => ctx.write_single_coil(w.address, w.words.first().is_some_and(|&v| v != 0)).await,
+            0x06 => ctx.write_single_register(w.address, w.words.first().copied().unwrap_or(0)).await,
+            _ => ctx.write_multiple_registers(w.address, &w.words).await,
+        }
+        .map(|a| a.map(|()| None)),
+    };
+    Ok(r?.map_err(u8::from))
+}
+
+/// Sends `op` to `unit`, waiting `timeout` for each try. Returns the answer and how long the
+/// last try took.
+pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retries: u32) -> (Answer, Duration) {
+    let mut tries = 0;
+    loop {
+        let started = Instant::now();
+        let answer = match tokio::time::timeout(timeout, once(link, unit, op)).await {
+            Ok(Ok(Ok(Some(v)))) => Answer::Values(v),
+            Ok(Ok(Ok(None))) => Answer::Done,
+            Ok(Ok(Err(code))) => Answer::Exception(code),
+            Ok(Err(e)) => {
+                link.reset();
+                Answer::Failed(format!("{e:#}"))
+            }
+            Err(_) => {
+                // A late answer must not be taken for the next request's: start afresh.
+                link.reset();
+                Answer::Failed(format!("no answer from unit {unit} within {} ms", timeout.as_millis()))
+            }
+        };
+        let took = started.elapsed();
+        if matches!(answer, Answer::Failed(_)) && tries < retries {
+            tries += 1;
+            continue;
+        }
+        return (answer, took);
+    }
+}
+
+/// Sends every read of `plan` to `unit` and names the answers with `profile`.
+pub async fn read_all(
+    link: &mut Link,
+    unit: u8,
+    targets: &[mbtap_core::query::resolve::Target],
+    plan: &mbtap_core::query::plan::Plan,
+    profile: Option<&mbtap_core::profile::Profile>,
+    timeout: Duration,
+    retries: u32,
+) -> (Vec<mbtap_core::query::rows::Row>, Vec<super::show::Failure>) {
+    let mut rows = Vec::new();
+    let mut failures = Vec::new();
+    for &read in &plan.reads {
+        let item = targets.get(read.target).map(|t| t.item.text.clone()).unwrap_or_default();
+        match send(link, unit, Op::Read(read), timeout, retries).await.0 {
+            Answer::Values(mut v) => {
+                // Bits come back padded to whole bytes (MAP v1.1b3 §6.1); keep those asked for.
+                v.truncate(usize::from(read.quantity));
+                rows.extend(mbtap_core::query::rows::rows(unit, read.table, read.address, &v, profile));
+            }
+            other => failures.push(super::show::Failure {
+                unit,
+                item,
+                read: Some(read),
+                problem: other.problem().unwrap_or_default(),
+            }),
+        }
+    }
+    (rows, failures)
+}

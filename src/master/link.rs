@@ -1,0 +1,125 @@
+//! The link to a device: a serial port (RTU), Modbus TCP, or RTU over TCP, opened as a
+//! tokio-modbus client context. Reopened after a timeout, because an answer that arrives late
+//! would otherwise be taken for the answer to the next request.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use mbtap_core::analyzer::SerialMode;
+use tokio_modbus::client::Context;
+use tokio_modbus::{Slave, prelude::rtu, prelude::tcp};
+
+/// Where the device is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Endpoint {
+    Serial(String),
+    Tcp(String),
+    RtuOverTcp(String),
+}
+
+impl Endpoint {
+    /// `rtu+tcp://H:P`, `tcp://H:P`, `H:P`, or a serial port path.
+    #[must_use]
+    pub fn parse(s: &str) -> Self {
+        if let Some(rest) = s.strip_prefix("rtu+tcp://").or_else(|| s.strip_prefix("rtu-over-tcp://")) {
+            Self::RtuOverTcp(rest.to_owned())
+        } else if let Some(rest) = s.strip_prefix("tcp://") {
+            Self::Tcp(rest.to_owned())
+        } else if s.contains('/') || s.starts_with("COM") || !s.contains(':') {
+            Self::Serial(s.to_owned())
+        } else {
+            Self::Tcp(s.to_owned())
+        }
+    }
+}
+
+async fn resolve(host_port: &str) -> anyhow::Result<SocketAddr> {
+    tokio::net::lookup_host(host_port)
+        .await
+        .with_context(|| format!("{host_port:?}: expected HOST:PORT"))?
+        .next()
+        .with_context(|| format!("{host_port:?}: the host name has no address"))
+}
+
+/// A reopenable link.
+pub struct Link {
+    endpoint: Endpoint,
+    line: mbtap_core::framer::LineSettings,
+    connect_timeout: Duration,
+    context: Option<Context>,
+}
+
+impl std::fmt::Debug for Link {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // tokio-modbus's context has no Debug; whether it is open is what matters.
+        f.debug_struct("Link")
+            .field("endpoint", &self.endpoint)
+            .field("line", &self.line)
+            .field("connect_timeout", &self.connect_timeout)
+            .field("open", &self.context.is_some())
+            .finish()
+    }
+}
+
+impl Link {
+    /// A link that opens on first use. ASCII framing is refused here: tokio-modbus speaks RTU
+    /// only (the bridge speaks ASCII).
+    pub fn new(target: &str, line: &crate::args::SerialLineArgs, connect_timeout: Duration) -> anyhow::Result<Self> {
+        let (mode, settings, _) = line.overrides().resolve();
+        anyhow::ensure!(
+            mode == SerialMode::Rtu,
+            "--mode ascii: read/write/watch speak RTU only (tokio-modbus has no ASCII client); to reach an ASCII line, run `mbtap bridge --mode ascii` and read through it over TCP"
+        );
+        Ok(Self { endpoint: Endpoint::parse(target), line: settings, connect_timeout, context: None })
+    }
+
+    /// The endpoint, for messages.
+    #[must_use]
+    pub fn describe(&self) -> String {
+        match &self.endpoint {
+            Endpoint::Serial(p) => format!("{p} (RTU, {})", self.line),
+            Endpoint::Tcp(a) => format!("{a} (Modbus TCP)"),
+            Endpoint::RtuOverTcp(a) => format!("{a} (RTU over TCP)"),
+        }
+    }
+
+    /// The open context, opening it when needed.
+    pub async fn context(&mut self, unit: u8) -> anyhow::Result<&mut Context> {
+        use tokio_modbus::prelude::SlaveContext as _;
+        if self.context.is_none() {
+            let slave = Slave(unit);
+            let ctx = match &self.endpoint {
+                Endpoint::Serial(path) => {
+                    let port = tokio_serial::SerialStream::open(&crate::source::serial::builder(path, self.line))
+                        .with_context(|| format!("opening serial port {path}"))?;
+                    rtu::attach_slave(port, slave)
+                }
+                Endpoint::Tcp(a) => {
+                    let addr = resolve(a).await?;
+                    tokio::time::timeout(self.connect_timeout, tcp::connect_slave(addr, slave))
+                        .await
+                        .with_context(|| format!("connecting to {addr}: no answer within {:?}", self.connect_timeout))?
+                        .with_context(|| format!("connecting to {addr}"))?
+                }
+                Endpoint::RtuOverTcp(a) => {
+                    let addr = resolve(a).await?;
+                    let stream = tokio::time::timeout(self.connect_timeout, tokio::net::TcpStream::connect(addr))
+                        .await
+                        .with_context(|| format!("connecting to {addr}: no answer within {:?}", self.connect_timeout))?
+                        .with_context(|| format!("connecting to {addr}"))?;
+                    rtu::attach_slave(stream, slave)
+                }
+            };
+            self.context = Some(ctx);
+        }
+        let ctx = self.context.as_mut().context("link not open")?;
+        ctx.set_slave(Slave(unit));
+        Ok(ctx)
+    }
+
+    /// Drops the connection; the next request opens a new one.
+    pub fn reset(&mut self) {
+        self.context = None;
+    }
+}

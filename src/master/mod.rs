@@ -1,0 +1,67 @@
+//! `read`, `write` and `watch`: mbtap as a Modbus master that speaks in the profiles' names.
+//! The requests are planned and checked by `mbtap_core::query` (pure); this module opens the
+//! link ([`link`]), sends them with tokio-modbus ([`exec`]) and prints what came back ([`show`]).
+
+pub mod exec;
+pub mod link;
+pub mod show;
+
+use clap::Args;
+
+use crate::args::SerialLineArgs;
+
+/// Where and whom the master asks, shared by `read`, `write` and `watch`.
+#[derive(Debug, Clone, Args)]
+pub struct MasterArgs {
+    /// The device: a serial port (`/dev/ttyUSB0`, RTU), `HOST:PORT` or `tcp://HOST:PORT`
+    /// (Modbus TCP), or `rtu+tcp://HOST:PORT` (RTU frames over TCP, as cheap Ethernet-to-RS-485
+    /// converters speak).
+    pub target: String,
+    /// The unit (slave) address [default: the profile's default address, else 1].
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=247))]
+    pub unit: Option<u8>,
+    /// The device's profile, for names, scaling and checks: a built-in name (mk4, mkzp,
+    /// display), a user profile or a file.
+    #[arg(long, value_name = "PROFILE")]
+    pub device: Option<String>,
+    /// How long to wait for each answer, in ms.
+    #[arg(long, default_value_t = 1000, value_name = "MS")]
+    pub timeout_ms: u64,
+    /// How often to send a request again after no answer (never after an exception).
+    #[arg(long, default_value_t = 0)]
+    pub retries: u32,
+    /// Output format [default: text on a terminal, jsonl in a pipe].
+    #[arg(long, value_enum)]
+    pub format: Option<MasterFormat>,
+    #[command(flatten)]
+    pub line: SerialLineArgs,
+}
+
+/// How values are printed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MasterFormat {
+    /// One line per value: `input 430 Phase A (L1) voltage = 230.5 V (raw 2305)`.
+    Text,
+    /// One JSON object per value: unit, table, address, name, raw, value, unit_of_measure.
+    Jsonl,
+}
+
+impl MasterArgs {
+    /// The format asked for, else text on a terminal and JSON lines in a pipe.
+    #[must_use]
+    pub fn format(&self) -> MasterFormat {
+        use std::io::IsTerminal;
+        self.format.unwrap_or(if std::io::stdout().is_terminal() { MasterFormat::Text } else { MasterFormat::Jsonl })
+    }
+
+    /// The profile named by `--device`, if any.
+    pub fn profile(&self) -> anyhow::Result<Option<mbtap_core::profile::Profile>> {
+        self.device.as_deref().map(crate::config::devices::resolve_profile).transpose()
+    }
+
+    /// `--unit`, else the profile's default address, else 1.
+    #[must_use]
+    pub fn unit(&self, profile: Option<&mbtap_core::profile::Profile>) -> u8 {
+        self.unit.or_else(|| profile.and_then(|p| p.meta.default_address)).unwrap_or(1)
+    }
+}
