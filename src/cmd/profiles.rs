@@ -1,5 +1,6 @@
 //! `mbtap profiles list|check|show`: the device profiles — built in, the user's, a file.
 
+use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -21,17 +22,18 @@ pub enum Command {
 
 pub fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::List => Ok(list()),
+        Command::List => list(),
         Command::Check { file } => check(&file),
         Command::Show { profile } => show(&profile),
     }
 }
 
 /// The built-in profiles, then the user's (each says whether it loads).
-fn list() -> ExitCode {
+fn list() -> anyhow::Result<ExitCode> {
+    let mut out = std::io::stdout().lock();
     for name in mbtap_core::profile::builtin::names() {
         if let Some(Ok(p)) = mbtap_core::profile::builtin::get(name) {
-            println!("{name:<8} built-in  {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""));
+            writeln!(out, "{name:<8} built-in  {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""))?;
         }
     }
     if let Some(dir) = user_profile_dir()
@@ -43,19 +45,21 @@ fn list() -> ExitCode {
         for f in files {
             let name = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             match load_profile_file(&f) {
-                Ok(p) => println!("{name:<8} user      {} — {}", p.meta.device, f.display()),
-                Err(e) => println!("{name:<8} user      does not load: {e:#}"),
+                Ok(p) => writeln!(out, "{name:<8} user      {} — {}", p.meta.device, f.display())?,
+                Err(e) => writeln!(out, "{name:<8} user      does not load: {e:#}")?,
             }
         }
     }
-    ExitCode::SUCCESS
+    Ok(ExitCode::SUCCESS)
 }
 
 /// A profile file loaded, its first problem with file:line:column or a summary.
 fn check(file: &std::path::Path) -> anyhow::Result<ExitCode> {
+    let mut out = std::io::stdout().lock();
     let p = load_profile_file(file)?;
     let count = |t| p.addresses(t).count();
-    println!(
+    writeln!(
+        out,
         "{}: ok — {} ({}): {} coils, {} discrete inputs, {} holding registers, {} input registers, {} reserved ranges",
         file.display(),
         p.meta.name,
@@ -65,23 +69,24 @@ fn check(file: &std::path::Path) -> anyhow::Result<ExitCode> {
         count(Table::HoldingRegisters),
         count(Table::InputRegisters),
         p.reserved.len()
-    );
+    )?;
     Ok(ExitCode::SUCCESS)
 }
 
 /// Every address a profile defines, per table.
 fn show(profile: &str) -> anyhow::Result<ExitCode> {
     let p = resolve_profile(profile)?;
-    println!("{} — {}", p.meta.name, p.meta.device);
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{} — {}", p.meta.name, p.meta.device)?;
     for t in [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters] {
-        println!("[{}]", t.name());
+        writeln!(out, "[{}]", t.name())?;
         for a in p.addresses(t) {
             if let Some((slot, def)) = p.slot(t, a)
                 && slot.part == 0
             {
                 let ru = def.name_ru.as_deref().map(|r| format!(" ({r})")).unwrap_or_default();
                 let unit = def.unit.as_deref().map(|u| format!(" [{u}]")).unwrap_or_default();
-                println!("  {a:>5} {}{ru}{unit}", slot.name);
+                writeln!(out, "  {a:>5} {}{ru}{unit}", slot.name)?;
             }
         }
     }

@@ -18,6 +18,8 @@ use crate::master::{MasterArgs, MasterFormat, exec, show};
 ///
 /// Every value is checked against the profile before anything is sent (read-only register,
 /// documented range, enumeration labels, what the scale can represent); a refusal says why.
+/// Each write is read back; the exit status is 1 when any write failed or the device kept
+/// another value than the one written (a device that clamps).
 /// Example: `mbtap write /dev/ttyUSB0 --device mk4 "Level 2 set point=1.50"`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -135,7 +137,8 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let kept = back.first().map(|r| r.raw);
         let written = rows(unit, w.table, w.address, &w.words, p).first().map(|r| r.raw);
         let differs = kept.is_some() && kept != written;
-        failed |= !failures.is_empty();
+        // A write the device did not keep as written (clamped, refused silently) fails the run.
+        failed |= !failures.is_empty() || differs;
         match format {
             MasterFormat::Text => {
                 for r in &back {

@@ -32,7 +32,7 @@ impl Answer {
     pub fn problem(&self) -> Option<String> {
         match self {
             Self::Values(_) | Self::Done => None,
-            Self::Exception(c) => Some(format!("exception {c:02X}: {}", ExceptionCode::from(*c))),
+            Self::Exception(c) => Some(format!("exception {}", ExceptionCode::from(*c))),
             Self::Failed(why) => Some(why.clone()),
         }
     }
