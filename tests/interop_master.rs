@@ -84,7 +84,7 @@ fn read_and_write_a_pymodbus_tcp_server() {
     // The server holds 10 × address in holding registers 0–99.
     let o = mbtap(&["read", &target, "--format", "jsonl", "holding", "0..9"]);
     assert!(o.status.success(), "{}", text(&o));
-    assert_eq!(raws(&o), (0..10).map(|a| (a, 10 * a as i64)).collect::<Vec<_>>());
+    assert_eq!(raws(&o), (0u8..10).map(|a| (u64::from(a), 10 * i64::from(a))).collect::<Vec<_>>());
     let o = mbtap(&["write", &target, "--format", "jsonl", "holding 5=777"]);
     assert!(o.status.success(), "{}", text(&o));
     let o = mbtap(&["read", &target, "--format", "jsonl", "holding", "4..6"]);
@@ -93,6 +93,10 @@ fn read_and_write_a_pymodbus_tcp_server() {
     let o = mbtap(&["read", &target, "--unit", "9", "--timeout-ms", "500", "--format", "jsonl", "holding", "0"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
 }
+
+/// The control write on the wire: unit 1, function 06, address 105 (0x0069), value 150
+/// (0x0096), CRC 0xB8D9 (low byte first).
+const SENT: &str = "01 06 0069 0096 D9B8";
 
 /// Sniffs the far end of a socat pty pair while `write` runs on the near end; the frames heard.
 fn heard_while(write_args: &[&str]) -> (Output, Vec<serde_json::Value>) {
@@ -137,8 +141,6 @@ fn refused_and_dry_run_writes_put_nothing_on_the_line() {
     // The control: the same write, sent, is heard (nobody answers, so it fails).
     let (o, heard) = heard_while(&["--device", "mk4", "Level 2 set point=1.50"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    // Unit 1, function 06, address 105 (0x0069), value 150 (0x0096), CRC 0xB8D9 (low byte first).
-    const SENT: &str = "01 06 0069 0096 D9B8";
     let sent = SENT.replace(' ', "");
     assert!(heard.iter().any(|e| e["hex"].as_str().unwrap().eq_ignore_ascii_case(&sent)), "{heard:?}");
 }
