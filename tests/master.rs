@@ -64,7 +64,7 @@ fn read_by_name_gives_named_scaled_values_with_the_image_keys() {
     assert!(raw.iter().all(|v| (2000..=2600).contains(v)), "mains voltages in 0.1 V: {raw:?}");
     // The scaled value is the raw value at the profile's scale 0.1.
     let scaled = rows[1]["value"].as_f64().unwrap();
-    assert!((scaled * 10.0 - raw[0] as f64).abs() < 1e-6, "{}", rows[1]);
+    assert!((scaled * 10.0 - f64::from(i32::try_from(raw[0]).unwrap())).abs() < 1e-6, "{}", rows[1]);
     assert_eq!(rows[5]["name"], "Operating mode");
     assert!(rows[5]["value"].is_string(), "an enum reads as its label: {}", rows[5]);
 }
