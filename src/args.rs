@@ -149,6 +149,8 @@ pub struct OutputArgs {
     /// Also give the report so far every SECONDS of bus time, while it runs (implies --report).
     #[arg(long, value_name = "SECONDS")]
     pub report_every: Option<f64>,
+    #[command(flatten)]
+    pub publish: crate::publish::PublishArgs,
 }
 
 /// A fault to inject on the simulated line.

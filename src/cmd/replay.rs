@@ -31,18 +31,22 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, image, line, output } = args;
     let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
+    let publishing = crate::publish::Publishing::start(&output.publish, false)?;
+    let taps = publishing.taps();
     if output.format == EventFormatArg::Tui {
         let (_, settings, _) = line.overrides().resolve();
         let source = file.display().to_string();
         let ui = crate::args::tui_source(&output, settings, true)?;
         return ui.run(&source, move |writer, err| {
             writer.paced = true;
+            writer.taps = taps;
             crate::output::replay(input, line.overrides(), writer, err)
                 .with_context(|| format!("replaying {}", file.display()))
         });
     }
     let stdout = io::stdout();
     let mut writer = event_writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()), &output)?;
+    writer.taps = taps;
     if image.is_some() {
         writer.image = Some(mbtap_core::profile::image::RegisterImage::default());
     }
@@ -57,5 +61,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         std::fs::write(path, text).with_context(|| format!("writing the register image {}", path.display()))?;
     }
     writer.finish()?;
+    if publishing.spy.is_some() {
+        // A replay ends in a moment; the image it built is served until asked to stop.
+        eprintln!("mbtap: the capture is replayed; serving its register image until Ctrl-C");
+        super::runtime()?.block_on(crate::signals::shutdown_signal());
+    }
+    publishing.finish();
     Ok(ExitCode::SUCCESS)
 }

@@ -45,16 +45,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         record,
         duration: seconds(duration),
     };
+    let publishing = crate::publish::Publishing::start(&output.publish, true)?;
+    let taps = publishing.taps();
     if output.format == EventFormatArg::Tui {
         let source = format!("{} ⇄ {}", opts.port, opts.link.display());
         let ui = crate::args::tui_source(&output, settings, false)?;
-        return ui.run(&source, move |writer, err| runtime()?.block_on(crate::source::tap::tap(opts, writer, err)));
+        return ui.run(&source, move |writer, err| {
+            writer.taps = taps;
+            runtime()?.block_on(crate::source::tap::tap(opts, writer, err))
+        });
     }
     let stdout = io::stdout();
     let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
+    writer.taps = taps;
     let result = runtime()?.block_on(crate::source::tap::tap(opts, &mut writer, &mut io::stderr()));
     // The summary is written even when the recording failed; the exit status says it did.
     writer.finish()?;
+    publishing.finish();
     result?;
     Ok(ExitCode::SUCCESS)
 }

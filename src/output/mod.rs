@@ -36,6 +36,8 @@ pub struct EventWriter<W: Write> {
     pub lang: mbtap_core::profile::annotate::Lang,
     /// The terminal UI's model: events go there instead of `out`.
     pub tui: Option<std::sync::Arc<dyn UiFeed>>,
+    /// Others that take every event beside the output (the spy server, MQTT).
+    pub taps: Vec<std::sync::Arc<dyn Tap>>,
     /// Recorded input shown in the UI: each event held until its time at the UI's speed.
     pub paced: bool,
     /// The bus health report, written by [`Self::finish`] when set.
@@ -56,6 +58,7 @@ impl<W: Write> EventWriter<W> {
             image: None,
             lang: mbtap_core::profile::annotate::Lang::En,
             tui: None,
+            taps: Vec::new(),
             paced: false,
             health: None,
             report_every_ns: None,
@@ -93,11 +96,11 @@ impl<W: Write> EventWriter<W> {
                 }
             }
         }
-        if let (Some(image), Event::Transaction(t)) = (self.image.as_mut(), e)
-            && let Some(req) = t.request
-        {
-            let resp = if t.outcome == mbtap_core::pairing::Outcome::Ok { t.response } else { None };
-            image.update(t.unit, t.t_start.0, req, resp);
+        if let Some(image) = self.image.as_mut() {
+            update_image(image, e);
+        }
+        for tap in &self.taps {
+            tap.event(e);
         }
         if let Some(feed) = &self.tui {
             feed.event(e, self.paced);
@@ -212,6 +215,23 @@ pub fn event_time(e: &Event<'_>) -> u64 {
         Event::Noise(n) | Event::Glitch(n) => n.t_end.0,
         Event::Transaction(t) => t.t_start.0,
     }
+}
+
+/// Takes a completed transaction into a register image (other events change nothing).
+pub fn update_image(image: &mut mbtap_core::profile::image::RegisterImage, e: &Event<'_>) {
+    if let Event::Transaction(t) = e
+        && let Some(req) = t.request
+    {
+        // A failed answer carries no values; its request alone still counts as a transaction.
+        let resp = if t.outcome == mbtap_core::pairing::Outcome::Ok { t.response } else { None };
+        image.update(t.unit, t.t_start.0, req, resp);
+    }
+}
+
+/// Something that takes every event beside the output, from the thread that analyses: it must
+/// not block (the spy server's image takes a short lock; MQTT queues and drops when full).
+pub trait Tap: Send + Sync + std::fmt::Debug {
+    fn event(&self, e: &Event<'_>);
 }
 
 /// Where events go instead of the text output while the terminal UI runs. The UI implements

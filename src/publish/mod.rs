@@ -1,2 +1,105 @@
-//! What the sniffer hears, served to others: a read-only Modbus TCP server of the register
-//! image (spy mode) and MQTT.
+//! What the sniffer hears, served to others while it listens: a read-only Modbus TCP server
+//! answering from the register image ([`spy`], `--serve`) and MQTT ([`mqtt`], `--mqtt`). Both
+//! are [`crate::output::Tap`]s fed by the analysing thread; neither ever writes to the serial
+//! line, and neither can slow the analysis down.
+
+pub mod spy;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use clap::Args;
+
+/// `--serve` and `--mqtt` options of `sniff`, `tap` and `replay`.
+#[derive(Debug, Clone, Args, Default)]
+pub struct PublishArgs {
+    /// Spy mode: serve the register image the sniffer builds as a read-only Modbus TCP server
+    /// at this address (e.g. 127.0.0.1:5020). Reads are answered with the latest value heard;
+    /// an address never heard → exception 02, a unit never heard or a value older than
+    /// --max-age → 0B, anything else (writes included) → 01. Nothing is ever sent on the line.
+    #[arg(long, value_name = "ADDRESS")]
+    pub serve: Option<String>,
+    /// With --serve: values older than this are answered with exception 0B (`30s`, `500ms`,
+    /// `none` to serve any age).
+    #[arg(long, default_value = "60s", value_parser = parse_age, value_name = "AGE")]
+    pub max_age: MaxAge,
+}
+
+/// How old a served value may be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MaxAge(pub Option<Duration>);
+
+impl Default for MaxAge {
+    fn default() -> Self {
+        Self(Some(Duration::from_mins(1)))
+    }
+}
+
+/// `30s`, `500ms`, `2` (seconds), `none`.
+fn parse_age(s: &str) -> Result<MaxAge, String> {
+    let t = s.trim();
+    if t.eq_ignore_ascii_case("none") {
+        return Ok(MaxAge(None));
+    }
+    let (n, scale) = if let Some(n) = t.strip_suffix("ms") {
+        (n, 1e-3)
+    } else if let Some(n) = t.strip_suffix('s') {
+        (n, 1.0)
+    } else {
+        (t, 1.0)
+    };
+    let v: f64 = n.trim().parse().map_err(|_| format!("{s:?}: expected an age like 30s, 500ms or none"))?;
+    if !(0.0..=1e9).contains(&v) {
+        return Err(format!("{s:?}: expected an age from 0 to 10^9 s"));
+    }
+    Ok(MaxAge(Some(Duration::from_secs_f64(v * scale))))
+}
+
+/// The publishers the options ask for, started; their taps go into the event writer.
+#[derive(Debug, Default)]
+pub struct Publishing {
+    pub spy: Option<Arc<spy::Spy>>,
+}
+
+impl Publishing {
+    /// Starts what `args` asks for. `live`: the events come from a live line (the server
+    /// ages values by the clock) rather than a capture (by the newest bus time heard).
+    pub fn start(args: &PublishArgs, live: bool) -> anyhow::Result<Self> {
+        let spy = match &args.serve {
+            Some(addr) => Some(spy::Spy::start(addr, args.max_age.0, live)?),
+            None => None,
+        };
+        Ok(Self { spy })
+    }
+
+    /// The taps to feed.
+    #[must_use]
+    pub fn taps(&self) -> Vec<Arc<dyn crate::output::Tap>> {
+        let mut out: Vec<Arc<dyn crate::output::Tap>> = Vec::new();
+        if let Some(s) = &self.spy {
+            out.push(Arc::clone(s) as Arc<dyn crate::output::Tap>);
+        }
+        out
+    }
+
+    /// The end of the input: say what each publisher did.
+    pub fn finish(&self) {
+        if let Some(s) = &self.spy {
+            eprintln!("mbtap: {}", s.summary());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ages_in_the_units_people_write() {
+        assert_eq!(parse_age("30s"), Ok(MaxAge(Some(Duration::from_secs(30)))));
+        assert_eq!(parse_age("500ms"), Ok(MaxAge(Some(Duration::from_millis(500)))));
+        assert_eq!(parse_age("none"), Ok(MaxAge(None)));
+        assert!(parse_age("-1").is_err());
+        assert!(parse_age("old").is_err());
+    }
+}

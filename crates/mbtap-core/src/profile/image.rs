@@ -195,3 +195,91 @@ struct Row {
     t_ns: u64,
     transaction: u64,
 }
+
+/// MAP v1.1b3 §7: exception 01, illegal function.
+pub const ILLEGAL_FUNCTION: u8 = 0x01;
+/// MAP v1.1b3 §7: exception 02, illegal data address.
+pub const ILLEGAL_DATA_ADDRESS: u8 = 0x02;
+/// MAP v1.1b3 §7: exception 03, illegal data value (a quantity out of range, §6.1–§6.4).
+pub const ILLEGAL_DATA_VALUE: u8 = 0x03;
+/// MAP v1.1b3 §7: exception 0B, gateway target device failed to respond.
+pub const GATEWAY_TARGET_FAILED: u8 = 0x0B;
+
+impl RegisterImage {
+    /// Whether anything was ever heard from `unit`.
+    #[must_use]
+    pub fn knows_unit(&self, unit: u8) -> bool {
+        self.values.range((unit, Table::Coils, 0)..=(unit, Table::InputRegisters, u16::MAX)).next().is_some()
+    }
+
+    /// The answer a read-only server gives from the image: the values of `quantity` addresses
+    /// of `table` from `address`, or the exception code — 03 for a quantity the spec does not
+    /// allow (1–2000 bits, 1–125 registers: MAP v1.1b3 §6.1–§6.4), 0B for a unit never heard
+    /// or any value older than `max_age_ns` at `now_ns` (a gateway whose target did not answer:
+    /// stale data must not pass for fresh), 02 for an address never heard.
+    pub fn serve_read(
+        &self,
+        unit: u8,
+        table: Table,
+        address: u16,
+        quantity: u16,
+        now_ns: u64,
+        max_age_ns: Option<u64>,
+    ) -> Result<Vec<u16>, u8> {
+        let max = if matches!(table, Table::Coils | Table::DiscreteInputs) { 2000 } else { 125 };
+        if quantity == 0 || quantity > max {
+            return Err(ILLEGAL_DATA_VALUE);
+        }
+        if !self.knows_unit(unit) {
+            return Err(GATEWAY_TARGET_FAILED);
+        }
+        let mut out = Vec::with_capacity(usize::from(quantity));
+        let mut stale = false;
+        for i in 0..quantity {
+            let a = address.checked_add(i).ok_or(ILLEGAL_DATA_ADDRESS)?;
+            let k = self.values.get(&(unit, table, a)).ok_or(ILLEGAL_DATA_ADDRESS)?;
+            stale |= max_age_ns.is_some_and(|max| now_ns.saturating_sub(k.t_ns) > max);
+            out.push(k.raw);
+        }
+        if stale { Err(GATEWAY_TARGET_FAILED) } else { Ok(out) }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod serve_tests {
+    use super::*;
+
+    /// Unit 1 reads holding 100–101 = 7, 8: request 01 03 0064 0002 + CRC, answer 01 03 04
+    /// 0007 0008 + CRC.
+    const REQUEST: [u8; 8] = [0x01, 0x03, 0x00, 0x64, 0x00, 0x02, 0x85, 0xD4];
+    const RESPONSE: [u8; 9] = [0x01, 0x03, 0x04, 0x00, 0x07, 0x00, 0x08, 0x4A, 0x34];
+
+    fn image() -> RegisterImage {
+        // CRC-16/MODBUS, low byte first (Serial Line v1.02 §2.5.1.2).
+        assert_eq!(crate::proto::crc16(&REQUEST[..6]).to_le_bytes(), [0x85, 0xD4]);
+        assert_eq!(crate::proto::crc16(&RESPONSE[..7]).to_le_bytes(), [0x4A, 0x34]);
+        let mut img = RegisterImage::default();
+        img.update(1, 1_000, &REQUEST, Some(&RESPONSE));
+        img
+    }
+
+    #[test]
+    fn answers_what_was_heard_and_refuses_the_rest() {
+        let img = image();
+        assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 2, 1_000, None), Ok(vec![7, 8]));
+        assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 3, 1_000, None), Err(ILLEGAL_DATA_ADDRESS));
+        assert_eq!(img.serve_read(1, Table::InputRegisters, 100, 1, 1_000, None), Err(ILLEGAL_DATA_ADDRESS));
+        assert_eq!(img.serve_read(2, Table::HoldingRegisters, 100, 1, 1_000, None), Err(GATEWAY_TARGET_FAILED));
+        assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 126, 1_000, None), Err(ILLEGAL_DATA_VALUE));
+        assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 0, 1_000, None), Err(ILLEGAL_DATA_VALUE));
+        assert_eq!(img.serve_read(1, Table::HoldingRegisters, u16::MAX, 2, 1_000, None), Err(ILLEGAL_DATA_ADDRESS));
+    }
+
+    #[test]
+    fn stale_values_are_a_failed_target_not_data() {
+        let img = image();
+        assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 2, 1_500, Some(500)), Ok(vec![7, 8]));
+        assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 2, 1_501, Some(500)), Err(GATEWAY_TARGET_FAILED));
+    }
+}

@@ -1,0 +1,172 @@
+//! Spy mode: a read-only Modbus TCP server (tokio-modbus's) answering from the register image
+//! the sniffer builds — per unit, per table, the latest value heard. It runs on its own thread
+//! and runtime, so a slow or hostile client never delays the analysis; the analysing thread
+//! only takes a short lock to update the image. Refusals are counted per exception code.
+
+use std::future::Ready;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::Context as _;
+use mbtap_core::analyzer::Event;
+use mbtap_core::profile::Table;
+use mbtap_core::profile::image::{ILLEGAL_FUNCTION, RegisterImage};
+use tokio_modbus::server::tcp::{Server, accept_tcp_connection};
+use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
+
+/// The image, its clock, and what the server did.
+#[derive(Debug)]
+pub struct Spy {
+    image: Mutex<Image>,
+    max_age_ns: Option<u64>,
+    live: bool,
+    pub addr: SocketAddr,
+    answered: AtomicU64,
+    /// Refusals by exception code (index = code, 0..=15).
+    refused: [AtomicU64; 16],
+}
+
+#[derive(Debug, Default)]
+struct Image {
+    values: RegisterImage,
+    /// The newest bus time heard (the clock of a replay).
+    latest_ns: u64,
+}
+
+impl crate::output::Tap for Spy {
+    fn event(&self, e: &Event<'_>) {
+        let t = crate::output::event_time(e);
+        // A poisoned lock means a panic elsewhere; serving stops being worth more than analysing.
+        if let Ok(mut img) = self.image.lock() {
+            img.latest_ns = img.latest_ns.max(t);
+            crate::output::update_image(&mut img.values, e);
+        }
+    }
+}
+
+fn bits(v: &[u16]) -> Vec<bool> {
+    v.iter().map(|&b| b != 0).collect()
+}
+
+impl Spy {
+    /// Binds `addr` and serves on a thread of its own.
+    pub fn start(addr: &str, max_age: Option<Duration>, live: bool) -> anyhow::Result<Arc<Self>> {
+        let listener =
+            std::net::TcpListener::bind(addr).with_context(|| format!("--serve {addr}: cannot listen there"))?;
+        listener.set_nonblocking(true).context("--serve: setting the socket non-blocking")?;
+        let bound = listener.local_addr().context("--serve: the bound address")?;
+        let spy = Arc::new(Self {
+            image: Mutex::new(Image::default()),
+            max_age_ns: max_age.map(|d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
+            live,
+            addr: bound,
+            answered: AtomicU64::new(0),
+            refused: std::array::from_fn(|_| AtomicU64::new(0)),
+        });
+        let server_spy = Arc::clone(&spy);
+        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("--serve: a runtime")?;
+        std::thread::Builder::new()
+            .name("spy-server".into())
+            .spawn(move || {
+                rt.block_on(async move {
+                    let listener = match tokio::net::TcpListener::from_std(listener) {
+                        Ok(l) => l,
+                        Err(e) => {
+                            eprintln!("mbtap: --serve: {e}");
+                            return;
+                        }
+                    };
+                    let server = Server::new(listener);
+                    let on_connected = |stream, peer| {
+                        let spy = Arc::clone(&server_spy);
+                        async move {
+                            accept_tcp_connection(stream, peer, move |_| Ok(Some(Service { spy: Arc::clone(&spy) })))
+                        }
+                    };
+                    // A client that breaks its connection ends only that connection.
+                    if let Err(e) = server.serve(&on_connected, |_err| {}).await {
+                        eprintln!("mbtap: --serve: the server stopped: {e}");
+                    }
+                });
+            })
+            .context("--serve: starting the server thread")?;
+        eprintln!(
+            "mbtap: spy server listening on {bound} (Modbus TCP, read-only: answers from what is heard on the line)"
+        );
+        Ok(spy)
+    }
+
+    fn now_ns(&self, img: &Image) -> u64 {
+        if self.live { crate::source::serial::now().0 } else { img.latest_ns }
+    }
+
+    /// The answer to one request.
+    fn answer(&self, unit: u8, request: &Request<'_>) -> Result<Response, ExceptionCode> {
+        let read = |table, address, quantity| -> Result<Vec<u16>, u8> {
+            let img = self.image.lock().map_err(|_| mbtap_core::profile::image::GATEWAY_TARGET_FAILED)?;
+            img.values.serve_read(unit, table, address, quantity, self.now_ns(&img), self.max_age_ns)
+        };
+        let r = match *request {
+            Request::ReadCoils(a, q) => read(Table::Coils, a, q).map(|v| Response::ReadCoils(bits(&v))),
+            Request::ReadDiscreteInputs(a, q) => {
+                read(Table::DiscreteInputs, a, q).map(|v| Response::ReadDiscreteInputs(bits(&v)))
+            }
+            Request::ReadHoldingRegisters(a, q) => {
+                read(Table::HoldingRegisters, a, q).map(Response::ReadHoldingRegisters)
+            }
+            Request::ReadInputRegisters(a, q) => read(Table::InputRegisters, a, q).map(Response::ReadInputRegisters),
+            // Writes and everything else: the spy sends nothing on the line, so it cannot do them.
+            _ => Err(ILLEGAL_FUNCTION),
+        };
+        match r {
+            Ok(resp) => {
+                self.answered.fetch_add(1, Ordering::Relaxed);
+                Ok(resp)
+            }
+            Err(code) => {
+                if let Some(c) = self.refused.get(usize::from(code)) {
+                    c.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(ExceptionCode::new(code))
+            }
+        }
+    }
+
+    /// `spy server: 12 answered, 3 refused (02: 1, 0B: 2)`.
+    #[must_use]
+    pub fn summary(&self) -> String {
+        let refused: Vec<(usize, u64)> = self
+            .refused
+            .iter()
+            .enumerate()
+            .map(|(c, n)| (c, n.load(Ordering::Relaxed)))
+            .filter(|&(_, n)| n > 0)
+            .collect();
+        let total: u64 = refused.iter().map(|(_, n)| n).sum();
+        let detail = refused.iter().map(|(c, n)| format!("{c:02X}: {n}")).collect::<Vec<_>>().join(", ");
+        format!(
+            "spy server on {}: {} answered, {total} refused{}",
+            self.addr,
+            self.answered.load(Ordering::Relaxed),
+            if detail.is_empty() { String::new() } else { format!(" ({detail})") }
+        )
+    }
+}
+
+/// One connection's service.
+struct Service {
+    spy: Arc<Spy>,
+}
+
+impl tokio_modbus::server::Service for Service {
+    type Request = SlaveRequest<'static>;
+    type Response = Response;
+    type Exception = ExceptionCode;
+    type Future = Ready<Result<Response, ExceptionCode>>;
+
+    fn call(&self, req: Self::Request) -> Self::Future {
+        std::future::ready(self.spy.answer(req.slave, &req.request))
+    }
+}
