@@ -35,27 +35,36 @@ pub struct Args {
     /// what a sniffer set up wrong gets.
     #[arg(long, value_name = "SETTINGS")]
     pub heard_at: Option<LineSettings>,
+    #[command(flatten)]
+    pub publish: crate::publish::PublishArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { format, lang, duration, faults, speed, heard_at } = args;
+    let Args { format, lang, duration, faults, speed, heard_at, publish } = args;
     let faults = fault_list(&faults);
     anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
     let duration = seconds(duration);
     let opts = crate::source::demo::DemoOptions { duration, faults, speed, heard_at };
     let format =
         format.unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });
+    let profiles = mbtap_core::sim::demo_profiles()?;
+    // The demo's line is simulated: values age by its own time, not the clock's.
+    let publishing = crate::publish::Publishing::start(&publish, false, "demo", &profiles)?;
+    let taps = publishing.taps();
     if format == EventFormatArg::Tui {
         let line = heard_at.unwrap_or_default();
-        let ui = TuiSource { profiles: mbtap_core::sim::demo_profiles()?, lang: lang.into(), line, pacing: true };
+        let ui = TuiSource { profiles, lang: lang.into(), line, pacing: true };
         return ui.run("demo (simulated bus)", move |writer, _| {
+            writer.taps = taps;
             runtime()?.block_on(crate::source::demo::demo(opts, writer))
         });
     }
     let stdout = io::stdout();
     let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), format.into());
     writer.lang = lang.into();
+    writer.taps = taps;
     runtime()?.block_on(crate::source::demo::demo(opts, &mut writer))?;
     writer.finish()?;
+    publishing.finish();
     Ok(ExitCode::SUCCESS)
 }

@@ -31,7 +31,8 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, image, line, output } = args;
     let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
-    let publishing = crate::publish::Publishing::start(&output.publish, false)?;
+    let profiles = crate::config::devices::load_devices(&output.devices)?;
+    let publishing = crate::publish::Publishing::start(&output.publish, false, &file.display().to_string(), &profiles)?;
     let taps = publishing.taps();
     if output.format == EventFormatArg::Tui {
         let (_, settings, _) = line.overrides().resolve();

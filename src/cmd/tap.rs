@@ -45,7 +45,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         record,
         duration: seconds(duration),
     };
-    let publishing = crate::publish::Publishing::start(&output.publish, true)?;
+    let profiles = crate::config::devices::load_devices(&output.devices)?;
+    let publishing = crate::publish::Publishing::start(&output.publish, true, &opts.port, &profiles)?;
     let taps = publishing.taps();
     if output.format == EventFormatArg::Tui {
         let source = format!("{} ⇄ {}", opts.port, opts.link.display());

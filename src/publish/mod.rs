@@ -3,6 +3,7 @@
 //! are [`crate::output::Tap`]s fed by the analysing thread; neither ever writes to the serial
 //! line, and neither can slow the analysis down.
 
+pub mod mqtt;
 pub mod spy;
 
 use std::sync::Arc;
@@ -23,6 +24,8 @@ pub struct PublishArgs {
     /// `none` to serve any age).
     #[arg(long, default_value = "60s", value_parser = parse_age, value_name = "AGE")]
     pub max_age: MaxAge,
+    #[command(flatten)]
+    pub mqtt: mqtt::MqttArgs,
 }
 
 /// How old a served value may be.
@@ -59,17 +62,25 @@ fn parse_age(s: &str) -> Result<MaxAge, String> {
 #[derive(Debug, Default)]
 pub struct Publishing {
     pub spy: Option<Arc<spy::Spy>>,
+    pub mqtt: Option<Arc<mqtt::Mqtt>>,
 }
 
 impl Publishing {
     /// Starts what `args` asks for. `live`: the events come from a live line (the server
-    /// ages values by the clock) rather than a capture (by the newest bus time heard).
-    pub fn start(args: &PublishArgs, live: bool) -> anyhow::Result<Self> {
+    /// ages values by the clock) rather than a capture (by the newest bus time heard);
+    /// `source` names the line (the MQTT prefix's last level); `profiles` name the values.
+    pub fn start(
+        args: &PublishArgs,
+        live: bool,
+        source: &str,
+        profiles: &mbtap_core::profile::Profiles,
+    ) -> anyhow::Result<Self> {
         let spy = match &args.serve {
             Some(addr) => Some(spy::Spy::start(addr, args.max_age.0, live)?),
             None => None,
         };
-        Ok(Self { spy })
+        let mqtt = mqtt::Mqtt::start(&args.mqtt, source, profiles.clone(), true)?;
+        Ok(Self { spy, mqtt })
     }
 
     /// The taps to feed.
@@ -79,6 +90,9 @@ impl Publishing {
         if let Some(s) = &self.spy {
             out.push(Arc::clone(s) as Arc<dyn crate::output::Tap>);
         }
+        if let Some(m) = &self.mqtt {
+            out.push(Arc::clone(m) as Arc<dyn crate::output::Tap>);
+        }
         out
     }
 
@@ -86,6 +100,9 @@ impl Publishing {
     pub fn finish(&self) {
         if let Some(s) = &self.spy {
             eprintln!("mbtap: {}", s.summary());
+        }
+        if let Some(m) = &self.mqtt {
+            m.finish();
         }
     }
 }

@@ -22,6 +22,8 @@ pub struct Known {
 pub struct RegisterImage {
     pub values: BTreeMap<(u8, Table, u16), Known>,
     transactions: u64,
+    /// The addresses the last [`Self::update`] set, in the order it set them.
+    touched: Vec<(u8, Table, u16)>,
 }
 
 fn pdu_of(wire: &[u8]) -> Option<Vec<u8>> {
@@ -37,12 +39,14 @@ impl RegisterImage {
         for (i, raw) in values.into_iter().enumerate() {
             let Some(a) = u16::try_from(i).ok().and_then(|i| start.checked_add(i)) else { break };
             self.values.insert((unit, table, a), Known { raw, t_ns, transaction: self.transactions });
+            self.touched.push((unit, table, a));
         }
     }
 
     /// Takes in a completed transaction (frames as on the wire).
     pub fn update(&mut self, unit: u8, t_ns: u64, request: &[u8], response: Option<&[u8]>) {
         self.transactions += 1;
+        self.touched.clear();
         let Some(req_pdu) = pdu_of(request) else { return };
         let Ok(([], req)) = crate::proto::parse_request(&req_pdu) else { return };
         let resp_pdu = response.and_then(pdu_of);
@@ -87,6 +91,13 @@ impl RegisterImage {
             }
             _ => {}
         }
+    }
+
+    /// The addresses the last [`Self::update`] set (at most one transaction's worth: a
+    /// publisher looks here for what may have changed).
+    #[must_use]
+    pub fn touched(&self) -> &[(u8, Table, u16)] {
+        &self.touched
     }
 
     /// The image as CSV: `unit,table,address,name,raw,value,unit_of_measure,t_ns,transaction`,

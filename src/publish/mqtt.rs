@@ -1,0 +1,498 @@
+//! Publishing to an MQTT broker with rumqttc: per unit and register the latest value (on
+//! change, at most every `--mqtt-interval` of bus time), per unit its health figures, the bus's
+//! findings when they appear or go, a retained `status` (`online`, and `offline` as the last
+//! will), the publisher's own counts, and optionally Home Assistant discovery.
+//!
+//! Never blocks the analysis: messages go into rumqttc's bounded request queue with
+//! `try_publish`; when the queue is full (a slow or absent broker) the message is dropped and
+//! counted, and the count is published. The connection runs on its own thread and runtime and
+//! reconnects every second while the broker is away.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::Context as _;
+use clap::Args;
+use mbtap_core::analyzer::Event;
+use mbtap_core::health::Health;
+use mbtap_core::profile::image::RegisterImage;
+use mbtap_core::profile::{Profiles, Table};
+use mbtap_core::query::rows::{Row, rows};
+use rumqttc::{AsyncClient, LastWill, MqttOptions, QoS, Transport};
+
+/// `--mqtt` options (on `sniff`, `tap`, `replay`, `watch` and `bridge --monitor`).
+#[derive(Debug, Clone, Args, Default)]
+pub struct MqttArgs {
+    /// Publish to an MQTT broker: `mqtt://HOST[:PORT]` (1883) or `mqtts://HOST[:PORT]` (8883,
+    /// with --mqtt-ca). User and password come from --mqtt-credentials or the environment
+    /// (MBTAP_MQTT_USER, MBTAP_MQTT_PASSWORD), never from the command line.
+    #[arg(long, value_name = "URL")]
+    pub mqtt: Option<String>,
+    /// Topic prefix [default: mbtap/HOSTNAME/PORT].
+    #[arg(long, value_name = "TOPIC")]
+    pub mqtt_prefix: Option<String>,
+    /// The CA certificate (PEM) that signed the broker's, for mqtts://.
+    #[arg(long, value_name = "FILE")]
+    pub mqtt_ca: Option<PathBuf>,
+    /// A file holding `USER:PASSWORD` on its first line.
+    #[arg(long, value_name = "FILE")]
+    pub mqtt_credentials: Option<PathBuf>,
+    /// QoS of value, health and findings messages (the status is always QoS 1).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=2))]
+    pub mqtt_qos: u8,
+    /// Retain value messages (the status and discovery messages always are).
+    #[arg(long)]
+    pub mqtt_retain: bool,
+    /// A value that changes is published at most this often (bus time): `1s`, `250ms`, `0`.
+    #[arg(long, default_value = "1s", value_parser = parse_interval, value_name = "INTERVAL")]
+    pub mqtt_interval: Duration,
+    /// Announce a sensor per register heard that the profile names.
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub mqtt_discovery: Option<Discovery>,
+    /// Messages waiting for the broker at most; more are dropped and counted.
+    #[arg(long, default_value_t = 10_000, value_name = "MESSAGES")]
+    pub mqtt_queue: usize,
+}
+
+/// Discovery conventions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Discovery {
+    /// Home Assistant's MQTT discovery (`homeassistant/sensor/…/config`).
+    Homeassistant,
+}
+
+fn parse_interval(s: &str) -> Result<Duration, String> {
+    let t = s.trim();
+    let (n, scale) = if let Some(n) = t.strip_suffix("ms") {
+        (n, 1e-3)
+    } else if let Some(n) = t.strip_suffix('s') {
+        (n, 1.0)
+    } else {
+        (t, 1.0)
+    };
+    let v: f64 = n.trim().parse().map_err(|_| format!("{s:?}: expected an interval like 1s, 250ms or 0"))?;
+    if !(0.0..=86_400.0).contains(&(v * scale)) {
+        return Err(format!("{s:?}: between 0 and 24h"));
+    }
+    Ok(Duration::from_secs_f64(v * scale))
+}
+
+/// A topic level from free text: MQTT reserves `/`, `+` and `#` (MQTT v3.1.1 §4.7).
+#[must_use]
+pub fn topic_level(s: &str) -> String {
+    let t: String =
+        s.chars().map(|c| if c.is_alphanumeric() || c == '-' || c == '_' || c == '.' { c } else { '_' }).collect();
+    if t.is_empty() { "_".into() } else { t }
+}
+
+/// This machine's name, for the default prefix.
+fn hostname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map_or_else(|| "host".into(), |h| topic_level(h.trim()))
+}
+
+/// `mqtt://host:port` → (tls, host, port).
+fn parse_url(url: &str) -> anyhow::Result<(bool, String, u16)> {
+    let (tls, rest) = if let Some(r) = url.strip_prefix("mqtts://") {
+        (true, r)
+    } else if let Some(r) = url.strip_prefix("mqtt://") {
+        (false, r)
+    } else {
+        anyhow::bail!("--mqtt {url:?}: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT]");
+    };
+    let rest = rest.trim_end_matches('/');
+    let (host, port) = match rest.rsplit_once(':') {
+        Some((h, p)) if !h.is_empty() => {
+            (h, p.parse().with_context(|| format!("--mqtt {url:?}: port {p:?} is not a number 1..=65535"))?)
+        }
+        _ => (rest, if tls { 8883 } else { 1883 }),
+    };
+    anyhow::ensure!(!host.is_empty(), "--mqtt {url:?}: no host");
+    anyhow::ensure!(
+        !host.contains('@'),
+        "--mqtt {url:?}: credentials do not go in the URL; use --mqtt-credentials FILE or MBTAP_MQTT_USER/MBTAP_MQTT_PASSWORD"
+    );
+    Ok((tls, host.trim_matches(['[', ']']).to_owned(), port))
+}
+
+fn credentials(args: &MqttArgs) -> anyhow::Result<Option<(String, String)>> {
+    if let Some(path) = &args.mqtt_credentials {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("--mqtt-credentials {}: cannot read it", path.display()))?;
+        let line = text.lines().next().unwrap_or_default();
+        let (u, p) = line
+            .split_once(':')
+            .with_context(|| format!("--mqtt-credentials {}: line 1: expected USER:PASSWORD", path.display()))?;
+        return Ok(Some((u.to_owned(), p.to_owned())));
+    }
+    match (std::env::var("MBTAP_MQTT_USER"), std::env::var("MBTAP_MQTT_PASSWORD")) {
+        (Ok(u), Ok(p)) => Ok(Some((u, p))),
+        (Ok(_), Err(_)) => anyhow::bail!("MBTAP_MQTT_USER is set but MBTAP_MQTT_PASSWORD is not"),
+        _ => Ok(None),
+    }
+}
+
+/// What was last published for one value.
+#[derive(Debug, Clone)]
+struct Sent {
+    raw: i64,
+    shown: String,
+    t_ns: u64,
+}
+
+#[derive(Debug, Default)]
+struct State {
+    image: RegisterImage,
+    health: Option<Health>,
+    last: BTreeMap<(u8, Table, u16), Sent>,
+    /// Changed values held back by the interval, newest row each.
+    pending: BTreeMap<(u8, Table, u16), (Row, u64)>,
+    discovered: BTreeSet<(u8, Table, u16)>,
+    units: BTreeMap<u8, String>,
+    findings: Option<BTreeSet<(String, Option<u8>)>>,
+    next_tick_ns: Option<u64>,
+    counts_sent: (u64, u64),
+}
+
+/// The publisher.
+pub struct Mqtt {
+    client: AsyncClient,
+    prefix: String,
+    qos: QoS,
+    retain: bool,
+    interval_ns: u64,
+    discovery: bool,
+    profiles: Profiles,
+    state: Mutex<State>,
+    published: AtomicU64,
+    dropped: AtomicU64,
+    connected: Arc<AtomicBool>,
+    done: Mutex<Option<std::sync::mpsc::Receiver<()>>>,
+}
+
+impl std::fmt::Debug for Mqtt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // rumqttc's client has no Debug; the figures are what matter.
+        f.debug_struct("Mqtt")
+            .field("prefix", &self.prefix)
+            .field("qos", &self.qos)
+            .field("retain", &self.retain)
+            .field("interval_ns", &self.interval_ns)
+            .field("discovery", &self.discovery)
+            .field("profiles", &self.profiles.len())
+            .field("state", &self.state)
+            .field("published", &self.published)
+            .field("dropped", &self.dropped)
+            .field("connected", &self.connected)
+            .field("done", &"…")
+            .finish_non_exhaustive()
+    }
+}
+
+fn qos(n: u8) -> QoS {
+    match n {
+        0 => QoS::AtMostOnce,
+        1 => QoS::AtLeastOnce,
+        _ => QoS::ExactlyOnce,
+    }
+}
+
+impl Mqtt {
+    /// Connects (in the background) as `args` say. `source` names the line for the default
+    /// prefix; `health` keeps a health analysis for the unit status and findings topics (not for
+    /// `watch`, which hears only its own answers).
+    pub fn start(args: &MqttArgs, source: &str, profiles: Profiles, health: bool) -> anyhow::Result<Option<Arc<Self>>> {
+        let Some(url) = &args.mqtt else { return Ok(None) };
+        let (tls, host, port) = parse_url(url)?;
+        let prefix = args.mqtt_prefix.clone().unwrap_or_else(|| {
+            let name = std::path::Path::new(source)
+                .file_name()
+                .map_or_else(|| source.to_owned(), |n| n.to_string_lossy().into_owned());
+            format!("mbtap/{}/{}", hostname(), topic_level(&name))
+        });
+        anyhow::ensure!(
+            !prefix.contains(['+', '#']) && !prefix.is_empty(),
+            "--mqtt-prefix {prefix:?}: a topic prefix cannot contain + or # (MQTT v3.1.1 §4.7.1)"
+        );
+        let status = format!("{prefix}/status");
+        let mut options = MqttOptions::new(format!("mbtap-{}-{}", hostname(), std::process::id()), host.clone(), port);
+        options.set_keep_alive(Duration::from_secs(10));
+        options.set_last_will(LastWill::new(&status, "offline", QoS::AtLeastOnce, true));
+        options.set_request_channel_capacity(args.mqtt_queue.max(1));
+        if let Some((u, p)) = credentials(args)? {
+            options.set_credentials(u, p);
+        }
+        if tls {
+            let ca_path = args
+                .mqtt_ca
+                .as_ref()
+                .context("mqtts:// needs --mqtt-ca FILE: the CA certificate (PEM) that signed the broker's")?;
+            let ca =
+                std::fs::read(ca_path).with_context(|| format!("--mqtt-ca {}: cannot read it", ca_path.display()))?;
+            // One process-wide provider; a second install (a second publisher) is harmless.
+            let _ = rustls::crypto::ring::default_provider().install_default();
+            options.set_transport(Transport::tls(ca, None, None));
+        }
+        let (client, mut eventloop) = AsyncClient::new(options, args.mqtt_queue.max(1));
+        let connected = Arc::new(AtomicBool::new(false));
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("--mqtt: a runtime")?;
+        let (loop_client, loop_connected, loop_status) = (client.clone(), Arc::clone(&connected), status.clone());
+        let broker = format!("{host}:{port}");
+        std::thread::Builder::new()
+            .name("mqtt".into())
+            .spawn(move || {
+                rt.block_on(async move {
+                    let mut said_down = false;
+                    loop {
+                        match eventloop.poll().await {
+                            Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
+                                loop_connected.store(true, Ordering::SeqCst);
+                                eprintln!("mbtap: mqtt: connected to {broker}");
+                                said_down = false;
+                                // Retained, so a late subscriber sees it; replaces the will.
+                                let _ = loop_client.try_publish(&loop_status, QoS::AtLeastOnce, true, "online");
+                            }
+                            Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
+                                // The DISCONNECT may still sit in the write buffer behind the
+                                // last publications: poll on until the broker closes (bounded).
+                                let drain = async { while eventloop.poll().await.is_ok() {} };
+                                let _ = tokio::time::timeout(Duration::from_secs(1), drain).await;
+                                break;
+                            }
+                            Ok(_) => {}
+                            Err(e) => {
+                                if loop_connected.swap(false, Ordering::SeqCst) || !said_down {
+                                    eprintln!("mbtap: mqtt: {broker}: {e}; analysis goes on, retrying every second");
+                                    said_down = true;
+                                }
+                                if matches!(e, rumqttc::ConnectionError::RequestsDone) {
+                                    break;
+                                }
+                                tokio::time::sleep(Duration::from_secs(1)).await;
+                            }
+                        }
+                    }
+                    let _ = done_tx.send(());
+                });
+            })
+            .context("--mqtt: starting the publisher thread")?;
+        eprintln!("mbtap: mqtt: publishing to {url} under {prefix}/");
+        let health = health.then(|| Health::new(profiles.clone()));
+        Ok(Some(Arc::new(Self {
+            client,
+            prefix,
+            qos: qos(args.mqtt_qos),
+            retain: args.mqtt_retain,
+            interval_ns: u64::try_from(args.mqtt_interval.as_nanos()).unwrap_or(u64::MAX),
+            discovery: args.mqtt_discovery.is_some(),
+            profiles,
+            state: Mutex::new(State { health, ..State::default() }),
+            published: AtomicU64::new(0),
+            dropped: AtomicU64::new(0),
+            connected,
+            done: Mutex::new(Some(done_rx)),
+        })))
+    }
+
+    /// Queues one message; a full queue drops it (counted).
+    fn send(&self, topic: &str, qos: QoS, retain: bool, payload: String) {
+        match self.client.try_publish(topic, qos, retain, payload) {
+            Ok(()) => self.published.fetch_add(1, Ordering::Relaxed),
+            Err(_) => self.dropped.fetch_add(1, Ordering::Relaxed),
+        };
+    }
+
+    fn value_topic(&self, r: &Row) -> String {
+        format!("{}/unit/{}/{}/{}", self.prefix, r.unit, r.table.name(), r.address)
+    }
+
+    fn publish_row(&self, st: &mut State, r: &Row, t_ns: u64) {
+        let mut payload = r.to_json();
+        if let Some(o) = payload.as_object_mut() {
+            o.insert("t_ns".into(), t_ns.into());
+        }
+        let topic = self.value_topic(r);
+        self.send(&topic, self.qos, self.retain, payload.to_string());
+        st.last.insert((r.unit, r.table, r.address), Sent { raw: r.raw, shown: r.shown.clone(), t_ns });
+        if self.discovery && r.name.is_some() && st.discovered.insert((r.unit, r.table, r.address)) {
+            self.announce(r, &topic);
+        }
+    }
+
+    /// Home Assistant MQTT discovery: one sensor per named value, grouped by device.
+    fn announce(&self, r: &Row, state_topic: &str) {
+        let node = topic_level(&self.prefix.replace('/', "_"));
+        let object = format!("u{}_{}_{}", r.unit, r.table.name(), r.address);
+        let profile = self.profiles.get(&r.unit);
+        let mut config = serde_json::json!({
+            "name": r.name,
+            "unique_id": format!("{node}_{object}"),
+            "object_id": format!("{node}_{object}"),
+            "state_topic": state_topic,
+            "value_template": "{{ value_json.value }}",
+            "availability_topic": format!("{}/status", self.prefix),
+            "device": {
+                "identifiers": [format!("{node}_u{}", r.unit)],
+                "name": format!("{} (unit {})", profile.map_or("Modbus device", |p| p.meta.device.as_str()), r.unit),
+                "manufacturer": profile.and_then(|p| p.meta.vendor.clone()),
+                "model": profile.map(|p| p.meta.name.clone()),
+                "via_device": node,
+            },
+        });
+        if let (Some(u), Some(o)) = (&r.unit_of_measure, config.as_object_mut()) {
+            o.insert("unit_of_measurement".into(), u.clone().into());
+        }
+        self.send(&format!("homeassistant/sensor/{node}/{object}/config"), QoS::AtLeastOnce, true, config.to_string());
+    }
+
+    /// Takes rows read at bus time `t_ns`: each one published if it changed and its last
+    /// publication is an interval old, else held for the next tick.
+    fn take_rows(&self, st: &mut State, rows: Vec<Row>, t_ns: u64) {
+        for r in rows {
+            let key = (r.unit, r.table, r.address);
+            match st.last.get(&key) {
+                Some(s) if s.raw == r.raw && s.shown == r.shown => {
+                    st.pending.remove(&key);
+                }
+                Some(s) if t_ns.saturating_sub(s.t_ns) < self.interval_ns => {
+                    st.pending.insert(key, (r, t_ns));
+                }
+                _ => self.publish_row(st, &r, t_ns),
+            }
+        }
+        self.tick(st, t_ns);
+    }
+
+    /// Every interval of bus time: held values, unit health, findings, own counts.
+    fn tick(&self, st: &mut State, t_ns: u64) {
+        let due = *st.next_tick_ns.get_or_insert(t_ns.saturating_add(self.interval_ns.max(1)));
+        if t_ns < due {
+            return;
+        }
+        st.next_tick_ns = Some(t_ns.saturating_add(self.interval_ns.max(1)));
+        self.flush(st, false);
+    }
+
+    fn flush(&self, st: &mut State, last: bool) {
+        for (_, (r, t)) in std::mem::take(&mut st.pending) {
+            self.publish_row(st, &r, t);
+        }
+        if let Some(h) = &st.health {
+            let report = h.report();
+            for u in &report.units {
+                let j = serde_json::to_value(u).unwrap_or_default().to_string();
+                if st.units.get(&u.unit) != Some(&j) {
+                    self.send(&format!("{}/unit/{}/status", self.prefix, u.unit), self.qos, true, j.clone());
+                    st.units.insert(u.unit, j);
+                }
+            }
+            let kinds: BTreeSet<(String, Option<u8>)> =
+                report.findings.iter().map(|f| (f.kind.to_owned(), f.unit)).collect();
+            if st.findings.as_ref() != Some(&kinds) || last {
+                let list: Vec<serde_json::Value> = report
+                    .findings
+                    .iter()
+                    .map(|f| serde_json::json!({"kind": f.kind, "unit": f.unit, "count": f.count, "summary": f.summary, "last_t_ns": f.last_t_ns}))
+                    .collect();
+                self.send(
+                    &format!("{}/findings", self.prefix),
+                    self.qos,
+                    true,
+                    serde_json::Value::from(list).to_string(),
+                );
+                st.findings = Some(kinds);
+            }
+        }
+        let counts = (self.published.load(Ordering::Relaxed), self.dropped.load(Ordering::Relaxed));
+        if counts.1 != st.counts_sent.1 || last {
+            // The count of drops itself may be dropped; the next change or the end says it again.
+            let j = serde_json::json!({"published": counts.0, "dropped": counts.1});
+            self.send(&format!("{}/publisher", self.prefix), QoS::AtLeastOnce, true, j.to_string());
+            st.counts_sent = counts;
+        }
+    }
+
+    /// Rows from `watch`'s reads.
+    pub fn rows(&self, rows: Vec<Row>, t_ns: u64) {
+        if let Ok(mut st) = self.state.lock() {
+            self.take_rows(&mut st, rows, t_ns);
+        }
+    }
+
+    /// The end: what is held goes out, `offline` (retained), then the connection closes
+    /// (waiting at most 2 s for the broker to take what is queued).
+    pub fn finish(&self) {
+        if let Ok(mut st) = self.state.lock() {
+            self.flush(&mut st, true);
+        }
+        let status = format!("{}/status", self.prefix);
+        self.send(&status, QoS::AtLeastOnce, true, "offline".to_owned());
+        let _ = self.client.try_disconnect();
+        if let Some(done) = self.done.lock().ok().and_then(|mut d| d.take()) {
+            let _ = done.recv_timeout(Duration::from_secs(2));
+        }
+        eprintln!(
+            "mbtap: mqtt: {} messages queued for the broker, {} dropped (queue full or broker away)",
+            self.published.load(Ordering::Relaxed),
+            self.dropped.load(Ordering::Relaxed)
+        );
+    }
+}
+
+impl crate::output::Tap for Mqtt {
+    fn event(&self, e: &Event<'_>) {
+        let Ok(mut st) = self.state.lock() else { return };
+        let st = &mut *st;
+        if let Some(h) = st.health.as_mut() {
+            h.event(e);
+        }
+        let t = crate::output::event_time(e);
+        if !matches!(e, Event::Transaction(_)) {
+            self.tick(st, t);
+            return;
+        }
+        crate::output::update_image(&mut st.image, e);
+        // Whole values around each address the transaction set, each once.
+        let mut seen = BTreeSet::new();
+        let mut out = Vec::new();
+        for &(unit, table, a) in st.image.touched() {
+            let p = self.profiles.get(&unit);
+            let (first, width) = match p.and_then(|p| p.slot(table, a)) {
+                Some((slot, def)) if !matches!(table, Table::Coils | Table::DiscreteInputs) => (slot.first, def.width),
+                _ => (a, 1),
+            };
+            if !seen.insert((unit, table, first)) {
+                continue;
+            }
+            let regs: Option<Vec<u16>> = (0..width)
+                .map(|i| first.checked_add(i).and_then(|x| st.image.values.get(&(unit, table, x))).map(|k| k.raw))
+                .collect();
+            // Half of a value heard (the other register never read): not published.
+            if let Some(regs) = regs {
+                out.extend(rows(unit, table, first, &regs, p).into_iter().take(1));
+            }
+        }
+        self.take_rows(st, out, t);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn broker_urls_and_topic_levels() {
+        assert_eq!(parse_url("mqtt://127.0.0.1:1884").unwrap(), (false, "127.0.0.1".into(), 1884));
+        assert_eq!(parse_url("mqtts://broker").unwrap(), (true, "broker".into(), 8883));
+        assert!(parse_url("http://x").is_err());
+        assert!(parse_url("mqtt://user:pw@host:1883").is_err(), "credentials never on the command line");
+        assert_eq!(topic_level("ttyUSB0"), "ttyUSB0");
+        assert_eq!(topic_level("a/b+c#"), "a_b_c_");
+    }
+}
