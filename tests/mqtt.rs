@@ -1,0 +1,220 @@
+//! MQTT publishing against a real Mosquitto broker, started by each test on a free loopback
+//! port with its own configuration: the MK4 voltages of `demo`'s line under the right topics,
+//! the retained status and Home Assistant discovery; a broker that is down at the start and
+//! killed mid-run (analysis goes on, the publisher reconnects, the retained status is right);
+//! and a broker that never reads (the analysis gives the same result, drops are counted).
+//! Needs mosquitto and mosquitto_sub: `#[ignore]`d in a plain `cargo test`, run by `.ci/run`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::io::{BufRead, BufReader};
+use std::net::{TcpListener, TcpStream};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+mod common;
+use common::{BIN, Kill};
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mbtap-mqtt-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn mosquitto_path() -> &'static str {
+    if std::path::Path::new("/usr/sbin/mosquitto").exists() { "/usr/sbin/mosquitto" } else { "mosquitto" }
+}
+
+/// A Mosquitto broker on `port`, configured by the test (loopback only, no persistence).
+fn broker(d: &std::path::Path, port: u16) -> Kill {
+    let conf = d.join(format!("mosquitto-{port}.conf"));
+    std::fs::write(&conf, format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n")).unwrap();
+    let child = Command::new(mosquitto_path())
+        .arg("-c")
+        .arg(&conf)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("mosquitto must be installed for this test");
+    let start = Instant::now();
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(start.elapsed() < Duration::from_secs(10), "mosquitto never listened on {port}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Kill(child)
+}
+
+/// A subscriber to `topic`; the (topic, payload) lines it got so far.
+struct Sub {
+    _child: Kill,
+    got: Arc<Mutex<Vec<(String, String)>>>,
+}
+
+impl Sub {
+    fn start(port: u16, topic: &str) -> Self {
+        let mut child: Child = Command::new("mosquitto_sub")
+            .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-t", topic, "-v"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("mosquitto_sub must be installed for this test");
+        let out = child.stdout.take().unwrap();
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let sink = Arc::clone(&got);
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines().map_while(Result::ok) {
+                let (t, p) = l.split_once(' ').unwrap_or((l.as_str(), ""));
+                sink.lock().unwrap().push((t.to_owned(), p.to_owned()));
+            }
+        });
+        // Subscribed once the client is connected: give it a moment (mosquitto_sub has no
+        // "ready" signal), then the tests only publish after this.
+        std::thread::sleep(Duration::from_millis(300));
+        Self { _child: Kill(child), got }
+    }
+
+    fn got(&self) -> Vec<(String, String)> {
+        self.got.lock().unwrap().clone()
+    }
+
+    /// Waits (bounded: a hang guard, not a timing assertion) until `pred` holds.
+    fn wait_for(&self, what: &str, pred: impl Fn(&[(String, String)]) -> bool) {
+        let start = Instant::now();
+        while !pred(&self.got()) {
+            assert!(start.elapsed() < Duration::from_secs(30), "never got {what}: {:#?}", self.got());
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+fn last<'a>(got: &'a [(String, String)], topic: &str) -> Option<&'a str> {
+    got.iter().rev().find(|(t, _)| t == topic).map(|(_, p)| p.as_str())
+}
+
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn a_subscriber_sees_the_mk4_voltages_of_the_demo_line() {
+    let d = dir("demo");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    let sub = Sub::start(port, "#");
+    let out = Command::new(BIN)
+        .args(["demo", "--format", "summary", "--speed", "0", "--duration", "5"])
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/site1/line1"])
+        .args(["--mqtt-discovery", "homeassistant"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    sub.wait_for("offline", |g| last(g, "mbtap/site1/line1/status") == Some("offline"));
+    let got = sub.got();
+    for (a, name) in [(430, "Phase A (L1) voltage"), (431, "Phase B (L2) voltage"), (432, "Phase C (L3) voltage")] {
+        let topic = format!("mbtap/site1/line1/unit/1/input_registers/{a}");
+        let v: serde_json::Value =
+            serde_json::from_str(last(&got, &topic).unwrap_or_else(|| panic!("no {topic}"))).unwrap();
+        assert_eq!(v["name"], name);
+        assert_eq!(v["unit_of_measure"], "V");
+        let raw = v["raw"].as_f64().unwrap();
+        assert!((2000.0..=2600.0).contains(&raw), "{v}");
+        assert!((v["value"].as_f64().unwrap() - raw / 10.0).abs() < 1e-9, "scaled by the profile's 0.1: {v}");
+        assert!(v["t_ns"].as_u64().is_some(), "{v}");
+    }
+    // Online first, offline at the end; unit health and findings (a healthy line: none).
+    assert_eq!(got.iter().find(|(t, _)| t == "mbtap/site1/line1/status").map(|(_, p)| p.as_str()), Some("online"));
+    let health: serde_json::Value =
+        serde_json::from_str(last(&got, "mbtap/site1/line1/unit/17/status").unwrap()).unwrap();
+    assert!(health["transactions"].as_u64().unwrap() > 0, "{health}");
+    assert_eq!(last(&got, "mbtap/site1/line1/findings"), Some("[]"));
+    // Home Assistant discovery: a sensor for the voltage, with its unit and device.
+    let config = got
+        .iter()
+        .find(|(t, _)| t.starts_with("homeassistant/sensor/") && t.ends_with("u1_input_registers_430/config"))
+        .map(|(_, p)| serde_json::from_str::<serde_json::Value>(p).unwrap())
+        .expect("a discovery config for input register 430");
+    assert_eq!(config["unit_of_measurement"], "V");
+    assert_eq!(config["state_topic"], "mbtap/site1/line1/unit/1/input_registers/430");
+    // On change only: a set point that never changes is published once.
+    let set_point = got.iter().filter(|(t, _)| t == "mbtap/site1/line1/unit/1/holding_registers/104").count();
+    assert_eq!(set_point, 1, "holding 104 never changes on the demo line");
+}
+
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn a_broker_down_at_start_and_killed_mid_run_is_reconnected() {
+    let d = dir("flaky");
+    let port = free_port();
+    // No broker yet: mbtap starts anyway and analyses in real time for 9 s.
+    let demo = Command::new(BIN)
+        .args(["demo", "--format", "summary", "--duration", "9"])
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/flaky"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    let first = broker(&d, port);
+    let sub = Sub::start(port, "mbtap/flaky/#");
+    sub.wait_for("online after the broker came", |g| last(g, "mbtap/flaky/status") == Some("online"));
+    sub.wait_for("values", |g| g.iter().any(|(t, _)| t.contains("/unit/1/input_registers/430")));
+    drop(first); // SIGKILL: the broker dies mid-run.
+    drop(sub);
+    std::thread::sleep(Duration::from_secs(1));
+    let _second = broker(&d, port);
+    let sub = Sub::start(port, "mbtap/flaky/#");
+    // A fresh broker (no persistence): the status it holds is the reconnected publisher's.
+    sub.wait_for("online again", |g| last(g, "mbtap/flaky/status") == Some("online"));
+    sub.wait_for("values again", |g| g.iter().any(|(t, _)| t.contains("/unit/1/input_registers/430")));
+    let out = demo.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    sub.wait_for("offline at the end", |g| last(g, "mbtap/flaky/status") == Some("offline"));
+    // The analysis went on through all of it: the summary counts every transaction of 9 s.
+    let summary = String::from_utf8_lossy(&out.stdout);
+    let transactions: u64 = summary
+        .split("; ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{summary}"));
+    let reference =
+        Command::new(BIN).args(["demo", "--format", "summary", "--duration", "9", "--speed", "0"]).output().unwrap();
+    let reference = String::from_utf8_lossy(&reference.stdout);
+    let expected: u64 =
+        reference.split("; ").nth(1).and_then(|s| s.split_whitespace().next()).and_then(|n| n.parse().ok()).unwrap();
+    assert_eq!(transactions, expected, "the same 9 s of line as without a broker:\n{summary}\n{reference}");
+}
+
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn a_broker_that_never_reads_does_not_change_the_analysis() {
+    // A "broker" that accepts the connection and never answers or reads: every message waits.
+    let stuck = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = stuck.local_addr().unwrap().port();
+    let held = std::thread::spawn(move || stuck.accept().map(|(s, _)| s));
+    let args = ["demo", "--format", "summary", "--speed", "0", "--duration", "3600"];
+    let without = Command::new(BIN).args(args).output().unwrap();
+    let with = Command::new(BIN)
+        .args(args)
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-queue", "100"])
+        .output()
+        .unwrap();
+    assert!(with.status.success(), "{}", String::from_utf8_lossy(&with.stderr));
+    assert_eq!(with.stdout, without.stdout, "the same summary with a stuck broker as without one");
+    let err = String::from_utf8_lossy(&with.stderr);
+    let dropped: u64 = err
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("mbtap: mqtt: ")?
+                .split(" queued for the broker, ")
+                .nth(1)?
+                .split_whitespace()
+                .next()?
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(dropped > 0, "an hour of line into a queue of 100 must drop: {err}");
+    drop(held);
+}
