@@ -218,3 +218,62 @@ fn a_broker_that_never_reads_does_not_change_the_analysis() {
     assert!(dropped > 0, "an hour of line into a queue of 100 must drop: {err}");
     drop(held);
 }
+
+fn simulator(d: &std::path::Path) -> (Kill, PathBuf) {
+    let bus = d.join("bus");
+    let sim = Kill(
+        Command::new(BIN)
+            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "60"])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    common::wait_for(&bus);
+    (sim, bus)
+}
+
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn watch_and_the_bridge_monitor_publish_what_they_read() {
+    let d = dir("watch");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    let sub = Sub::start(port, "#");
+    let (_sim, bus) = simulator(&d);
+    let url = format!("mqtt://127.0.0.1:{port}");
+    let out = Command::new(BIN)
+        .args(["watch", bus.to_str().unwrap(), "--device", "mk4", "--interval", "100ms", "--count", "3"])
+        .args(["--format", "jsonl", "--mqtt", &url, "--mqtt-prefix", "w"])
+        .args(["430..433"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    sub.wait_for("watch's voltages", |g| g.iter().any(|(t, _)| t == "w/unit/1/input_registers/433"));
+
+    // The bridge publishes what its monitor hears: a read through it shows up as values.
+    let mut bridge = Command::new(BIN)
+        .args(["bridge", "--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0", "--monitor", "jsonl"])
+        .args(["--device", "17=mkzp", "--mqtt", &url, "--mqtt-prefix", "b"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(bridge.stderr.take().unwrap()).lines();
+    let tcp = loop {
+        let l = lines.next().expect("the bridge ended before listening").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    std::thread::spawn(move || for _ in lines {});
+    let _bridge = Kill(bridge);
+    let read = Command::new(BIN)
+        .args(["read", &tcp, "--unit", "17", "--format", "jsonl", "holding", "50..52"])
+        .output()
+        .unwrap();
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    sub.wait_for("the bridge's MKZP currents", |g| g.iter().any(|(t, _)| t == "b/unit/17/holding_registers/52"));
+    let v: serde_json::Value =
+        serde_json::from_str(last(&sub.got(), "b/unit/17/holding_registers/50").unwrap()).unwrap();
+    assert_eq!(v["name"], "Current_Faza_A: phase A current", "{v}");
+}

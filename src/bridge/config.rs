@@ -43,6 +43,8 @@ queue-per-client = 32
 # metrics = "127.0.0.1:9502"
 # monitor = "jsonl"      # text | jsonl | tui
 # device = ["1=mk4", "5=display", "17=mkzp"]
+# mqtt = "mqtt://127.0.0.1:1883"   # publish what the monitor hears (needs monitor)
+# mqtt-prefix = "mbtap/site/line"
 "#;
 
 /// The `[bridge]` table as command-line options.

@@ -94,6 +94,9 @@ pub struct Args {
     /// Stop after this many seconds.
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Publish what the monitor hears (values, unit health, findings) to MQTT.
+    #[command(flatten)]
+    pub mqtt: crate::publish::mqtt::MqttArgs,
 }
 
 /// Runs the bridge; `matches` tells which options the command line gave, for `--config`.
@@ -129,7 +132,10 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         monitor,
         devices,
         duration,
+        mqtt,
     } = args;
+    // The port name the MQTT prefix ends with.
+    let source = serial.clone().unwrap_or_else(|| "bridge".to_owned());
     let (mode, settings, latency_ns) = line.overrides().resolve();
     let allow_functions = if allow_functions.is_empty() {
         None
@@ -220,11 +226,33 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         reverse,
     };
     let profiles = crate::config::devices::load_devices(&devices)?;
+    anyhow::ensure!(
+        mqtt.mqtt.is_none() || monitor.is_some(),
+        "--mqtt on the bridge publishes what its monitor hears: add --monitor (text, jsonl or tui)"
+    );
+    let publisher = crate::publish::mqtt::Mqtt::start(&mqtt, &source, profiles.clone(), true)?;
+    let taps: Vec<std::sync::Arc<dyn crate::output::Tap>> =
+        publisher.iter().map(|m| std::sync::Arc::clone(m) as std::sync::Arc<dyn crate::output::Tap>).collect();
+    let result = run_monitored(monitor, profiles, settings, opts, taps);
+    if let Some(m) = &publisher {
+        m.finish();
+    }
+    result
+}
+
+fn run_monitored(
+    monitor: Option<EventFormatArg>,
+    profiles: mbtap_core::profile::Profiles,
+    settings: mbtap_core::framer::LineSettings,
+    opts: crate::bridge::run::BridgeOptions,
+    taps: Vec<std::sync::Arc<dyn crate::output::Tap>>,
+) -> anyhow::Result<ExitCode> {
     match monitor {
         Some(EventFormatArg::Tui) => {
             let ui =
                 TuiSource { profiles, lang: mbtap_core::profile::annotate::Lang::En, line: settings, pacing: false };
             ui.run("bridge", move |writer, err| {
+                writer.taps = taps;
                 runtime()?.block_on(crate::bridge::run::bridge(opts, Some(writer), err))
             })
         }
@@ -232,6 +260,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             let stdout = io::stdout();
             let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), format.into());
             writer.profiles = profiles;
+            writer.taps = taps;
             runtime()?.block_on(crate::bridge::run::bridge(opts, Some(&mut writer), &mut io::stderr()))?;
             writer.finish()?;
             Ok(ExitCode::SUCCESS)
@@ -343,6 +372,15 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "monitor" => monitor,
         "devices" => devices,
         "duration" => duration,
+        "mqtt" => mqtt.mqtt,
+        "mqtt_prefix" => mqtt.mqtt_prefix,
+        "mqtt_ca" => mqtt.mqtt_ca,
+        "mqtt_credentials" => mqtt.mqtt_credentials,
+        "mqtt_qos" => mqtt.mqtt_qos,
+        "mqtt_retain" => mqtt.mqtt_retain,
+        "mqtt_interval" => mqtt.mqtt_interval,
+        "mqtt_discovery" => mqtt.mqtt_discovery,
+        "mqtt_queue" => mqtt.mqtt_queue,
     }
     merged.config = cli.config;
     Ok(merged)

@@ -26,6 +26,8 @@ pub struct Args {
     /// Stop after this many rounds [default: until Ctrl-C].
     #[arg(long)]
     pub count: Option<u64>,
+    #[command(flatten)]
+    pub mqtt: crate::publish::mqtt::MqttArgs,
 }
 
 /// `1s`, `250ms`, `1.5` (seconds).
@@ -55,6 +57,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let mut link = Link::new(&m.target, &m.line, timeout)?;
     let format = m.format();
     let live = format == MasterFormat::Text && std::io::stdout().is_terminal();
+    let profiles: mbtap_core::profile::Profiles = profile.iter().map(|p| (unit, p.clone())).collect();
+    // No health figures: watch hears only its own answers, not the bus.
+    let mqtt = crate::publish::mqtt::Mqtt::start(&args.mqtt, &m.target, profiles, false)?;
     let rt = crate::cmd::runtime()?;
     let mut any_failed = false;
     rt.block_on(async {
@@ -69,6 +74,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             let (rows, failures) =
                 exec::read_all(&mut link, unit, &targets, &plan, profile.as_ref(), timeout, m.retries).await;
             any_failed |= !failures.is_empty();
+            if let Some(mq) = &mqtt {
+                mq.rows(rows.clone(), t_ns);
+            }
             let took = started.elapsed();
             let mut out = std::io::stdout().lock();
             if live {
@@ -99,6 +107,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         anyhow::Ok(())
     })
     .context("writing the values")?;
+    if let Some(mq) = &mqtt {
+        mq.finish();
+    }
     Ok(if any_failed { ExitCode::FAILURE } else { ExitCode::SUCCESS })
 }
 
