@@ -7,6 +7,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::io::{BufRead, BufReader};
+use std::os::unix::fs::PermissionsExt as _;
 use std::net::{TcpListener, TcpStream};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -276,4 +277,152 @@ fn watch_and_the_bridge_monitor_publish_what_they_read() {
     let v: serde_json::Value =
         serde_json::from_str(last(&sub.got(), "b/unit/17/holding_registers/50").unwrap()).unwrap();
     assert_eq!(v["name"], "Current_Faza_A: phase A current", "{v}");
+}
+
+/// openssl: a CA, and a broker certificate for 127.0.0.1 signed by it.
+fn certificates(d: &std::path::Path) {
+    let run = |args: &[&str]| {
+        let o = Command::new("openssl").args(args).current_dir(d).output().expect("openssl must be installed");
+        assert!(o.status.success(), "openssl {args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    };
+    run(&[
+        "req",
+        "-x509",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        "ca.key",
+        "-out",
+        "ca.pem",
+        "-days",
+        "2",
+        "-subj",
+        "/CN=mbtap test CA",
+    ]);
+    run(&[
+        "req",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        "server.key",
+        "-out",
+        "server.csr",
+        "-subj",
+        "/CN=127.0.0.1",
+    ]);
+    std::fs::write(d.join("san.ext"), "subjectAltName=IP:127.0.0.1\n").unwrap();
+    run(&[
+        "x509",
+        "-req",
+        "-in",
+        "server.csr",
+        "-CA",
+        "ca.pem",
+        "-CAkey",
+        "ca.key",
+        "-CAcreateserial",
+        "-out",
+        "server.pem",
+        "-days",
+        "2",
+        "-extfile",
+        "san.ext",
+    ]);
+    // Mosquitto started as root drops to its own user, which must read the (test-only) key.
+    std::fs::set_permissions(d.join("server.key"), std::fs::Permissions::from_mode(0o644)).unwrap();
+}
+
+#[test]
+#[ignore = "needs mosquitto and openssl; .ci/run installs them and runs this with --ignored"]
+fn mqtts_with_a_ca_file_and_a_password_from_a_file() {
+    let d = dir("tls");
+    certificates(&d);
+    let port = free_port();
+    let passwords = d.join("passwords");
+    std::fs::write(&passwords, "").unwrap();
+    let o = Command::new("mosquitto_passwd").arg("-b").arg(&passwords).args(["site", "s3cret"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let conf = d.join("tls.conf");
+    std::fs::write(
+        &conf,
+        format!(
+            "listener {port} 127.0.0.1\ncafile {0}/ca.pem\ncertfile {0}/server.pem\nkeyfile {0}/server.key\n\
+             allow_anonymous false\npassword_file {1}\npersistence false\n",
+            d.display(),
+            passwords.display()
+        ),
+    )
+    .unwrap();
+    let _broker = Kill(Command::new(mosquitto_path()).arg("-c").arg(&conf).stderr(Stdio::null()).spawn().unwrap());
+    let start = Instant::now();
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(start.elapsed() < Duration::from_secs(10), "mosquitto never listened");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let sub = Command::new("mosquitto_sub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "--cafile"])
+        .arg(d.join("ca.pem"))
+        .args(["-u", "site", "-P", "s3cret", "-t", "tls/#", "-v", "-C", "1"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let credentials = d.join("credentials");
+    std::fs::write(&credentials, "site:s3cret\n").unwrap();
+    let url = format!("mqtts://127.0.0.1:{port}");
+    let out = Command::new(BIN)
+        .args([
+            "demo",
+            "--format",
+            "summary",
+            "--speed",
+            "0",
+            "--duration",
+            "2",
+            "--mqtt",
+            &url,
+            "--mqtt-prefix",
+            "tls",
+        ])
+        .arg("--mqtt-ca")
+        .arg(d.join("ca.pem"))
+        .arg("--mqtt-credentials")
+        .arg(&credentials)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let got = sub.wait_with_output().unwrap();
+    assert!(String::from_utf8_lossy(&got.stdout).starts_with("tls/"), "{}", String::from_utf8_lossy(&got.stdout));
+    // A wrong password: the broker refuses, mbtap says so and its analysis is unchanged.
+    std::fs::write(&credentials, "site:wrong\n").unwrap();
+    let out = Command::new(BIN)
+        .args([
+            "demo",
+            "--format",
+            "summary",
+            "--speed",
+            "0",
+            "--duration",
+            "2",
+            "--mqtt",
+            &url,
+            "--mqtt-prefix",
+            "tls",
+        ])
+        .arg("--mqtt-ca")
+        .arg(d.join("ca.pem"))
+        .arg("--mqtt-credentials")
+        .arg(&credentials)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("mbtap: mqtt: 127.0.0.1:") && !err.contains("connected to"), "{err}");
+    // mqtts without a CA file is refused before anything starts.
+    let out =
+        Command::new(BIN).args(["demo", "--format", "summary", "--duration", "1", "--mqtt", &url]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--mqtt-ca"));
 }
