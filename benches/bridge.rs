@@ -18,7 +18,7 @@
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
@@ -26,13 +26,8 @@ const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
 const PDU: [u8; 5] = [0x04, 0x01, 0xAE, 0x00, 0x04];
 const BAUD: &str = "115200";
 
-struct Kill(Child);
-impl Drop for Kill {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+mod support;
+use support::{Kill, percentile};
 
 fn simulator(link: &Path) -> Kill {
     let _ = std::fs::remove_file(link);
@@ -47,12 +42,6 @@ fn simulator(link: &Path) -> Kill {
         std::thread::sleep(Duration::from_millis(20));
     }
     k
-}
-
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let i = ((v.len() - 1) as f64 * p).round() as usize;
-    v[i]
 }
 
 fn rtu(pdu: &[u8]) -> Vec<u8> {
@@ -106,18 +95,7 @@ fn bridge(link: &Path) -> (Kill, String) {
 
 /// One request; whether the answer was a normal one (not an exception).
 fn call(s: &mut TcpStream, tid: u16) -> bool {
-    let mut f = vec![0u8; 7];
-    f[..2].copy_from_slice(&tid.to_be_bytes());
-    f[5] = 6;
-    f[6] = 1;
-    f.extend_from_slice(&PDU);
-    s.write_all(&f).unwrap();
-    let mut head = [0u8; 7];
-    s.read_exact(&mut head).unwrap();
-    assert_eq!(head[..2], tid.to_be_bytes());
-    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
-    s.read_exact(&mut pdu).unwrap();
-    pdu[0] == 0x04
+    support::call(s, tid, 1, &PDU)[0] == 0x04
 }
 
 /// `clients` clients for `seconds`, each pausing `pause` between requests; (round trips ms of

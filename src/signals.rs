@@ -49,3 +49,17 @@ pub(crate) async fn shutdown_signal() {
     // Another waiter (a second loop in the same run) stops too.
     STOP.notify_one();
 }
+
+/// [`shutdown_signal`], or `deadline` (`--duration`) when there is one, whichever comes first.
+pub(crate) async fn stop_or_deadline(deadline: Option<tokio::time::Instant>) {
+    let at_deadline = async {
+        match deadline {
+            Some(d) => tokio::time::sleep_until(d).await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::select! {
+        () = shutdown_signal() => {}
+        () = at_deadline => {}
+    }
+}

@@ -215,3 +215,45 @@ fn play_caps_a_clock_step_and_says_so() {
     assert!(err.contains("3600.0 s of silence") && err.contains("played as 0.2 s"), "{err}");
     assert!(err.contains("played 2 packets"), "{err}");
 }
+
+/// Found while benchmarking spy mode: `sniff --duration 8` of a port that vanished (its socat
+/// ended) waited for the port forever, past its duration. The deadline holds while the port is
+/// away, for `sniff` and `tap` alike.
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn sniff_duration_holds_while_the_port_is_gone() {
+    let dir = std::env::temp_dir().join(format!("mbtap-vanish-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    let socat = Kill(
+        Command::new("socat")
+            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
+            .spawn()
+            .expect("socat must be installed for this test"),
+    );
+    wait_for(&b);
+    let mut sniff = Command::new(BIN)
+        .args(["sniff", b.to_str().unwrap(), "--format", "summary", "--duration", "2"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    drop(socat);
+    // A hang guard, not a timing assertion: the sniff must end on its own.
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = sniff.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed() > Duration::from_secs(30) {
+            let _ = sniff.kill();
+            panic!("sniff --duration 2 still running 30 s after its port vanished");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut sniff.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(status.success(), "{err}");
+    assert!(err.contains("waiting for it to come back"), "the port did vanish: {err}");
+}

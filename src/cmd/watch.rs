@@ -92,7 +92,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             } else if format == MasterFormat::Text {
                 writeln!(out, "# round {round}, {:.1} ms", took.as_secs_f64() * 1e3)?;
             }
-            show::print(format, &rows, &failures, &[("t_ns", t_ns.into()), ("round", round.into())], &mut out)?;
+            let round_ms = (took.as_secs_f64() * 1e6).round() / 1e3;
+            let extra = [("t_ns", t_ns.into()), ("round", round.into()), ("round_ms", round_ms.into())];
+            show::print(format, &rows, &failures, &extra, &mut out)?;
             drop(out);
             next += args.interval;
             let now = tokio::time::Instant::now();

@@ -137,6 +137,9 @@ fn credentials(args: &MqttArgs) -> anyhow::Result<Option<(String, String)>> {
     }
 }
 
+/// Unit health, findings and the publisher's counts go out at most this often (bus time).
+const FIGURES_EVERY_NS: u64 = 1_000_000_000;
+
 /// What was last published for one value.
 #[derive(Debug, Clone)]
 struct Sent {
@@ -156,6 +159,8 @@ struct State {
     units: BTreeMap<u8, String>,
     findings: Option<BTreeSet<(String, Option<u8>)>>,
     next_tick_ns: Option<u64>,
+    next_figures_ns: Option<u64>,
+    figures_at: Option<std::time::Instant>,
     counts_sent: (u64, u64),
 }
 
@@ -369,14 +374,30 @@ impl Mqtt {
         self.tick(st, t_ns);
     }
 
-    /// Every interval of bus time: held values, unit health, findings, own counts.
+    /// Every interval of bus time: held values; every [`FIGURES_EVERY_NS`] (or the interval,
+    /// if longer) of bus time and at least a second of the clock: unit health, findings, own
+    /// counts. The figures cost a health report each, so they never follow a short interval (at
+    /// `--mqtt-interval 0` they were computed per event: quadratic over a long capture).
     fn tick(&self, st: &mut State, t_ns: u64) {
-        let due = *st.next_tick_ns.get_or_insert(t_ns.saturating_add(self.interval_ns.max(1)));
-        if t_ns < due {
-            return;
+        if !st.pending.is_empty() {
+            let due = *st.next_tick_ns.get_or_insert(t_ns.saturating_add(self.interval_ns));
+            if t_ns >= due {
+                st.next_tick_ns = Some(t_ns.saturating_add(self.interval_ns));
+                for (_, (r, t)) in std::mem::take(&mut st.pending) {
+                    self.publish_row(st, &r, t);
+                }
+            }
         }
-        st.next_tick_ns = Some(t_ns.saturating_add(self.interval_ns.max(1)));
-        self.flush(st, false);
+        let every = self.interval_ns.max(FIGURES_EVERY_NS);
+        let due = *st.next_figures_ns.get_or_insert(t_ns.saturating_add(every));
+        // Also a second of the clock: a replay runs a thousand times faster than its line, and
+        // each report sorts every latency heard (live, bus time and the clock agree).
+        let clock_due = st.figures_at.is_none_or(|at| at.elapsed() >= Duration::from_secs(1));
+        if t_ns >= due && clock_due {
+            st.next_figures_ns = Some(t_ns.saturating_add(every));
+            st.figures_at = Some(std::time::Instant::now());
+            self.flush(st, false);
+        }
     }
 
     fn flush(&self, st: &mut State, last: bool) {

@@ -13,7 +13,6 @@ use tokio::io::AsyncReadExt;
 use tokio_serial::SerialPortBuilderExt;
 
 use crate::output::EventWriter;
-use crate::signals::shutdown_signal;
 use crate::source::record::Recorder;
 use crate::source::serial::{builder, now};
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
@@ -74,7 +73,9 @@ pub async fn sniff<W: Write>(
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     let mut last_flush = tokio::time::Instant::now();
     let mut buf = vec![0u8; 4096];
-    let mut stop = Box::pin(shutdown_signal());
+    // The deadline is part of the stop: it holds while the port is away too (it did not, and a
+    // sniff of a vanished port with --duration ran on forever).
+    let mut stop = Box::pin(crate::signals::stop_or_deadline(deadline));
     loop {
         if deadline.is_some_and(|d| tokio::time::Instant::now() >= d) {
             break;

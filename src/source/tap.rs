@@ -78,7 +78,8 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { mode: opts.mode, framer: FramerConfig::new(opts.line, latency_ns), pairing });
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
-    let mut stop = Box::pin(crate::signals::shutdown_signal());
+    // The deadline is part of the stop, so it holds while the port is away too.
+    let mut stop = Box::pin(crate::signals::stop_or_deadline(deadline));
     let (mut from_app, mut from_bus) = (vec![0u8; 4096], vec![0u8; 4096]);
     let mut last_flush = tokio::time::Instant::now();
     loop {
