@@ -1,5 +1,6 @@
 //! Reverse mode: the bridge answers as slave addresses on the serial bus and forwards each
-//! request to a Modbus TCP server, so an RTU (or ASCII) master can reach TCP devices.
+//! request to a Modbus TCP server (or an RTU-over-TCP server: `--target-rtu`), so an RTU (or
+//! ASCII) master can reach TCP devices.
 //!
 //! Requests are framed from the serial bytes the way a slave's UART sees them (structure and
 //! CRC, the silence for functions of unknown length: [`mbtap_core::sim::RequestAssembler`]). The TCP
@@ -22,6 +23,7 @@ use super::metrics::Metrics;
 use mbtap_core::analyzer::SerialMode;
 use mbtap_core::chunk::PortId;
 use mbtap_core::framer::LineSettings;
+use mbtap_core::proto::answer_end::Verdict;
 use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
 use mbtap_core::proto::{encode_ascii, encode_rtu, encode_tcp};
 use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
@@ -36,6 +38,8 @@ pub struct ReverseOptions {
     pub units: BTreeSet<u8>,
     /// The Modbus TCP server (`HOST:PORT`).
     pub target: String,
+    /// The target speaks RTU over TCP (frames with CRC, no MBAP header) instead of Modbus TCP.
+    pub target_rtu: bool,
     pub timeout: Duration,
     /// Time from the end of a request to the answer (a slave's turnaround).
     pub turnaround: Duration,
@@ -199,6 +203,20 @@ async fn forward(
             }
         }
         let Some(s) = tcp.as_mut() else { return Err(GATEWAY_PATH_UNAVAILABLE) };
+        if opts.target_rtu {
+            match forward_rtu(opts, s, unit, pdu).await {
+                Ok(answer) => return Ok(answer),
+                Err(RtuFailure::Lost) => {
+                    *tcp = None;
+                    continue;
+                }
+                Err(RtuFailure::NoAnswer) => {
+                    // A late answer would be taken for the next request's: start clean.
+                    *tcp = None;
+                    return Err(GATEWAY_TARGET_FAILED);
+                }
+            }
+        }
         *tid = tid.wrapping_add(1);
         let mut frame = Vec::with_capacity(pdu.len() + 7);
         encode_tcp(*tid, unit, pdu, &mut frame);
@@ -217,6 +235,52 @@ async fn forward(
         }
     }
     Err(GATEWAY_PATH_UNAVAILABLE)
+}
+
+/// Why an RTU-over-TCP request got no answer.
+enum RtuFailure {
+    /// The connection failed: reconnect and try once more.
+    Lost,
+    /// No valid answer in time (or a failed check).
+    NoAnswer,
+}
+
+/// One request to an RTU-over-TCP server: the RTU frame as on a serial line, the answer found
+/// by its structure and CRC (what the forward bridge does on a real line); a function of
+/// unknown length ends after 20 ms without bytes — a TCP segment carries no character timing.
+async fn forward_rtu(opts: &ReverseOptions, s: &mut TcpStream, unit: u8, pdu: &[u8]) -> Result<Vec<u8>, RtuFailure> {
+    const QUIET: Duration = Duration::from_millis(20);
+    let mut frame = Vec::with_capacity(pdu.len() + 3);
+    encode_rtu(unit, pdu, &mut frame);
+    s.write_all(&frame).await.map_err(|_| RtuFailure::Lost)?;
+    let function = pdu.first().copied().unwrap_or(0);
+    let deadline = tokio::time::Instant::now() + opts.timeout;
+    let mut buf: Vec<u8> = Vec::with_capacity(300);
+    let mut chunk = [0u8; 300];
+    loop {
+        let wait = if buf.is_empty() { deadline } else { (tokio::time::Instant::now() + QUIET).min(deadline) };
+        let silent = match tokio::time::timeout_at(wait, s.read(&mut chunk)).await {
+            Ok(Ok(0) | Err(_)) => return Err(RtuFailure::Lost),
+            Ok(Ok(n)) => {
+                buf.extend_from_slice(chunk.get(..n).unwrap_or_default());
+                // Bounded: an RTU frame is at most 256 bytes (Serial Line v1.02 §2.5.1).
+                if buf.len() > 1024 {
+                    return Err(RtuFailure::NoAnswer);
+                }
+                false
+            }
+            Err(_) if buf.is_empty() || tokio::time::Instant::now() >= deadline => return Err(RtuFailure::NoAnswer),
+            Err(_) => true,
+        };
+        match mbtap_core::proto::answer_end::judge_rtu(&buf, unit, function, silent) {
+            Verdict::Pending => {}
+            Verdict::Answer { len } => {
+                return buf.get(1..len.saturating_sub(2)).map(<[u8]>::to_vec).ok_or(RtuFailure::NoAnswer);
+            }
+            Verdict::BadCheck => return Err(RtuFailure::NoAnswer),
+            Verdict::Foreign => buf.clear(),
+        }
+    }
 }
 
 /// Reads MBAP frames until the one with `tid`; its PDU.

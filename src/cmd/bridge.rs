@@ -76,12 +76,16 @@ pub struct Args {
     #[arg(long, value_name = "ADDR:PORT")]
     pub metrics: Option<String>,
     /// Reverse: answer as serial slaves (--answer-as) and forward to the Modbus TCP server
-    /// --target, so an RTU master reaches TCP devices.
-    #[arg(long, requires = "target")]
+    /// --target (or the RTU-over-TCP server --target-rtu), so an RTU master reaches TCP devices.
+    #[arg(long, requires = "reverse_target")]
     pub reverse: bool,
     /// Reverse mode: the Modbus TCP server to forward to.
-    #[arg(long, value_name = "HOST:PORT")]
+    #[arg(long, value_name = "HOST:PORT", group = "reverse_target")]
     pub target: Option<String>,
+    /// Reverse mode: an RTU-over-TCP server to forward to instead (a serial device server, a
+    /// cheap Ethernet-to-RS-485 converter): RTU frames with their CRC over the TCP stream.
+    #[arg(long, value_name = "HOST:PORT", group = "reverse_target")]
+    pub target_rtu: Option<String>,
     /// Reverse mode: serial addresses to answer as, e.g. 1,5,10-20 (default: all).
     #[arg(long, value_name = "UNITS")]
     pub answer_as: Option<String>,
@@ -128,6 +132,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         metrics,
         reverse,
         target,
+        target_rtu,
         answer_as,
         monitor,
         devices,
@@ -155,13 +160,20 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     };
     let reverse = if reverse {
         let port = serial.clone().context("--reverse needs --serial PORT: the line to answer on")?;
-        let target = target.context("--reverse needs --target HOST:PORT: the Modbus TCP server to reach")?;
+        let (target, target_rtu) = match (target, target_rtu) {
+            (Some(t), _) => (t, false),
+            (None, Some(t)) => (t, true),
+            (None, None) => anyhow::bail!(
+                "--reverse needs --target HOST:PORT (a Modbus TCP server) or --target-rtu HOST:PORT (RTU over TCP)"
+            ),
+        };
         Some(crate::bridge::reverse::ReverseOptions {
             port,
             line: settings,
             mode,
             units: crate::bridge::run::parse_units(answer_as.as_deref().unwrap_or(""))?,
             target,
+            target_rtu,
             timeout: std::time::Duration::from_millis(timeout_ms),
             turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
             read_only,
@@ -368,6 +380,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "metrics" => metrics,
         "reverse" => reverse,
         "target" => target,
+        "target_rtu" => target_rtu,
         "answer_as" => answer_as,
         "monitor" => monitor,
         "devices" => devices,
