@@ -53,8 +53,12 @@ pub struct LineOptions {
     pub port: String,
     pub line: LineSettings,
     pub mode: SerialMode,
-    /// Per-request response timeout.
+    /// Per-request response timeout (with `--timeout auto`, the ceiling).
     pub timeout: Duration,
+    /// `--timeout fixed|auto`.
+    pub timeout_mode: super::timing::TimeoutMode,
+    /// `--unit-timeout`: units with a timeout of their own.
+    pub unit_timeouts: std::collections::BTreeMap<u8, Duration>,
     /// Retries after a timeout or a failed check.
     pub retries: u32,
     /// Extra quiet time after t3.5 before the next request (slow slaves need it).
@@ -167,7 +171,9 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
     // The line is free for the next request from this time on (t3.5 + turnaround after the
     // last byte, Serial Line v1.02 §2.5.1.1).
     let mut free_at = Instant::now();
-    let mut master = Master { opts: &opts, shared: &shared, monitor: monitor.as_ref(), buf: Vec::with_capacity(600) };
+    let timeouts = super::timing::Timeouts::new(opts.timeout, opts.timeout_mode, opts.unit_timeouts.clone());
+    let mut master =
+        Master { opts: &opts, shared: &shared, monitor: monitor.as_ref(), buf: Vec::with_capacity(600), timeouts };
     let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
     loop {
         let Some((_, job)) = shared.next() else {
@@ -262,6 +268,7 @@ struct Master<'a> {
     shared: &'a LineShared,
     monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
     buf: Vec<u8>,
+    timeouts: super::timing::Timeouts,
 }
 
 impl Master<'_> {
@@ -307,7 +314,17 @@ impl Master<'_> {
                 let reply = if self.opts.broadcast_reply { echo_reply(&job.pdu) } else { Reply::Silence };
                 return Ok((reply, sent + self.opts.turnaround));
             }
-            let outcome = self.read_answer(port, job.unit, function, sent).await?;
+            let timeout = self.timeouts.get(job.unit);
+            self.shared.metrics.unit_timeout(job.unit, timeout);
+            let outcome = self.read_answer(port, job.unit, function, sent, timeout).await?;
+            match &outcome {
+                (Some(_), last) => self.timeouts.answered(job.unit, last.saturating_duration_since(sent)),
+                (None, last) if last.saturating_duration_since(sent) >= timeout => {
+                    self.timeouts.timed_out(job.unit);
+                    self.shared.metrics.waited_in_vain(job.unit, timeout);
+                }
+                (None, _) => {}
+            }
             let retry = attempt <= self.opts.retries;
             match outcome {
                 (Some(pdu), last) => {
@@ -331,8 +348,9 @@ impl Master<'_> {
         unit: u8,
         function: u8,
         sent: Instant,
+        timeout: Duration,
     ) -> std::io::Result<(Option<Vec<u8>>, Instant)> {
-        let deadline = sent + self.opts.timeout;
+        let deadline = sent + timeout;
         // RTU: t3.5 of silence ends a frame; ASCII: the 1 s inter-character timeout (Serial
         // Line v1.02 §2.5.2.1). Plus one timer tick, as reads come in 1 ms steps.
         let silence = match self.opts.mode {

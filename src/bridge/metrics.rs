@@ -20,6 +20,10 @@ struct Unit {
     crc_errors: u64,
     /// Requests answered 0x0B at once while the unit's circuit breaker was open.
     circuit_open: u64,
+    /// The timeout in force for the unit's last request (learnt with `--timeout auto`).
+    timeout: Option<Duration>,
+    /// Line time spent waiting for answers that never came.
+    waited_in_vain: Duration,
     buckets: [u64; BUCKETS.len()],
     latency_count: u64,
     latency_sum: f64,
@@ -74,6 +78,19 @@ impl Metrics {
     /// A request answered at once because the unit's circuit breaker is open.
     pub fn circuit_open(&self, unit: u8) {
         self.with(|m| m.units.entry(unit).or_default().circuit_open += 1);
+    }
+
+    /// The timeout used for `unit`'s request.
+    pub fn unit_timeout(&self, unit: u8, d: Duration) {
+        self.with(|m| m.units.entry(unit).or_default().timeout = Some(d));
+    }
+
+    /// Line time lost waiting `d` for an answer from `unit` that never came.
+    pub fn waited_in_vain(&self, unit: u8, d: Duration) {
+        self.with(|m| {
+            let u = m.units.entry(unit).or_default();
+            u.waited_in_vain = u.waited_in_vain.saturating_add(d);
+        });
     }
 
     pub fn crc_error(&self, unit: u8) {
@@ -184,6 +201,19 @@ impl Metrics {
             );
             for (u, v) in m.units.iter().filter(|(_, v)| v.circuit_open > 0) {
                 let _ = writeln!(s, "mbtap_bridge_circuit_open_total{{unit=\"{u}\"}} {}", v.circuit_open);
+            }
+            let _ = writeln!(
+                s,
+                "# HELP mbtap_bridge_unit_timeout_seconds The answer timeout in force for the unit (learnt with --timeout auto).\n# TYPE mbtap_bridge_unit_timeout_seconds gauge"
+            );
+            for (u, v) in &m.units {
+                if let Some(t) = v.timeout {
+                    let _ = writeln!(s, "mbtap_bridge_unit_timeout_seconds{{unit=\"{u}\"}} {}", t.as_secs_f64());
+                }
+            }
+            counter(&mut s, "mbtap_bridge_timeout_wait_seconds_total", "Line time spent waiting for answers that never came.");
+            for (u, v) in &m.units {
+                let _ = writeln!(s, "mbtap_bridge_timeout_wait_seconds_total{{unit=\"{u}\"}} {}", v.waited_in_vain.as_secs_f64());
             }
             counter(&mut s, "mbtap_bridge_crc_errors_total", "Answers whose CRC or LRC failed.");
             for (u, v) in &m.units {

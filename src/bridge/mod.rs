@@ -1,7 +1,7 @@
 //! The bridge: Modbus TCP clients (or raw RTU over TCP) reaching devices on serial lines.
 //!
-//! Pure parts: [`queue`] (fair per-client queues) and [`response`] (where a slave's answer
-//! ends). At the edge: [`line`] (the serial master, one transaction at a time, reopening a
+//! Pure parts: [`queue`] (fair per-client queues), [`timing`] (per-unit timeouts, fixed or
+//! learnt) and `mbtap_core::proto::answer_end` (where a slave's answer ends). At the edge: [`line`] (the serial master, one transaction at a time, reopening a
 //! lost port), [`server`] (the TCP side, each connection on its own), [`metrics`] (Prometheus
 //! text); [`reverse`] (an RTU slave on the serial side, a Modbus TCP client behind).
 
@@ -12,3 +12,4 @@ pub mod queue;
 pub mod reverse;
 pub mod run;
 pub mod server;
+pub mod timing;

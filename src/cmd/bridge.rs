@@ -39,6 +39,16 @@ pub struct Args {
     /// Response timeout per request, ms; then retries, then exception 0x0B.
     #[arg(long, default_value_t = 1000)]
     pub timeout_ms: u64,
+    /// `fixed`: --timeout-ms for every unit. `auto`: each unit's timeout learnt from its
+    /// answers (3 × its slowest of the last 32 + 10 ms, at least 20 ms, at most --timeout-ms,
+    /// doubled after each timeout), so a dead unit costs little line time and a slow one is not
+    /// cut off.
+    #[arg(long, value_enum, default_value_t = crate::bridge::timing::TimeoutMode::Fixed, value_name = "MODE")]
+    pub timeout: crate::bridge::timing::TimeoutMode,
+    /// A unit's own timeout (repeatable): `--unit-timeout 5=2000` for a slow unit beside fast
+    /// ones, `--unit-timeout 10-12=50`. Wins over --timeout auto.
+    #[arg(long, value_name = "UNITS=MS")]
+    pub unit_timeout: Vec<String>,
     /// Retries after a timeout or a failed CRC.
     #[arg(long, default_value_t = 0)]
     pub retries: u32,
@@ -118,6 +128,8 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         listen_rtu,
         routes,
         timeout_ms,
+        timeout,
+        unit_timeout,
         retries,
         turnaround_ms,
         broadcast_reply,
@@ -194,11 +206,14 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         idle_timeout.is_finite() && idle_timeout > 0.0,
         "--idle-timeout {idle_timeout}: expected seconds above 0"
     );
+    let unit_timeouts = crate::bridge::timing::parse_unit_timeouts(&unit_timeout).map_err(anyhow::Error::msg)?;
     let line_for = |port: String| crate::bridge::line::LineOptions {
         port,
         line: settings,
         mode,
         timeout: std::time::Duration::from_millis(timeout_ms),
+        timeout_mode: timeout,
+        unit_timeouts: unit_timeouts.clone(),
         retries,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         broadcast_reply,
@@ -366,6 +381,8 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "listen_rtu" => listen_rtu,
         "routes" => routes,
         "timeout_ms" => timeout_ms,
+        "timeout" => timeout,
+        "unit_timeout" => unit_timeout,
         "retries" => retries,
         "turnaround_ms" => turnaround_ms,
         "broadcast_reply" => broadcast_reply,
