@@ -161,7 +161,7 @@ fn per_unit_timeouts_fixed_and_learnt() {
     assert!(text(&o).contains("0x0B"), "{}", text(&o));
     let text = metrics(&m);
     let learnt = gauge(&text, "mbtap_bridge_unit_timeout_seconds", 1).unwrap();
-    assert!(learnt < 1.0 && learnt >= 0.02, "unit 1's learnt timeout {learnt} s: {text}");
+    assert!((0.02..1.0).contains(&learnt), "unit 1's learnt timeout {learnt} s: {text}");
     assert_eq!(gauge(&text, "mbtap_bridge_unit_timeout_seconds", 9), Some(0.05), "{text}");
     assert_eq!(gauge(&text, "mbtap_bridge_unit_timeout_seconds", 8), Some(1.0), "never heard: the ceiling");
     assert_eq!(gauge(&text, "mbtap_bridge_timeout_wait_seconds_total", 9), Some(0.05), "{text}");
