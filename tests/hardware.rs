@@ -167,3 +167,106 @@ fn per_unit_timeouts_fixed_and_learnt() {
     assert_eq!(gauge(&text, "mbtap_bridge_timeout_wait_seconds_total", 9), Some(0.05), "{text}");
     assert_eq!(gauge(&text, "mbtap_bridge_timeout_wait_seconds_total", 1), Some(0.0), "{text}");
 }
+
+/// How the scripted adapter gives a request back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EchoKind {
+    Exact,
+    /// One byte of the echo changed: another driver on the line.
+    ChangedByte,
+    /// The echo 30 ms after the request.
+    Late,
+    Never,
+}
+
+/// A scripted half-duplex adapter with a device behind it on the far end of a pty pair: each
+/// read-holding-registers request (8 bytes) is given back as `kind` says, then answered by unit
+/// 1 with holding register N = 100 + N.
+fn fake_adapter(path: &Path, kind: EchoKind) {
+    use std::io::{Read, Write};
+    let _ = Command::new("stty").args(["-F", path.to_str().unwrap(), "raw", "-echo"]).status();
+    let mut port = std::fs::OpenOptions::new().read(true).write(true).open(path).unwrap();
+    std::thread::spawn(move || {
+        let mut req = Vec::new();
+        let mut buf = [0u8; 256];
+        loop {
+            let Ok(n) = port.read(&mut buf) else { return };
+            if n == 0 {
+                return;
+            }
+            req.extend_from_slice(&buf[..n]);
+            while req.len() >= 8 {
+                let r: Vec<u8> = req.drain(..8).collect();
+                let mut echo = r.clone();
+                match kind {
+                    EchoKind::Exact => {}
+                    EchoKind::ChangedByte => echo[3] ^= 0x10,
+                    EchoKind::Late => std::thread::sleep(std::time::Duration::from_millis(30)),
+                    EchoKind::Never => echo.clear(),
+                }
+                let (address, quantity) = (u16::from_be_bytes([r[2], r[3]]), u16::from_be_bytes([r[4], r[5]]));
+                // Unit 1, function 03, byte count, the registers, CRC low byte first.
+                let mut answer = vec![r[0], 0x03, u8::try_from(quantity * 2).unwrap()];
+                for a in address..address + quantity {
+                    answer.extend_from_slice(&(100 + a).to_be_bytes());
+                }
+                let crc = mbtap_core::proto::crc16(&answer);
+                answer.extend_from_slice(&crc.to_le_bytes());
+                echo.extend_from_slice(&answer);
+                if port.write_all(&echo).is_err() {
+                    return;
+                }
+            }
+        }
+    });
+}
+
+/// A bridge with `--echo echo` on a pty whose far end is the scripted adapter; what a read of
+/// holding 0..3 gave, and the bridge's metrics after it.
+fn through_adapter(name: &str, kind: EchoKind, echo: &str) -> (Output, String) {
+    let d = dir(name);
+    let (_socat, a, b) = socat_pair(&d);
+    fake_adapter(&b, kind);
+    let (_bridge, tcp, m) = bridge_with_metrics(&a, &["--echo", echo, "--timeout-ms", "300"]);
+    let o = mbtap(&["read", &tcp, "--unit", "1", "--timeout-ms", "2000", "--format", "jsonl", "holding", "0..3"]);
+    let text = metrics(&m);
+    (o, text)
+}
+
+fn raws(o: &Output) -> Vec<i64> {
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok()?["raw"].as_i64())
+        .collect()
+}
+
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn an_echoing_adapter_exact_late_changed_and_silent() {
+    // Echo given back exactly: consumed, the answer read after it.
+    let (o, m) = through_adapter("echo-exact", EchoKind::Exact, "on");
+    assert_eq!(raws(&o), [100, 101, 102, 103], "{}\n{m}", text(&o));
+    assert_eq!(gauge(&m, "mbtap_bridge_collisions_total", 1), Some(0.0), "{m}");
+    // auto finds it from the first request.
+    let (o, _) = through_adapter("echo-auto", EchoKind::Exact, "auto");
+    assert_eq!(raws(&o), [100, 101, 102, 103], "{}", text(&o));
+    // Late (30 ms): still the echo, then the answer.
+    let (o, _) = through_adapter("echo-late", EchoKind::Late, "on");
+    assert_eq!(raws(&o), [100, 101, 102, 103], "{}", text(&o));
+    // A changed byte: a collision, counted; the client gets 0B, never the garbled exchange.
+    let (o, m) = through_adapter("echo-changed", EchoKind::ChangedByte, "on");
+    assert!(text(&o).contains("0x0B"), "{}", text(&o));
+    assert_eq!(gauge(&m, "mbtap_bridge_collisions_total", 1), Some(1.0), "{m}");
+    // Never echoed under --echo on: what came is a whole valid answer, so the adapter does not
+    // echo — counted as a missing echo, and the answer used (not mistaken for a collision).
+    let (o, m) = through_adapter("echo-never-on", EchoKind::Never, "on");
+    assert_eq!(raws(&o), [100, 101, 102, 103], "{}\n{m}", text(&o));
+    assert_eq!(gauge(&m, "mbtap_bridge_echo_missing_total", 1), Some(1.0), "{m}");
+    assert_eq!(gauge(&m, "mbtap_bridge_collisions_total", 1), Some(0.0), "{m}");
+    // …and under auto: no echo found, the answer read as it is.
+    let (o, m) = through_adapter("echo-never-auto", EchoKind::Never, "auto");
+    assert_eq!(raws(&o), [100, 101, 102, 103], "{}\n{m}", text(&o));
+    // The control: an echoing adapter with --echo off takes the echo for the answer and fails.
+    let (o, _) = through_adapter("echo-off", EchoKind::Exact, "off");
+    assert_ne!(raws(&o), [100, 101, 102, 103], "{}", text(&o));
+}

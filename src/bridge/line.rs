@@ -59,6 +59,8 @@ pub struct LineOptions {
     pub timeout_mode: super::timing::TimeoutMode,
     /// `--unit-timeout`: units with a timeout of their own.
     pub unit_timeouts: std::collections::BTreeMap<u8, Duration>,
+    /// `--echo`: whether the adapter hears its own transmission.
+    pub echo: EchoMode,
     /// Retries after a timeout or a failed check.
     pub retries: u32,
     /// Extra quiet time after t3.5 before the next request (slow slaves need it).
@@ -68,6 +70,33 @@ pub struct LineOptions {
     /// How late the adapter may deliver a byte (a USB adapter's latency timer): added to the
     /// silence that ends an answer of unknown length.
     pub latency: Duration,
+}
+
+/// Whether the adapter echoes what the bridge sends (an RS-485 transceiver whose receiver is
+/// not disabled while it drives the line hears every byte it sends).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum EchoMode {
+    /// Detect it from the first request whose answer cannot look like the request itself
+    /// (not 05, 06 or 08, whose normal answers echo the request).
+    #[default]
+    Auto,
+    /// The adapter echoes: consume exactly the frame sent before reading the answer; a
+    /// difference is a collision (another driver on the line).
+    On,
+    /// No echo.
+    Off,
+}
+
+/// What came back while the frame was expected as an echo.
+enum Echo {
+    /// The frame came back as sent; what followed it (the start of the answer).
+    Clean(Vec<u8>),
+    /// Something else came back: another driver on the line at the same time.
+    Collision(Vec<u8>),
+    /// Nothing (or too little) came back in time.
+    Missing,
+    /// `auto`, undecided: bytes that are not the frame — no echo; they start the answer.
+    NotEcho(Vec<u8>),
 }
 
 /// What the line task and the connections share.
@@ -172,8 +201,14 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
     // last byte, Serial Line v1.02 §2.5.1.1).
     let mut free_at = Instant::now();
     let timeouts = super::timing::Timeouts::new(opts.timeout, opts.timeout_mode, opts.unit_timeouts.clone());
-    let mut master =
-        Master { opts: &opts, shared: &shared, monitor: monitor.as_ref(), buf: Vec::with_capacity(600), timeouts };
+    let mut master = Master {
+        opts: &opts,
+        shared: &shared,
+        monitor: monitor.as_ref(),
+        buf: Vec::with_capacity(600),
+        timeouts,
+        echo_found: None,
+    };
     let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
     loop {
         let Some((_, job)) = shared.next() else {
@@ -269,6 +304,8 @@ struct Master<'a> {
     monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
     buf: Vec<u8>,
     timeouts: super::timing::Timeouts,
+    /// With `--echo auto`: what the first telling request found.
+    echo_found: Option<bool>,
 }
 
 impl Master<'_> {
@@ -316,7 +353,58 @@ impl Master<'_> {
             }
             let timeout = self.timeouts.get(job.unit);
             self.shared.metrics.unit_timeout(job.unit, timeout);
-            let outcome = self.read_answer(port, job.unit, function, sent, timeout).await?;
+            let initial = match self.echo_expected(function) {
+                None => Vec::new(),
+                Some(decided) => match self.consume_echo(port, &adu, sent + timeout, decided).await? {
+                    Echo::Clean(rest) => {
+                        if self.echo_found.is_none() && self.opts.echo == EchoMode::Auto {
+                            self.echo_found = Some(true);
+                            self.shared
+                                .metrics
+                                .note(&format!("{}: the adapter echoes what is sent (--echo auto)", self.opts.port));
+                        }
+                        rest
+                    }
+                    Echo::NotEcho(bytes) => {
+                        self.echo_found = Some(false);
+                        bytes
+                    }
+                    Echo::Collision(heard) => {
+                        // Not the frame: either no echo at all and this is the answer (the
+                        // adapter does not echo: counted, the answer used), or a collision.
+                        let (answer, last) =
+                            self.read_answer(port, job.unit, function, sent, timeout, heard.clone(), true).await?;
+                        if let Some(pdu) = answer {
+                            self.shared.metrics.echo_missing(job.unit);
+                            self.timeouts.answered(job.unit, last.saturating_duration_since(sent));
+                            self.shared.metrics.response(job.unit, &pdu);
+                            return Ok((Reply::Pdu(pdu), last));
+                        }
+                        // The monitor sees what was really on the line in place of the request.
+                        self.observe(0, &heard);
+                        self.shared.metrics.collision(job.unit);
+                        if attempt <= self.opts.retries {
+                            wait_until(last + self.opts.line_guard()).await;
+                            continue;
+                        }
+                        self.shared.metrics.gateway_exception(job.unit, GATEWAY_TARGET_FAILED);
+                        return Ok((Reply::Gateway(GATEWAY_TARGET_FAILED), last));
+                    }
+                    Echo::Missing => {
+                        self.shared.metrics.echo_missing(job.unit);
+                        self.timeouts.timed_out(job.unit);
+                        self.shared.metrics.waited_in_vain(job.unit, timeout);
+                        let last = Instant::now();
+                        if attempt <= self.opts.retries {
+                            wait_until(last + self.opts.line_guard()).await;
+                            continue;
+                        }
+                        self.shared.metrics.gateway_exception(job.unit, GATEWAY_TARGET_FAILED);
+                        return Ok((Reply::Gateway(GATEWAY_TARGET_FAILED), last));
+                    }
+                },
+            };
+            let outcome = self.read_answer(port, job.unit, function, sent, timeout, initial, false).await?;
             match &outcome {
                 (Some(_), last) => self.timeouts.answered(job.unit, last.saturating_duration_since(sent)),
                 (None, last) if last.saturating_duration_since(sent) >= timeout => {
@@ -340,8 +428,61 @@ impl Master<'_> {
         }
     }
 
+    /// Whether to read the frame back before the answer: `Some(true)` when the adapter is known
+    /// to echo, `Some(false)` to find out (`auto`, first telling request), `None` not to.
+    fn echo_expected(&self, function: u8) -> Option<bool> {
+        match (self.opts.echo, self.echo_found) {
+            (EchoMode::Off, _) | (EchoMode::Auto, Some(false)) => None,
+            (EchoMode::On, _) | (EchoMode::Auto, Some(true)) => Some(true),
+            // 05, 06 and 08 answer with the request itself: an echo and an answer look alike.
+            (EchoMode::Auto, None) if matches!(function, 0x05 | 0x06 | 0x08) => None,
+            (EchoMode::Auto, None) => Some(false),
+        }
+    }
+
+    /// Reads back the frame just sent. `decided`: the adapter is known to echo (a difference is
+    /// a collision); otherwise bytes that differ from the frame mean there is no echo.
+    async fn consume_echo(
+        &mut self,
+        port: &mut SerialStream,
+        adu: &[u8],
+        deadline: Instant,
+        decided: bool,
+    ) -> std::io::Result<Echo> {
+        let mut heard: Vec<u8> = Vec::with_capacity(adu.len() + 64);
+        let mut chunk = [0u8; 512];
+        while heard.len() < adu.len() {
+            match tokio::time::timeout_at(deadline, port.read(&mut chunk)).await {
+                Ok(Ok(0)) => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
+                Ok(Ok(n)) => heard.extend_from_slice(chunk.get(..n).unwrap_or_default()),
+                Ok(Err(e)) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Ok(Err(e)) => return Err(e),
+                Err(_) => break,
+            }
+            let n = heard.len().min(adu.len());
+            if !decided && heard.get(..n) != adu.get(..n) {
+                return Ok(Echo::NotEcho(heard));
+            }
+        }
+        if heard.len() < adu.len() {
+            // An echoing adapter gives the frame back whether or not the unit answers: undecided,
+            // silence means no echo.
+            return Ok(match (decided, heard.is_empty()) {
+                (true, true) => Echo::Missing,
+                (true, false) => Echo::Collision(heard),
+                (false, _) => Echo::NotEcho(heard),
+            });
+        }
+        // Everything heard goes on: after a clean echo, what followed it; else all of it.
+        Ok(if heard.get(..adu.len()) == Some(adu) {
+            Echo::Clean(heard.split_off(adu.len()))
+        } else {
+            Echo::Collision(heard)
+        })
+    }
+
     /// Reads until an answer, a failed check or the timeout; the answer's PDU (or none) and
-    /// the time of the last byte.
+    /// the time of the last byte. `initial`: bytes already read that start the answer.
     async fn read_answer(
         &mut self,
         port: &mut SerialStream,
@@ -349,6 +490,8 @@ impl Master<'_> {
         function: u8,
         sent: Instant,
         timeout: Duration,
+        initial: Vec<u8>,
+        strict_start: bool,
     ) -> std::io::Result<(Option<Vec<u8>>, Instant)> {
         let deadline = sent + timeout;
         // RTU: t3.5 of silence ends a frame; ASCII: the 1 s inter-character timeout (Serial
@@ -361,6 +504,11 @@ impl Master<'_> {
         };
         self.buf.clear();
         let mut last = sent;
+        if !initial.is_empty() {
+            self.observe(1, &initial);
+            self.buf.extend_from_slice(&initial);
+            last = Instant::now();
+        }
         let mut chunk = [0u8; 512];
         loop {
             let now = Instant::now();
@@ -408,6 +556,9 @@ impl Master<'_> {
                     self.shared.metrics.crc_error(unit);
                     return Ok((None, last));
                 }
+                // `strict_start`: the answer must begin with the first byte (what came in place
+                // of an echo is judged whole: anything else is a collision).
+                Verdict::Foreign if strict_start => return Ok((None, last)),
                 Verdict::Foreign => self.buf.clear(),
             }
         }

@@ -24,6 +24,10 @@ struct Unit {
     timeout: Option<Duration>,
     /// Line time spent waiting for answers that never came.
     waited_in_vain: Duration,
+    /// The echo of a request differed from what was sent: another driver on the line.
+    collisions: u64,
+    /// `--echo on` and the request did not come back.
+    echo_missing: u64,
     buckets: [u64; BUCKETS.len()],
     latency_count: u64,
     latency_sum: f64,
@@ -83,6 +87,19 @@ impl Metrics {
     /// The timeout used for `unit`'s request.
     pub fn unit_timeout(&self, unit: u8, d: Duration) {
         self.with(|m| m.units.entry(unit).or_default().timeout = Some(d));
+    }
+
+    /// The echo of a request to `unit` was not what was sent.
+    pub fn collision(&self, unit: u8) {
+        self.with(|m| m.units.entry(unit).or_default().collisions += 1);
+        self.note(&format!(
+            "collision: the echo of a request to unit {unit} differed from what was sent (another driver on the line?)"
+        ));
+    }
+
+    /// A request to `unit` did not come back from an echoing adapter.
+    pub fn echo_missing(&self, unit: u8) {
+        self.with(|m| m.units.entry(unit).or_default().echo_missing += 1);
     }
 
     /// Line time lost waiting `d` for an answer from `unit` that never came.
@@ -214,6 +231,14 @@ impl Metrics {
             counter(&mut s, "mbtap_bridge_timeout_wait_seconds_total", "Line time spent waiting for answers that never came.");
             for (u, v) in &m.units {
                 let _ = writeln!(s, "mbtap_bridge_timeout_wait_seconds_total{{unit=\"{u}\"}} {}", v.waited_in_vain.as_secs_f64());
+            }
+            counter(&mut s, "mbtap_bridge_collisions_total", "Requests whose echo differed from what was sent: another driver on the line.");
+            for (u, v) in &m.units {
+                let _ = writeln!(s, "mbtap_bridge_collisions_total{{unit=\"{u}\"}} {}", v.collisions);
+            }
+            counter(&mut s, "mbtap_bridge_echo_missing_total", "Requests an echoing adapter (--echo on) did not give back.");
+            for (u, v) in m.units.iter().filter(|(_, v)| v.echo_missing > 0) {
+                let _ = writeln!(s, "mbtap_bridge_echo_missing_total{{unit=\"{u}\"}} {}", v.echo_missing);
             }
             counter(&mut s, "mbtap_bridge_crc_errors_total", "Answers whose CRC or LRC failed.");
             for (u, v) in &m.units {

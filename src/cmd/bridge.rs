@@ -45,6 +45,11 @@ pub struct Args {
     /// cut off.
     #[arg(long, value_enum, default_value_t = crate::bridge::timing::TimeoutMode::Fixed, value_name = "MODE")]
     pub timeout: crate::bridge::timing::TimeoutMode,
+    /// Whether the adapter hears its own transmission: `auto` finds out from the first request,
+    /// `on` consumes each request's echo before the answer (a difference is a collision,
+    /// counted), `off` expects none.
+    #[arg(long, value_enum, default_value_t = crate::bridge::line::EchoMode::Auto)]
+    pub echo: crate::bridge::line::EchoMode,
     /// A unit's own timeout (repeatable): `--unit-timeout 5=2000` for a slow unit beside fast
     /// ones, `--unit-timeout 10-12=50`. Wins over --timeout auto.
     #[arg(long, value_name = "UNITS=MS")]
@@ -130,6 +135,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         timeout_ms,
         timeout,
         unit_timeout,
+        echo,
         retries,
         turnaround_ms,
         broadcast_reply,
@@ -214,6 +220,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         timeout: std::time::Duration::from_millis(timeout_ms),
         timeout_mode: timeout,
         unit_timeouts: unit_timeouts.clone(),
+        echo,
         retries,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         broadcast_reply,
@@ -383,6 +390,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "timeout_ms" => timeout_ms,
         "timeout" => timeout,
         "unit_timeout" => unit_timeout,
+        "echo" => echo,
         "retries" => retries,
         "turnaround_ms" => turnaround_ms,
         "broadcast_reply" => broadcast_reply,
