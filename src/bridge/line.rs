@@ -87,6 +87,16 @@ pub enum EchoMode {
     Off,
 }
 
+/// The answer a request waits for: from whom, to which function, from when, how long.
+#[derive(Debug, Clone, Copy)]
+struct Awaited {
+    unit: u8,
+    function: u8,
+    /// When the request's last character left.
+    sent: Instant,
+    timeout: Duration,
+}
+
 /// What came back while the frame was expected as an echo.
 enum Echo {
     /// The frame came back as sent; what followed it (the start of the answer).
@@ -95,8 +105,9 @@ enum Echo {
     Collision(Vec<u8>),
     /// Nothing (or too little) came back in time.
     Missing,
-    /// `auto`, undecided: bytes that are not the frame — no echo; they start the answer.
-    NotEcho(Vec<u8>),
+    /// `auto`, undecided: bytes that are not the frame — the adapter does not echo; they start
+    /// the answer.
+    Absent(Vec<u8>),
 }
 
 /// What the line task and the connections share.
@@ -353,6 +364,7 @@ impl Master<'_> {
             }
             let timeout = self.timeouts.get(job.unit);
             self.shared.metrics.unit_timeout(job.unit, timeout);
+            let awaited = Awaited { unit: job.unit, function, sent, timeout };
             let initial = match self.echo_expected(function) {
                 None => Vec::new(),
                 Some(decided) => match self.consume_echo(port, &adu, sent + timeout, decided).await? {
@@ -365,7 +377,7 @@ impl Master<'_> {
                         }
                         rest
                     }
-                    Echo::NotEcho(bytes) => {
+                    Echo::Absent(bytes) => {
                         self.echo_found = Some(false);
                         bytes
                     }
@@ -373,7 +385,7 @@ impl Master<'_> {
                         // Not the frame: either no echo at all and this is the answer (the
                         // adapter does not echo: counted, the answer used), or a collision.
                         let (answer, last) =
-                            self.read_answer(port, job.unit, function, sent, timeout, heard.clone(), true).await?;
+                            self.read_answer(port, awaited, heard.clone(), true).await?;
                         if let Some(pdu) = answer {
                             self.shared.metrics.echo_missing(job.unit);
                             self.timeouts.answered(job.unit, last.saturating_duration_since(sent));
@@ -404,7 +416,7 @@ impl Master<'_> {
                     }
                 },
             };
-            let outcome = self.read_answer(port, job.unit, function, sent, timeout, initial, false).await?;
+            let outcome = self.read_answer(port, awaited, initial, false).await?;
             match &outcome {
                 (Some(_), last) => self.timeouts.answered(job.unit, last.saturating_duration_since(sent)),
                 (None, last) if last.saturating_duration_since(sent) >= timeout => {
@@ -461,7 +473,7 @@ impl Master<'_> {
             }
             let n = heard.len().min(adu.len());
             if !decided && heard.get(..n) != adu.get(..n) {
-                return Ok(Echo::NotEcho(heard));
+                return Ok(Echo::Absent(heard));
             }
         }
         if heard.len() < adu.len() {
@@ -470,7 +482,7 @@ impl Master<'_> {
             return Ok(match (decided, heard.is_empty()) {
                 (true, true) => Echo::Missing,
                 (true, false) => Echo::Collision(heard),
-                (false, _) => Echo::NotEcho(heard),
+                (false, _) => Echo::Absent(heard),
             });
         }
         // Everything heard goes on: after a clean echo, what followed it; else all of it.
@@ -486,13 +498,11 @@ impl Master<'_> {
     async fn read_answer(
         &mut self,
         port: &mut SerialStream,
-        unit: u8,
-        function: u8,
-        sent: Instant,
-        timeout: Duration,
+        wait: Awaited,
         initial: Vec<u8>,
         strict_start: bool,
     ) -> std::io::Result<(Option<Vec<u8>>, Instant)> {
+        let Awaited { unit, function, sent, timeout } = wait;
         let deadline = sent + timeout;
         // RTU: t3.5 of silence ends a frame; ASCII: the 1 s inter-character timeout (Serial
         // Line v1.02 §2.5.2.1). Plus one timer tick, as reads come in 1 ms steps.
