@@ -270,3 +270,26 @@ fn an_echoing_adapter_exact_late_changed_and_silent() {
     let (o, _) = through_adapter("echo-off", EchoKind::Exact, "off");
     assert_ne!(raws(&o), [100, 101, 102, 103], "{}", text(&o));
 }
+
+/// Direction control a port cannot do is refused at start with the port's name and what to do,
+/// never a silent fallback: a pseudo-terminal has neither the kernel's RS-485 mode nor an RTS
+/// line. (Real transceivers: README "Wiring and adapters".)
+#[test]
+fn rs485_modes_a_pty_cannot_do_are_refused_clearly() {
+    let d = dir("rs485");
+    let bus = d.join("bus");
+    let _sim = simulator(&bus, &[]);
+    let b = bus.to_str().unwrap();
+    for (mode, says) in [("kernel", "does not take the kernel's RS-485 mode"), ("rts", "has no RTS line")] {
+        let o = mbtap(&["bridge", "--serial", b, "--listen", "127.0.0.1:0", "--rs485", mode, "--duration", "1"]);
+        assert_eq!(o.status.code(), Some(2), "--rs485 {mode}: {}", text(&o));
+        assert!(text(&o).contains(says) && text(&o).contains(b), "--rs485 {mode}: {}", text(&o));
+    }
+    let capture = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/mk4-doc-examples-rtu.pcapng");
+    let o = mbtap(&["play", capture.to_str().unwrap(), b, "--rs485", "kernel"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("TIOCSRS485"), "{}", text(&o));
+    // Off (an auto-direction adapter) is what a pty can do.
+    let o = mbtap(&["bridge", "--serial", b, "--listen", "127.0.0.1:0", "--rs485", "off", "--duration", "1"]);
+    assert!(o.status.success(), "{}", text(&o));
+}

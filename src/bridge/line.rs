@@ -7,7 +7,7 @@
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::AsyncReadExt;
 use tokio::sync::{Notify, mpsc, oneshot};
 use tokio::time::Instant;
 use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
@@ -61,6 +61,8 @@ pub struct LineOptions {
     pub unit_timeouts: std::collections::BTreeMap<u8, Duration>,
     /// `--echo`: whether the adapter hears its own transmission.
     pub echo: EchoMode,
+    /// `--rs485`: transmitter direction control.
+    pub rs485: crate::source::rs485::Rs485Args,
     /// Retries after a timeout or a failed check.
     pub retries: u32,
     /// Extra quiet time after t3.5 before the next request (slow slaves need it).
@@ -292,6 +294,8 @@ impl LineOptions {
 }
 
 fn open(opts: &LineOptions) -> Option<SerialStream> {
+    // Checked at start-up; a port that comes back must take the mode again.
+    opts.rs485.prepare(&opts.port).ok()?;
     let port = crate::source::serial::builder(&opts.port, opts.line).open_native_async().ok()?;
     let _ = port.clear(tokio_serial::ClearBuffer::All);
     Some(port)
@@ -353,10 +357,15 @@ impl Master<'_> {
             // Stale bytes (a late answer to an earlier request, noise) must not be taken for
             // this request's answer.
             let _ = port.clear(tokio_serial::ClearBuffer::Input);
-            port.write_all(&adu).await?;
+            self.opts.rs485.send(port, &adu).await?;
             self.observe_sent(0, &adu);
-            // The request is on the wire when its last character has left.
-            let sent = Instant::now() + self.opts.char_time() * u32::try_from(adu.len()).unwrap_or(u32::MAX);
+            // The request is on the wire when its last character has left (with --rs485 rts
+            // the send returned then: tcdrain).
+            let sent = if self.opts.rs485.rs485 == crate::source::rs485::Rs485Mode::Rts {
+                Instant::now()
+            } else {
+                Instant::now() + self.opts.char_time() * u32::try_from(adu.len()).unwrap_or(u32::MAX)
+            };
             if job.unit == 0 {
                 // Broadcast (Serial Line v1.02 §2.1): no answer; the turnaround delay follows.
                 let reply = if self.opts.broadcast_reply { echo_reply(&job.pdu) } else { Reply::Silence };
@@ -384,8 +393,7 @@ impl Master<'_> {
                     Echo::Collision(heard) => {
                         // Not the frame: either no echo at all and this is the answer (the
                         // adapter does not echo: counted, the answer used), or a collision.
-                        let (answer, last) =
-                            self.read_answer(port, awaited, heard.clone(), true).await?;
+                        let (answer, last) = self.read_answer(port, awaited, heard.clone(), true).await?;
                         if let Some(pdu) = answer {
                             self.shared.metrics.echo_missing(job.unit);
                             self.timeouts.answered(job.unit, last.saturating_duration_since(sent));

@@ -49,6 +49,8 @@ pub struct ReverseOptions {
     /// Without `read_only`: only these function codes are forwarded (None: all); with it, these
     /// are forwarded too.
     pub allow_functions: Option<Vec<u8>>,
+    /// `--rs485`: transmitter direction control for the answers.
+    pub rs485: crate::source::rs485::Rs485Args,
 }
 
 /// Runs until the future is dropped; the serial port is reopened when it goes away. With
@@ -58,7 +60,10 @@ pub async fn run(opts: ReverseOptions, metrics: Arc<Metrics>, monitor: Option<mp
     let mut tid: u16 = 0;
     let metrics = &*metrics;
     loop {
-        let Ok(mut port) = crate::source::serial::builder(&opts.port, opts.line).open_native_async() else {
+        let prepared = opts.rs485.prepare(&opts.port);
+        let Ok(mut port) =
+            prepared.and_then(|()| Ok(crate::source::serial::builder(&opts.port, opts.line).open_native_async()?))
+        else {
             metrics.note(&format!("cannot open {}; retrying", opts.port));
             tokio::time::sleep(Duration::from_secs(1)).await;
             continue;
@@ -176,7 +181,7 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
                 SerialMode::Rtu => encode_rtu(r.unit, &pdu, &mut out),
                 SerialMode::Ascii => encode_ascii(r.unit, &pdu, &mut out),
             }
-            port.write_all(&out).await?;
+            opts.rs485.send(port, &out).await?;
             side.monitor_sent(PortId(1), &out, opts.line.char_ns());
         }
     }

@@ -113,6 +113,9 @@ pub struct Args {
     /// Stop after this many seconds.
     #[arg(long)]
     pub duration: Option<f64>,
+    /// RS-485 direction control of the serial lines.
+    #[command(flatten)]
+    pub rs485: crate::source::rs485::Rs485Args,
     /// Publish what the monitor hears (values, unit health, findings) to MQTT.
     #[command(flatten)]
     pub mqtt: crate::publish::mqtt::MqttArgs,
@@ -155,6 +158,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         monitor,
         devices,
         duration,
+        rs485,
         mqtt,
     } = args;
     // The port name the MQTT prefix ends with.
@@ -196,6 +200,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
             read_only,
             allow_functions: allow_functions.clone(),
+            rs485,
         })
     } else {
         None
@@ -221,6 +226,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         timeout_mode: timeout,
         unit_timeouts: unit_timeouts.clone(),
         echo,
+        rs485,
         retries,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         broadcast_reply,
@@ -236,6 +242,10 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         lines.push((1..=247, line_for(port)));
     }
     anyhow::ensure!(reverse.is_some() || !lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
+    // Direction control the port cannot do is refused now, never a silent fallback.
+    for port in lines.iter().map(|(_, l)| l.port.as_str()).chain(reverse.as_ref().map(|r| r.port.as_str())) {
+        rs485.prepare(port)?;
+    }
     let allow_ips = allow_ips
         .iter()
         .map(|s| s.parse().map_err(|e: String| anyhow::anyhow!("--allow-ip: {e}")))
@@ -410,6 +420,10 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "monitor" => monitor,
         "devices" => devices,
         "duration" => duration,
+        "rs485" => rs485.rs485,
+        "rs485_delay_before_us" => rs485.rs485_delay_before_us,
+        "rs485_delay_after_us" => rs485.rs485_delay_after_us,
+        "rs485_rx_during_tx" => rs485.rs485_rx_during_tx,
         "mqtt" => mqtt.mqtt,
         "mqtt_prefix" => mqtt.mqtt_prefix,
         "mqtt_ca" => mqtt.mqtt_ca,

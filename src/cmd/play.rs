@@ -21,15 +21,17 @@ pub struct Args {
     /// or a corrupt timestamp must not make play wait for hours).
     #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
     pub max_gap: f64,
+    #[command(flatten)]
+    pub rs485: crate::source::rs485::Rs485Args,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
-    let Args { file, port, line, speed, max_gap } = args;
+    let Args { file, port, line, speed, max_gap, rs485 } = args;
     anyhow::ensure!(speed.is_finite() && *speed > 0.0, "--speed {speed}: expected a factor above 0, e.g. 1 or 10");
     anyhow::ensure!(max_gap.is_finite() && *max_gap >= 0.0, "--max-gap {max_gap}: expected seconds, 0 or more");
     let (_, settings, _) = line.overrides().resolve();
     let max_gap = std::time::Duration::from_secs_f64(max_gap.min(1e6));
-    let (packets, bytes) = crate::source::play::play(file, port, settings, *speed, max_gap)?;
+    let (packets, bytes) = crate::source::play::play(file, port, settings, *speed, max_gap, *rs485)?;
     eprintln!("mbtap: played {packets} packets ({bytes} bytes) into {port}");
     Ok(ExitCode::SUCCESS)
 }

@@ -7,6 +7,7 @@ pub mod demo;
 pub mod link;
 pub mod play;
 pub mod record;
+pub mod rs485;
 pub mod scan;
 pub mod serial;
 pub mod simulate;

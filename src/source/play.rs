@@ -24,8 +24,10 @@ pub fn play(
     line: LineSettings,
     speed: f64,
     max_gap: Duration,
+    rs485: crate::source::rs485::Rs485Args,
 ) -> anyhow::Result<(u64, u64)> {
     let input = crate::output::progress::open_capture(file, true)?;
+    rs485.prepare(port)?;
     let mut out = builder(port, line).open().with_context(|| format!("opening serial port {port}"))?;
     let mut reader = CaptureReader::new(std::io::BufReader::new(input));
     let start = Instant::now();
@@ -61,7 +63,8 @@ pub fn play(
                         _ => std::hint::spin_loop(),
                     }
                 }
-                out.write_all(data).with_context(|| format!("writing to {port}"))?;
+                // With --rs485 rts, RTS is raised around each packet as it was read.
+                rs485.send_blocking(&mut *out, data).with_context(|| format!("writing to {port}"))?;
                 packets += 1;
                 bytes += data.len() as u64;
             }
