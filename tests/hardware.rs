@@ -293,3 +293,82 @@ fn rs485_modes_a_pty_cannot_do_are_refused_clearly() {
     let o = mbtap(&["bridge", "--serial", b, "--listen", "127.0.0.1:0", "--rs485", "off", "--duration", "1"]);
     assert!(o.status.success(), "{}", text(&o));
 }
+
+/// Points `link` (standing in for `/dev/serial/by-id/…`) at `target`.
+fn relink(link: &Path, target: &Path) {
+    let _ = std::fs::remove_file(link);
+    std::os::unix::fs::symlink(target, link).unwrap();
+}
+
+/// A USB adapter unplugged and back as another `/dev/ttyUSBn`, its by-id link following it: the
+/// bridge finds it again through the link and says which device it is now.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn the_bridge_follows_a_by_id_link_to_the_renumbered_adapter() {
+    let d = dir("byid");
+    let (one, two, by_id) = (d.join("ttyUSB0"), d.join("ttyUSB1"), d.join("usb-FTDI_FT232R_A10K-if00-port0"));
+    let sim = simulator(&one, &[]);
+    relink(&by_id, &one);
+    let (_bridge, addrs, log) = bridge(&["--serial", by_id.to_str().unwrap(), "--listen", "127.0.0.1:0"]);
+    let tcp = addr(&addrs[0]).to_owned();
+    let read = || mbtap(&["read", &tcp, "--unit", "1", "--format", "jsonl", "input", "430"]);
+    assert!(read().status.success());
+    let before = std::fs::canonicalize(&one).unwrap();
+    drop(sim);
+    let _sim = simulator(&two, &[]);
+    relink(&by_id, &two);
+    let after = std::fs::canonicalize(&two).unwrap();
+    assert_ne!(before, after, "the second adapter must be another device");
+    // The line reopens with backoff: a hang guard, not a timing assertion.
+    let start = std::time::Instant::now();
+    while !read().status.success() {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(30),
+            "never reached the adapter again: {:?}",
+            log.lock().unwrap()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    let said = format!("is now {} (was {})", after.display(), before.display());
+    let start = std::time::Instant::now();
+    while !log.lock().unwrap().iter().any(|l| l.contains(&said)) {
+        assert!(start.elapsed() < std::time::Duration::from_secs(10), "no {said:?} in {:?}", log.lock().unwrap());
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
+/// The same for `sniff`: the port vanishes, comes back under another device behind the link,
+/// and the sniffer hears the line again, saying where it is now.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn sniff_follows_a_by_id_link_to_the_renumbered_adapter() {
+    let d = dir("byid-sniff");
+    let (one, two, by_id) = (d.join("ttyUSB0"), d.join("ttyUSB1"), d.join("by-id-port"));
+    let sim = simulator(&one, &["--poll"]);
+    relink(&by_id, &one);
+    let before = std::fs::canonicalize(&one).unwrap();
+    let sniff = Command::new(BIN)
+        .args(["sniff", by_id.to_str().unwrap(), "--format", "jsonl", "--duration", "7"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    drop(sim);
+    let _sim = simulator(&two, &["--poll"]);
+    relink(&by_id, &two);
+    let relinked_ns =
+        u64::try_from(std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos()).unwrap();
+    let after = std::fs::canonicalize(&two).unwrap();
+    let out = sniff.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("is now {} (was {})", after.display(), before.display())), "{err}");
+    assert!(err.contains(" is back"), "{err}");
+    // Transactions heard from the second adapter, after the link moved.
+    let ok_after = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|e| e["event"] == "transaction" && e["outcome"] == "ok" && e["t_ns"].as_u64() > Some(relinked_ns))
+        .count();
+    assert!(ok_after > 0, "nothing heard after the adapter came back:\n{err}");
+}

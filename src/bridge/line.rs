@@ -223,12 +223,13 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         echo_found: None,
     };
     let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
+    let mut watch = crate::source::serial::DeviceWatch::default();
     loop {
         let Some((_, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
             let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
             if port.is_none() && Instant::now() >= next_open {
-                port = open(&opts);
+                port = open(&opts, &shared, &mut watch);
             }
             continue;
         };
@@ -238,7 +239,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             continue;
         }
         if port.is_none() && Instant::now() >= next_open {
-            port = open(&opts);
+            port = open(&opts, &shared, &mut watch);
             if port.is_some() {
                 backoff = Duration::from_millis(100);
                 shared.metrics.reopened();
@@ -293,11 +294,21 @@ impl LineOptions {
     }
 }
 
-fn open(opts: &LineOptions) -> Option<SerialStream> {
+/// Opens the line's port (a by-id link or `usb:VID:PID[:SERIAL]` found again wherever the
+/// adapter came back), telling when the device behind the name changed.
+fn open(
+    opts: &LineOptions,
+    shared: &LineShared,
+    watch: &mut crate::source::serial::DeviceWatch,
+) -> Option<SerialStream> {
+    let path = crate::source::serial::resolve_port(&opts.port).ok()?;
     // Checked at start-up; a port that comes back must take the mode again.
-    opts.rs485.prepare(&opts.port).ok()?;
-    let port = crate::source::serial::builder(&opts.port, opts.line).open_native_async().ok()?;
+    opts.rs485.prepare(&path).ok()?;
+    let port = crate::source::serial::builder(&path, opts.line).open_native_async().ok()?;
     let _ = port.clear(tokio_serial::ClearBuffer::All);
+    if let Some(said) = watch.opened(&opts.port, &path) {
+        shared.metrics.note(&said);
+    }
     Some(port)
 }
 

@@ -25,6 +25,10 @@ pub struct Args {
     /// The serial port of the line (all units; see --route for several lines).
     #[arg(long)]
     pub serial: Option<String>,
+    /// The line's USB adapter by its ids instead of a path, `VID:PID[:SERIAL]` (hex, as lsusb
+    /// prints them): found again under whatever /dev/ttyUSBn it comes back as.
+    #[arg(long, value_name = "VID:PID[:SERIAL]", conflicts_with = "serial")]
+    pub serial_match: Option<String>,
     #[command(flatten)]
     pub line: LineArgs,
     /// Modbus TCP (MBAP) listening address, e.g. 0.0.0.0:502 (port 0 picks a free port).
@@ -131,6 +135,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     let Args {
         config: _,
         serial,
+        serial_match,
         line,
         listen,
         listen_rtu,
@@ -161,6 +166,17 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         rs485,
         mqtt,
     } = args;
+    let serial = match serial_match {
+        Some(m) => {
+            let spec = format!("usb:{m}");
+            anyhow::ensure!(
+                crate::source::serial::UsbMatch::parse(&spec).is_some(),
+                "--serial-match {m:?}: expected VID:PID or VID:PID:SERIAL in hex, e.g. 0403:6001"
+            );
+            Some(spec)
+        }
+        None => serial,
+    };
     // The port name the MQTT prefix ends with.
     let source = serial.clone().unwrap_or_else(|| "bridge".to_owned());
     let (mode, settings, latency_ns) = line.overrides().resolve();
@@ -244,7 +260,9 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     anyhow::ensure!(reverse.is_some() || !lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
     // Direction control the port cannot do is refused now, never a silent fallback.
     for port in lines.iter().map(|(_, l)| l.port.as_str()).chain(reverse.as_ref().map(|r| r.port.as_str())) {
-        rs485.prepare(port)?;
+        if rs485.rs485 != crate::source::rs485::Rs485Mode::Off {
+            rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
+        }
     }
     let allow_ips = allow_ips
         .iter()
@@ -387,6 +405,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
     command_line_wins! {
         "config" => config,
         "serial" => serial,
+        "serial_match" => serial_match,
         "mode" => line.serial.mode,
         "baud" => line.serial.baud,
         "parity" => line.serial.parity,

@@ -88,3 +88,115 @@ pub fn prepare_latency(port: &str, said: Option<u64>, err: &mut dyn std::io::Wri
     };
     said.unwrap_or(found)
 }
+
+/// `usb:VID:PID[:SERIAL]` (hex ids, as `lsusb` prints them): the adapter wherever the kernel
+/// numbered it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UsbMatch {
+    pub vid: u16,
+    pub pid: u16,
+    pub serial: Option<String>,
+}
+
+impl UsbMatch {
+    /// `usb:0403:6001` or `usb:0403:6001:A10K1234`; `None` for anything else (a path).
+    #[must_use]
+    pub fn parse(spec: &str) -> Option<Self> {
+        let rest = spec.strip_prefix("usb:")?;
+        let mut parts = rest.splitn(3, ':');
+        let vid = u16::from_str_radix(parts.next()?, 16).ok()?;
+        let pid = u16::from_str_radix(parts.next()?, 16).ok()?;
+        let serial = parts.next().filter(|s| !s.is_empty()).map(str::to_owned);
+        Some(Self { vid, pid, serial })
+    }
+
+    fn matches(&self, vid: u16, pid: u16, serial: Option<&str>) -> bool {
+        self.vid == vid && self.pid == pid && self.serial.as_deref().is_none_or(|s| Some(s) == serial)
+    }
+}
+
+/// The path to open for a port as the user named it: a path as it is (a `/dev/serial/by-id/…`
+/// link follows its adapter when the kernel renumbers it), `usb:VID:PID[:SERIAL]` looked up
+/// among the USB serial ports present now.
+///
+/// # Errors
+/// No USB serial port matches (or more than one without a serial number to choose).
+pub fn resolve_port(spec: &str) -> std::io::Result<String> {
+    let Some(want) = UsbMatch::parse(spec) else { return Ok(spec.to_owned()) };
+    let ports = tokio_serial::available_ports().map_err(std::io::Error::other)?;
+    let found: Vec<String> = ports
+        .into_iter()
+        .filter(|p| match &p.port_type {
+            tokio_serial::SerialPortType::UsbPort(u) => want.matches(u.vid, u.pid, u.serial_number.as_deref()),
+            _ => false,
+        })
+        .map(|p| p.port_name)
+        .collect();
+    match found.as_slice() {
+        [one] => Ok(one.clone()),
+        [] => Err(std::io::Error::new(std::io::ErrorKind::NotFound, format!("no USB serial port matches {spec}"))),
+        many => Err(std::io::Error::other(format!(
+            "{} USB serial ports match {spec} ({}): add the adapter's serial number, usb:VID:PID:SERIAL",
+            many.len(),
+            many.join(", ")
+        ))),
+    }
+}
+
+/// Which device a port name leads to now, to tell the user when it changed (an adapter that
+/// came back as another `/dev/ttyUSBn` behind the same by-id link or USB ids).
+#[derive(Debug, Default)]
+pub struct DeviceWatch {
+    last: Option<std::path::PathBuf>,
+}
+
+impl DeviceWatch {
+    /// `spec` was just opened as `path`: a line to log when the device behind it changed.
+    pub fn opened(&mut self, spec: &str, path: &str) -> Option<String> {
+        let device = std::fs::canonicalize(path).ok()?;
+        let said = match &self.last {
+            Some(old) if *old != device => Some(format!("{spec} is now {} (was {})", device.display(), old.display())),
+            _ => None,
+        };
+        self.last = Some(device);
+        said
+    }
+}
+
+/// Opens a port as the user named it ([`resolve_port`]); says on `err` when the device behind
+/// the name is not the one `watch` saw last.
+///
+/// # Errors
+/// The name resolves to no port, or the port does not open.
+pub fn open_named(
+    spec: &str,
+    line: LineSettings,
+    watch: &mut DeviceWatch,
+    err: &mut dyn std::io::Write,
+) -> std::io::Result<tokio_serial::SerialStream> {
+    use tokio_serial::SerialPortBuilderExt as _;
+    let path = resolve_port(spec)?;
+    let port = builder(&path, line).open_native_async()?;
+    if let Some(said) = watch.opened(spec, &path) {
+        let _ = writeln!(err, "mbtap: {said}");
+    }
+    Ok(port)
+}
+
+#[cfg(test)]
+mod port_name_tests {
+    use super::*;
+
+    #[test]
+    fn usb_ids_with_and_without_a_serial_number() {
+        let m = UsbMatch::parse("usb:0403:6001:A10K").unwrap();
+        assert_eq!((m.vid, m.pid, m.serial.as_deref()), (0x0403, 0x6001, Some("A10K")));
+        assert!(m.matches(0x0403, 0x6001, Some("A10K")));
+        assert!(!m.matches(0x0403, 0x6001, Some("B2")));
+        let any = UsbMatch::parse("usb:1a86:7523").unwrap();
+        assert!(any.matches(0x1a86, 0x7523, None) && any.matches(0x1a86, 0x7523, Some("x")));
+        assert_eq!(UsbMatch::parse("/dev/ttyUSB0"), None);
+        assert_eq!(UsbMatch::parse("usb:zz:1"), None);
+        assert_eq!(resolve_port("/dev/ttyUSB0").unwrap(), "/dev/ttyUSB0");
+    }
+}

@@ -10,11 +10,10 @@ use std::time::Duration;
 
 use anyhow::Context;
 use tokio::io::AsyncReadExt;
-use tokio_serial::SerialPortBuilderExt;
 
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
-use crate::source::serial::{builder, now};
+use crate::source::serial::now;
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
@@ -59,8 +58,8 @@ pub async fn sniff<W: Write>(
         ..AnalyzerConfig::default()
     };
     let mut analyzer = Analyzer::new(config);
-    let mut stream = builder(&opts.port, opts.line)
-        .open_native_async()
+    let mut watch = crate::source::serial::DeviceWatch::default();
+    let mut stream = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err)
         .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?;
     let _ = writeln!(
         err,
@@ -102,7 +101,8 @@ pub async fn sniff<W: Write>(
                         if let Some(r) = recorder.as_mut() {
                             r.flush(err);
                         }
-                        if let Ok(s) = builder(&opts.port, opts.line).open_native_async() {
+                        // A by-id link or usb:VID:PID finds the adapter under its new name.
+                        if let Ok(s) = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err) {
                             let _ = writeln!(err, "mbtap: {} is back", opts.port);
                             break s;
                         }

@@ -13,11 +13,11 @@ use std::time::Duration;
 
 use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+use tokio_serial::{SerialPort, SerialStream};
 
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
-use crate::source::serial::{builder, now};
+use crate::source::serial::now;
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
@@ -47,8 +47,8 @@ pub struct TapOptions {
 /// When the port or the pseudo-terminal cannot be set up, or the recording written.
 pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &mut dyn Write) -> anyhow::Result<()> {
     let latency_ns = crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err);
-    let mut bus = builder(&opts.port, opts.line)
-        .open_native_async()
+    let mut watch = crate::source::serial::DeviceWatch::default();
+    let mut bus = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err)
         .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?;
     let (mut app, slave) = SerialStream::pair().context("creating a pseudo-terminal")?;
     let slave_path = slave.name().context("the pseudo-terminal has no name")?;
@@ -110,7 +110,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
                 // reopened as `sniff` does.
                 _ => {
                     let _ = writeln!(err, "mbtap: lost {}; the application's side stays open, waiting for the port to come back", opts.port);
-                    match reopen(&opts, &mut app, &mut stop, recorder.as_mut(), err).await {
+                    match reopen(&opts, &mut app, &mut stop, recorder.as_mut(), &mut watch, err).await {
                         Some(b) => {
                             let _ = writeln!(err, "mbtap: {} is back", opts.port);
                             bus = b;
@@ -158,6 +158,7 @@ async fn reopen(
     app: &mut SerialStream,
     stop: &mut std::pin::Pin<Box<impl std::future::Future<Output = ()>>>,
     mut recorder: Option<&mut Recorder>,
+    watch: &mut crate::source::serial::DeviceWatch,
     err: &mut dyn Write,
 ) -> Option<SerialStream> {
     let mut scratch = [0u8; 1024];
@@ -177,7 +178,7 @@ async fn reopen(
                 if let Some(r) = recorder.as_deref_mut() {
                     r.flush(err);
                 }
-                if let Ok(b) = builder(&opts.port, opts.line).open_native_async() {
+                if let Ok(b) = crate::source::serial::open_named(&opts.port, opts.line, watch, err) {
                     return Some(b);
                 }
             }
