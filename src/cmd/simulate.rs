@@ -30,6 +30,10 @@ pub struct Args {
     /// have crossed the line, answers leave at the character rate.
     #[arg(long)]
     pub paced: bool,
+    /// Echo every byte the master sends back to it before the answer, as a half-duplex adapter
+    /// whose receiver stays on does (for `bridge --echo`).
+    #[arg(long)]
+    pub echo: bool,
     /// Play the master too: poll the devices and put the whole line on the pseudo-terminal,
     /// paced at the line's character rate, for a listener (`mbtap sniff LINK`).
     #[arg(long)]
@@ -48,7 +52,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { link, devices, line, duration, turnaround_ms, paced, poll, faults, heard_at, follow_baud } = args;
+    let Args { link, devices, line, duration, turnaround_ms, paced, echo, poll, faults, heard_at, follow_baud } = args;
     anyhow::ensure!(
         turnaround_ms.is_finite() && turnaround_ms >= 0.0,
         "--turnaround-ms {turnaround_ms}: expected 0 or more"
@@ -68,6 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         duration: seconds(duration),
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         paced,
+        echo,
         poll: poll.then(|| crate::source::simulate::PollOptions { faults: fault_list(&faults), heard_at, follow_baud }),
     };
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;

@@ -64,6 +64,9 @@ pub struct SimulateOptions {
     /// Answer mode: take the line's time — a request ends when its characters would have
     /// crossed the line, and the answer leaves at the character rate (in 1 ms batches).
     pub paced: bool,
+    /// The master's adapter hears its own transmission (a half-duplex transceiver whose
+    /// receiver stays on): every byte the master sends comes back to it, before the answer.
+    pub echo: bool,
     /// Play the master too (`--poll`): the whole line goes out on the pseudo-terminal, for a
     /// listener (`mbtap sniff`) to hear.
     pub poll: Option<PollOptions>,
@@ -169,6 +172,16 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
             Ok(Ok(n)) => {
                 let (_, count) = request_start.get_or_insert((tokio::time::Instant::now(), 0));
                 *count += n;
+                if opts.echo {
+                    let echo = buf.get(..n).unwrap_or_default();
+                    if opts.paced {
+                        write_paced(&mut master_side, echo, char_time).await?;
+                    } else {
+                        AsyncWriteExt::write_all(&mut master_side, echo)
+                            .await
+                            .context("echoing to the pseudo-terminal")?;
+                    }
+                }
                 assembler.push(buf.get(..n).unwrap_or_default(), &mut requests);
             }
             // EIO while no master has the far end open; try again shortly.
