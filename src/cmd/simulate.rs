@@ -10,6 +10,8 @@ use mbtap_core::framer::LineSettings;
 use crate::args::{FaultArg, LineArgs, fault_list, seconds};
 
 #[derive(Debug, clap::Args)]
+// Command-line switches are bools by nature; each is an independent option, not a state.
+#[allow(clippy::struct_excessive_bools)]
 /// Simulated devices on a pseudo-terminal: point a Modbus master (or mbtap) at --link.
 pub struct Args {
     /// Where to create the pseudo-terminal link for the master.
