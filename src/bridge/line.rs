@@ -63,6 +63,8 @@ pub struct LineOptions {
     pub echo: EchoMode,
     /// `--rs485`: transmitter direction control.
     pub rs485: crate::source::rs485::Rs485Args,
+    /// `--cache` rules for this line's units.
+    pub cache: Vec<super::cache::Rule>,
     /// Retries after a timeout or a failed check.
     pub retries: u32,
     /// Extra quiet time after t3.5 before the next request (slow slaves need it).
@@ -118,16 +120,55 @@ pub struct LineShared {
     queue: Mutex<FairQueue<Job>>,
     wake: Notify,
     pub metrics: Metrics,
+    /// Answers from memory (`--cache`), filled and invalidated by the line, read by the
+    /// connections before they queue.
+    cache: Mutex<super::cache::Cache>,
 }
 
 impl LineShared {
     #[must_use]
-    pub fn new(per_client: usize) -> Arc<Self> {
+    pub fn new(per_client: usize, cache: Vec<super::cache::Rule>) -> Arc<Self> {
         Arc::new(Self {
             queue: Mutex::new(FairQueue::new(per_client)),
             wake: Notify::new(),
             metrics: Metrics::default(),
+            cache: Mutex::new(super::cache::Cache::new(cache)),
         })
+    }
+
+    fn cache(&self) -> std::sync::MutexGuard<'_, super::cache::Cache> {
+        self.cache.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The answer from the cache, when `--cache` covers the read and it is fresh (counted as a
+    /// hit; a covered read that must go to the line as a miss).
+    pub fn cached(&self, unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
+        let cache = self.cache();
+        if !cache.is_on() {
+            return None;
+        }
+        let answer = cache.lookup(unit, pdu, Instant::now().into_std());
+        drop(cache);
+        self.metrics.cache(answer.is_some());
+        answer
+    }
+
+    /// Identical reads other clients have waiting at the head of their queues: they share this
+    /// one's answer (coalescing; reads only — a write twice is two writes).
+    fn twins(&self, client: ClientId, job: &Job) -> Vec<Job> {
+        if job.unit == 0 || !matches!(job.pdu.first(), Some(0x01..=0x04)) {
+            return Vec::new();
+        }
+        let twins: Vec<Job> = self
+            .queue()
+            .take_heads(client, |j| j.unit == job.unit && j.pdu == job.pdu)
+            .into_iter()
+            .map(|(_, j)| j)
+            .collect();
+        if !twins.is_empty() {
+            self.metrics.coalesced(twins.len());
+        }
+        twins
     }
 
     fn queue(&self) -> std::sync::MutexGuard<'_, FairQueue<Job>> {
@@ -225,7 +266,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
     let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
     let mut watch = crate::source::serial::DeviceWatch::default();
     loop {
-        let Some((_, job)) = shared.next() else {
+        let Some((client, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
             let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
             if port.is_none() && Instant::now() >= next_open {
@@ -261,8 +302,18 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             continue;
         }
         wait_until(free_at).await;
+        let twins = shared.twins(client, &job);
+        // A write may change what the cache holds, whatever its outcome.
+        shared.cache().invalidate(job.unit, &job.pdu);
         match master.transact(p, &job).await {
             Ok((reply, last_byte)) => {
+                if let Reply::Pdu(answer) = &reply {
+                    shared.cache().fill(job.unit, &job.pdu, answer, Instant::now().into_std());
+                }
+                for twin in twins {
+                    shared.metrics.latency(twin.unit, twin.queued.elapsed());
+                    let _ = twin.reply.send(reply.clone());
+                }
                 if job.unit != 0 {
                     let answered = !matches!(reply, Reply::Gateway(GATEWAY_TARGET_FAILED));
                     breakers.entry(job.unit).or_default().record(answered, Instant::now());
@@ -272,6 +323,9 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
                 let _ = job.reply.send(reply);
             }
             Err(lost) => {
+                for twin in twins {
+                    let _ = twin.reply.send(Reply::Gateway(GATEWAY_PATH_UNAVAILABLE));
+                }
                 // The port failed under us: answer 0x0A and reopen with backoff.
                 shared.metrics.port_lost(&lost);
                 shared.metrics.gateway_exception(job.unit, GATEWAY_PATH_UNAVAILABLE);

@@ -43,6 +43,9 @@ struct Inner {
     connections_open: i64,
     refused: BTreeMap<&'static str, u64>,
     last_note: Option<String>,
+    cache_hits: u64,
+    cache_misses: u64,
+    coalesced: u64,
 }
 
 /// Counters shared by the line and the connections.
@@ -82,6 +85,16 @@ impl Metrics {
     /// A request answered at once because the unit's circuit breaker is open.
     pub fn circuit_open(&self, unit: u8) {
         self.with(|m| m.units.entry(unit).or_default().circuit_open += 1);
+    }
+
+    /// A covered read answered from the cache (`hit`) or sent to the line.
+    pub fn cache(&self, hit: bool) {
+        self.with(|m| if hit { m.cache_hits += 1 } else { m.cache_misses += 1 });
+    }
+
+    /// `n` requests answered with another client's identical read.
+    pub fn coalesced(&self, n: usize) {
+        self.with(|m| m.coalesced += n as u64);
     }
 
     /// The timeout used for `unit`'s request.
@@ -272,6 +285,12 @@ impl Metrics {
                 "# HELP mbtap_bridge_connections_open TCP connections open.\n# TYPE mbtap_bridge_connections_open gauge\nmbtap_bridge_connections_open {}",
                 m.connections_open
             );
+            counter(&mut s, "mbtap_bridge_cache_hits_total", "Reads answered from the cache (--cache).");
+            let _ = writeln!(s, "mbtap_bridge_cache_hits_total {}", m.cache_hits);
+            counter(&mut s, "mbtap_bridge_cache_misses_total", "Reads the cache covers that went to the line (missing or stale).");
+            let _ = writeln!(s, "mbtap_bridge_cache_misses_total {}", m.cache_misses);
+            counter(&mut s, "mbtap_bridge_coalesced_total", "Requests answered with another client's identical read, sent once.");
+            let _ = writeln!(s, "mbtap_bridge_coalesced_total {}", m.coalesced);
             counter(&mut s, "mbtap_bridge_refused_total", "Connections or requests refused, by reason.");
             for (r, n) in &m.refused {
                 let _ = writeln!(s, "mbtap_bridge_refused_total{{reason=\"{r}\"}} {n}");

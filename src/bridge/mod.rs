@@ -5,6 +5,7 @@
 //! lost port), [`server`] (the TCP side, each connection on its own), [`metrics`] (Prometheus
 //! text); [`reverse`] (an RTU slave on the serial side, a Modbus TCP client behind).
 
+pub mod cache;
 pub mod config;
 pub mod line;
 pub mod metrics;

@@ -57,6 +57,27 @@ impl<T> FairQueue<T> {
         Some((next, item))
     }
 
+    /// Takes the first waiting request of every other client for which `pred` holds — only
+    /// first ones, so each client's pipelined requests still come back in order.
+    pub fn take_heads(&mut self, except: ClientId, mut pred: impl FnMut(&T) -> bool) -> Vec<(ClientId, T)> {
+        let mut out = Vec::new();
+        let mut emptied = Vec::new();
+        for (&c, q) in &mut self.queues {
+            if c != except && q.front().is_some_and(&mut pred) {
+                if let Some(item) = q.pop_front() {
+                    out.push((c, item));
+                }
+                if q.is_empty() {
+                    emptied.push(c);
+                }
+            }
+        }
+        for c in emptied {
+            self.queues.remove(&c);
+        }
+        out
+    }
+
     /// Drops everything `client` still has waiting; how many.
     pub fn remove_client(&mut self, client: ClientId) -> usize {
         self.queues.remove(&client).map_or(0, |q| q.len())
@@ -101,6 +122,21 @@ mod tests {
         // The quiet client is served second, not after the flood.
         assert_eq!(q.pop(), Some((1, 0)));
         assert_eq!(q.pop(), Some((2, 1000)));
+    }
+
+    #[test]
+    fn twins_are_taken_from_the_heads_only() {
+        let mut q = FairQueue::new(10);
+        q.push(1, 'r').unwrap();
+        q.push(2, 'r').unwrap();
+        q.push(3, 'w').unwrap();
+        q.push(3, 'r').unwrap();
+        q.push(4, 'r').unwrap();
+        q.push(4, 'x').unwrap();
+        let (c, first) = q.pop().unwrap();
+        let twins = q.take_heads(c, |&i| i == first);
+        assert_eq!(twins, [(2, 'r'), (4, 'r')], "client 3's 'r' waits behind its 'w'");
+        assert_eq!(q.len(), 3);
     }
 
     #[test]

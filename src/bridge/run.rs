@@ -181,7 +181,7 @@ pub async fn bridge<W: Write>(
     } else {
         let mut routes = Vec::new();
         for (units, line_opts) in &opts.lines {
-            let shared = LineShared::new(opts.queue_per_client);
+            let shared = LineShared::new(opts.queue_per_client, line_opts.cache.clone());
             let monitor = monitoring.then(|| monitor_tx.clone());
             tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
             routes.push(Route { units: units.clone(), line: shared });

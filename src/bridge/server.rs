@@ -452,6 +452,9 @@ fn request(
     let Some(route) = routes.iter().find(|r| r.units.contains(&target) || target == 0) else {
         return refuse("no_route", GATEWAY_PATH_UNAVAILABLE);
     };
+    if let Some(answer) = route.line.cached(target, &pdu) {
+        return reply(Answer::Now(Reply::Pdu(answer)));
+    }
     let (tx, rx) = oneshot::channel();
     let job = Job { unit: target, pdu, reply: tx, queued: Instant::now() };
     match route.line.submit(client, job) {

@@ -54,6 +54,11 @@ pub struct Args {
     /// counted), `off` expects none.
     #[arg(long, value_enum, default_value_t = crate::bridge::line::EchoMode::Auto)]
     pub echo: crate::bridge::line::EchoMode,
+    /// Answer reads of these registers from memory while younger than MAX_AGE (repeatable):
+    /// `UNITS:TABLE:FIRST-LAST=MAX_AGE`, e.g. `1:holding:0-9=1s`, `1,5:input:430-433=500ms`.
+    /// Writes invalidate what they overlap; exceptions are never cached.
+    #[arg(long, value_name = "RULE")]
+    pub cache: Vec<String>,
     /// A unit's own timeout (repeatable): `--unit-timeout 5=2000` for a slow unit beside fast
     /// ones, `--unit-timeout 10-12=50`. Wins over --timeout auto.
     #[arg(long, value_name = "UNITS=MS")]
@@ -144,6 +149,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         timeout,
         unit_timeout,
         echo,
+        cache,
         retries,
         turnaround_ms,
         broadcast_reply,
@@ -234,6 +240,11 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         "--idle-timeout {idle_timeout}: expected seconds above 0"
     );
     let unit_timeouts = crate::bridge::timing::parse_unit_timeouts(&unit_timeout).map_err(anyhow::Error::msg)?;
+    let cache = cache
+        .iter()
+        .map(|r| crate::bridge::cache::parse_rule(r))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(anyhow::Error::msg)?;
     let line_for = |port: String| crate::bridge::line::LineOptions {
         port,
         line: settings,
@@ -243,6 +254,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         unit_timeouts: unit_timeouts.clone(),
         echo,
         rs485,
+        cache: cache.clone(),
         retries,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         broadcast_reply,
@@ -420,6 +432,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "timeout" => timeout,
         "unit_timeout" => unit_timeout,
         "echo" => echo,
+        "cache" => cache,
         "retries" => retries,
         "turnaround_ms" => turnaround_ms,
         "broadcast_reply" => broadcast_reply,

@@ -1,0 +1,249 @@
+//! The bridge's register cache (`--cache UNITS:TABLE:FIRST-LAST=MAX_AGE`): reads of covered
+//! registers are answered from memory while every register asked for is younger than its
+//! rule's maximum age, otherwise they go to the line and the answer fills the cache. Writes
+//! that reach the line invalidate what they overlap (whatever their outcome: a write that timed
+//! out may have been done). Exceptions are never cached. Time is an input: no clock here.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::{Duration, Instant};
+
+/// A table a read function addresses (MAP v1.1b3 §6.1–§6.4): the function code reads it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Table {
+    Coils = 0x01,
+    Discrete = 0x02,
+    Holding = 0x03,
+    Input = 0x04,
+}
+
+impl Table {
+    fn of_read(function: u8) -> Option<Self> {
+        match function {
+            0x01 => Some(Self::Coils),
+            0x02 => Some(Self::Discrete),
+            0x03 => Some(Self::Holding),
+            0x04 => Some(Self::Input),
+            _ => None,
+        }
+    }
+
+    fn word(s: &str) -> Option<Self> {
+        match s {
+            "coils" | "coil" => Some(Self::Coils),
+            "discrete" | "discrete_inputs" => Some(Self::Discrete),
+            "holding" | "holding_registers" => Some(Self::Holding),
+            "input" | "input_registers" => Some(Self::Input),
+            _ => None,
+        }
+    }
+
+    const fn bits(self) -> bool {
+        matches!(self, Self::Coils | Self::Discrete)
+    }
+}
+
+/// One `--cache` rule.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Rule {
+    pub units: BTreeSet<u8>,
+    pub table: Table,
+    pub first: u16,
+    pub last: u16,
+    pub max_age: Duration,
+}
+
+/// `1:holding:0-9=1s`, `1,5-7:input:430-433=500ms`.
+///
+/// # Errors
+/// What part is wrong, with the value.
+pub fn parse_rule(spec: &str) -> Result<Rule, String> {
+    let bad = |what: &str| {
+        format!("--cache {spec:?}: {what}; expected UNITS:TABLE:FIRST-LAST=MAX_AGE, e.g. 1:holding:0-9=1s")
+    };
+    let (head, age) = spec.split_once('=').ok_or_else(|| bad("no =MAX_AGE"))?;
+    let mut parts = head.splitn(3, ':');
+    let (units, table, range) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""), parts.next().unwrap_or(""));
+    let units = super::run::parse_units(units).map_err(|e| bad(&format!("{e:#}")))?;
+    if units.is_empty() {
+        return Err(bad("no unit"));
+    }
+    let table =
+        Table::word(table.trim()).ok_or_else(|| bad(&format!("{table:?} is not coils, discrete, holding or input")))?;
+    let (a, b) = range.split_once('-').unwrap_or((range, range));
+    let num = |s: &str| s.trim().parse::<u16>().map_err(|_| bad(&format!("{s:?} is not an address 0..=65535")));
+    let (first, last) = (num(a)?, num(b)?);
+    if last < first {
+        return Err(bad("the range runs backwards"));
+    }
+    let age = age.trim();
+    let (n, scale) = if let Some(n) = age.strip_suffix("ms") {
+        (n, 1e-3)
+    } else if let Some(n) = age.strip_suffix('s') {
+        (n, 1.0)
+    } else {
+        (age, 1.0)
+    };
+    let secs = n.trim().parse::<f64>().ok().map(|v| v * scale).filter(|v| (0.0..=86_400.0).contains(v) && *v > 0.0);
+    let max_age = Duration::from_secs_f64(secs.ok_or_else(|| bad(&format!("{age:?} is not an age like 1s or 500ms")))?);
+    Ok(Rule { units, table, first, last, max_age })
+}
+
+/// The cache of one line.
+#[derive(Debug, Default)]
+pub struct Cache {
+    rules: Vec<Rule>,
+    values: BTreeMap<(u8, Table, u16), (u16, Instant)>,
+}
+
+/// A read request's table, address and quantity, when it is one.
+fn read_of(pdu: &[u8]) -> Option<(Table, u16, u16)> {
+    let table = Table::of_read(*pdu.first()?)?;
+    let address = u16::from_be_bytes([*pdu.get(1)?, *pdu.get(2)?]);
+    let quantity = u16::from_be_bytes([*pdu.get(3)?, *pdu.get(4)?]);
+    (pdu.len() == 5 && quantity > 0).then_some((table, address, quantity))
+}
+
+impl Cache {
+    #[must_use]
+    pub fn new(rules: Vec<Rule>) -> Self {
+        Self { rules, values: BTreeMap::new() }
+    }
+
+    /// Whether there are rules at all.
+    #[must_use]
+    pub fn is_on(&self) -> bool {
+        !self.rules.is_empty()
+    }
+
+    fn max_age(&self, unit: u8, table: Table, address: u16) -> Option<Duration> {
+        self.rules
+            .iter()
+            .filter(|r| r.table == table && r.units.contains(&unit) && (r.first..=r.last).contains(&address))
+            .map(|r| r.max_age)
+            .min()
+    }
+
+    /// The answer from memory to `pdu` for `unit` at `now`, when every register it reads is
+    /// covered and fresh.
+    #[must_use]
+    pub fn lookup(&self, unit: u8, pdu: &[u8], now: Instant) -> Option<Vec<u8>> {
+        let (table, address, quantity) = read_of(pdu)?;
+        let mut values = Vec::with_capacity(usize::from(quantity));
+        for i in 0..quantity {
+            let a = address.checked_add(i)?;
+            let max_age = self.max_age(unit, table, a)?;
+            let &(v, at) = self.values.get(&(unit, table, a))?;
+            if now.saturating_duration_since(at) > max_age {
+                return None;
+            }
+            values.push(v);
+        }
+        let mut out = vec![table as u8];
+        if table.bits() {
+            // MAP v1.1b3 §6.1: packed, LSB of the first byte is the first point.
+            let mut bytes = vec![0u8; values.len().div_ceil(8)];
+            for (i, v) in values.iter().enumerate() {
+                if *v != 0 {
+                    bytes[i / 8] |= 1 << (i % 8);
+                }
+            }
+            out.push(u8::try_from(bytes.len()).ok()?);
+            out.extend(bytes);
+        } else {
+            out.push(u8::try_from(values.len() * 2).ok()?);
+            out.extend(values.iter().flat_map(|v| v.to_be_bytes()));
+        }
+        Some(out)
+    }
+
+    /// A normal answer `response` to `request` for `unit`, received at `now`: the covered
+    /// registers are kept. Exceptions and malformed answers are not.
+    pub fn fill(&mut self, unit: u8, request: &[u8], response: &[u8], now: Instant) {
+        let Some((table, address, quantity)) = read_of(request) else { return };
+        if response.first() != Some(&(table as u8)) {
+            return;
+        }
+        let data = response.get(2..).unwrap_or_default();
+        for i in 0..quantity {
+            let Some(a) = address.checked_add(i) else { break };
+            if self.max_age(unit, table, a).is_none() {
+                continue;
+            }
+            let i = usize::from(i);
+            let v = if table.bits() {
+                data.get(i / 8).map(|b| u16::from(b >> (i % 8) & 1))
+            } else {
+                data.get(i * 2..i * 2 + 2).map(|p| u16::from_be_bytes([p[0], p[1]]))
+            };
+            if let Some(v) = v {
+                self.values.insert((unit, table, a), (v, now));
+            }
+        }
+    }
+
+    /// A write `request` sent to `unit` (broadcast: every unit): what it may have changed is
+    /// forgotten — holding registers for 06/10/16/17, coils for 05/0F.
+    pub fn invalidate(&mut self, unit: u8, request: &[u8]) {
+        let field = |i: usize| request.get(i..i + 2).map(|p| u16::from_be_bytes([p[0], p[1]]));
+        let (table, address, quantity) = match request.first() {
+            Some(0x05) => (Table::Coils, field(1), Some(1)),
+            Some(0x0F) => (Table::Coils, field(1), field(3)),
+            Some(0x06 | 0x16) => (Table::Holding, field(1), Some(1)),
+            Some(0x10) => (Table::Holding, field(1), field(3)),
+            // 17: the write part starts at byte 5 (MAP v1.1b3 §6.17).
+            Some(0x17) => (Table::Holding, field(5), field(7)),
+            _ => return,
+        };
+        let (Some(address), Some(quantity)) = (address, quantity) else { return };
+        let last = address.saturating_add(quantity.saturating_sub(1));
+        self.values.retain(|&(u, t, a), _| !((u == unit || unit == 0) && t == table && (address..=last).contains(&a)));
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    /// Read holding 0–1 of unit 1 (03 0000 0002) and its answer 03 04 000A 000B.
+    const READ: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x02];
+    const ANSWER: [u8; 6] = [0x03, 0x04, 0x00, 0x0A, 0x00, 0x0B];
+
+    #[test]
+    fn answered_from_memory_while_fresh_and_forgotten_on_write() {
+        let t0 = Instant::now();
+        let mut c = Cache::new(vec![parse_rule("1:holding:0-9=1s").unwrap()]);
+        assert_eq!(c.lookup(1, &READ, t0), None, "empty");
+        c.fill(1, &READ, &ANSWER, t0);
+        assert_eq!(c.lookup(1, &READ, t0 + Duration::from_millis(900)), Some(ANSWER.to_vec()));
+        assert_eq!(c.lookup(1, &READ, t0 + Duration::from_millis(1001)), None, "stale");
+        assert_eq!(c.lookup(2, &READ, t0), None, "another unit");
+        // Holding 1..10: 10 is outside the rule.
+        assert_eq!(c.lookup(1, &[0x03, 0x00, 0x01, 0x00, 0x0A], t0), None);
+        // A write to holding 1 (06 0001 0007) forgets it, not holding 0.
+        c.invalidate(1, &[0x06, 0x00, 0x01, 0x00, 0x07]);
+        assert_eq!(c.lookup(1, &READ, t0), None);
+        assert_eq!(c.lookup(1, &[0x03, 0x00, 0x00, 0x00, 0x01], t0), Some(vec![0x03, 0x02, 0x00, 0x0A]));
+    }
+
+    #[test]
+    fn exceptions_are_never_cached_and_bits_pack() {
+        let t0 = Instant::now();
+        let mut c = Cache::new(vec![parse_rule("1:holding:0-9=1s").unwrap(), parse_rule("1:coils:0-7=1s").unwrap()]);
+        c.fill(1, &READ, &[0x83, 0x02], t0);
+        assert_eq!(c.lookup(1, &READ, t0), None);
+        // Coils 0–4 = 1,0,1,1,0 (01 01 0D).
+        c.fill(1, &[0x01, 0x00, 0x00, 0x00, 0x05], &[0x01, 0x01, 0x0D], t0);
+        assert_eq!(c.lookup(1, &[0x01, 0x00, 0x01, 0x00, 0x03], t0), Some(vec![0x01, 0x01, 0x06]));
+    }
+
+    #[test]
+    fn rules_say_what_is_wrong() {
+        assert!(parse_rule("1:holding:0-9").unwrap_err().contains("=MAX_AGE"));
+        assert!(parse_rule("1:register:0-9=1s").unwrap_err().contains("\"register\""));
+        assert!(parse_rule("1:holding:9-0=1s").unwrap_err().contains("backwards"));
+        assert!(parse_rule("1:holding:0-9=0s").is_err());
+        let r = parse_rule("1,5-6:input:430-433=500ms").unwrap();
+        assert_eq!((r.units.len(), r.first, r.last, r.max_age), (3, 430, 433, Duration::from_millis(500)));
+    }
+}

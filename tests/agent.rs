@@ -1,0 +1,153 @@
+//! Beyond the line's limit (issue 19): identical reads from many clients go out once
+//! (coalescing), and `--cache` answers covered reads from memory while fresh, forgets what a
+//! write overlaps and never keeps an exception. Against `mbtap simulate --paced` on a real
+//! pseudo-terminal at 9600 baud (a line that takes its time): `#[ignore]`d in a plain
+//! `cargo test`, run by `.ci/run` with `--ignored`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+mod common;
+use common::{BIN, Kill, wait_for};
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mbtap-agent-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn paced_line(link: &Path) -> Kill {
+    let sim = Kill(
+        Command::new(BIN)
+            .args(["simulate", "--link", link.to_str().unwrap(), "--paced", "--baud", "9600", "--duration", "120"])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_for(link);
+    sim
+}
+
+fn bridge(link: &Path, extra: &[&str]) -> (Kill, String, String) {
+    let mut child = Command::new(BIN)
+        .args(["bridge", "--serial", link.to_str().unwrap(), "--baud", "9600", "--listen", "127.0.0.1:0"])
+        .args(["--metrics", "127.0.0.1:0"])
+        .args(extra)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let (mut tcp, mut m) = (None, None);
+    while tcp.is_none() || m.is_none() {
+        let l = lines.next().expect("the bridge ended early").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            tcp = Some(rest.split_whitespace().next().unwrap().to_owned());
+        } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
+            m = Some(rest.trim_end_matches("/metrics").to_owned());
+        }
+    }
+    std::thread::spawn(move || for _ in lines {});
+    (Kill(child), tcp.unwrap(), m.unwrap())
+}
+
+fn metric(addr: &str, line: &str) -> u64 {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).unwrap();
+    text.lines()
+        .find_map(|l| l.strip_prefix(line)?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {line} in {text}"))
+}
+
+/// One Modbus TCP request (MBAP, Modbus Messaging on TCP/IP v1.0b §3.1.3); the answer's PDU.
+fn call(s: &mut TcpStream, tid: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut f = vec![0u8; 7];
+    f[..2].copy_from_slice(&tid.to_be_bytes());
+    f[4..6].copy_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    f[6] = unit;
+    f.extend_from_slice(pdu);
+    s.write_all(&f).unwrap();
+    let mut head = [0u8; 7];
+    s.read_exact(&mut head).unwrap();
+    assert_eq!(head[..2], tid.to_be_bytes(), "each client gets its own transaction id back");
+    let mut answer = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
+    s.read_exact(&mut answer).unwrap();
+    answer
+}
+
+fn mbtap(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().unwrap()
+}
+
+/// MK4 input registers 430–433 (MAP v1.1b3 §6.4: 04, address 0x01AE, quantity 4).
+const VOLTAGES: [u8; 5] = [0x04, 0x01, 0xAE, 0x00, 0x04];
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn sixteen_clients_reading_the_same_registers_share_the_line() {
+    let d = dir("coalesce");
+    let link = d.join("bus");
+    let _sim = paced_line(&link);
+    let (_bridge, tcp, m) = bridge(&link, &[]);
+    let until = Instant::now() + Duration::from_secs(3);
+    let threads: Vec<_> = (0..16)
+        .map(|_| {
+            let tcp = tcp.clone();
+            std::thread::spawn(move || {
+                let mut s = TcpStream::connect(&tcp).unwrap();
+                let (mut n, mut tid) = (0u64, 0u16);
+                while Instant::now() < until {
+                    tid = tid.wrapping_add(1);
+                    let answer = call(&mut s, tid, 1, &VOLTAGES);
+                    assert_eq!(answer[0], 0x04, "a normal answer: {answer:02X?}");
+                    n += 1;
+                }
+                n
+            })
+        })
+        .collect();
+    let answered: u64 = threads.into_iter().map(|t| t.join().unwrap()).sum();
+    let on_line = metric(&m, "mbtap_bridge_requests_total{unit=\"1\"} ");
+    let coalesced = metric(&m, "mbtap_bridge_coalesced_total ");
+    assert!(coalesced > 0);
+    // Every answer either went on the line or shared one that did.
+    assert_eq!(on_line + coalesced, answered, "line {on_line} + coalesced {coalesced} = answered {answered}");
+    assert!(on_line * 4 < answered, "16 clients, the line carried {on_line} of {answered}");
+}
+
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn the_cache_answers_fresh_reads_forgets_writes_and_keeps_no_exception() {
+    let d = dir("cache");
+    let link = d.join("bus");
+    let _sim = paced_line(&link);
+    let (_bridge, tcp, m) = bridge(&link, &["--cache", "1:holding:100-109=30s", "--cache", "1:holding:9990-9999=30s"]);
+    let read = |what: &[&str]| {
+        let mut args = vec!["read", tcp.as_str(), "--unit", "1", "--format", "jsonl"];
+        args.extend_from_slice(what);
+        let o = mbtap(&args);
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let first = read(&["holding", "100..109"]);
+    assert_eq!(metric(&m, "mbtap_bridge_cache_misses_total "), 1);
+    let second = read(&["holding", "100..109"]);
+    assert_eq!(second, first, "the same values from memory");
+    assert_eq!(metric(&m, "mbtap_bridge_cache_hits_total "), 1);
+    assert_eq!(metric(&m, "mbtap_bridge_requests_total{unit=\"1\"} "), 1, "the line was not used again");
+    // A write through the bridge: what it overlaps is read from the device again.
+    let o = mbtap(&["write", &tcp, "--unit", "1", "--format", "jsonl", "holding 105=777"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let after = read(&["holding", "105"]);
+    assert!(after.contains("\"raw\":777"), "{after}");
+    // An exception (holding 9999 is outside the MK4's map) goes to the line every time.
+    read(&["holding", "9999"]);
+    read(&["holding", "9999"]);
+    let hits = metric(&m, "mbtap_bridge_cache_hits_total ");
+    assert!(read(&["holding", "9999"]).contains("Illegal Data Address"));
+    assert_eq!(metric(&m, "mbtap_bridge_cache_hits_total "), hits, "an exception is never answered from the cache");
+}
