@@ -356,6 +356,30 @@ mod tests {
     }
 
     #[test]
+    fn text_and_dates_are_written_whole() {
+        // MK4 256–267: one character per register, padded with 0.
+        let w = write("Device name in SMS=PUMP-7", false).unwrap();
+        assert_eq!((w.address, w.function, w.words.len()), (256, 0x10, 12));
+        assert_eq!(&w.words[..7], &[u16::from(b'P'), 85, 77, 80, 45, 55, 0]);
+        let e = write("Device name in SMS=a name much too long", false).unwrap_err().to_string();
+        assert!(e.contains("at most 12 characters"), "{e}");
+        // A date typed in calendar order lands in the profile's register order.
+        let mkzp = crate::profile::builtin::get("mkzp").unwrap().unwrap();
+        let (slot_address, _) = mkzp
+            .tables
+            .iter()
+            .flat_map(|(_, m)| m.iter())
+            .find(|(_, s)| mkzp.defs[s.def].value_type == ValueType::Datetime && s.part == 0)
+            .map(|(a, s)| (*a, s.clone()))
+            .expect("the MKZP's trip records have a date");
+        let t = resolve(&parse_item(&format!("holding {slot_address}=11-22 14:35:07"), None).unwrap(), Some(&mkzp))
+            .unwrap();
+        let w = encode_write(&t, Some(&mkzp), true).unwrap();
+        // Parts month, day, hour, minute, second (MKZP document), typed month-day hour:minute:second.
+        assert_eq!(w.words, [11, 22, 14, 35, 7]);
+    }
+
+    #[test]
     fn without_a_profile_raw_values() {
         let t = resolve(&parse_item("holding 10..12=1,-1,0x10", None).unwrap(), None).unwrap();
         let w = encode_write(&t, None, false).unwrap();
