@@ -365,12 +365,12 @@ mod tests {
         assert!(e.contains("at most 12 characters"), "{e}");
         // A date typed in calendar order lands in the profile's register order.
         let mkzp = crate::profile::builtin::get("mkzp").unwrap().unwrap();
-        let (slot_address, _) = mkzp
+        let slot_address = mkzp
             .tables
-            .iter()
-            .flat_map(|(_, m)| m.iter())
+            .values()
+            .flat_map(|m| m.iter())
             .find(|(_, s)| mkzp.defs[s.def].value_type == ValueType::Datetime && s.part == 0)
-            .map(|(a, s)| (*a, s.clone()))
+            .map(|(a, _)| *a)
             .expect("the MKZP's trip records have a date");
         let t = resolve(&parse_item(&format!("holding {slot_address}=11-22 14:35:07"), None).unwrap(), Some(&mkzp))
             .unwrap();
