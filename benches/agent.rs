@@ -1,7 +1,8 @@
 //! Beyond the line's limit (issue 19), end to end on a paced 9600 8E1 line (`mbtap simulate
 //! --paced --baud 9600`): 64 Modbus TCP clients each reading the same 10 MK4 holding
 //! registers once a second (their starts spread over the second), with and without
-//! `--cache 1:holding:100-109=1s`; and 16 clients back to back on the same range (coalescing).
+//! `--cache 1:holding:100-109=1s`, and with agent polling (`--poll …@500ms`, values kept 1 s);
+//! and 16 clients back to back on the same range (coalescing).
 //! The line's load is the bridge's own count of requests it put on the line.
 //!
 //! Run: `cargo bench --bench agent` (about 40 s). Figures go to BENCHMARKS.md.
@@ -115,9 +116,11 @@ fn clients(tcp: &str, clients: usize, secs: f64, period: Option<Duration>) -> (u
 fn main() {
     let d = dir();
     let link = d.join("bus");
-    for (name, extra) in
-        [("no cache", &[][..]), ("--cache 1:holding:100-109=1s", &["--cache", "1:holding:100-109=1s"][..])]
-    {
+    for (name, extra) in [
+        ("no cache", &[][..]),
+        ("--cache 1:holding:100-109=1s", &["--cache", "1:holding:100-109=1s"][..]),
+        ("--poll 1:holding:100-109@500ms", &["--poll", "1:holding:100-109@500ms"][..]),
+    ] {
         let _sim = line(&link);
         let (_bridge, tcp, m) = bridge(&link, extra);
         let secs = 10.0;

@@ -88,6 +88,49 @@ pub fn parse_rule(spec: &str) -> Result<Rule, String> {
     Ok(Rule { units, table, first, last, max_age })
 }
 
+/// One `--poll` rule: the bridge reads these registers itself every `interval` (agent mode),
+/// keeping the cache fresh for its clients.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Poll {
+    pub rule: Rule,
+    pub interval: Duration,
+}
+
+/// `1:holding:100-109@1s`: as a cache rule, with `@INTERVAL` for its age. The cached values
+/// are kept for two intervals (a poll that is late by less than one still finds them fresh).
+///
+/// # Errors
+/// What part is wrong, with the value.
+pub fn parse_poll(spec: &str) -> Result<Poll, String> {
+    let (head, interval) = spec.rsplit_once('@').ok_or_else(|| {
+        format!("--poll {spec:?}: expected UNITS:TABLE:FIRST-LAST@INTERVAL, e.g. 1:holding:100-109@1s")
+    })?;
+    let rule = parse_rule(&format!("{head}={interval}")).map_err(|e| e.replacen("--cache", "--poll", 1))?;
+    let interval = rule.max_age;
+    Ok(Poll { rule: Rule { max_age: interval.saturating_mul(2), ..rule }, interval })
+}
+
+impl Poll {
+    /// The read requests (PDUs) that cover the rule for one unit, split at the spec's limits
+    /// (MAP v1.1b3 §6.1–§6.4: 2000 bits, 125 registers).
+    #[must_use]
+    pub fn requests(&self) -> Vec<Vec<u8>> {
+        let limit: u32 = if self.rule.table.bits() { 2000 } else { 125 };
+        let mut out = Vec::new();
+        let mut a = u32::from(self.rule.first);
+        let last = u32::from(self.rule.last);
+        while a <= last {
+            let n = (last - a + 1).min(limit);
+            let mut pdu = vec![self.rule.table as u8];
+            pdu.extend_from_slice(&u16::try_from(a).unwrap_or(u16::MAX).to_be_bytes());
+            pdu.extend_from_slice(&u16::try_from(n).unwrap_or(1).to_be_bytes());
+            out.push(pdu);
+            a += n;
+        }
+        out
+    }
+}
+
 /// The cache of one line.
 #[derive(Debug, Default)]
 pub struct Cache {
@@ -235,6 +278,15 @@ mod tests {
         // Coils 0–4 = 1,0,1,1,0 (01 01 0D).
         c.fill(1, &[0x01, 0x00, 0x00, 0x00, 0x05], &[0x01, 0x01, 0x0D], t0);
         assert_eq!(c.lookup(1, &[0x01, 0x00, 0x01, 0x00, 0x03], t0), Some(vec![0x01, 0x01, 0x06]));
+    }
+
+    #[test]
+    fn polls_cover_their_range_in_requests_the_spec_allows() {
+        let p = parse_poll("1:holding:0-299@1s").unwrap();
+        assert_eq!((p.interval, p.rule.max_age), (Duration::from_secs(1), Duration::from_secs(2)));
+        let r = p.requests();
+        assert_eq!(r, [vec![3, 0, 0, 0, 125], vec![3, 0, 125, 0, 125], vec![3, 0, 250, 0, 50]]);
+        assert!(parse_poll("1:holding:0-9").unwrap_err().contains("--poll"));
     }
 
     #[test]

@@ -65,6 +65,8 @@ pub struct LineOptions {
     pub rs485: crate::source::rs485::Rs485Args,
     /// `--cache` rules for this line's units.
     pub cache: Vec<super::cache::Rule>,
+    /// `--poll`: ranges the bridge keeps fresh itself.
+    pub polls: Vec<super::cache::Poll>,
     /// Retries after a timeout or a failed check.
     pub retries: u32,
     /// Extra quiet time after t3.5 before the next request (slow slaves need it).
@@ -200,6 +202,51 @@ impl LineShared {
         let job = q.pop();
         self.metrics.queue_depth(q.len());
         job
+    }
+}
+
+/// The queue's client id of the bridge's own polls (`--poll`): it takes its turn like any
+/// client, so polling never starves the clients' requests.
+pub const POLL_CLIENT: ClientId = ClientId::MAX;
+
+/// Agent mode: reads every `--poll` range once per its interval, the requests spread evenly over
+/// the interval so they leave line time between them; the answers fill the cache (the line
+/// does that for every answer). Runs as long as the bridge.
+pub async fn poll(polls: Vec<super::cache::Poll>, shared: Arc<LineShared>) {
+    let mut jobs: Vec<(Duration, u8, Vec<u8>)> = Vec::new();
+    for p in &polls {
+        for &unit in &p.rule.units {
+            for pdu in p.requests() {
+                jobs.push((p.interval, unit, pdu));
+            }
+        }
+    }
+    if jobs.is_empty() {
+        return;
+    }
+    let start = Instant::now();
+    let n = u32::try_from(jobs.len()).unwrap_or(u32::MAX);
+    let mut tasks = Vec::new();
+    for (i, (interval, unit, pdu)) in jobs.into_iter().enumerate() {
+        let shared = Arc::clone(&shared);
+        // Job i of n starts i/n of its interval in.
+        let offset = interval / n * u32::try_from(i).unwrap_or(0);
+        tasks.push(tokio::spawn(async move {
+            let mut tick = tokio::time::interval_at(start + offset, interval);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            loop {
+                tick.tick().await;
+                let (tx, rx) = oneshot::channel();
+                let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now() };
+                if shared.submit(POLL_CLIENT, job).is_ok() {
+                    // Waiting keeps one poll of this range in the queue at a time.
+                    let _ = rx.await;
+                }
+            }
+        }));
+    }
+    for t in tasks {
+        let _ = t.await;
     }
 }
 

@@ -43,8 +43,9 @@ impl<T> FairQueue<T> {
 
     /// The next request: the oldest of the next client in turn.
     pub fn pop(&mut self) -> Option<(ClientId, T)> {
-        let next = match self.last {
-            Some(last) => self.queues.range(last + 1..).next().or_else(|| self.queues.iter().next()),
+        // After the highest id (the bridge's own polls are ClientId::MAX) the turn wraps.
+        let next = match self.last.and_then(|last| last.checked_add(1)) {
+            Some(after) => self.queues.range(after..).next().or_else(|| self.queues.iter().next()),
             None => self.queues.iter().next(),
         }
         .map(|(&c, _)| c)?;
@@ -122,6 +123,19 @@ mod tests {
         // The quiet client is served second, not after the flood.
         assert_eq!(q.pop(), Some((1, 0)));
         assert_eq!(q.pop(), Some((2, 1000)));
+    }
+
+    /// Found with agent polling: the turn after the poll client (ClientId::MAX) overflowed.
+    #[test]
+    fn the_turn_wraps_after_the_highest_client_id() {
+        let mut q = FairQueue::new(10);
+        q.push(ClientId::MAX, 'p').unwrap();
+        q.push(ClientId::MAX, 'p').unwrap();
+        q.push(1, 'c').unwrap();
+        assert_eq!(q.pop(), Some((1, 'c')));
+        assert_eq!(q.pop(), Some((ClientId::MAX, 'p')));
+        assert_eq!(q.pop(), Some((ClientId::MAX, 'p')));
+        assert_eq!(q.pop(), None);
     }
 
     #[test]

@@ -184,6 +184,7 @@ pub async fn bridge<W: Write>(
             let shared = LineShared::new(opts.queue_per_client, line_opts.cache.clone());
             let monitor = monitoring.then(|| monitor_tx.clone());
             tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
+            tokio::spawn(line::poll(line_opts.polls.clone(), Arc::clone(&shared)));
             routes.push(Route { units: units.clone(), line: shared });
             let _ = writeln!(
                 err,

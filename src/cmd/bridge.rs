@@ -59,6 +59,11 @@ pub struct Args {
     /// Writes invalidate what they overlap; exceptions are never cached.
     #[arg(long, value_name = "RULE")]
     pub cache: Vec<String>,
+    /// Agent mode: the bridge reads these registers itself every INTERVAL (repeatable),
+    /// `UNITS:TABLE:FIRST-LAST@INTERVAL`, e.g. `1:holding:100-109@1s`, spreading its polls over
+    /// the interval; clients are answered from the cache (values kept two intervals).
+    #[arg(long, value_name = "RULE")]
+    pub poll: Vec<String>,
     /// A unit's own timeout (repeatable): `--unit-timeout 5=2000` for a slow unit beside fast
     /// ones, `--unit-timeout 10-12=50`. Wins over --timeout auto.
     #[arg(long, value_name = "UNITS=MS")]
@@ -150,6 +155,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         unit_timeout,
         echo,
         cache,
+        poll,
         retries,
         turnaround_ms,
         broadcast_reply,
@@ -240,11 +246,18 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         "--idle-timeout {idle_timeout}: expected seconds above 0"
     );
     let unit_timeouts = crate::bridge::timing::parse_unit_timeouts(&unit_timeout).map_err(anyhow::Error::msg)?;
-    let cache = cache
+    let polls = poll
+        .iter()
+        .map(|r| crate::bridge::cache::parse_poll(r))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(anyhow::Error::msg)?;
+    let mut cache = cache
         .iter()
         .map(|r| crate::bridge::cache::parse_rule(r))
         .collect::<Result<Vec<_>, _>>()
         .map_err(anyhow::Error::msg)?;
+    // What the bridge polls is what it answers from memory.
+    cache.extend(polls.iter().map(|p| p.rule.clone()));
     let line_for = |port: String| crate::bridge::line::LineOptions {
         port,
         line: settings,
@@ -255,6 +268,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         echo,
         rs485,
         cache: cache.clone(),
+        polls: polls.clone(),
         retries,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         broadcast_reply,
@@ -433,6 +447,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "unit_timeout" => unit_timeout,
         "echo" => echo,
         "cache" => cache,
+        "poll" => poll,
         "retries" => retries,
         "turnaround_ms" => turnaround_ms,
         "broadcast_reply" => broadcast_reply,
