@@ -14,3 +14,4 @@ pub mod reverse;
 pub mod run;
 pub mod server;
 pub mod timing;
+pub mod tls;

@@ -37,6 +37,8 @@ pub struct BridgeOptions {
     /// Reverse mode instead of `lines` and the listeners: answer as slaves on a serial line,
     /// forwarding to a Modbus TCP server.
     pub reverse: Option<ReverseOptions>,
+    /// The Modbus/TCP Security listener, when asked for.
+    pub tls: crate::bridge::tls::TlsArgs,
 }
 
 /// What the bridge serves, for the metrics endpoint and the notes on stderr.
@@ -204,7 +206,18 @@ pub async fn bridge<W: Write>(
             let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
             let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
-            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts));
+            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, None));
+        }
+        if let Some(addr) = &opts.tls.listen_tls {
+            // Files are read (and checked) before listening: a bad certificate stops the start.
+            let tls = crate::bridge::tls::Tls::start(&opts.tls)?;
+            let listener =
+                TcpListener::bind(addr).await.with_context(|| format!("--listen-tls: listening on {addr}"))?;
+            let local = listener.local_addr().with_context(|| format!("--listen-tls: listening on {addr}"))?;
+            let _ =
+                writeln!(err, "mbtap: bridge listening on {local} (Modbus/TCP Security, TLS with client certificates)");
+            let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, ..opts.server.clone() });
+            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, Some(tls)));
         }
         (mode, settings) =
             opts.lines.first().map_or(

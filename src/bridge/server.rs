@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot};
 use tokio::time::Instant;
 
@@ -202,8 +202,18 @@ fn broadcastable(fc: u8) -> bool {
     matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16)
 }
 
+/// How long a TLS client has to complete its handshake.
+const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+
 /// Accepts connections forever.
-pub async fn serve(listener: TcpListener, routes: Arc<Vec<Route>>, opts: Arc<ServerOptions>) {
+/// With `tls`, each connection first completes a TLS handshake with a client certificate
+/// (within [`HANDSHAKE_TIMEOUT`]); its role decides what it may do.
+pub async fn serve(
+    listener: TcpListener,
+    routes: Arc<Vec<Route>>,
+    opts: Arc<ServerOptions>,
+    tls: Option<super::tls::Tls>,
+) {
     static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1);
     let metrics_line = routes.first().map(|r| Arc::clone(&r.line));
     let table: Arc<Table> = Arc::default();
@@ -240,7 +250,8 @@ pub async fn serve(listener: TcpListener, routes: Arc<Vec<Route>>, opts: Arc<Ser
             m.connection_opened();
         }
         let client = NEXT_CLIENT.fetch_add(1, Ordering::Relaxed);
-        let (routes, opts, table_for_task) = (Arc::clone(&routes), Arc::clone(&opts), Arc::clone(&table));
+        let (routes, opts, table_for_task, tls) =
+            (Arc::clone(&routes), Arc::clone(&opts), Arc::clone(&table), tls.clone());
         // Registered before the task runs, so its cleanup always finds (and removes) it.
         let mut entries = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         let handle = tokio::spawn(async move {
@@ -251,7 +262,37 @@ pub async fn serve(listener: TcpListener, routes: Arc<Vec<Route>>, opts: Arc<Ser
                     e.last_request = Some(Instant::now());
                 }
             };
-            connection(stream, peer, client, &routes, &opts, &seen).await;
+            match &tls {
+                None => connection(stream, peer, client, &routes, &opts, &seen, Role::Plain).await,
+                Some(tls) => {
+                    let metrics = routes.first().map(|r| &r.line.metrics);
+                    let Some(acceptor) = tls.current() else { return };
+                    match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(stream)).await {
+                        Ok(Ok(tls_stream)) => {
+                            let role = tls_stream
+                                .get_ref()
+                                .1
+                                .peer_certificates()
+                                .and_then(|c| c.first())
+                                .and_then(|c| super::tls::role_of(c));
+                            let policy = role.as_ref().and_then(|r| tls.roles.get(r));
+                            connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy)).await;
+                        }
+                        // No certificate, an expired one, one from another CA, a slow or
+                        // broken handshake: the connection ends here, counted.
+                        Ok(Err(_)) => {
+                            if let Some(m) = metrics {
+                                m.refused("tls_handshake");
+                            }
+                        }
+                        Err(_) => {
+                            if let Some(m) = metrics {
+                                m.refused("tls_handshake_timeout");
+                            }
+                        }
+                    }
+                }
+            }
             drop(cleanup);
         });
         entries.insert(client, Conn { opened: Instant::now(), last_request: None, abort: handle.abort_handle() });
@@ -274,16 +315,19 @@ enum Answer {
 
 /// One client's connection until it closes, misbehaves or idles out; `seen` is told of every
 /// whole request (for eviction).
-async fn connection(
-    stream: TcpStream,
+async fn connection<S>(
+    stream: S,
     peer: SocketAddr,
     client: ClientId,
     routes: &[Route],
     opts: &ServerOptions,
     seen: &(dyn Fn(ClientId) + Sync),
-) {
+    role: Role<'_>,
+) where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Send + 'static,
+{
     let _ = peer;
-    let (mut rd, mut wr) = stream.into_split();
+    let (mut rd, mut wr) = tokio::io::split(stream);
     let (tx, mut rx) = mpsc::channel::<Pending>(64);
     let rtu = opts.rtu_over_tcp;
     let writer = tokio::spawn(async move {
@@ -335,7 +379,7 @@ async fn connection(
                 if let Some(f) = rtu_frames.silence() {
                     last_request = Instant::now();
                     seen(client);
-                    let pending = request(client, 0, f.unit, f.pdu, routes, opts, &mut bucket);
+                    let pending = request(client, 0, f.unit, f.pdu, routes, opts, &mut bucket, role);
                     if tx.send(pending).await.is_err() {
                         break;
                     }
@@ -390,7 +434,7 @@ async fn connection(
             };
             last_request = Instant::now();
             seen(client);
-            let pending = request(client, transaction_id, unit, pdu, routes, opts, &mut bucket);
+            let pending = request(client, transaction_id, unit, pdu, routes, opts, &mut bucket, role);
             if tx.send(pending).await.is_err() {
                 break 'read;
             }
@@ -405,7 +449,16 @@ async fn connection(
     let _ = writer.await;
 }
 
+/// Who the client is, for authorisation: anyone on a plain listener; on the TLS listener the
+/// policy of its certificate's role, or none (no role, or one no rule names: nothing allowed).
+#[derive(Debug, Clone, Copy)]
+enum Role<'a> {
+    Plain,
+    Tls(Option<&'a super::tls::Policy>),
+}
+
 /// Checks one request and queues it on its line; what to answer.
+#[allow(clippy::too_many_arguments)] // the request's fields and the connection's context
 fn request(
     client: ClientId,
     transaction_id: u16,
@@ -414,6 +467,7 @@ fn request(
     routes: &[Route],
     opts: &ServerOptions,
     bucket: &mut Option<(f64, Instant)>,
+    role: Role<'_>,
 ) -> Pending {
     let function = pdu.first().copied().unwrap_or(0);
     let reply = |answer| Pending { transaction_id, unit, function, answer };
@@ -424,6 +478,12 @@ fn request(
         }
         reply(Answer::Now(Reply::Gateway(code)))
     };
+    // MODBUS/TCP Security: a request the client's role does not authorise is answered 01.
+    match role {
+        Role::Tls(None) => return refuse("no_role", ILLEGAL_FUNCTION),
+        Role::Tls(Some(p)) if !p.allows(unit, &pdu) => return refuse("role", ILLEGAL_FUNCTION),
+        Role::Plain | Role::Tls(Some(_)) => {}
+    }
     let listed = opts.allow_functions.as_ref().map(|a| a.contains(&function));
     if opts.read_only {
         // An allow-list: what is not known to be harmless is refused, unless explicitly allowed.

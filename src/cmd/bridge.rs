@@ -130,6 +130,9 @@ pub struct Args {
     /// RS-485 direction control of the serial lines.
     #[command(flatten)]
     pub rs485: crate::source::rs485::Rs485Args,
+    /// Modbus/TCP Security: the TLS listener, its certificates and the clients' roles.
+    #[command(flatten)]
+    pub tls: crate::bridge::tls::TlsArgs,
     /// Publish what the monitor hears (values, unit health, findings) to MQTT.
     #[command(flatten)]
     pub mqtt: crate::publish::mqtt::MqttArgs,
@@ -176,6 +179,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         devices,
         duration,
         rs485,
+        tls,
         mqtt,
     } = args;
     let serial = match serial_match {
@@ -234,8 +238,8 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         None
     };
     anyhow::ensure!(
-        reverse.is_some() || listen.is_some() || listen_rtu.is_some(),
-        "nothing to listen on: give --listen ADDR:PORT (Modbus TCP) and/or --listen-rtu ADDR:PORT"
+        reverse.is_some() || listen.is_some() || listen_rtu.is_some() || tls.listen_tls.is_some(),
+        "nothing to listen on: give --listen ADDR:PORT (Modbus TCP), --listen-rtu ADDR:PORT and/or --listen-tls ADDR:PORT"
     );
     anyhow::ensure!(
         turnaround_ms.is_finite() && turnaround_ms >= 0.0,
@@ -312,6 +316,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         metrics,
         duration: seconds(duration),
         reverse,
+        tls,
     };
     let profiles = crate::config::devices::load_devices(&devices)?;
     anyhow::ensure!(
@@ -467,6 +472,12 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "monitor" => monitor,
         "devices" => devices,
         "duration" => duration,
+        "listen_tls" => tls.listen_tls,
+        "cert" => tls.cert,
+        "key" => tls.key,
+        "client_ca" => tls.client_ca,
+        "crl" => tls.crl,
+        "role" => tls.role,
         "rs485" => rs485.rs485,
         "rs485_delay_before_us" => rs485.rs485_delay_before_us,
         "rs485_delay_after_us" => rs485.rs485_delay_after_us,
