@@ -45,6 +45,8 @@ pub struct Job {
     pub pdu: Vec<u8>,
     pub reply: oneshot::Sender<Reply>,
     pub queued: Instant,
+    /// `--priority high=…` matched: goes before the round-robin (three turns in four).
+    pub high: bool,
 }
 
 /// Line settings of the bridge.
@@ -199,7 +201,8 @@ impl LineShared {
 
     fn next(&self) -> Option<(ClientId, Job)> {
         let mut q = self.queue();
-        let job = q.pop();
+        // The priority class takes three turns in four; the fourth is everyone's.
+        let job = q.pop_prefer(|j| j.high, 4);
         self.metrics.queue_depth(q.len());
         job
     }
@@ -237,7 +240,7 @@ pub async fn poll(polls: Vec<super::cache::Poll>, shared: Arc<LineShared>) {
             loop {
                 tick.tick().await;
                 let (tx, rx) = oneshot::channel();
-                let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now() };
+                let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now(), high: false };
                 if shared.submit(POLL_CLIENT, job).is_ok() {
                     // Waiting keeps one poll of this range in the queue at a time.
                     let _ = rx.await;
@@ -349,6 +352,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             continue;
         }
         wait_until(free_at).await;
+        let on_line_from = Instant::now();
         let twins = shared.twins(client, &job);
         // A write may change what the cache holds, whatever its outcome.
         shared.cache().invalidate(job.unit, &job.pdu);
@@ -357,6 +361,14 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
                 if let Reply::Pdu(answer) = &reply {
                     shared.cache().fill(job.unit, &job.pdu, answer, Instant::now().into_std());
                 }
+                let class = if client == POLL_CLIENT {
+                    "poll"
+                } else if job.high {
+                    "high"
+                } else {
+                    "normal"
+                };
+                shared.metrics.line_time(class, last_byte.saturating_duration_since(on_line_from));
                 for twin in twins {
                     shared.metrics.latency(twin.unit, twin.queued.elapsed());
                     let _ = twin.reply.send(reply.clone());

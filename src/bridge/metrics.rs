@@ -46,6 +46,8 @@ struct Inner {
     cache_hits: u64,
     cache_misses: u64,
     coalesced: u64,
+    /// Line time used, by class: high (`--priority`), normal, poll (`--poll`).
+    line_time: BTreeMap<&'static str, Duration>,
 }
 
 /// Counters shared by the line and the connections.
@@ -90,6 +92,14 @@ impl Metrics {
     /// A covered read answered from the cache (`hit`) or sent to the line.
     pub fn cache(&self, hit: bool) {
         self.with(|m| if hit { m.cache_hits += 1 } else { m.cache_misses += 1 });
+    }
+
+    /// Line time one transaction of `class` used.
+    pub fn line_time(&self, class: &'static str, d: Duration) {
+        self.with(|m| {
+            let t = m.line_time.entry(class).or_default();
+            *t = t.saturating_add(d);
+        });
     }
 
     /// `n` requests answered with another client's identical read.
@@ -291,6 +301,10 @@ impl Metrics {
             let _ = writeln!(s, "mbtap_bridge_cache_misses_total {}", m.cache_misses);
             counter(&mut s, "mbtap_bridge_coalesced_total", "Requests answered with another client's identical read, sent once.");
             let _ = writeln!(s, "mbtap_bridge_coalesced_total {}", m.coalesced);
+            counter(&mut s, "mbtap_bridge_line_seconds_total", "Line time used, by class (high: --priority, poll: --poll).");
+            for (c, d) in &m.line_time {
+                let _ = writeln!(s, "mbtap_bridge_line_seconds_total{{class=\"{c}\"}} {}", d.as_secs_f64());
+            }
             counter(&mut s, "mbtap_bridge_refused_total", "Connections or requests refused, by reason.");
             for (r, n) in &m.refused {
                 let _ = writeln!(s, "mbtap_bridge_refused_total{{reason=\"{r}\"}} {n}");

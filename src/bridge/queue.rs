@@ -20,12 +20,14 @@ pub struct FairQueue<T> {
     /// The last client served: the next turn goes to the first client after it.
     last: Option<ClientId>,
     per_client: usize,
+    /// Pops so far, for the share the priority class leaves to the others.
+    pops: u64,
 }
 
 impl<T> FairQueue<T> {
     #[must_use]
     pub fn new(per_client: usize) -> Self {
-        Self { queues: BTreeMap::new(), last: None, per_client: per_client.max(1) }
+        Self { queues: BTreeMap::new(), last: None, per_client: per_client.max(1), pops: 0 }
     }
 
     /// Queues `item` for `client`.
@@ -56,6 +58,33 @@ impl<T> FairQueue<T> {
         }
         self.last = Some(next);
         Some((next, item))
+    }
+
+    /// Like [`Self::pop`], but a request for which `high` holds goes first (the first such head
+    /// in turn order) — except every `every`-th pop, which is a plain round-robin turn, so the
+    /// other class always keeps at least 1/`every` of the line (no starvation).
+    pub fn pop_prefer(&mut self, high: impl Fn(&T) -> bool, every: u64) -> Option<(ClientId, T)> {
+        self.pops = self.pops.wrapping_add(1);
+        if !self.pops.is_multiple_of(every.max(1)) {
+            let after = self.last.and_then(|l| l.checked_add(1)).unwrap_or(0);
+            let pick = self
+                .queues
+                .range(after..)
+                .chain(self.queues.range(..after))
+                .find(|(_, q)| q.front().is_some_and(&high))
+                .map(|(&c, _)| c);
+            if let Some(c) = pick
+                && let Some(q) = self.queues.get_mut(&c)
+                && let Some(item) = q.pop_front()
+            {
+                if q.is_empty() {
+                    self.queues.remove(&c);
+                }
+                self.last = Some(c);
+                return Some((c, item));
+            }
+        }
+        self.pop()
     }
 
     /// Takes the first waiting request of every other client for which `pred` holds — only
@@ -123,6 +152,21 @@ mod tests {
         // The quiet client is served second, not after the flood.
         assert_eq!(q.pop(), Some((1, 0)));
         assert_eq!(q.pop(), Some((2, 1000)));
+    }
+
+    #[test]
+    fn the_priority_class_goes_first_but_never_starves_the_rest() {
+        let mut q = FairQueue::new(100);
+        for i in 0..20 {
+            q.push(1, ('r', i)).unwrap();
+        }
+        for i in 0..20 {
+            q.push(2, ('w', i)).unwrap();
+        }
+        let order: Vec<char> =
+            (0..12).filter_map(|_| q.pop_prefer(|&(k, _)| k == 'w', 4)).map(|(_, (k, _))| k).collect();
+        // Three writes, then the fourth turn is round-robin's (the reader's), and so on.
+        assert_eq!(order.iter().collect::<String>(), "wwwrwwwrwwwr");
     }
 
     /// Found with agent polling: the turn after the poll client (ClientId::MAX) overflowed.

@@ -124,6 +124,40 @@ pub struct ServerOptions {
     pub rate_limit: Option<f64>,
     /// TCP unit id → serial address.
     pub unit_map: BTreeMap<u8, u8>,
+    /// `--priority high=…`: requests that go before the round-robin.
+    pub priority: Vec<Priority>,
+}
+
+/// One `--priority high=…` rule: a client network, units or function codes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Priority {
+    Net(IpNet),
+    Units(std::collections::BTreeSet<u8>),
+    Functions(std::collections::BTreeSet<u8>),
+}
+
+/// `high=ip:10.0.0.0/24`, `high=unit:1-5`, `high=fc:5,6,15,16`.
+///
+/// # Errors
+/// What is wrong with the value.
+pub fn parse_priority(spec: &str) -> Result<Priority, String> {
+    let bad =
+        |why: String| format!("--priority {spec:?}: {why}; expected high=ip:NET, high=unit:UNITS or high=fc:CODES");
+    let rule = spec.strip_prefix("high=").ok_or_else(|| bad("only the class \"high\" exists".into()))?;
+    match rule.split_once(':') {
+        Some(("ip", net)) => net.parse().map(Priority::Net).map_err(bad),
+        Some(("unit", units)) => super::run::parse_units(units).map(Priority::Units).map_err(|e| bad(format!("{e:#}"))),
+        Some(("fc", codes)) => codes
+            .split(',')
+            .map(|c| {
+                let c = c.trim();
+                c.strip_prefix("0x").map_or_else(|| c.parse(), |h| u8::from_str_radix(h, 16))
+            })
+            .collect::<Result<_, _>>()
+            .map(Priority::Functions)
+            .map_err(|_| bad(format!("{codes:?} is not a list of function codes"))),
+        _ => Err(bad(format!("{rule:?}"))),
+    }
 }
 
 /// An address or a network (`192.168.1.0/24`, `::1`).
@@ -326,7 +360,8 @@ async fn connection<S>(
 ) where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Send + 'static,
 {
-    let _ = peer;
+    // `--priority high=ip:…`: the whole connection's requests.
+    let peer_high = opts.priority.iter().any(|p| matches!(p, Priority::Net(n) if n.contains(peer.ip())));
     let (mut rd, mut wr) = tokio::io::split(stream);
     let (tx, mut rx) = mpsc::channel::<Pending>(64);
     let rtu = opts.rtu_over_tcp;
@@ -379,7 +414,7 @@ async fn connection<S>(
                 if let Some(f) = rtu_frames.silence() {
                     last_request = Instant::now();
                     seen(client);
-                    let pending = request(client, 0, f.unit, f.pdu, routes, opts, &mut bucket, role);
+                    let pending = request(client, 0, f.unit, f.pdu, routes, opts, &mut bucket, role, peer_high);
                     if tx.send(pending).await.is_err() {
                         break;
                     }
@@ -434,7 +469,7 @@ async fn connection<S>(
             };
             last_request = Instant::now();
             seen(client);
-            let pending = request(client, transaction_id, unit, pdu, routes, opts, &mut bucket, role);
+            let pending = request(client, transaction_id, unit, pdu, routes, opts, &mut bucket, role, peer_high);
             if tx.send(pending).await.is_err() {
                 break 'read;
             }
@@ -468,6 +503,7 @@ fn request(
     opts: &ServerOptions,
     bucket: &mut Option<(f64, Instant)>,
     role: Role<'_>,
+    peer_high: bool,
 ) -> Pending {
     let function = pdu.first().copied().unwrap_or(0);
     let reply = |answer| Pending { transaction_id, unit, function, answer };
@@ -515,8 +551,14 @@ fn request(
     if let Some(answer) = route.line.cached(target, &pdu) {
         return reply(Answer::Now(Reply::Pdu(answer)));
     }
+    let high = peer_high
+        || opts.priority.iter().any(|p| match p {
+            Priority::Units(u) => u.contains(&target),
+            Priority::Functions(f) => f.contains(&function),
+            Priority::Net(_) => false,
+        });
     let (tx, rx) = oneshot::channel();
-    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now() };
+    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high };
     match route.line.submit(client, job) {
         Ok(()) => reply(Answer::Later(rx)),
         Err(_) => refuse("queue_full", SERVER_DEVICE_BUSY),

@@ -64,6 +64,11 @@ pub struct Args {
     /// the interval; clients are answered from the cache (values kept two intervals).
     #[arg(long, value_name = "RULE")]
     pub poll: Vec<String>,
+    /// Requests that go before the round-robin (repeatable): `high=ip:NET` (a control room's
+    /// network), `high=unit:UNITS`, `high=fc:CODES` (e.g. writes: `high=fc:5,6,15,16`). They
+    /// take three turns in four; the fourth is everyone's, so no one starves.
+    #[arg(long, value_name = "high=RULE")]
+    pub priority: Vec<String>,
     /// A unit's own timeout (repeatable): `--unit-timeout 5=2000` for a slow unit beside fast
     /// ones, `--unit-timeout 10-12=50`. Wins over --timeout auto.
     #[arg(long, value_name = "UNITS=MS")]
@@ -159,6 +164,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         echo,
         cache,
         poll,
+        priority,
         retries,
         turnaround_ms,
         broadcast_reply,
@@ -311,6 +317,11 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             idle_timeout: std::time::Duration::from_secs_f64(idle_timeout),
             rate_limit,
             unit_map: crate::bridge::run::parse_unit_map(&unit_map)?,
+            priority: priority
+                .iter()
+                .map(|p| crate::bridge::server::parse_priority(p))
+                .collect::<Result<_, _>>()
+                .map_err(anyhow::Error::msg)?,
         },
         queue_per_client,
         metrics,
@@ -453,6 +464,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "echo" => echo,
         "cache" => cache,
         "poll" => poll,
+        "priority" => priority,
         "retries" => retries,
         "turnaround_ms" => turnaround_ms,
         "broadcast_reply" => broadcast_reply,
