@@ -58,8 +58,9 @@ fn issue(d: &Path, ca: &str, name: &str, cn: &str, ext: &str, days: &str) {
     );
 }
 
-fn certificates() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mbtap-tls-{}", std::process::id()));
+/// A fresh directory of certificates per test (tests run in parallel).
+fn certificates(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mbtap-tls-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     for ca in ["ca", "other-ca"] {
         openssl(
@@ -116,7 +117,7 @@ fn metric(addr: &str, line: &str) -> u64 {
 #[test]
 #[ignore = "needs openssl and python3; .ci/run installs them and runs this with --ignored"]
 fn roles_certificates_and_refusals_as_the_specification_says() {
-    let d = certificates();
+    let d = certificates("roles");
     std::thread::sleep(std::time::Duration::from_millis(1500));
     let bus = d.join("bus");
     let _sim = Kill(
@@ -175,4 +176,82 @@ fn roles_certificates_and_refusals_as_the_specification_says() {
     assert_eq!(metric(&m, "mbtap_bridge_refused_total{reason=\"tls_handshake\"} "), 3);
     assert_eq!(metric(&m, "mbtap_bridge_refused_total{reason=\"role\"} "), 1);
     assert_eq!(metric(&m, "mbtap_bridge_refused_total{reason=\"no_role\"} "), 2);
+}
+
+/// SIGHUP reloads the files: after the client CA file is swapped for another CA's, a client of
+/// the old CA fails the handshake and one of the new CA gets in — without a restart. And the
+/// TLS listener's own allow-list refuses what the plain one lets in.
+#[test]
+#[ignore = "needs openssl and python3; .ci/run installs them and runs this with --ignored"]
+fn sighup_reloads_the_client_ca_and_the_tls_listener_has_its_own_allow_list() {
+    let d = certificates("hup");
+    let bus = d.join("bus-hup");
+    let _sim = Kill(
+        Command::new(BIN)
+            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "120"])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_for(&bus);
+    let trusted = d.join("trusted-ca.pem");
+    std::fs::copy(d.join("ca.pem"), &trusted).unwrap();
+    let f = |n: &str| d.join(n).to_str().unwrap().to_owned();
+    let start = |extra: &[&str]| {
+        let mut child = Command::new(BIN)
+            .args([
+                "bridge",
+                "--serial",
+                bus.to_str().unwrap(),
+                "--listen",
+                "127.0.0.1:0",
+                "--listen-tls",
+                "127.0.0.1:0",
+            ])
+            .args(["--cert", &f("server.pem"), "--key", &f("server.key"), "--client-ca", trusted.to_str().unwrap()])
+            .args(["--role", "operator=units:1-247"])
+            .args(extra)
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+        let port = loop {
+            let l = lines.next().expect("the bridge ended early").unwrap();
+            if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ")
+                && rest.contains("TLS")
+            {
+                break rest.split_whitespace().next().unwrap().rsplit(':').next().unwrap().parse::<u16>().unwrap();
+            }
+        };
+        let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let sink = std::sync::Arc::clone(&log);
+        std::thread::spawn(move || {
+            for l in lines.map_while(Result::ok) {
+                sink.lock().unwrap().push(l);
+            }
+        });
+        (child, port, log)
+    };
+    let (child, port, log) = start(&[]);
+    let bridge = Kill(child);
+    assert!(client(port, &d, Some("operator"))["read"].is_array());
+    assert!(client(port, &d, Some("foreign"))["handshake"].is_string());
+    std::fs::copy(d.join("other-ca.pem"), &trusted).unwrap();
+    let pid = bridge.0.id().to_string();
+    assert!(Command::new("kill").args(["-HUP", &pid]).status().unwrap().success());
+    let t = std::time::Instant::now();
+    while !log.lock().unwrap().iter().any(|l| l.contains("reloaded")) {
+        assert!(t.elapsed() < std::time::Duration::from_secs(10), "no reload: {:?}", log.lock().unwrap());
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    assert!(client(port, &d, Some("operator"))["handshake"].is_string(), "the old CA's client is out");
+    // The new CA's client: the server's own certificate is still the old CA's, which the
+    // client trusts (tls_client.py verifies the server against ca.pem).
+    assert!(client(port, &d, Some("foreign"))["read"].is_array(), "the new CA's client is in");
+
+    // Its own allow-list: the TLS listener admits only 10.0.0.0/8; loopback is refused there.
+    std::fs::copy(d.join("ca.pem"), &trusted).unwrap();
+    let (child, port, _) = start(&["--tls-allow-ip", "10.0.0.0/8"]);
+    let _bridge2 = Kill(child);
+    assert!(client(port, &d, Some("operator"))["handshake"].is_string(), "refused by the TLS allow-list");
 }

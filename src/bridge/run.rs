@@ -216,7 +216,17 @@ pub async fn bridge<W: Write>(
             let local = listener.local_addr().with_context(|| format!("--listen-tls: listening on {addr}"))?;
             let _ =
                 writeln!(err, "mbtap: bridge listening on {local} (Modbus/TCP Security, TLS with client certificates)");
-            let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, ..opts.server.clone() });
+            // Its own allow-list when given (a TLS port is often opened wider than a plain one).
+            let allow_ips = if opts.tls.tls_allow_ip.is_empty() {
+                opts.server.allow_ips.clone()
+            } else {
+                opts.tls
+                    .tls_allow_ip
+                    .iter()
+                    .map(|s| s.parse().map_err(|e: String| anyhow::anyhow!("--tls-allow-ip: {e}")))
+                    .collect::<anyhow::Result<Vec<_>>>()?
+            };
+            let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, allow_ips, ..opts.server.clone() });
             tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, Some(tls)));
         }
         (mode, settings) =

@@ -45,6 +45,10 @@ pub struct TlsArgs {
     /// A role no rule names may do nothing.
     #[arg(long, value_name = "NAME=RULES")]
     pub role: Vec<String>,
+    /// Only these client addresses may connect to the TLS listener (repeatable; default: the
+    /// plain listeners' --allow-ip).
+    #[arg(long, value_name = "NET")]
+    pub tls_allow_ip: Vec<String>,
 }
 
 /// What one role may do.

@@ -490,6 +490,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "client_ca" => tls.client_ca,
         "crl" => tls.crl,
         "role" => tls.role,
+        "tls_allow_ip" => tls.tls_allow_ip,
         "rs485" => rs485.rs485,
         "rs485_delay_before_us" => rs485.rs485_delay_before_us,
         "rs485_delay_after_us" => rs485.rs485_delay_after_us,
