@@ -45,7 +45,7 @@ pub struct Job {
     pub pdu: Vec<u8>,
     pub reply: oneshot::Sender<Reply>,
     pub queued: Instant,
-    /// `--priority high=…` matched: goes before the round-robin (three turns in four).
+    /// `--priority high=…` matched: goes before the round-robin (see `FairQueue::pop_prefer`).
     pub high: bool,
 }
 
@@ -201,7 +201,7 @@ impl LineShared {
 
     fn next(&self) -> Option<(ClientId, Job)> {
         let mut q = self.queue();
-        // The priority class takes three turns in four; the fourth is everyone's.
+        // The priority class first, unless the others were passed over three times in a row.
         let job = q.pop_prefer(|j| j.high, 4);
         self.metrics.queue_depth(q.len());
         job

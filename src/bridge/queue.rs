@@ -20,14 +20,14 @@ pub struct FairQueue<T> {
     /// The last client served: the next turn goes to the first client after it.
     last: Option<ClientId>,
     per_client: usize,
-    /// Pops so far, for the share the priority class leaves to the others.
-    pops: u64,
+    /// Times in a row the priority class went first while others waited.
+    passed_over: u64,
 }
 
 impl<T> FairQueue<T> {
     #[must_use]
     pub fn new(per_client: usize) -> Self {
-        Self { queues: BTreeMap::new(), last: None, per_client: per_client.max(1), pops: 0 }
+        Self { queues: BTreeMap::new(), last: None, per_client: per_client.max(1), passed_over: 0 }
     }
 
     /// Queues `item` for `client`.
@@ -61,11 +61,12 @@ impl<T> FairQueue<T> {
     }
 
     /// Like [`Self::pop`], but a request for which `high` holds goes first (the first such head
-    /// in turn order) — except every `every`-th pop, which is a plain round-robin turn, so the
-    /// other class always keeps at least 1/`every` of the line (no starvation).
+    /// in turn order) — unless the others have been passed over `every - 1` times in a row, when
+    /// they get a plain round-robin turn: a saturating high class leaves the rest at least
+    /// 1/`every` of the line (no starvation), while an occasional high request always goes next.
     pub fn pop_prefer(&mut self, high: impl Fn(&T) -> bool, every: u64) -> Option<(ClientId, T)> {
-        self.pops = self.pops.wrapping_add(1);
-        if !self.pops.is_multiple_of(every.max(1)) {
+        let others_waiting = self.queues.values().any(|q| q.front().is_some_and(|h| !high(h)));
+        if !others_waiting || self.passed_over + 1 < every.max(1) {
             let after = self.last.and_then(|l| l.checked_add(1)).unwrap_or(0);
             let pick = self
                 .queues
@@ -81,9 +82,13 @@ impl<T> FairQueue<T> {
                     self.queues.remove(&c);
                 }
                 self.last = Some(c);
+                if others_waiting {
+                    self.passed_over += 1;
+                }
                 return Some((c, item));
             }
         }
+        self.passed_over = 0;
         self.pop()
     }
 
@@ -167,6 +172,21 @@ mod tests {
             (0..12).filter_map(|_| q.pop_prefer(|&(k, _)| k == 'w', 4)).map(|(_, (k, _))| k).collect();
         // Three writes, then the fourth turn is round-robin's (the reader's), and so on.
         assert_eq!(order.iter().collect::<String>(), "wwwrwwwrwwwr");
+        // An occasional high request goes next, whatever turn it is.
+        let mut q = FairQueue::new(100);
+        for i in 0..5 {
+            q.push(1, ('r', i)).unwrap();
+            q.push(3, ('r', i)).unwrap();
+        }
+        assert_eq!(q.pop_prefer(|&(k, _)| k == 'w', 4).map(|(_, (k, _))| k), Some('r'));
+        assert_eq!(q.pop_prefer(|&(k, _)| k == 'w', 4).map(|(_, (k, _))| k), Some('r'));
+        assert_eq!(q.pop_prefer(|&(k, _)| k == 'w', 4).map(|(_, (k, _))| k), Some('r'));
+        q.push(2, ('w', 0)).unwrap();
+        assert_eq!(
+            q.pop_prefer(|&(k, _)| k == 'w', 4).map(|(_, (k, _))| k),
+            Some('w'),
+            "the fourth pop, and still first"
+        );
     }
 
     /// Found with agent polling: the turn after the poll client (ClientId::MAX) overflowed.

@@ -66,7 +66,7 @@ pub struct Args {
     pub poll: Vec<String>,
     /// Requests that go before the round-robin (repeatable): `high=ip:NET` (a control room's
     /// network), `high=unit:UNITS`, `high=fc:CODES` (e.g. writes: `high=fc:5,6,15,16`). They
-    /// take three turns in four; the fourth is everyone's, so no one starves.
+    /// go next, unless the others have been passed over three times in a row: no one starves.
     #[arg(long, value_name = "high=RULE")]
     pub priority: Vec<String>,
     /// A unit's own timeout (repeatable): `--unit-timeout 5=2000` for a slow unit beside fast
