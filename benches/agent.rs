@@ -8,7 +8,6 @@
 //! Run: `cargo bench --bench agent` (about 40 s). Figures go to BENCHMARKS.md.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::cast_precision_loss)]
 
-use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -43,33 +42,15 @@ fn line(link: &Path) -> Kill {
 }
 
 fn bridge(link: &Path, extra: &[&str]) -> (Kill, String, String) {
-    let mut child = Command::new(BIN)
-        .args(["bridge", "--serial", link.to_str().unwrap(), "--baud", "9600", "--listen", "127.0.0.1:0"])
-        .args(["--metrics", "127.0.0.1:0", "--max-connections", "100"])
-        .args(extra)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let (mut tcp, mut m) = (None, None);
-    while tcp.is_none() || m.is_none() {
-        let l = lines.next().unwrap().unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            tcp = Some(rest.split_whitespace().next().unwrap().to_owned());
-        } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
-            m = Some(rest.trim_end_matches("/metrics").to_owned());
-        }
-    }
-    std::thread::spawn(move || for _ in lines {});
-    (Kill(child), tcp.unwrap(), m.unwrap())
+    let mut args = vec!["--serial", link.to_str().unwrap(), "--baud", "9600", "--listen", "127.0.0.1:0"];
+    args.extend_from_slice(&["--metrics", "127.0.0.1:0", "--max-connections", "100"]);
+    args.extend_from_slice(extra);
+    let b = support::bridge(&args);
+    (b.child, b.tcp.unwrap(), b.metrics.unwrap())
 }
 
-fn metric(addr: &str, line: &str) -> f64 {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
-    let mut text = String::new();
-    s.read_to_string(&mut text).unwrap();
-    text.lines().find_map(|l| l.strip_prefix(line)?.trim().parse().ok()).unwrap_or(0.0)
+fn metric(addr: &str, series: &str) -> f64 {
+    support::counter(addr, series.trim_end()) as f64
 }
 
 /// `clients` clients for `secs`, each every `period` (None: back to back); (answers, latencies

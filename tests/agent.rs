@@ -5,7 +5,7 @@
 //! `cargo test`, run by `.ci/run` with `--ignored`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -33,34 +33,15 @@ fn paced_line(link: &Path) -> Kill {
 }
 
 fn bridge(link: &Path, extra: &[&str]) -> (Kill, String, String) {
-    let mut child = Command::new(BIN)
-        .args(["bridge", "--serial", link.to_str().unwrap(), "--baud", "9600", "--listen", "127.0.0.1:0"])
-        .args(["--metrics", "127.0.0.1:0"])
-        .args(extra)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let (mut tcp, mut m) = (None, None);
-    while tcp.is_none() || m.is_none() {
-        let l = lines.next().expect("the bridge ended early").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            tcp = Some(rest.split_whitespace().next().unwrap().to_owned());
-        } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
-            m = Some(rest.trim_end_matches("/metrics").to_owned());
-        }
-    }
-    std::thread::spawn(move || for _ in lines {});
-    (Kill(child), tcp.unwrap(), m.unwrap())
+    let mut args = vec!["--serial", link.to_str().unwrap(), "--baud", "9600", "--listen", "127.0.0.1:0"];
+    args.extend_from_slice(&["--metrics", "127.0.0.1:0"]);
+    args.extend_from_slice(extra);
+    let b = common::bridge(&args);
+    (b.child, b.tcp.unwrap(), b.metrics.unwrap())
 }
 
-fn metric(addr: &str, line: &str) -> u64 {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
-    let mut text = String::new();
-    s.read_to_string(&mut text).unwrap();
-    // A per-unit series appears with its unit's first request: absent counts as 0.
-    text.lines().find_map(|l| l.strip_prefix(line)?.trim().parse().ok()).unwrap_or(0)
+fn metric(addr: &str, series: &str) -> u64 {
+    common::counter(addr, series.trim_end())
 }
 
 /// One Modbus TCP request (MBAP, Modbus Messaging on TCP/IP v1.0b §3.1.3); the answer's PDU.

@@ -6,12 +6,11 @@
 //! plain `cargo test`, run by `.ci/run` with `--ignored`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
 mod common;
-use common::{BIN, Kill, wait_for};
+use common::{BIN, Kill, socat_pair, wait_for};
 
 fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mbtap-hw-{name}-{}", std::process::id()));
@@ -27,44 +26,11 @@ fn simulator(link: &Path, extra: &[&str]) -> Kill {
     sim
 }
 
-fn socat_pair(d: &Path) -> (Kill, PathBuf, PathBuf) {
-    let (a, b) = (d.join("a"), d.join("b"));
-    let k = Kill(
-        Command::new("socat")
-            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
-            .spawn()
-            .expect("socat must be installed for this test"),
-    );
-    wait_for(&a);
-    wait_for(&b);
-    (k, a, b)
-}
-
-/// Starts `mbtap bridge` with `args`; the process and every address it said it listens on, in
-/// order, with the kind in parentheses.
+/// Starts `mbtap bridge` with `args`; the process, the addresses it listens on (Modbus TCP,
+/// RTU over TCP, in that order, as asked for) and its later stderr.
 fn bridge(args: &[&str]) -> (Kill, Vec<String>, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
-    let mut child = Command::new(BIN).arg("bridge").args(args).stderr(Stdio::piped()).spawn().unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let expected = args.iter().filter(|a| a.starts_with("--listen")).count();
-    let mut addrs = Vec::new();
-    while addrs.len() < expected {
-        let l = lines.next().expect("the bridge ended before listening").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            addrs.push(rest.to_owned());
-        }
-    }
-    let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-    let sink = std::sync::Arc::clone(&log);
-    std::thread::spawn(move || {
-        for l in lines.map_while(Result::ok) {
-            sink.lock().unwrap().push(l);
-        }
-    });
-    (Kill(child), addrs, log)
-}
-
-fn addr(said: &str) -> &str {
-    said.split_whitespace().next().unwrap()
+    let b = common::bridge(args);
+    (b.child, b.tcp.into_iter().chain(b.rtu).collect(), b.log)
 }
 
 fn mbtap(args: &[&str]) -> Output {
@@ -85,7 +51,7 @@ fn reverse_mode_reaches_an_rtu_over_tcp_server() {
     let bus = d.join("bus");
     let _sim = simulator(&bus, &[]);
     let (_fwd, addrs, _) = bridge(&["--serial", bus.to_str().unwrap(), "--listen-rtu", "127.0.0.1:0"]);
-    let rtu = addr(&addrs[0]).to_owned();
+    let rtu = addrs[0].clone();
     let (_socat, a, b) = socat_pair(&d);
     let (_rev, _, _) =
         bridge(&["--reverse", "--serial", a.to_str().unwrap(), "--target-rtu", &rtu, "--answer-as", "1,17"]);
@@ -104,41 +70,20 @@ fn reverse_mode_reaches_an_rtu_over_tcp_server() {
     assert!(text(&o).contains("Illegal Data Address"), "the device's own exception comes back: {}", text(&o));
 }
 
-/// GET /metrics from the bridge.
 fn metrics(addr: &str) -> String {
-    use std::io::{Read, Write};
-    let mut s = std::net::TcpStream::connect(addr).unwrap();
-    s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
-    let mut out = String::new();
-    s.read_to_string(&mut out).unwrap();
-    out
+    common::metrics_text(addr)
 }
 
 fn gauge(text: &str, name: &str, unit: u8) -> Option<f64> {
-    let key = format!("{name}{{unit=\"{unit}\"}} ");
-    text.lines().find_map(|l| l.strip_prefix(&key)?.trim().parse().ok())
+    common::metric(text, &format!("{name}{{unit=\"{unit}\"}}"))
 }
 
 /// Starts a bridge with metrics; its Modbus TCP address and metrics address.
 fn bridge_with_metrics(bus: &Path, extra: &[&str]) -> (Kill, String, String) {
-    let mut child = Command::new(BIN)
-        .args(["bridge", "--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0", "--metrics", "127.0.0.1:0"])
-        .args(extra)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let (mut tcp, mut m) = (None, None);
-    while tcp.is_none() || m.is_none() {
-        let l = lines.next().expect("the bridge ended early").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            tcp = Some(addr(rest).to_owned());
-        } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
-            m = Some(rest.trim_end_matches("/metrics").to_owned());
-        }
-    }
-    std::thread::spawn(move || for _ in lines {});
-    (Kill(child), tcp.unwrap(), m.unwrap())
+    let mut args = vec!["--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0", "--metrics", "127.0.0.1:0"];
+    args.extend_from_slice(extra);
+    let b = common::bridge(&args);
+    (b.child, b.tcp.unwrap(), b.metrics.unwrap())
 }
 
 /// `--timeout auto` learns a live unit's timeout from its answers (well under the ceiling) and
@@ -310,7 +255,7 @@ fn the_bridge_follows_a_by_id_link_to_the_renumbered_adapter() {
     let sim = simulator(&one, &[]);
     relink(&by_id, &one);
     let (_bridge, addrs, log) = bridge(&["--serial", by_id.to_str().unwrap(), "--listen", "127.0.0.1:0"]);
-    let tcp = addr(&addrs[0]).to_owned();
+    let tcp = addrs[0].clone();
     let read = || mbtap(&["read", &tcp, "--unit", "1", "--format", "jsonl", "input", "430"]);
     assert!(read().status.success());
     let before = std::fs::canonicalize(&one).unwrap();
@@ -383,7 +328,7 @@ fn the_ascii_bridge_reads_and_writes_a_pymodbus_ascii_server() {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/pymodbus_ascii_server.py");
     let _server = Kill(Command::new("python3").arg(script).arg(&b).stderr(Stdio::null()).spawn().unwrap());
     let (_bridge, addrs, _) = bridge(&["--serial", a.to_str().unwrap(), "--mode", "ascii", "--listen", "127.0.0.1:0"]);
-    let tcp = addr(&addrs[0]).to_owned();
+    let tcp = addrs[0].clone();
     // pymodbus needs a moment to open its port: a hang guard while it starts.
     let start = std::time::Instant::now();
     let o = loop {

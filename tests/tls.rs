@@ -6,7 +6,6 @@
 //! openssl, python3 and pymodbus: `#[ignore]`d in a plain `cargo test`, run by `.ci/run`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -106,12 +105,8 @@ fn client(port: u16, d: &Path, who: Option<&str>) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
-fn metric(addr: &str, line: &str) -> u64 {
-    let mut s = std::net::TcpStream::connect(addr).unwrap();
-    s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
-    let mut text = String::new();
-    s.read_to_string(&mut text).unwrap();
-    text.lines().find_map(|l| l.strip_prefix(line)?.trim().parse().ok()).unwrap_or(0)
+fn metric(addr: &str, series: &str) -> u64 {
+    common::counter(addr, series.trim_end())
 }
 
 #[test]
@@ -129,26 +124,28 @@ fn roles_certificates_and_refusals_as_the_specification_says() {
     );
     wait_for(&bus);
     let f = |n: &str| d.join(n).to_str().unwrap().to_owned();
-    let mut child = Command::new(BIN)
-        .args(["bridge", "--serial", bus.to_str().unwrap(), "--listen-tls", "127.0.0.1:0", "--metrics", "127.0.0.1:0"])
-        .args(["--cert", &f("server.pem"), "--key", &f("server.key"), "--client-ca", &f("ca.pem")])
-        .args(["--role", "viewer=read-only", "--role", "operator=units:1-247"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let (mut port, mut m) = (None, None);
-    while port.is_none() || m.is_none() {
-        let l = lines.next().expect("the bridge ended early").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            port = rest.split_whitespace().next().unwrap().rsplit(':').next().unwrap().parse::<u16>().ok();
-        } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
-            m = Some(rest.trim_end_matches("/metrics").to_owned());
-        }
-    }
-    std::thread::spawn(move || for _ in lines {});
-    let _bridge = Kill(child);
-    let (port, m) = (port.unwrap(), m.unwrap());
+    let (server, server_key, ca) = (f("server.pem"), f("server.key"), f("ca.pem"));
+    let b = common::bridge(&[
+        "--serial",
+        bus.to_str().unwrap(),
+        "--listen-tls",
+        "127.0.0.1:0",
+        "--metrics",
+        "127.0.0.1:0",
+        "--cert",
+        &server,
+        "--key",
+        &server_key,
+        "--client-ca",
+        &ca,
+        "--role",
+        "viewer=read-only",
+        "--role",
+        "operator=units:1-247",
+    ]);
+    let port: u16 = b.tls.as_deref().unwrap().rsplit(':').next().unwrap().parse().unwrap();
+    let m = b.metrics.clone().unwrap();
+    let _bridge = b.child;
 
     let operator = client(port, &d, Some("operator"));
     assert!(operator["read"].is_array(), "{operator}");
@@ -197,43 +194,18 @@ fn sighup_reloads_the_client_ca_and_the_tls_listener_has_its_own_allow_list() {
     let trusted = d.join("trusted-ca.pem");
     std::fs::copy(d.join("ca.pem"), &trusted).unwrap();
     let f = |n: &str| d.join(n).to_str().unwrap().to_owned();
+    let (server, server_key) = (f("server.pem"), f("server.key"));
     let start = |extra: &[&str]| {
-        let mut child = Command::new(BIN)
-            .args([
-                "bridge",
-                "--serial",
-                bus.to_str().unwrap(),
-                "--listen",
-                "127.0.0.1:0",
-                "--listen-tls",
-                "127.0.0.1:0",
-            ])
-            .args(["--cert", &f("server.pem"), "--key", &f("server.key"), "--client-ca", trusted.to_str().unwrap()])
-            .args(["--role", "operator=units:1-247"])
-            .args(extra)
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-        let port = loop {
-            let l = lines.next().expect("the bridge ended early").unwrap();
-            if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ")
-                && rest.contains("TLS")
-            {
-                break rest.split_whitespace().next().unwrap().rsplit(':').next().unwrap().parse::<u16>().unwrap();
-            }
-        };
-        let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let sink = std::sync::Arc::clone(&log);
-        std::thread::spawn(move || {
-            for l in lines.map_while(Result::ok) {
-                sink.lock().unwrap().push(l);
-            }
-        });
-        (child, port, log)
+        let mut args =
+            vec!["--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0", "--listen-tls", "127.0.0.1:0"];
+        args.extend_from_slice(&["--cert", &server, "--key", &server_key, "--client-ca", trusted.to_str().unwrap()]);
+        args.extend_from_slice(&["--role", "operator=units:1-247"]);
+        args.extend_from_slice(extra);
+        let b = common::bridge(&args);
+        let port: u16 = b.tls.as_deref().unwrap().rsplit(':').next().unwrap().parse().unwrap();
+        (b.child, port, b.log)
     };
-    let (child, port, log) = start(&[]);
-    let bridge = Kill(child);
+    let (bridge, port, log) = start(&[]);
     assert!(client(port, &d, Some("operator"))["read"].is_array());
     assert!(client(port, &d, Some("foreign"))["handshake"].is_string());
     std::fs::copy(d.join("other-ca.pem"), &trusted).unwrap();
@@ -251,7 +223,6 @@ fn sighup_reloads_the_client_ca_and_the_tls_listener_has_its_own_allow_list() {
 
     // Its own allow-list: the TLS listener admits only 10.0.0.0/8; loopback is refused there.
     std::fs::copy(d.join("ca.pem"), &trusted).unwrap();
-    let (child, port, _) = start(&["--tls-allow-ip", "10.0.0.0/8"]);
-    let _bridge2 = Kill(child);
+    let (_bridge2, port, _) = start(&["--tls-allow-ip", "10.0.0.0/8"]);
     assert!(client(port, &d, Some("operator"))["handshake"].is_string(), "refused by the TLS allow-list");
 }

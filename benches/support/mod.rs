@@ -1,21 +1,17 @@
-//! Pieces the end-to-end benches share: a child killed at the end, percentiles, a blocking
-//! Modbus TCP request.
+//! Pieces the end-to-end benches share: the tests' helpers (a child killed at the end, a
+//! bridge started and its addresses, metrics), percentiles, a blocking Modbus TCP request.
 #![allow(dead_code, clippy::unwrap_used, clippy::cast_precision_loss)]
 #![allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // percentile indexes of short vectors
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::process::Child;
 
-/// A child process killed and reaped when dropped.
-pub struct Kill(pub Child);
-
-impl Drop for Kill {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+// The tests' helpers (a killed-on-drop child, starting a bridge, reading its metrics), shared
+// rather than written again.
+#[path = "../../tests/common/mod.rs"]
+mod common;
+#[allow(unused_imports)] // each bench uses some of them
+pub use common::{Kill, bridge, counter};
 
 /// The `p` quantile (0..=1) of `v` (sorted in place).
 pub fn percentile(v: &mut [f64], p: f64) -> f64 {

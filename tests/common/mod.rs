@@ -25,3 +25,88 @@ pub fn wait_for(path: &std::path::Path) {
         std::thread::sleep(Duration::from_millis(20));
     }
 }
+
+/// A running `mbtap bridge`: the addresses it said it listens on, and what it wrote on stderr
+/// after that.
+pub struct Bridge {
+    pub child: Kill,
+    /// Modbus TCP, RTU over TCP, Modbus/TCP Security, metrics (`ADDR:PORT`), as asked for.
+    pub tcp: Option<String>,
+    pub rtu: Option<String>,
+    pub tls: Option<String>,
+    pub metrics: Option<String>,
+    pub log: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
+}
+
+/// Starts `mbtap bridge ARGS` and waits until every listener the arguments ask for is up.
+pub fn bridge(args: &[&str]) -> Bridge {
+    use std::io::{BufRead, BufReader};
+    let mut child =
+        std::process::Command::new(BIN).arg("bridge").args(args).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let wants = |flag: &str| args.contains(&flag);
+    let (mut tcp, mut rtu, mut tls, mut metrics) = (None, None, None, None);
+    while (wants("--listen") && tcp.is_none())
+        || (wants("--listen-rtu") && rtu.is_none())
+        || (wants("--listen-tls") && tls.is_none())
+        || (wants("--metrics") && metrics.is_none())
+    {
+        let l = lines.next().expect("the bridge ended before listening").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            let addr = Some(rest.split_whitespace().next().unwrap().to_owned());
+            if rest.contains("(Modbus TCP)") {
+                tcp = addr;
+            } else if rest.contains("TLS") {
+                tls = addr;
+            } else {
+                rtu = addr;
+            }
+        } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
+            metrics = Some(rest.trim_end_matches("/metrics").to_owned());
+        }
+    }
+    let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let sink = std::sync::Arc::clone(&log);
+    std::thread::spawn(move || {
+        for l in lines.map_while(Result::ok) {
+            sink.lock().unwrap().push(l);
+        }
+    });
+    Bridge { child: Kill(child), tcp, rtu, tls, metrics, log }
+}
+
+/// GET /metrics.
+pub fn metrics_text(addr: &str) -> String {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n").unwrap();
+    let mut out = String::new();
+    s.read_to_string(&mut out).unwrap();
+    out
+}
+
+/// The value of the series that starts `series ` (`name{labels}`); a series not there yet
+/// (per-unit series appear with the unit's first request) is `None`.
+pub fn metric(text: &str, series: &str) -> Option<f64> {
+    text.lines().find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.trim().parse().ok())
+}
+
+/// A pair of linked pseudo-terminals (socat), `a` and `b` in `dir`.
+pub fn socat_pair(dir: &std::path::Path) -> (Kill, std::path::PathBuf, std::path::PathBuf) {
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    let k = Kill(
+        std::process::Command::new("socat")
+            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
+            .spawn()
+            .expect("socat must be installed for this test"),
+    );
+    wait_for(&a);
+    wait_for(&b);
+    (k, a, b)
+}
+
+/// A counter's value (0 when the series is not there yet).
+pub fn counter(addr: &str, series: &str) -> u64 {
+    let text = metrics_text(addr);
+    text.lines().find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.trim().parse().ok()).unwrap_or(0)
+}
