@@ -43,6 +43,18 @@ queue-per-client = 32
 # metrics = "127.0.0.1:9502"
 # monitor = "jsonl"      # text | jsonl | tui
 # device = ["1=mk4", "5=display", "17=mkzp"]
+# Modbus/TCP Security: TLS with client certificates; the role in a client's certificate
+# (extension 1.3.6.1.4.1.50316.802.1) says what it may do.
+# listen-tls = "0.0.0.0:802"
+# cert = "/etc/mbtap/bridge.pem"
+# key = "/etc/mbtap/bridge.key"
+# client-ca = "/etc/mbtap/clients-ca.pem"
+# [roles.operator]
+# functions = [3, 4, 6, 16]
+# units = ["1-20"]
+# [roles.viewer]
+# read-only = true
+
 # mqtt = "mqtt://127.0.0.1:1883"   # publish what the monitor hears (needs monitor)
 # mqtt-prefix = "mbtap/site/line"
 "#;
@@ -54,13 +66,21 @@ queue-per-client = 32
 /// type no option takes.
 pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
     let doc: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
+    let roles = doc.get("roles").cloned();
     let table = match doc.get("bridge") {
         Some(toml::Value::Table(t)) => t.clone(),
         Some(_) => return Err("[bridge] must be a table".into()),
         None => doc,
     };
     let mut out = Vec::new();
+    // `[roles.NAME]` tables (MODBUS/TCP Security roles) become `--role NAME=RULES`.
+    if let Some(roles) = &roles {
+        out.extend(role_options(roles)?);
+    }
     for (key, value) in &table {
+        if key == "roles" {
+            continue;
+        }
         let long = key.replace('_', "-");
         if !known.contains(&long) {
             return Err(format!("unknown setting {key:?} in [bridge]; known: {}", known.join(", ")));
@@ -91,6 +111,40 @@ pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
             }
             v => out.push(format!("{flag}={}", scalar(v)?)),
         }
+    }
+    Ok(out)
+}
+
+/// `[roles.operator] functions = [3, 4, 6] units = ["1-20"] read-only = false` as `--role`
+/// options.
+fn role_options(roles: &toml::Value) -> Result<Vec<String>, String> {
+    let toml::Value::Table(roles) = roles else { return Err("[roles] must hold tables, e.g. [roles.operator]".into()) };
+    let mut out = Vec::new();
+    for (name, rules) in roles {
+        let toml::Value::Table(rules) = rules else { return Err(format!("roles.{name} must be a table")) };
+        let mut parts = Vec::new();
+        for (key, value) in rules {
+            let list = |v: &toml::Value| -> Result<String, String> {
+                let items = v.as_array().ok_or_else(|| format!("roles.{name}.{key} = {v}: expected a list"))?;
+                items
+                    .iter()
+                    .map(|i| match i {
+                        toml::Value::Integer(n) => Ok(n.to_string()),
+                        toml::Value::String(s) => Ok(s.clone()),
+                        other => Err(format!("roles.{name}.{key}: {other} is not a number or a range")),
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+                    .map(|v| v.join(","))
+            };
+            match (key.as_str(), value) {
+                ("functions", v) => parts.push(format!("functions:{}", list(v)?)),
+                ("units", v) => parts.push(format!("units:{}", list(v)?)),
+                ("read-only" | "read_only", toml::Value::Boolean(true)) => parts.push("read-only".into()),
+                ("read-only" | "read_only", toml::Value::Boolean(false)) => {}
+                _ => return Err(format!("roles.{name}.{key}: known keys are functions, units and read-only")),
+            }
+        }
+        out.push(format!("--role={name}={}", parts.join(";")));
     }
     Ok(out)
 }

@@ -551,6 +551,27 @@ mod tests {
     }
 
     #[test]
+    fn roles_tables_in_the_file_become_role_rules() {
+        let file = file(
+            "roles",
+            "[bridge]\nserial = \"/dev/ttyS0\"\nlisten-tls = \"127.0.0.1:802\"\ncert = \"c.pem\"\nkey = \"k.pem\"\nclient-ca = \"ca.pem\"\n\
+             [roles.operator]\nfunctions = [3, 4, 6]\nunits = [\"1-20\"]\n[roles.viewer]\nread-only = true\n",
+        );
+        let path = file.to_str().unwrap();
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", path]);
+        let b = merge(&file, cli, Some(&m)).unwrap();
+        assert_eq!(b.tls.role, ["operator=functions:3,4,6;units:1-20", "viewer=read-only"]);
+        let roles = crate::bridge::tls::parse_roles(&b.tls.role).unwrap();
+        assert!(roles["viewer"].read_only);
+        let bad = file_bad();
+        assert!(merge(&bad, parse(&["mbtap", "bridge", "--config", bad.to_str().unwrap()]).0, None).is_err());
+    }
+
+    fn file_bad() -> std::path::PathBuf {
+        file("roles-bad", "[bridge]\nserial = \"/dev/ttyS0\"\n[roles.operator]\nwrites = true\n")
+    }
+
+    #[test]
     fn the_command_line_wins_over_the_file() {
         let file = file("wins", "[bridge]\nserial = \"/dev/ttyS0\"\nlisten = \"127.0.0.1:1502\"\nread-only = true\n");
         let path = file.to_str().unwrap();
