@@ -27,6 +27,7 @@ fn run_dir(dir: &Path) -> usize {
             "uart" => mbtap_core::fuzzing::uart,
             "bridge_response" => mbtap_core::fuzzing::bridge_response,
             "health" => mbtap_core::fuzzing::health,
+            "query" => mbtap_core::fuzzing::query,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

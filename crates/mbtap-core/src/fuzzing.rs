@@ -311,3 +311,34 @@ pub fn health(data: &[u8]) {
     let _ = (report.text(), report.json(), crate::health::html::render(&report, "fuzz"));
     let _ = crate::scan::scan_stored(&stored, line);
 }
+
+/// Any text as the items of `mbtap read`/`write` (one per line), with the MK4 profile and with
+/// none: parsed, resolved, planned and encoded — never a panic, every planned read inside the
+/// spec's quantity limits and the target's addresses, every write within 123 registers.
+pub fn query(data: &[u8]) {
+    use crate::query::{encode, items, plan, resolve};
+    static MK4: std::sync::OnceLock<Option<crate::profile::Profile>> = std::sync::OnceLock::new();
+    let mk4 = MK4.get_or_init(|| crate::profile::builtin::get("mk4").and_then(Result::ok));
+    let text = String::from_utf8_lossy(data);
+    let tokens: Vec<&str> = text.split('\n').collect();
+    let Ok(parsed) = items::parse_items(&tokens) else { return };
+    for profile in [None, mk4.as_ref()] {
+        let targets: Vec<_> = parsed.iter().filter_map(|i| resolve::resolve(i, profile).ok()).collect();
+        if let Ok(p) = plan::plan(&targets, profile) {
+            for r in &p.reads {
+                let max = if crate::query::is_bits(r.table) { plan::MAX_READ_BITS } else { plan::MAX_READ_REGISTERS };
+                assert!((1..=max).contains(&r.quantity), "read of {} registers", r.quantity);
+                let t = &targets[r.target];
+                assert!(r.address >= t.first && u32::from(r.address) + u32::from(r.quantity) - 1 <= u32::from(t.last));
+            }
+        }
+        for t in &targets {
+            for force in [false, true] {
+                if let Ok(w) = encode::encode_write(t, profile, force) {
+                    assert!(!w.words.is_empty() && w.words.len() <= 123, "{} words", w.words.len());
+                    let _ = w.pdu();
+                }
+            }
+        }
+    }
+}

@@ -85,11 +85,20 @@ fn find_name(item: &Item, name: &str, p: &Profile) -> Result<(Table, u16), Query
     match found.as_slice() {
         [one] => Ok(*one),
         [] => {
+            // Only names of about the same length can be close enough: the edit distance is at
+            // least the difference in length, and skipping the rest keeps a long garbage name
+            // from costing its length times every name in the profile.
+            let limit = want.chars().count() / 3 + 2;
+            let near = |n: &str| n.chars().count().abs_diff(want.chars().count()) <= limit;
             let suggestion = named_values(p)
                 .filter(|&(t, ..)| in_table(t))
-                .map(|(_, _, en, _)| (distance(&want, &en.to_lowercase()).min(distance(&want, &short(en))), en))
+                .filter_map(|(_, _, en, _)| {
+                    let (full, cut) = (en.to_lowercase(), short(en));
+                    let d = [full, cut].iter().filter(|n| near(n)).map(|n| distance(&want, n)).min()?;
+                    Some((d, en))
+                })
                 .min_by_key(|&(d, _)| d)
-                .filter(|&(d, _)| d <= want.chars().count() / 3 + 2)
+                .filter(|&(d, _)| d <= limit)
                 .map(|(_, en)| en.to_owned());
             Err(QueryError::UnknownName { item: item.text.clone(), profile: p.meta.name.clone(), suggestion })
         }
