@@ -315,6 +315,9 @@ pub fn health(data: &[u8]) {
 /// Any text as the items of `mbtap read`/`write` (one per line), with the MK4 profile and with
 /// none: parsed, resolved, planned and encoded — never a panic, every planned read inside the
 /// spec's quantity limits and the target's addresses, every write within 123 registers.
+///
+/// # Panics
+/// When one of those holds not: that is what the fuzzer looks for.
 pub fn query(data: &[u8]) {
     use crate::query::{encode, items, plan, resolve};
     static MK4: std::sync::OnceLock<Option<crate::profile::Profile>> = std::sync::OnceLock::new();
