@@ -408,3 +408,24 @@ fn control_characters_from_profiles_and_frames_never_reach_the_terminal() {
     assert!(!s.contains('\u{1b}') && !s.contains('\u{7}'), "a control character reached stdout: {s:?}");
     assert!(s.contains("\\u{1b}"), "shown escaped: {s}");
 }
+
+/// Issue 14: a response cut short (byte count 6, the frame ends 3 bytes early) was shown only
+/// as a request with an absurd quantity, while `replay` called the same bytes a bad response.
+/// Without the request before it `decode` cannot choose: it shows both readings.
+#[test]
+fn a_truncated_response_is_shown_as_both_readings() {
+    // Unit 1, 03, byte count 6, registers 000A 000B and one byte of the third: 3 bytes missing
+    // (the third register's low byte and the CRC).
+    const CUT: &str = "01 03 06 00 0A 00 0B 00";
+    let o = mbtap(&["decode", CUT], None);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("· request ·"), "{text}");
+    assert!(text.contains("or: a truncated response — 0x03 whose byte count (6) makes the frame 11 bytes"), "{text}");
+    assert!(text.contains("8 received, 3 missing"), "{text}");
+    let o = mbtap(&["decode", "--format", "jsonl", CUT], None);
+    let j: serde_json::Value = serde_json::from_slice(o.stdout.split(|&b| b == b'\n').next().unwrap()).unwrap();
+    assert_eq!(j["or_truncated_response"]["expected_len"], 11, "{j}");
+    // A request with a damaged CRC and a plausible structure gets no such second reading.
+    let o = mbtap(&["decode", "01 03 00 65 00 03 15 D5"], None);
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("truncated"));
+}

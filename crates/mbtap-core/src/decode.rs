@@ -308,8 +308,23 @@ impl<'p> Decoder<'p> {
             self.outcome = self.outcome.max(Outcome::Problems);
         }
         let view = FrameView { wire: &this.wire, adu: &this.adu, decode: &decode, request: None };
+        let cut = truncated_response(&this, &decode);
         match format {
-            Format::Text => writeln!(out, "{}", printable(&text::frame(&view, ""))),
+            Format::Text => {
+                let frame = text::frame(&view, "");
+                let shown = printable(&frame);
+                let Some(c) = cut else { return writeln!(out, "{shown}") };
+                writeln!(out, "{}", shown.trim_end_matches('\n'))?;
+                writeln!(
+                    out,
+                    "  or: a truncated response — 0x{:02X} whose byte count ({}) makes the frame {} bytes with its CRC; {} received, {} missing\n",
+                    c.function,
+                    c.byte_count,
+                    c.expected,
+                    c.received,
+                    c.expected - c.received
+                )
+            }
             Format::Jsonl => {
                 let mut j = serde_json::Map::new();
                 j.insert("event".into(), json!("frame"));
@@ -324,10 +339,46 @@ impl<'p> Decoder<'p> {
                 if let serde_json::Value::Object(m) = jsonl::frame(&view) {
                     j.extend(m);
                 }
+                if let Some(c) = cut {
+                    j.insert(
+                        "or_truncated_response".into(),
+                        json!({"function": c.function, "byte_count": c.byte_count, "expected_len": c.expected, "received_len": c.received}),
+                    );
+                }
                 writeln!(out, "{}", serde_json::Value::Object(j))
             }
         }
     }
+}
+
+/// A response cut short: what its own byte count says the frame needed, and what came.
+#[derive(Debug, Clone, Copy)]
+struct Cut {
+    function: u8,
+    byte_count: u8,
+    expected: usize,
+    received: usize,
+}
+
+/// The other reading of an RTU frame whose CRC failed and that was read as a request: a
+/// response whose byte count (MAP v1.1b3 §6.1–§6.4: the third byte) asks for more bytes than
+/// came — what a read cut by the adapter or a lost tail looks like. `replay` calls such bytes a
+/// bad response; `decode`, without the request before it, cannot choose, so it says both.
+fn truncated_response(input: &Input, decode: &PduDecode<'_>) -> Option<Cut> {
+    let is_request = matches!(decode, PduDecode::One(DecodedPdu { pdu: Pdu::Request(_), .. }));
+    if input.adu.mode != Mode::Rtu || input.adu.check.ok() || input.hint == DirectionHint::Request || !is_request {
+        return None;
+    }
+    // The bytes after the unit, the supposed CRC included: a response prefix.
+    let body = input.wire.get(1..)?;
+    let (&function, &byte_count) = (body.first()?, body.get(1)?);
+    if !matches!(function, 0x01..=0x04) {
+        return None;
+    }
+    let crate::proto::PduLength::Exact(pdu) = crate::proto::response_len(body) else { return None };
+    // Unit + PDU + CRC (Serial Line v1.02 §2.5.1).
+    let expected = pdu.checked_add(3)?;
+    (expected > input.wire.len()).then_some(Cut { function, byte_count, expected, received: input.wire.len() })
 }
 
 /// The request reading of a decode, when it has no trailing bytes.
