@@ -75,16 +75,9 @@ pub fn parse_rule(spec: &str) -> Result<Rule, String> {
     if last < first {
         return Err(bad("the range runs backwards"));
     }
-    let age = age.trim();
-    let (n, scale) = if let Some(n) = age.strip_suffix("ms") {
-        (n, 1e-3)
-    } else if let Some(n) = age.strip_suffix('s') {
-        (n, 1.0)
-    } else {
-        (age, 1.0)
-    };
-    let secs = n.trim().parse::<f64>().ok().map(|v| v * scale).filter(|v| (0.0..=86_400.0).contains(v) && *v > 0.0);
-    let max_age = Duration::from_secs_f64(secs.ok_or_else(|| bad(&format!("{age:?} is not an age like 1s or 500ms")))?);
+    // More than nothing (an age of 0 would cache nothing), at most a day.
+    let max_age = mbtap_core::duration::parse_duration(age, Duration::from_millis(1), Duration::from_hours(24))
+        .map_err(|e| bad(&e))?;
     Ok(Rule { units, table, first, last, max_age })
 }
 

@@ -30,22 +30,9 @@ pub struct Args {
     pub mqtt: crate::publish::mqtt::MqttArgs,
 }
 
-/// `1s`, `250ms`, `1.5` (seconds).
+/// Between 1 ms and a day.
 fn parse_interval(s: &str) -> Result<Duration, String> {
-    let s = s.trim();
-    let (number, scale) = if let Some(n) = s.strip_suffix("ms") {
-        (n, 1e-3)
-    } else if let Some(n) = s.strip_suffix('s') {
-        (n, 1.0)
-    } else {
-        (s, 1.0)
-    };
-    let v: f64 = number.trim().parse().map_err(|_| format!("{s:?}: expected a time like 1s, 250ms or 2"))?;
-    let secs = v * scale;
-    if !(0.001..=86_400.0).contains(&secs) {
-        return Err(format!("{s:?}: between 1ms and 24h"));
-    }
-    Ok(Duration::from_secs_f64(secs))
+    mbtap_core::duration::parse_duration(s, Duration::from_millis(1), Duration::from_hours(24))
 }
 
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {

@@ -38,24 +38,12 @@ impl Default for MaxAge {
     }
 }
 
-/// `30s`, `500ms`, `2` (seconds), `none`.
+/// An age (`30s`, `500ms`, …) or `none`.
 fn parse_age(s: &str) -> Result<MaxAge, String> {
-    let t = s.trim();
-    if t.eq_ignore_ascii_case("none") {
+    if s.trim().eq_ignore_ascii_case("none") {
         return Ok(MaxAge(None));
     }
-    let (n, scale) = if let Some(n) = t.strip_suffix("ms") {
-        (n, 1e-3)
-    } else if let Some(n) = t.strip_suffix('s') {
-        (n, 1.0)
-    } else {
-        (t, 1.0)
-    };
-    let v: f64 = n.trim().parse().map_err(|_| format!("{s:?}: expected an age like 30s, 500ms or none"))?;
-    if !(0.0..=1e9).contains(&v) {
-        return Err(format!("{s:?}: expected an age from 0 to 10^9 s"));
-    }
-    Ok(MaxAge(Some(Duration::from_secs_f64(v * scale))))
+    mbtap_core::duration::parse_duration(s, Duration::ZERO, Duration::from_secs(1_000_000_000)).map(|d| MaxAge(Some(d)))
 }
 
 /// The publishers the options ask for, started; their taps go into the event writer.

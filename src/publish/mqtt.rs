@@ -64,20 +64,9 @@ pub enum Discovery {
     Homeassistant,
 }
 
+/// From 0 (every change) to a day.
 fn parse_interval(s: &str) -> Result<Duration, String> {
-    let t = s.trim();
-    let (n, scale) = if let Some(n) = t.strip_suffix("ms") {
-        (n, 1e-3)
-    } else if let Some(n) = t.strip_suffix('s') {
-        (n, 1.0)
-    } else {
-        (t, 1.0)
-    };
-    let v: f64 = n.trim().parse().map_err(|_| format!("{s:?}: expected an interval like 1s, 250ms or 0"))?;
-    if !(0.0..=86_400.0).contains(&(v * scale)) {
-        return Err(format!("{s:?}: between 0 and 24h"));
-    }
-    Ok(Duration::from_secs_f64(v * scale))
+    mbtap_core::duration::parse_duration(s, Duration::ZERO, Duration::from_hours(24))
 }
 
 /// A topic level from free text: MQTT reserves `/`, `+` and `#` (MQTT v3.1.1 §4.7).

@@ -22,6 +22,7 @@
 //! - [`query`] — what `read`/`write`/`watch` ask of a device: names resolved, requests split,
 //!   writes checked and encoded, answers named and scaled.
 //! - [`decode`] — frames typed as text, explained (the work of `mbtap decode`).
+//! - [`duration`] — durations as typed (`250ms`, `1s`, `2min`): one parser for every option.
 //! - [`line_args`] — line settings from a command line or a capture's description, merged.
 //! - [`traffic`] — synthetic traffic with ground truth, observation models, scoring.
 //! - [`sim`] — simulated slaves from profiles, the virtual bus with faults, the UART model.
@@ -34,6 +35,7 @@ pub mod capture;
 pub mod chunk;
 pub mod decode;
 pub mod decode_lines;
+pub mod duration;
 pub mod framer;
 pub mod fuzzing;
 pub mod health;
