@@ -7,40 +7,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-/// A table a read function addresses (MAP v1.1b3 §6.1–§6.4): the function code reads it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Table {
-    Coils = 0x01,
-    Discrete = 0x02,
-    Holding = 0x03,
-    Input = 0x04,
-}
-
-impl Table {
-    fn of_read(function: u8) -> Option<Self> {
-        match function {
-            0x01 => Some(Self::Coils),
-            0x02 => Some(Self::Discrete),
-            0x03 => Some(Self::Holding),
-            0x04 => Some(Self::Input),
-            _ => None,
-        }
-    }
-
-    fn word(s: &str) -> Option<Self> {
-        match s {
-            "coils" | "coil" => Some(Self::Coils),
-            "discrete" | "discrete_inputs" => Some(Self::Discrete),
-            "holding" | "holding_registers" => Some(Self::Holding),
-            "input" | "input_registers" => Some(Self::Input),
-            _ => None,
-        }
-    }
-
-    const fn bits(self) -> bool {
-        matches!(self, Self::Coils | Self::Discrete)
-    }
-}
+use mbtap_core::profile::Table;
+use mbtap_core::query::{is_bits, read_function, table_read_by, table_word};
 
 /// One `--cache` rule.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -68,7 +36,7 @@ pub fn parse_rule(spec: &str) -> Result<Rule, String> {
         return Err(bad("no unit"));
     }
     let table =
-        Table::word(table.trim()).ok_or_else(|| bad(&format!("{table:?} is not coils, discrete, holding or input")))?;
+        table_word(table.trim()).ok_or_else(|| bad(&format!("{table:?} is not coils, discrete, holding or input")))?;
     let (a, b) = range.split_once('-').unwrap_or((range, range));
     let num = |s: &str| s.trim().parse::<u16>().map_err(|_| bad(&format!("{s:?} is not an address 0..=65535")));
     let (first, last) = (num(a)?, num(b)?);
@@ -108,13 +76,13 @@ impl Poll {
     /// (MAP v1.1b3 §6.1–§6.4: 2000 bits, 125 registers).
     #[must_use]
     pub fn requests(&self) -> Vec<Vec<u8>> {
-        let limit: u32 = if self.rule.table.bits() { 2000 } else { 125 };
+        let limit: u32 = if is_bits(self.rule.table) { 2000 } else { 125 };
         let mut out = Vec::new();
         let mut a = u32::from(self.rule.first);
         let last = u32::from(self.rule.last);
         while a <= last {
             let n = (last - a + 1).min(limit);
-            let mut pdu = vec![self.rule.table as u8];
+            let mut pdu = vec![read_function(self.rule.table)];
             pdu.extend_from_slice(&u16::try_from(a).unwrap_or(u16::MAX).to_be_bytes());
             pdu.extend_from_slice(&u16::try_from(n).unwrap_or(1).to_be_bytes());
             out.push(pdu);
@@ -133,7 +101,7 @@ pub struct Cache {
 
 /// A read request's table, address and quantity, when it is one.
 fn read_of(pdu: &[u8]) -> Option<(Table, u16, u16)> {
-    let table = Table::of_read(*pdu.first()?)?;
+    let table = table_read_by(*pdu.first()?)?;
     let address = u16::from_be_bytes([*pdu.get(1)?, *pdu.get(2)?]);
     let quantity = u16::from_be_bytes([*pdu.get(3)?, *pdu.get(4)?]);
     (pdu.len() == 5 && quantity > 0).then_some((table, address, quantity))
@@ -174,8 +142,8 @@ impl Cache {
             }
             values.push(v);
         }
-        let mut out = vec![table as u8];
-        if table.bits() {
+        let mut out = vec![read_function(table)];
+        if is_bits(table) {
             // MAP v1.1b3 §6.1: packed, LSB of the first byte is the first point.
             let mut bytes = vec![0u8; values.len().div_ceil(8)];
             for (i, v) in values.iter().enumerate() {
@@ -196,7 +164,7 @@ impl Cache {
     /// registers are kept. Exceptions and malformed answers are not.
     pub fn fill(&mut self, unit: u8, request: &[u8], response: &[u8], now: Instant) {
         let Some((table, address, quantity)) = read_of(request) else { return };
-        if response.first() != Some(&(table as u8)) {
+        if response.first() != Some(&read_function(table)) {
             return;
         }
         let data = response.get(2..).unwrap_or_default();
@@ -206,7 +174,7 @@ impl Cache {
                 continue;
             }
             let i = usize::from(i);
-            let v = if table.bits() {
+            let v = if is_bits(table) {
                 data.get(i / 8).map(|b| u16::from(b >> (i % 8) & 1))
             } else {
                 data.get(i * 2..i * 2 + 2).map(|p| u16::from_be_bytes([p[0], p[1]]))
@@ -224,10 +192,10 @@ impl Cache {
         let (table, address, quantity) = match request.first() {
             Some(0x05) => (Table::Coils, field(1), Some(1)),
             Some(0x0F) => (Table::Coils, field(1), field(3)),
-            Some(0x06 | 0x16) => (Table::Holding, field(1), Some(1)),
-            Some(0x10) => (Table::Holding, field(1), field(3)),
+            Some(0x06 | 0x16) => (Table::HoldingRegisters, field(1), Some(1)),
+            Some(0x10) => (Table::HoldingRegisters, field(1), field(3)),
             // 17: the write part starts at byte 5 (MAP v1.1b3 §6.17).
-            Some(0x17) => (Table::Holding, field(5), field(7)),
+            Some(0x17) => (Table::HoldingRegisters, field(5), field(7)),
             _ => return,
         };
         let (Some(address), Some(quantity)) = (address, quantity) else { return };

@@ -130,6 +130,22 @@ pub fn parse_units(spec: &str) -> anyhow::Result<std::collections::BTreeSet<u8>>
     Ok(out)
 }
 
+/// A function code as written: decimal (`3`) or hex (`0x03`).
+#[must_use]
+pub fn parse_function_code(s: &str) -> Option<u8> {
+    let s = s.trim();
+    match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(hex) => u8::from_str_radix(hex, 16).ok(),
+        None => s.parse().ok(),
+    }
+}
+
+/// A comma-separated list of function codes (`3,4,0x10`).
+#[must_use]
+pub fn parse_function_codes(list: &str) -> Option<std::collections::BTreeSet<u8>> {
+    list.split(',').map(parse_function_code).collect()
+}
+
 /// Parses `TCP=SERIAL` unit mappings (`--map-unit 10=1`).
 ///
 /// # Errors

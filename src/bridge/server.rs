@@ -147,15 +147,9 @@ pub fn parse_priority(spec: &str) -> Result<Priority, String> {
     match rule.split_once(':') {
         Some(("ip", net)) => net.parse().map(Priority::Net).map_err(bad),
         Some(("unit", units)) => super::run::parse_units(units).map(Priority::Units).map_err(|e| bad(format!("{e:#}"))),
-        Some(("fc", codes)) => codes
-            .split(',')
-            .map(|c| {
-                let c = c.trim();
-                c.strip_prefix("0x").map_or_else(|| c.parse(), |h| u8::from_str_radix(h, 16))
-            })
-            .collect::<Result<_, _>>()
+        Some(("fc", codes)) => super::run::parse_function_codes(codes)
             .map(Priority::Functions)
-            .map_err(|_| bad(format!("{codes:?} is not a list of function codes"))),
+            .ok_or_else(|| bad(format!("{codes:?} is not a list of function codes"))),
         _ => Err(bad(format!("{rule:?}"))),
     }
 }

@@ -87,13 +87,7 @@ pub fn parse_roles(values: &[String]) -> anyhow::Result<Roles> {
             match rule.split_once(':') {
                 None if rule == "read-only" => p.read_only = true,
                 Some(("functions", list)) => {
-                    let codes = list
-                        .split(',')
-                        .map(|c| {
-                            let c = c.trim();
-                            c.strip_prefix("0x").map_or_else(|| c.parse(), |h| u8::from_str_radix(h, 16))
-                        })
-                        .collect::<Result<BTreeSet<u8>, _>>()
+                    let codes = super::run::parse_function_codes(list)
                         .with_context(|| format!("--role {v:?}: {list:?} is not a list of function codes"))?;
                     p.functions = Some(codes);
                 }

@@ -209,11 +209,8 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             allow_functions
                 .iter()
                 .map(|f| {
-                    let parsed = match f.strip_prefix("0x").or_else(|| f.strip_prefix("0X")) {
-                        Some(hex) => u8::from_str_radix(hex, 16).ok(),
-                        None => f.parse().ok(),
-                    };
-                    parsed.with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
+                    crate::bridge::run::parse_function_code(f)
+                        .with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
                 })
                 .collect::<anyhow::Result<Vec<u8>>>()?,
         )

@@ -57,6 +57,29 @@ pub fn table_word(word: &str) -> Option<Table> {
     TABLE_WORDS.iter().find(|(w, _)| w.eq_ignore_ascii_case(word)).map(|&(_, t)| t)
 }
 
+/// The function code that reads `table` (MAP v1.1b3 §6.1–§6.4).
+#[must_use]
+pub const fn read_function(table: Table) -> u8 {
+    match table {
+        Table::Coils => 0x01,
+        Table::DiscreteInputs => 0x02,
+        Table::HoldingRegisters => 0x03,
+        Table::InputRegisters => 0x04,
+    }
+}
+
+/// The table a read function code reads, when it is one (MAP v1.1b3 §6.1–§6.4).
+#[must_use]
+pub const fn table_read_by(function: u8) -> Option<Table> {
+    match function {
+        0x01 => Some(Table::Coils),
+        0x02 => Some(Table::DiscreteInputs),
+        0x03 => Some(Table::HoldingRegisters),
+        0x04 => Some(Table::InputRegisters),
+        _ => None,
+    }
+}
+
 /// Whether a table holds bits (coils, discrete inputs) rather than 16-bit registers.
 #[must_use]
 pub const fn is_bits(table: Table) -> bool {

@@ -27,12 +27,7 @@ impl Read {
     /// The function code that reads `table` (MAP v1.1b3 §6.1–§6.4).
     #[must_use]
     pub const fn function(&self) -> u8 {
-        match self.table {
-            Table::Coils => 0x01,
-            Table::DiscreteInputs => 0x02,
-            Table::HoldingRegisters => 0x03,
-            Table::InputRegisters => 0x04,
-        }
+        super::read_function(self.table)
     }
 }
 
