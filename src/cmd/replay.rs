@@ -54,6 +54,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     crate::output::replay(input, line.overrides(), &mut writer, &mut io::stderr())
         .with_context(|| format!("replaying {}", file.display()))?;
     if let (Some(path), Some(img)) = (&image, writer.image.take()) {
+        if img.overflowed > 0 {
+            eprintln!(
+                "mbtap: warning: the register image is full ({} addresses): {} values of new addresses not kept",
+                mbtap_core::profile::image::MAX_VALUES,
+                img.overflowed
+            );
+        }
         let text = if path.extension().is_some_and(|e| e == "json") {
             serde_json::to_string_pretty(&img.to_json(&writer.profiles))?
         } else {

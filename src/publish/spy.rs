@@ -145,9 +145,15 @@ impl Spy {
             .filter(|&(_, n)| n > 0)
             .collect();
         let total: u64 = refused.iter().map(|(_, n)| n).sum();
+        let overflowed = self.image.lock().map_or(0, |i| i.values.overflowed);
+        let full = if overflowed > 0 {
+            format!("; image full: {overflowed} values of new addresses not kept")
+        } else {
+            String::new()
+        };
         let detail = refused.iter().map(|(c, n)| format!("{c:02X}: {n}")).collect::<Vec<_>>().join(", ");
         format!(
-            "spy server on {}: {} answered, {total} refused{}",
+            "spy server on {}: {} answered, {total} refused{}{full}",
             self.addr,
             self.answered.load(Ordering::Relaxed),
             if detail.is_empty() { String::new() } else { format!(" ({detail})") }

@@ -17,13 +17,27 @@ pub struct Known {
     pub transaction: u64,
 }
 
+/// Addresses the image holds at most (about 60 MiB): a line whose frames name ever new units
+/// and addresses — a hostile or broken one, every address of 247 units and four tables is 65 M —
+/// must not take the memory of the process that listens (spy mode, MQTT, `--image`).
+pub const MAX_VALUES: usize = 1 << 20;
+
 /// The image.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct RegisterImage {
     pub values: BTreeMap<(u8, Table, u16), Known>,
     transactions: u64,
     /// The addresses the last [`Self::update`] set, in the order it set them.
     touched: Vec<(u8, Table, u16)>,
+    limit: usize,
+    /// Values of new addresses not kept because the image was full (known ones still update).
+    pub overflowed: u64,
+}
+
+impl Default for RegisterImage {
+    fn default() -> Self {
+        Self::with_limit(MAX_VALUES)
+    }
 }
 
 fn pdu_of(wire: &[u8]) -> Option<Vec<u8>> {
@@ -35,10 +49,29 @@ fn pdu_of(wire: &[u8]) -> Option<Vec<u8>> {
 }
 
 impl RegisterImage {
+    /// An image that keeps at most `limit` addresses.
+    #[must_use]
+    pub fn with_limit(limit: usize) -> Self {
+        Self { values: BTreeMap::new(), transactions: 0, touched: Vec::new(), limit, overflowed: 0 }
+    }
+
     fn set(&mut self, unit: u8, table: Table, start: u16, values: impl IntoIterator<Item = u16>, t_ns: u64) {
         for (i, raw) in values.into_iter().enumerate() {
             let Some(a) = u16::try_from(i).ok().and_then(|i| start.checked_add(i)) else { break };
-            self.values.insert((unit, table, a), Known { raw, t_ns, transaction: self.transactions });
+            let known = Known { raw, t_ns, transaction: self.transactions };
+            let full = self.values.len() >= self.limit;
+            match self.values.entry((unit, table, a)) {
+                std::collections::btree_map::Entry::Occupied(mut e) => {
+                    e.insert(known);
+                }
+                std::collections::btree_map::Entry::Vacant(_) if full => {
+                    self.overflowed += 1;
+                    continue;
+                }
+                std::collections::btree_map::Entry::Vacant(e) => {
+                    e.insert(known);
+                }
+            }
             self.touched.push((unit, table, a));
         }
     }
@@ -285,6 +318,16 @@ mod serve_tests {
         assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 126, 1_000, None), Err(ILLEGAL_DATA_VALUE));
         assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 0, 1_000, None), Err(ILLEGAL_DATA_VALUE));
         assert_eq!(img.serve_read(1, Table::HoldingRegisters, u16::MAX, 2, 1_000, None), Err(ILLEGAL_DATA_ADDRESS));
+    }
+
+    #[test]
+    fn a_full_image_keeps_updating_what_it_has_and_counts_the_rest() {
+        let mut img = RegisterImage::with_limit(1);
+        img.update(1, 1_000, &REQUEST, Some(&RESPONSE));
+        assert_eq!((img.values.len(), img.overflowed), (1, 1), "holding 100 kept, 101 counted");
+        img.update(1, 2_000, &REQUEST, Some(&RESPONSE));
+        assert_eq!(img.values[&(1, Table::HoldingRegisters, 100)].t_ns, 2_000, "a known address still updates");
+        assert_eq!(img.overflowed, 2);
     }
 
     #[test]
