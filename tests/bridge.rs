@@ -12,7 +12,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{BIN, Kill, wait_for};
+use common::{BIN, Kill, socat_pair, wait_for, wait_port};
 
 fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mbtap-bridge-{name}-{}", std::process::id()));
@@ -590,24 +590,12 @@ fn free_port() -> u16 {
 #[ignore = "needs socat, mbpoll and pymodbus; .ci/run installs them and runs this with --ignored"]
 fn reverse_mode_lets_an_rtu_master_reach_a_tcp_server() {
     let d = dir("reverse");
-    let (a, b) = (d.join("a"), d.join("b"));
-    let _socat = Kill(
-        Command::new("socat")
-            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
-            .spawn()
-            .expect("socat must be installed"),
-    );
-    wait_for(&a);
-    wait_for(&b);
+    let (_socat, a, b) = socat_pair(&d);
     let port = free_port();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/pymodbus_tcp_server.py");
     let _server =
         Kill(Command::new("python3").arg(script).arg(port.to_string()).stderr(Stdio::null()).spawn().unwrap());
-    let start = Instant::now();
-    while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(start.elapsed() < Duration::from_secs(20), "the pymodbus server never listened");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_port(port);
     let target = format!("127.0.0.1:{port}");
     let mut child = Command::new(BIN)
         .args(["bridge", "--reverse", "--serial", a.to_str().unwrap(), "--target", &target, "--answer-as", "1"])

@@ -5,13 +5,12 @@
 //! `#[ignore]`d in a plain `cargo test`, run by `.ci/run` with `--ignored`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 mod common;
-use common::{BIN, Kill, wait_for};
+use common::{BIN, Kill, socat_pair, wait_for, wait_port};
 
 fn mbtap(args: &[&str]) -> Output {
     Command::new(BIN).args(args).output().unwrap()
@@ -75,11 +74,7 @@ fn read_and_write_a_pymodbus_tcp_server() {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/pymodbus_tcp_server.py");
     let _server =
         Kill(Command::new("python3").arg(script).arg(port.to_string()).stderr(Stdio::null()).spawn().unwrap());
-    let start = Instant::now();
-    while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(start.elapsed() < Duration::from_secs(20), "the pymodbus server never listened");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_port(port);
     let target = format!("127.0.0.1:{port}");
     // The server holds 10 × address in holding registers 0–99.
     let o = mbtap(&["read", &target, "--format", "jsonl", "holding", "0..9"]);
@@ -101,15 +96,7 @@ const SENT: &str = "01 06 0069 0096 D9B8";
 /// Sniffs the far end of a socat pty pair while `write` runs on the near end; the frames heard.
 fn heard_while(write_args: &[&str]) -> (Output, Vec<serde_json::Value>) {
     let d = dir(&format!("line{}", write_args.len()));
-    let (a, b) = (d.join("a"), d.join("b"));
-    let _socat = Kill(
-        Command::new("socat")
-            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
-            .spawn()
-            .expect("socat must be installed for this test"),
-    );
-    wait_for(&a);
-    wait_for(&b);
+    let (_socat, a, b) = socat_pair(&d);
     let sniff = Command::new(BIN)
         .args(["sniff", b.to_str().unwrap(), "--format", "jsonl", "--duration", "2"])
         .stdout(Stdio::piped())

@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{BIN, Kill, wait_for};
+use common::{BIN, Kill, socat_pair, wait_for};
 
 /// The hex of every frame with a valid check, in order.
 fn good_frames(jsonl: &str) -> Vec<String> {
@@ -42,15 +42,7 @@ fn replay(path: &std::path::Path) -> String {
 fn sniff_records_what_play_sends_through_a_pty() {
     let dir = std::env::temp_dir().join(format!("mbtap-pty-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (a, b) = (dir.join("a"), dir.join("b"));
-    let _socat = Kill(
-        Command::new("socat")
-            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
-            .spawn()
-            .expect("socat must be installed for this test"),
-    );
-    wait_for(&a);
-    wait_for(&b);
+    let (_socat, a, b) = socat_pair(&dir);
     let rec = dir.join("rec.pcapng");
     let sniff = Command::new(BIN)
         .args(["sniff", b.to_str().unwrap(), "--format", "jsonl", "--record", rec.to_str().unwrap()])
@@ -172,15 +164,7 @@ fn sniff_survives_the_port_disappearing_and_coming_back() {
 fn play_caps_a_clock_step_and_says_so() {
     let dir = std::env::temp_dir().join(format!("mbtap-play-gap-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (a, b) = (dir.join("a"), dir.join("b"));
-    let _socat = Kill(
-        Command::new("socat")
-            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
-            .spawn()
-            .expect("socat must be installed for this test"),
-    );
-    wait_for(&a);
-    wait_for(&b);
+    let (_socat, a, _b) = socat_pair(&dir);
     // Two frames an hour apart: a pcap (microseconds, link type 147) written by hand.
     let frames: [(u32, &[u8]); 2] = [(0, &[0x01, 0x83, 0x03, 0x01, 0x31]), (3600, &[0x01, 0x83, 0x02, 0xC0, 0xF1])];
     let mut f = Vec::new();
@@ -224,14 +208,7 @@ fn play_caps_a_clock_step_and_says_so() {
 fn sniff_duration_holds_while_the_port_is_gone() {
     let dir = std::env::temp_dir().join(format!("mbtap-vanish-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (a, b) = (dir.join("a"), dir.join("b"));
-    let socat = Kill(
-        Command::new("socat")
-            .args([format!("pty,raw,echo=0,link={}", a.display()), format!("pty,raw,echo=0,link={}", b.display())])
-            .spawn()
-            .expect("socat must be installed for this test"),
-    );
-    wait_for(&b);
+    let (socat, _a, b) = socat_pair(&dir);
     let mut sniff = Command::new(BIN)
         .args(["sniff", b.to_str().unwrap(), "--format", "summary", "--duration", "2"])
         .stdout(Stdio::null())

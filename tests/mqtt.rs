@@ -7,7 +7,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::io::{BufRead, BufReader};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpListener;
 use std::os::unix::fs::PermissionsExt as _;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{BIN, Kill};
+use common::{BIN, Kill, wait_port};
 
 fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mbtap-mqtt-{name}-{}", std::process::id()));
@@ -42,11 +42,7 @@ fn broker(d: &std::path::Path, port: u16) -> Kill {
         .stderr(Stdio::null())
         .spawn()
         .expect("mosquitto must be installed for this test");
-    let start = Instant::now();
-    while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(start.elapsed() < Duration::from_secs(10), "mosquitto never listened on {port}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_port(port);
     Kill(child)
 }
 
@@ -356,11 +352,7 @@ fn mqtts_with_a_ca_file_and_a_password_from_a_file() {
     )
     .unwrap();
     let _broker = Kill(Command::new(mosquitto_path()).arg("-c").arg(&conf).stderr(Stdio::null()).spawn().unwrap());
-    let start = Instant::now();
-    while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(start.elapsed() < Duration::from_secs(10), "mosquitto never listened");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_port(port);
     let sub = Command::new("mosquitto_sub")
         .args(["-h", "127.0.0.1", "-p", &port.to_string(), "--cafile"])
         .arg(d.join("ca.pem"))
@@ -372,51 +364,36 @@ fn mqtts_with_a_ca_file_and_a_password_from_a_file() {
     let credentials = d.join("credentials");
     std::fs::write(&credentials, "site:s3cret\n").unwrap();
     let url = format!("mqtts://127.0.0.1:{port}");
-    let out = Command::new(BIN)
-        .args([
-            "demo",
-            "--format",
-            "summary",
-            "--speed",
-            "0",
-            "--duration",
-            "2",
-            "--mqtt",
-            &url,
-            "--mqtt-prefix",
-            "tls",
-        ])
-        .arg("--mqtt-ca")
-        .arg(d.join("ca.pem"))
-        .arg("--mqtt-credentials")
-        .arg(&credentials)
-        .output()
-        .unwrap();
+    // Two seconds of demo line published over mqtts with the credentials file as it is now.
+    let demo = || {
+        Command::new(BIN)
+            .args([
+                "demo",
+                "--format",
+                "summary",
+                "--speed",
+                "0",
+                "--duration",
+                "2",
+                "--mqtt",
+                &url,
+                "--mqtt-prefix",
+                "tls",
+            ])
+            .arg("--mqtt-ca")
+            .arg(d.join("ca.pem"))
+            .arg("--mqtt-credentials")
+            .arg(&credentials)
+            .output()
+            .unwrap()
+    };
+    let out = demo();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let got = sub.wait_with_output().unwrap();
     assert!(String::from_utf8_lossy(&got.stdout).starts_with("tls/"), "{}", String::from_utf8_lossy(&got.stdout));
     // A wrong password: the broker refuses, mbtap says so and its analysis is unchanged.
     std::fs::write(&credentials, "site:wrong\n").unwrap();
-    let out = Command::new(BIN)
-        .args([
-            "demo",
-            "--format",
-            "summary",
-            "--speed",
-            "0",
-            "--duration",
-            "2",
-            "--mqtt",
-            &url,
-            "--mqtt-prefix",
-            "tls",
-        ])
-        .arg("--mqtt-ca")
-        .arg(d.join("ca.pem"))
-        .arg("--mqtt-credentials")
-        .arg(&credentials)
-        .output()
-        .unwrap();
+    let out = demo();
     assert!(out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("mbtap: mqtt: 127.0.0.1:") && !err.contains("connected to"), "{err}");

@@ -110,3 +110,12 @@ pub fn counter(addr: &str, series: &str) -> u64 {
     let text = metrics_text(addr);
     text.lines().find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.trim().parse().ok()).unwrap_or(0)
 }
+
+/// Waits (up to 20 s) until something listens on loopback `port`: a broker, a Python server.
+pub fn wait_port(port: u16) {
+    let start = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(start.elapsed() < Duration::from_secs(20), "nothing ever listened on port {port}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
