@@ -198,3 +198,55 @@ fn a_replayed_image_goes_stale_by_its_own_bus_time() {
     let (ok, text, _) = mbpoll(port, &["-a", "1", "-t", "0", "-r", "0", "-c", "8"]);
     assert!(!ok && text.contains("Target device failed to respond"), "{text}");
 }
+
+/// A client opening connection after connection gets 64 and no more: the 65th is closed at
+/// once and counted, and a place that frees is taken again.
+#[test]
+fn the_spy_server_holds_at_most_64_connections() {
+    use std::io::{Read, Write};
+    let capture = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/mk4-doc-examples-rtu.pcapng");
+    let mut child = Command::new(BIN)
+        .args([
+            "replay",
+            capture.to_str().unwrap(),
+            "--format",
+            "summary",
+            "--serve",
+            "127.0.0.1:0",
+            "--max-age",
+            "none",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(child.stderr.take().unwrap()).lines();
+    let addr = loop {
+        let l = err.next().expect("replay ended before serving").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: spy server listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    std::thread::spawn(move || for _ in err {});
+    let _server = Kill(child);
+    // Read coils 0–7 of unit 1 (MBAP: transaction 1, length 6, unit 1; PDU 01 0000 0008).
+    const READ: [u8; 12] = [0, 1, 0, 0, 0, 6, 1, 0x01, 0x00, 0x00, 0x00, 0x08];
+    let ask = |s: &mut std::net::TcpStream| -> bool {
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        let mut answer = [0u8; 10];
+        s.write_all(&READ).is_ok() && s.read_exact(&mut answer).is_ok()
+    };
+    let mut held: Vec<_> = (0..64).map(|_| std::net::TcpStream::connect(&addr).unwrap()).collect();
+    for s in &mut held {
+        assert!(ask(s), "each of the first 64 is served");
+    }
+    let mut extra = std::net::TcpStream::connect(&addr).unwrap();
+    assert!(!ask(&mut extra), "the 65th is closed");
+    drop(held.pop());
+    // The freed place is taken again (the server notices the close asynchronously: retry).
+    let start = std::time::Instant::now();
+    while !ask(&mut std::net::TcpStream::connect(&addr).unwrap()) {
+        assert!(start.elapsed() < Duration::from_secs(10), "the freed place never came back");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}

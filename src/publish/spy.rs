@@ -3,6 +3,7 @@
 //! and runtime, so a slow or hostile client never delays the analysis; the analysing thread
 //! only takes a short lock to update the image. Refusals are counted per exception code.
 
+use std::fmt::Write as _;
 use std::future::Ready;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -13,7 +14,7 @@ use anyhow::Context as _;
 use mbtap_core::analyzer::Event;
 use mbtap_core::profile::Table;
 use mbtap_core::profile::image::{ILLEGAL_FUNCTION, RegisterImage};
-use tokio_modbus::server::tcp::{Server, accept_tcp_connection};
+use tokio_modbus::server::tcp::Server;
 use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 
 /// The image, its clock, and what the server did.
@@ -24,6 +25,9 @@ pub struct Spy {
     live: bool,
     pub addr: SocketAddr,
     answered: AtomicU64,
+    /// Connections open now, and those refused because [`MAX_CLIENTS`] were.
+    open: std::sync::atomic::AtomicUsize,
+    refused_connections: AtomicU64,
     /// Refusals by exception code (index = code, 0..=15).
     refused: [AtomicU64; 16],
 }
@@ -63,6 +67,8 @@ impl Spy {
             live,
             addr: bound,
             answered: AtomicU64::new(0),
+            open: std::sync::atomic::AtomicUsize::new(0),
+            refused_connections: AtomicU64::new(0),
             refused: std::array::from_fn(|_| AtomicU64::new(0)),
         });
         let server_spy = Arc::clone(&spy);
@@ -82,7 +88,15 @@ impl Spy {
                     let on_connected = |stream, peer| {
                         let spy = Arc::clone(&server_spy);
                         async move {
-                            accept_tcp_connection(stream, peer, move |_| Ok(Some(Service { spy: Arc::clone(&spy) })))
+                            // A client opening connection after connection gets no more than
+                            // MAX_CLIENTS: the rest are closed at once, counted.
+                            if spy.open.fetch_add(1, Ordering::SeqCst) >= MAX_CLIENTS {
+                                spy.open.fetch_sub(1, Ordering::SeqCst);
+                                spy.refused_connections.fetch_add(1, Ordering::Relaxed);
+                                return Ok(None);
+                            }
+                            let _ = peer;
+                            std::io::Result::Ok(Some((Service { spy: Arc::clone(&spy) }, stream)))
                         }
                     };
                     // A client that breaks its connection ends only that connection.
@@ -146,11 +160,15 @@ impl Spy {
             .collect();
         let total: u64 = refused.iter().map(|(_, n)| n).sum();
         let overflowed = self.image.lock().map_or(0, |i| i.values.overflowed);
-        let full = if overflowed > 0 {
+        let mut full = if overflowed > 0 {
             format!("; image full: {overflowed} values of new addresses not kept")
         } else {
             String::new()
         };
+        let turned_away = self.refused_connections.load(Ordering::Relaxed);
+        if turned_away > 0 {
+            let _ = write!(full, "; {turned_away} connections refused ({MAX_CLIENTS} open at most)");
+        }
         let detail = refused.iter().map(|(c, n)| format!("{c:02X}: {n}")).collect::<Vec<_>>().join(", ");
         format!(
             "spy server on {}: {} answered, {total} refused{}{full}",
@@ -161,9 +179,18 @@ impl Spy {
     }
 }
 
-/// One connection's service.
+/// Connections the spy server holds open at once.
+const MAX_CLIENTS: usize = 64;
+
+/// One connection's service; its end frees the connection's place.
 struct Service {
     spy: Arc<Spy>,
+}
+
+impl Drop for Service {
+    fn drop(&mut self) {
+        self.spy.open.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 impl tokio_modbus::server::Service for Service {
