@@ -199,6 +199,9 @@ fn a_replayed_image_goes_stale_by_its_own_bus_time() {
     assert!(!ok && text.contains("Target device failed to respond"), "{text}");
 }
 
+/// Read coils 0–7 of unit 1 (MBAP: transaction 1, protocol 0, length 6, unit 1; PDU 01 0000 0008).
+const READ_COILS: [u8; 12] = [0, 1, 0, 0, 0, 6, 1, 0x01, 0x00, 0x00, 0x00, 0x08];
+
 /// A client opening connection after connection gets 64 and no more: the 65th is closed at
 /// once and counted, and a place that frees is taken again.
 #[test]
@@ -229,12 +232,10 @@ fn the_spy_server_holds_at_most_64_connections() {
     };
     std::thread::spawn(move || for _ in err {});
     let _server = Kill(child);
-    // Read coils 0–7 of unit 1 (MBAP: transaction 1, length 6, unit 1; PDU 01 0000 0008).
-    const READ: [u8; 12] = [0, 1, 0, 0, 0, 6, 1, 0x01, 0x00, 0x00, 0x00, 0x08];
     let ask = |s: &mut std::net::TcpStream| -> bool {
         s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
         let mut answer = [0u8; 10];
-        s.write_all(&READ).is_ok() && s.read_exact(&mut answer).is_ok()
+        s.write_all(&READ_COILS).is_ok() && s.read_exact(&mut answer).is_ok()
     };
     let mut held: Vec<_> = (0..64).map(|_| std::net::TcpStream::connect(&addr).unwrap()).collect();
     for s in &mut held {
