@@ -24,8 +24,9 @@ fn main() {
         LineSettings { baud: 115_200, parity: Parity::None, ..LineSettings::default() },
     ];
     let models = [Observation::PerByte, Observation::FIFO_16550, Observation::USB_1MS, Observation::USB_16MS];
-    // Per observation model, summed over the line settings: (good, total, false valid, exact, corrupted).
-    let mut per_model = [(0usize, 0usize, 0usize, 0usize, 0usize); 4];
+    // Per observation model, summed over the line settings: (good, total, false valid, exact,
+    // corrupted, reported with two lengths, of those the wrong one first).
+    let mut per_model = [(0usize, 0usize, 0usize, 0usize, 0usize, 0usize, 0usize); 4];
     for (i, line) in lines.into_iter().enumerate() {
         let cfg =
             TrafficConfig { seed: 42 + i as u64, line, transactions, glitch, lookalike, ..TrafficConfig::default() };
@@ -42,6 +43,8 @@ fn main() {
                 a.2 + m.false_valid,
                 a.3 + m.corrupted_exact,
                 a.4 + m.corrupted_total,
+                a.5 + m.ambiguous,
+                a.6 + m.ambiguous_wrong,
             );
             println!(
                 "| {line} | {} | {:.3} % ({}/{}) | {} | {:.1} % ({}/{}) | {}/{} | {:.3} % | {} | {:.1} % |",
@@ -62,11 +65,16 @@ fn main() {
         }
     }
     println!();
-    println!("| observation (all line settings) | good | false valid | corrupted exact |");
-    println!("|---|---|---|---|");
-    for (model, (good, total, false_valid, exact, corrupted)) in models.into_iter().zip(per_model) {
+    println!(
+        "| observation (all line settings) | good | false valid | corrupted exact | two lengths shown (wrong one first) |"
+    );
+    println!("|---|---|---|---|---|");
+    for (model, (good, total, false_valid, exact, corrupted, ambiguous, wrong)) in models.into_iter().zip(per_model) {
         #[allow(clippy::cast_precision_loss)]
         let (g, c) = (good as f64 * 100.0 / total.max(1) as f64, exact as f64 * 100.0 / corrupted.max(1) as f64);
-        println!("| {} | {g:.3} % ({good}/{total}) | {false_valid} | {c:.1} % ({exact}/{corrupted}) |", model.name());
+        println!(
+            "| {} | {g:.3} % ({good}/{total}) | {false_valid} | {c:.1} % ({exact}/{corrupted}) | {ambiguous} ({wrong}) |",
+            model.name()
+        );
     }
 }

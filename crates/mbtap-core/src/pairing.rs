@@ -382,6 +382,7 @@ mod tests {
                 short_gap_before_ns: None,
                 gap_before_known: true,
                 bad_chars: false,
+                alt_len: None,
             };
             let len = bytes.len().saturating_sub(2);
             p.frame(&f, Some((bytes[0], &bytes[1..len])), &mut emit);

@@ -89,6 +89,7 @@ impl AsciiFramer {
             // ASCII frames are cut at their ':' and CR LF; the read time of the ':' bounds the start.
             gap_before_known: true,
             bad_chars,
+            alt_len: None,
         }));
         self.buf.clear();
     }

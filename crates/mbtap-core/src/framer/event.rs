@@ -26,6 +26,12 @@ pub struct Frame<'a> {
     pub gap_before_known: bool,
     /// ASCII only: characters that are not hex digits where digits belong.
     pub bad_chars: bool,
+    /// RTU only: another length of these bytes that checks too and that neither structure,
+    /// timing nor what follows could rule out — one byte more (the `00` after the frame was its
+    /// CRC's high byte, not a turnaround glitch) or one byte less (the frame's last `00` was a
+    /// glitch). CRC-16/MODBUS's shift property makes both pass; the framer took the likelier on
+    /// this line and says so, rather than pass a guess off as certain.
+    pub alt_len: Option<usize>,
 }
 
 /// Bytes that belong to no frame.

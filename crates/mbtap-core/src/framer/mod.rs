@@ -3,6 +3,7 @@
 
 pub mod ascii;
 pub mod event;
+mod glitch;
 pub mod rtu;
 pub mod timing;
 

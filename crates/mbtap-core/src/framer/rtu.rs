@@ -30,6 +30,7 @@
 //! the frame, a frame of its own, or noise.
 
 use super::event::{Frame, FrameEvent, Noise};
+use super::glitch::{Sender, TurnaroundStats};
 use super::timing::LineSettings;
 use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::proto::checksum::{crc16, crc16_update};
@@ -112,7 +113,9 @@ const MAX_ADDRESS: u8 = 247;
 const GLITCHY_FOR: u32 = 64;
 
 enum Try {
-    Found(usize, Reading),
+    /// A frame of this length, read so; with another length that checks too and that nothing
+    /// but the odds on this line ruled out (see [`Frame::alt_len`]).
+    Found(usize, Reading, Option<usize>),
     NotHere,
     /// Nothing can change until this many bytes (from the candidate start) are buffered.
     NeedMore(usize),
@@ -164,6 +167,15 @@ pub struct RtuFramer {
     /// While the garbage before a found frame goes out: where that frame starts (a lone byte
     /// glued to its start is the sender's driver switching on).
     frame_next_at: Option<usize>,
+    /// How often the master's and the slaves' frames are followed by a `00` glitch.
+    turn: TurnaroundStats,
+    /// Who sent the last frame emitted (whose glitch the next lone byte would be).
+    last_sender: Sender,
+    /// The other length of the frame about to be emitted, if any (see [`Frame::alt_len`]).
+    next_alt: Option<usize>,
+    /// The last thing emitted (glitches aside) was a failed frame or noise: nothing is
+    /// expected, and a CRC match right after damage must be confirmed by what follows.
+    after_damage: bool,
 }
 
 impl RtuFramer {
@@ -194,6 +206,10 @@ impl RtuFramer {
             glitch_counts: [0; 256],
             glitch_top: 0,
             frame_next_at: None,
+            turn: TurnaroundStats::default(),
+            last_sender: Sender::Unknown,
+            next_alt: None,
+            after_damage: false,
         }
     }
 
@@ -362,8 +378,12 @@ impl RtuFramer {
             short_gap_before_ns: (self.after_frame && ub < self.t35).then_some(ub),
             gap_before_known: ub != u64::MAX,
             bad_chars: false,
+            alt_len: None,
         }));
         self.known_units[usize::from(chunk.bytes[0])] = true;
+        self.last_sender = sender_of(self.expect, chunk.bytes, Some(reading));
+        self.after_damage = false;
+        self.turn.frame(self.last_sender);
         self.last_end = Some(t_end);
         self.last_read = self.last_read.max(chunk.t.0);
         self.after_frame = true;
@@ -508,7 +528,44 @@ impl RtuFramer {
             }
         }
         let reading_of = |is_request: bool| if is_request { Reading::Request } else { Reading::Response };
-        if unconfirmed_start {
+        let clean = |l: usize, is_request: bool| {
+            let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
+            matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty())
+        };
+        // A reading whose byte count its own quantity contradicts is no frame, whatever its CRC
+        // says: valid frames glued together check as one (each leaves the CRC at zero), and a
+        // chance match over damage does in 1 of 65 536.
+        let answer_expected = (g == 0 || after_glitch) && matches!(self.expect, Expect::Response { .. });
+        for slot in &mut found {
+            if let Some((l, is_request)) = *slot
+                && (!consistent(&s[1..l - 2], is_request)
+                    // While an answer is awaited, a reading that is not it must at least be well
+                    // formed: a damaged answer ending in `00` checks one byte shorter, as a
+                    // request with an absurd quantity.
+                    || (answer_expected
+                        && !self.expected(g, l, reading_of(is_request))
+                        && !clean(l, is_request)))
+            {
+                *slot = None;
+            }
+        }
+        // Right after damage nothing is expected, and a damaged byte count can make a shorter
+        // frame whose CRC matches by chance (1 in 65 536): what follows must confirm it.
+        let after_damage = self.after_damage && (g == 0 || after_glitch) && found.iter().any(Option::is_some);
+        // Bytes before `g` that are not a lone glitch are damage too, not yet emitted: a reading
+        // found there must at least decode without findings (a CRC matching by chance over a
+        // damaged byte count gives absurd quantities).
+        if g > 0 && !after_glitch {
+            for (slot, is_request) in found.iter_mut().zip([true, false]) {
+                let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
+                if slot.is_some_and(
+                    |(l, _)| !matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty()),
+                ) {
+                    *slot = None;
+                }
+            }
+        }
+        if unconfirmed_start || after_damage {
             // Confirmed by what follows, and well formed: no findings in its decode.
             let confirmed = |(l, is_request): (usize, bool)| {
                 let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
@@ -523,12 +580,12 @@ impl RtuFramer {
                 }
             }
             return match found {
-                [Some((a, _)), Some((b, _))] if a == b => Try::Found(a, Reading::Either),
+                [Some((a, _)), Some((b, _))] if a == b => Try::Found(a, Reading::Either, None),
                 [Some(a), Some(b)] => {
                     let (l, r) = self.best(g, a, b);
-                    Try::Found(l, reading_of(r))
+                    Try::Found(l, reading_of(r), None)
                 }
-                [Some((l, r)), None] | [None, Some((l, r))] => Try::Found(l, reading_of(r)),
+                [Some((l, r)), None] | [None, Some((l, r))] => Try::Found(l, reading_of(r), None),
                 // Not yet confirmed: wait for what follows, unless nothing more can come.
                 [None, None] if !flushing && (need_more || found_any) => Try::NeedMore(s.len() + 1),
                 [None, None] => Try::NotHere,
@@ -541,13 +598,13 @@ impl RtuFramer {
             [Some((l, r)), None] | [None, Some((l, r))]
                 if !need_more || flushing || !wait_worth || self.expected(g, l, reading_of(r)) =>
             {
-                return Try::Found(l, reading_of(r));
+                return Try::Found(l, reading_of(r), None);
             }
             // Echo shapes (05, 06, 08, 15, 16) read the same length both ways: one frame.
-            [Some(a), Some(b)] if a.0 == b.0 => return Try::Found(a.0, Reading::Either),
+            [Some(a), Some(b)] if a.0 == b.0 => return Try::Found(a.0, Reading::Either, None),
             [Some(a), Some(b)] => {
                 let (l, r) = self.best(g, a, b);
-                return Try::Found(l, reading_of(r));
+                return Try::Found(l, reading_of(r), None);
             }
             [Some(_), None] | [None, Some(_)] => return Try::NeedMore(need),
             [None, None] => {}
@@ -579,6 +636,20 @@ impl RtuFramer {
             (self.expected(g, l, reading), clean, confirmed, std::cmp::Reverse(l))
         };
         if score(b) > score(a) { b } else { a }
+    }
+
+    /// Who sends the frame starting at live index `g`, as far as the expectation says.
+    fn sender_at(&self, g: usize) -> Sender {
+        let expect = if g == 0 || (g == 1 && self.at_glitch(self.head)) { self.expect } else { Expect::Unknown };
+        match (expect, &self.buf[self.head + g..]) {
+            (Expect::Request, _) => Sender::Master,
+            (Expect::Response { unit, fc, .. }, [u, f, ..])
+                if *u == unit && (*f == fc || *f == fc | EXCEPTION_FLAG) =>
+            {
+                Sender::Slave
+            }
+            _ => Sender::Unknown,
+        }
     }
 
     /// Does a frame end before live index `i`: a known silence or a valid frame starts there?
@@ -620,6 +691,13 @@ impl RtuFramer {
         if s[0] > 247 || !(base.name().is_some() || base.is_user_defined() || self.known_units[usize::from(s[0])]) {
             return Try::NotHere;
         }
+        // After damage (bytes before `g` that are not a lone glitch), a known unit's frame must
+        // carry a public or user-defined code too: there a 4-byte "frame" of any code is a CRC
+        // matching by chance as often as not.
+        let after_glitch = g == 1 && self.at_glitch(self.head);
+        if g > 0 && !after_glitch && !(base.name().is_some() || base.is_user_defined()) {
+            return Try::NotHere;
+        }
         // Broadcasts carry writes only (Modbus over Serial Line v1.02 §2.1), and every write has
         // a fixed layout: address 0 with a length the structure cannot tell is garbage.
         if s[0] == 0 || !sane_header(s) {
@@ -657,21 +735,42 @@ impl RtuFramer {
                     // frame validates too, take the longer unless only the shorter is followed
                     // by something that looks like a frame.
                     if s.get(l) == Some(&0) && l < RTU_MAX_LEN && s.len() > l && Self::crc_ok(&s[..=l]) {
-                        // The longer frame followed by its own glitch byte is the longer frame.
-                        let longer_glitch = self.glitch_then_end(g + l + 1) || self.glitch_then_start(g + l + 1);
+                        // Diagnostics data is N × 2 bytes (MAP v1.1b3 §6.8): its structure
+                        // decides where the CRC can.
+                        if let Some(even) = diagnostics_even_len(s, l) {
+                            return Try::Found(even, Reading::Unknown, None);
+                        }
+                        // What follows the longer frame decides below: wait until its start
+                        // (two bytes) has arrived, unless nothing more can come.
+                        if !flushing && s.len() < l + 3 && !self.boundary_at(g + l + 1) {
+                            return Try::NeedMore(l + 3);
+                        }
+                        // The longer frame followed by its own glitch byte is the longer frame —
+                        // a byte taking a glitch's value: a lone other byte before a silence is
+                        // as likely a slow slave pausing after its answer's first byte.
+                        let glitch_like =
+                            s.get(l + 1).is_some_and(|&v| self.glitch_value(v) || matches!(v, 0x00 | 0xFE | 0xFF));
+                        let longer_glitch =
+                            (glitch_like && self.glitch_then_end(g + l + 1)) || self.glitch_then_start(g + l + 1);
                         let longer_ok = g + l + 1 == live_len
                             || self.boundary_at(g + l + 1)
                             || self.exact_frame_at(g + l + 1)
                             || self.looks_like_frame_start(g + l + 1)
                             || longer_glitch;
-                        // On a line that glitches, the `00` is likelier a glitch than a CRC byte.
-                        let shorter_strong =
-                            self.boundary_at(g + l) || self.exact_frame_at(g + l) || (self.glitchy() && !longer_glitch);
+                        let evidence = self.boundary_at(g + l) || self.exact_frame_at(g + l) || longer_glitch;
+                        // Nothing else decides: whether this sender's `00` glitch is likelier
+                        // than a CRC ending in `00` (1 in 256).
+                        let odds = self.turn.zero_tail(self.sender_at(g));
+                        let shorter_strong = self.boundary_at(g + l)
+                            || self.exact_frame_at(g + l)
+                            || (odds.glitch_likelier && !longer_glitch);
+                        let alt = |other: usize| (longer_ok && !evidence && odds.ambiguous).then_some(other);
                         if longer_ok && !shorter_strong {
-                            return Try::Found(l + 1, Reading::Unknown);
+                            return Try::Found(l + 1, Reading::Unknown, alt(l));
                         }
+                        return Try::Found(l, Reading::Unknown, alt(l + 1));
                     }
-                    return Try::Found(l, Reading::Unknown);
+                    return Try::Found(l, Reading::Unknown, None);
                 }
                 first_match = false;
             }
@@ -705,10 +804,11 @@ impl RtuFramer {
                 break;
             }
             match self.try_frame_at(self.garbage, flushing) {
-                Try::Found(len, reading) => {
+                Try::Found(len, reading, alt) => {
                     self.frame_next_at = Some(self.head + self.garbage);
                     self.emit_garbage(self.garbage, emit);
                     self.frame_next_at = None;
+                    self.next_alt = alt;
                     self.emit_frame(len, Some(reading), emit);
                 }
                 Try::NotHere => {
@@ -846,14 +946,23 @@ impl RtuFramer {
         while a < b {
             let piece = &self.buf[a..b];
             // A frame of a length the structure cannot tell with its `00` glitch also passes the
-            // CRC (the shift property): on a line known to glitch, the glitch is the likelier.
-            if self.glitchy()
-                && piece.len() > RTU_MIN_LEN
-                && piece.last() == Some(&0)
-                && self.plausible_frame(&piece[..piece.len() - 1])
+            // CRC (the shift property): Diagnostics' structure decides, else the odds on this line.
+            if piece.len() > RTU_MIN_LEN && piece.last() == Some(&0) && self.plausible_frame(&piece[..piece.len() - 1])
             {
-                self.emit_frame(b - a - 1, Some(Reading::Unknown), emit);
-                self.emit_unframed(b - 1, b, emit);
+                let n = piece.len();
+                let odds = self.turn.zero_tail(self.sender_at(a - self.head));
+                let shorter = if let Some(even) = diagnostics_even_len(piece, n - 1) {
+                    even < n
+                } else {
+                    self.next_alt = odds.ambiguous.then_some(if odds.glitch_likelier { n } else { n - 1 });
+                    odds.glitch_likelier
+                };
+                if shorter {
+                    self.emit_frame(n - 1, Some(Reading::Unknown), emit);
+                    self.emit_unframed(b - 1, b, emit);
+                } else {
+                    self.emit_frame(n, Some(Reading::Unknown), emit);
+                }
                 return;
             }
             if self.plausible_frame(piece) {
@@ -872,15 +981,25 @@ impl RtuFramer {
             if let Some(s) = (1..piece.len().saturating_sub(RTU_MIN_LEN - 1))
                 .find(|&s| self.known_units[usize::from(piece[s])] && self.plausible_frame(&piece[s..]))
             {
-                // With its `00` glitch the frame passes the CRC too: on a glitching line, trim it.
-                let trim =
-                    self.glitchy() && piece.last() == Some(&0) && self.plausible_frame(&piece[s..piece.len() - 1]);
+                // With its `00` glitch the frame passes the CRC too: trim it where Diagnostics'
+                // structure or the odds on this line say the `00` is a glitch.
+                let n = piece.len() - s;
+                let both = piece.last() == Some(&0) && self.plausible_frame(&piece[s..piece.len() - 1]);
+                let odds = self.turn.zero_tail(Sender::Unknown);
+                let (trim, alt) = match diagnostics_even_len(&piece[s..], n - 1) {
+                    Some(even) if both => (even < n, None),
+                    _ if both => {
+                        (odds.glitch_likelier, odds.ambiguous.then_some(if odds.glitch_likelier { n } else { n - 1 }))
+                    }
+                    _ => (false, None),
+                };
                 self.emit_unframed(a, a + s, emit);
+                self.next_alt = alt;
                 if trim {
-                    self.emit_frame(b - a - s - 1, Some(Reading::Unknown), emit);
+                    self.emit_frame(n - 1, Some(Reading::Unknown), emit);
                     self.emit_unframed(b - 1, b, emit);
                 } else {
-                    self.emit_frame(b - a - s, Some(Reading::Unknown), emit);
+                    self.emit_frame(n, Some(Reading::Unknown), emit);
                 }
                 return;
             }
@@ -982,6 +1101,7 @@ impl RtuFramer {
             self.head = b;
             self.wait_at = usize::MAX;
             self.after_frame = false;
+            self.after_damage = true;
         }
     }
 
@@ -1003,9 +1123,13 @@ impl RtuFramer {
             short_gap_before_ns,
             gap_before_known: ub != u64::MAX,
             bad_chars: false,
+            alt_len: self.next_alt.take().filter(|_| check_ok),
         }));
+        self.last_sender = sender_of(self.expect, &self.buf[a..b], reading);
+        self.after_damage = !check_ok;
         if check_ok {
             self.known_units[usize::from(self.buf[a])] = true;
+            self.turn.frame(self.last_sender);
         }
         self.expect = next_expect(self.expect, &self.buf[a..b], reading);
         self.since_glitch = self.since_glitch.saturating_add(1);
@@ -1024,6 +1148,9 @@ impl RtuFramer {
             t_end: Timestamp(self.end[a]),
         }));
         self.since_glitch = 0;
+        if self.glitch_at == Some(a) {
+            self.turn.glitch(self.last_sender, self.buf[a]);
+        }
         let n = &mut self.glitch_counts[usize::from(self.buf[a])];
         *n = n.saturating_add(1);
         self.glitch_top = self.glitch_top.max(*n);
@@ -1060,6 +1187,28 @@ fn consistent(pdu: &[u8], is_request: bool) -> bool {
             0x0C => byte(1).is_none_or(|bc| bc >= 6),
             _ => true,
         }
+    }
+}
+
+/// For a Diagnostics frame `s` (function 08, not an exception) that checks both `l` and `l + 1`
+/// bytes long: the length whose data after the sub-function is N × 2 bytes (MAP v1.1b3 §6.8).
+fn diagnostics_even_len(s: &[u8], l: usize) -> Option<usize> {
+    // unit, function, sub-function (2), data, CRC (2)
+    let data = l.checked_sub(6)?;
+    (s.get(1) == Some(&0x08)).then_some(if data % 2 == 0 { l } else { l + 1 })
+}
+
+/// Who sent frame `f`, read as `reading` (valid) or failed (`None`), given what was expected.
+fn sender_of(expect: Expect, f: &[u8], reading: Option<Reading>) -> Sender {
+    match (reading, expect, f) {
+        (Some(Reading::Request), ..) | (Some(Reading::Either | Reading::Unknown) | None, Expect::Request, _) => {
+            Sender::Master
+        }
+        (Some(Reading::Response), ..) => Sender::Slave,
+        (_, Expect::Response { unit, fc, .. }, [u, f, ..]) if *u == unit && (*f == fc || *f == fc | EXCEPTION_FLAG) => {
+            Sender::Slave
+        }
+        _ => Sender::Unknown,
     }
 }
 

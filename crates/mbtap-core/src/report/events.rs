@@ -76,6 +76,16 @@ fn summary(fields: &[Field<'_>]) -> String {
     s
 }
 
+/// What a frame's other possible length means (`Frame::alt_len`), said in one phrase.
+#[must_use]
+pub fn alt_len_text(len: usize, alt: usize) -> String {
+    if alt > len {
+        format!("or {alt} bytes: the 00 after it checks as its CRC's high byte too, not a turnaround glitch")
+    } else {
+        format!("or {alt} bytes: its last 00 checks as a turnaround glitch too, not its CRC's high byte")
+    }
+}
+
 /// One event as a line of text.
 #[must_use]
 pub fn text_line(e: &Event<'_>) -> String {
@@ -105,6 +115,9 @@ pub fn text_line(e: &Event<'_>) -> String {
             }
             if let Some(g) = frame.short_gap_before_ns {
                 let _ = write!(line, " [only {} µs after previous frame]", g / 1000);
+            }
+            if let Some(n) = frame.alt_len {
+                let _ = write!(line, " [{}]", alt_len_text(frame.bytes.len(), n));
             }
             let _ = write!(line, "  | {}", wire(frame.bytes));
             line
@@ -183,6 +196,9 @@ pub fn json(e: &Event<'_>) -> J {
             }
             if frame.bad_chars {
                 m.insert("bad_chars".into(), json!(true));
+            }
+            if let Some(n) = frame.alt_len {
+                m.insert("or_len".into(), json!(n));
             }
             J::Object(m)
         }

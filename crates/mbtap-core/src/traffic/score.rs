@@ -18,6 +18,8 @@ pub struct Decided {
     pub frame: bool,
     pub check_ok: bool,
     pub glitch: bool,
+    /// A valid frame's other length that checks too, reported beside it (`Frame::alt_len`).
+    pub alt_len: Option<usize>,
 }
 
 /// How well a framer did.
@@ -25,7 +27,13 @@ pub struct Decided {
 pub struct Score {
     pub good_total: usize,
     pub good_recovered: usize,
+    /// Frames reported valid, without doubt, that were not one frame on the wire.
     pub false_valid: usize,
+    /// Valid frames reported with two lengths (`Frame::alt_len`: CRC-16's shift property, both
+    /// readings possible on this line), and of those, the ones whose first reading was the
+    /// wrong one (the frame on the wire was the other length).
+    pub ambiguous: usize,
+    pub ambiguous_wrong: usize,
     pub corrupted_total: usize,
     pub corrupted_exact: usize,
     /// Turnaround glitch bytes on the wire, and those reported as glitches.
@@ -68,8 +76,14 @@ pub fn score(wire: &Wire, decided: &[Decided]) -> Score {
         .count();
     for d in decided.iter().filter(|d| d.frame) {
         let t = truth.get(&(d.range.start, d.range.end)).copied();
+        if d.check_ok && d.alt_len.is_some() {
+            s.ambiguous += 1;
+        }
+        let alt_good =
+            d.alt_len.is_some_and(|n| truth.get(&(d.range.start, d.range.start + n)) == Some(&TruthKind::Good));
         match (d.check_ok, t) {
             (true, Some(TruthKind::Good)) => s.good_recovered += 1,
+            (true, _) if alt_good => s.ambiguous_wrong += 1,
             (true, _) => s.false_valid += 1,
             (false, Some(TruthKind::Corrupted)) => s.corrupted_exact += 1,
             (false, _) => {}
@@ -86,12 +100,12 @@ pub fn run_framer(wire: &Wire, chunks: &[ChunkSpan], config: FramerConfig) -> Ve
     let mut offset = 0usize;
     let mut emit = |e: FrameEvent<'_>| {
         let n = e.bytes().len();
-        let (frame, check_ok, glitch) = match e {
-            FrameEvent::Frame(f) => (true, f.check_ok, false),
-            FrameEvent::Noise(_) => (false, false, false),
-            FrameEvent::Glitch(_) => (false, false, true),
+        let (frame, check_ok, glitch, alt_len) = match e {
+            FrameEvent::Frame(f) => (true, f.check_ok, false, f.alt_len),
+            FrameEvent::Noise(_) => (false, false, false, None),
+            FrameEvent::Glitch(_) => (false, false, true, None),
         };
-        out.push(Decided { range: offset..offset + n, frame, check_ok, glitch });
+        out.push(Decided { range: offset..offset + n, frame, check_ok, glitch, alt_len });
         offset += n;
     };
     for (t, r) in chunks {
@@ -114,7 +128,7 @@ pub fn run_gap_cutter(wire: &Wire, chunks: &[ChunkSpan], config: FramerConfig) -
         if end > start {
             let b = &wire.bytes[start..end];
             let ok = b.len() >= 4 && crc16(&b[..b.len() - 2]) == u16::from_le_bytes([b[b.len() - 2], b[b.len() - 1]]);
-            out.push(Decided { range: start..end, frame: true, check_ok: ok, glitch: false });
+            out.push(Decided { range: start..end, frame: true, check_ok: ok, glitch: false, alt_len: None });
         }
     };
     for (t, r) in chunks {

@@ -1,0 +1,198 @@
+//! CRC-16/MODBUS's shift property on lines with turnaround glitches: a frame whose CRC high byte
+//! is `00` also checks one byte shorter, so `… 00` reads both as that frame and as a shorter
+//! frame plus a `00` glitch. Where a function's structure fixes no length (vendor codes,
+//! Diagnostics 0000) these pin how the framer decides: by structure where there is one, by who
+//! sent the frame (the master's driver leaves `00`, slaves' `FE`/`FF`), and — where only the odds
+//! on this line are left — by showing both lengths rather than passing a guess off as certain.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_core::chunk::{Chunk, PortId, Timestamp};
+use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_core::proto::{crc16, encode_rtu};
+use mbtap_core::report::events::text_line;
+
+const L9600: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
+
+/// A user-defined function code (MAP v1.1b3 §5: 65–72): no structure tells its length.
+const VENDOR: u8 = 0x41;
+/// Diagnostics (MAP v1.1b3 §6.8), sub-function 0000 Return Query Data: the data is echoed, any
+/// N × 2 bytes.
+const DIAGNOSTICS: u8 = 0x08;
+
+/// One event as the tests compare it: kind (`F+`, `F-`, `N`, `G`), bytes, other length shown.
+type Seen = (&'static str, Vec<u8>, Option<usize>);
+
+fn rtu(unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut f = Vec::new();
+    encode_rtu(unit, pdu, &mut f);
+    f
+}
+
+/// `unit` + `pdu` with the PDU's last byte chosen so the frame's CRC high byte is `00`.
+fn ending_in_zero(unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut p = pdu.to_vec();
+    for v in 0..=255u8 {
+        *p.last_mut().unwrap() = v;
+        let f = rtu(unit, &p);
+        if f.last() == Some(&0) {
+            return f;
+        }
+    }
+    panic!("no last byte gives a CRC ending in 00 for {pdu:02X?}");
+}
+
+/// Builds a per-byte-stamped line at 9600 8E1: each item is bytes sent back to back after
+/// `silence_chars` of silence.
+struct Line {
+    t: u64,
+    chunks: Vec<(u64, Vec<u8>)>,
+}
+
+impl Line {
+    fn new() -> Self {
+        Self { t: 1_000_000_000, chunks: Vec::new() }
+    }
+
+    fn send(&mut self, silence_chars: u64, bytes: &[u8]) {
+        let c = L9600.char_ns();
+        self.t += silence_chars * c;
+        for &b in bytes {
+            self.t += c;
+            self.chunks.push((self.t, vec![b]));
+        }
+    }
+
+    /// A read of 1 register and its answer, each followed by its driver's glitch when asked.
+    fn poll(&mut self, master_glitch: bool, slave_glitch: bool) {
+        self.send(10, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+        if master_glitch {
+            self.send(0, &[0x00]);
+        }
+        self.send(5, &rtu(1, &[0x03, 0x02, 0x12, 0x34]));
+        if slave_glitch {
+            self.send(0, &[0xFE]);
+        }
+    }
+
+    fn events(&self) -> Vec<Seen> {
+        let mut a = Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(L9600, 0), ..AnalyzerConfig::default() });
+        let mut out = Vec::new();
+        let mut sink = |e: &Event<'_>| match e {
+            Event::Frame { frame, .. } => {
+                out.push((if frame.check_ok { "F+" } else { "F-" }, frame.bytes.to_vec(), frame.alt_len));
+            }
+            Event::Noise(n) => out.push(("N", n.bytes.to_vec(), None)),
+            Event::Glitch(n) => out.push(("G", n.bytes.to_vec(), None)),
+            Event::Transaction(_) => {}
+        };
+        for (t, bytes) in &self.chunks {
+            a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut sink);
+        }
+        a.finish(&mut sink);
+        out
+    }
+}
+
+/// The events from the first frame that is `from` or the start of it on.
+fn tail(events: &[Seen], from: &[u8]) -> Vec<Seen> {
+    let at = events.iter().position(|(_, b, _)| b.starts_with(&from[..2]) && b[..] == from[..b.len().min(from.len())]);
+    events[at.expect("the frame was reported")..].to_vec()
+}
+
+/// Was: on a line whose master leaves a `00` after every request, a vendor answer whose CRC
+/// ended in `00` was cut one byte short and its last byte called a glitch — but slaves' drivers
+/// leave `FE`/`FF`, and this slave never left a `00`.
+#[test]
+fn a_slave_answer_ending_in_00_stays_whole_where_only_the_master_glitches_00() {
+    let mut line = Line::new();
+    for _ in 0..40 {
+        line.poll(true, true);
+    }
+    let request = rtu(1, &[VENDOR, 0x10, 0x20]);
+    let answer = ending_in_zero(1, &[VENDOR, 0x01, 0x02, 0x03, 0x00]);
+    line.send(10, &request);
+    line.send(0, &[0x00]);
+    line.send(5, &answer);
+    line.send(40, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let e = tail(&line.events(), &request);
+    assert_eq!(e[..3], [("F+", request, None), ("G", vec![0x00], None), ("F+", answer, None)], "{e:02X?}");
+}
+
+/// Was: a Diagnostics 0000 request whose CRC ended in `00`, on a line whose master glitches, was
+/// read as a frame with 3 data bytes and a glitch — but Diagnostics data is N × 2 bytes; and its
+/// echo the same.
+#[test]
+fn a_diagnostics_echo_ending_in_00_keeps_its_even_data() {
+    let mut line = Line::new();
+    for i in 0..40 {
+        line.poll(i % 3 == 0, false);
+    }
+    let request = ending_in_zero(1, &[DIAGNOSTICS, 0x00, 0x00, 0xA5, 0x37, 0x11, 0x00]);
+    assert_eq!(request.len(), 10);
+    line.send(10, &request);
+    line.send(5, &request);
+    line.send(40, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let e = tail(&line.events(), &request);
+    assert_eq!(e[..2], [("F+", request.clone(), None), ("F+", request, None)], "{e:02X?}");
+}
+
+/// A vendor request ending in `00` with no glitch after it, on a line whose master glitches
+/// after about one request in three: a `00` glitch is the likelier reading there (1 in 3
+/// against 1 in 256), so the framer reads a shorter request and a glitch — and says the frame
+/// may be one byte longer, in the event and in its text.
+#[test]
+fn a_vendor_request_ending_in_00_where_the_master_glitches_sometimes_shows_both_lengths() {
+    let mut line = Line::new();
+    for i in 0..60 {
+        line.poll(i % 3 == 0, false);
+    }
+    let request = ending_in_zero(1, &[VENDOR, 0x10, 0x20, 0x30]);
+    let n = request.len();
+    line.send(10, &request);
+    line.send(5, &rtu(1, &[VENDOR, 0x55]));
+    line.send(40, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let e = tail(&line.events(), &request);
+    assert_eq!(e[..2], [("F+", request[..n - 1].to_vec(), Some(n)), ("G", vec![0x00], None)], "{e:02X?}");
+    assert_eq!(crc16(&request[..n - 2]).to_le_bytes(), [request[n - 2], 0x00]);
+}
+
+/// The same request on a line that never glitched: its `00` is its CRC's, without doubt.
+#[test]
+fn a_vendor_request_ending_in_00_on_a_line_that_never_glitched_is_whole() {
+    let mut line = Line::new();
+    for _ in 0..60 {
+        line.poll(false, false);
+    }
+    let request = ending_in_zero(1, &[VENDOR, 0x10, 0x20, 0x30]);
+    line.send(10, &request);
+    line.send(5, &rtu(1, &[VENDOR, 0x55]));
+    line.send(40, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let e = tail(&line.events(), &request);
+    assert_eq!(e[0], ("F+", request, None), "{e:02X?}");
+}
+
+/// What the user reads for such a frame: the other length and why, in text and JSON.
+#[test]
+fn the_other_length_is_said_in_text_and_json() {
+    let request = ending_in_zero(1, &[VENDOR, 0x10, 0x20, 0x30]);
+    let n = request.len();
+    let frame = mbtap_core::framer::Frame {
+        port: PortId(0),
+        bytes: &request[..n - 1],
+        t_start: Timestamp(0),
+        t_end: Timestamp(1),
+        check_ok: true,
+        gap_violation_ns: None,
+        short_gap_before_ns: None,
+        gap_before_known: true,
+        bad_chars: false,
+        alt_len: Some(n),
+    };
+    let pdu = &request[1..n - 3];
+    let e = Event::Frame { frame: &frame, role: mbtap_core::pairing::Role::Unknown, unit: Some(1), pdu: Some(pdu) };
+    let text = text_line(&e);
+    assert!(text.contains(&format!("[or {n} bytes: the 00 after it checks as its CRC's high byte too")), "{text}");
+    let json = mbtap_core::report::events::json(&e);
+    assert_eq!(json["or_len"], n, "{json}");
+}
