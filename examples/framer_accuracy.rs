@@ -3,7 +3,9 @@
 //!
 //! Run: `cargo run --release --example framer_accuracy [transactions] [glitch] [lookalike]`
 //! (glitch: share of frames followed by a turnaround glitch byte; lookalike: share of register
-//! answers made CRC look-alikes; both 0 by default).
+//! answers made CRC look-alikes; both 0 by default; then `unknown` to give the framer no
+//! latency, so it has only what it learns from valid frames, or `fixed` to give it 0 and no
+//! learning — what it did before it learned).
 
 use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
 use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
@@ -13,6 +15,9 @@ fn main() {
     let transactions: usize = arg(1).and_then(|s| s.parse().ok()).unwrap_or(20_000);
     let glitch: f64 = arg(2).and_then(|s| s.parse().ok()).unwrap_or(0.0);
     let lookalike: f64 = arg(3).and_then(|s| s.parse().ok()).unwrap_or(0.0);
+    // "unknown": the framer is not told the observer's latency (a capture from another tool,
+    // `--latency-ms` not given) and has only what it learns; "fixed": told 0 and not learning.
+    let latency = arg(4).unwrap_or_default();
     println!("{transactions} transactions per line setting, glitch {glitch}, look-alikes {lookalike}\n");
     println!(
         "| line | observation | mbtap good | mbtap false valid | mbtap corrupted exact | mbtap glitches | gap-cut good | gap-cut false valid | gap-cut corrupted exact |"
@@ -33,7 +38,12 @@ fn main() {
         let wire = generate(&cfg);
         for (mi, model) in models.into_iter().enumerate() {
             let chunks = observe(&wire, model, line.char_ns());
-            let fc = FramerConfig::new(line, model.latency_ns(line.char_ns()));
+            let mut fc = FramerConfig::new(line, model.latency_ns(line.char_ns()));
+            match latency.as_str() {
+                "unknown" => fc.latency_ns = 0,
+                "fixed" => (fc.latency_ns, fc.learn_latency) = (0, false),
+                _ => {}
+            }
             let m = score(&wire, &run_framer(&wire, &chunks, fc));
             let g = score(&wire, &run_gap_cutter(&wire, &chunks, fc));
             let a = &mut per_model[mi];

@@ -61,8 +61,10 @@ pub struct LineArgs {
     #[command(flatten)]
     pub serial: SerialLineArgs,
     /// How late the adapter may deliver a byte, in ms (FTDI default latency timer: 16).
-    /// Timing gaps shorter than this are not trusted. [default: live ports: the adapter's
-    /// latency timer, at least 1 ms; captures: what they were recorded with; else 0]
+    /// Timing gaps shorter than this are not trusted. Not given, it is also learned from the
+    /// valid frames (a delayed read inside one shows the delay; the summary says what was
+    /// learned); given, it is kept. [default: live ports: the adapter's latency timer, at least
+    /// 1 ms; captures: what they were recorded with; else 0]
     #[arg(long)]
     pub latency_ms: Option<f64>,
     /// Read a capture's interfaces of this link type as raw serial bytes too (147–162, the

@@ -156,6 +156,11 @@ impl<W: Write> EventWriter<W> {
         }
     }
 
+    /// Keeps what a port's framer learned about its reads, for the summary.
+    pub fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
+        self.stats.observe(port.0, estimate);
+    }
+
     /// Writes the summary (text and summary formats) and flushes.
     ///
     /// # Errors
@@ -282,5 +287,9 @@ impl<W: Write> mbtap_core::analyzer::Sink for WriterSink<'_, W> {
         if let Some(feed) = &self.writer.tui {
             feed.settings(line);
         }
+    }
+
+    fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
+        self.writer.observer(port, estimate);
     }
 }

@@ -58,6 +58,30 @@ impl Recorder {
         self.failed = Some(message);
     }
 
+    /// Writes what the framer learned about a port's reads into the recording (an interface
+    /// statistics block's comment, `mbtap observer latency_ns=…`): known only at the end, read
+    /// back by `replay` and shown beside what the replay learns.
+    pub fn note_observer(
+        &mut self,
+        port: mbtap_core::chunk::PortId,
+        e: &mbtap_core::framer::ObserverEstimate,
+        err: &mut dyn Write,
+    ) {
+        let Some(learned) = e.learned_latency_ns else { return };
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        let comment = format!(
+            "mbtap observer latency_ns={learned} split_frames={} reads={} read_bytes={} longest_read={}",
+            e.split_frames, e.reads, e.read_bytes, e.longest_read
+        );
+        if let Some(w) = self.writer.as_mut()
+            && let Err(x) = w.write_statistics_comment(u32::from(port.0), Timestamp(now), &comment)
+        {
+            self.fail(&x, err);
+        }
+    }
+
     /// Flushes and closes; the error if the recording failed at any time.
     ///
     /// # Errors
@@ -97,5 +121,27 @@ mod tests {
         assert_eq!(said.matches("recording to /dev/full failed").count(), 1, "said once: {said}");
         let e = r.finish(&mut err).unwrap_err().to_string();
         assert!(e.contains("/dev/full"), "{e}");
+    }
+
+    /// What the framer learned about a port's reads goes into the file, for replay to read back;
+    /// nothing is written before anything was learned.
+    #[test]
+    fn the_learned_latency_is_written_at_the_end_of_the_recording() {
+        let path = std::env::temp_dir().join(format!("mbtap-observer-{}.pcapng", std::process::id()));
+        let mut r = Recorder::create(&path, &[("p", "mbtap rtu 9600 8E1 latency_ns=0")]).unwrap();
+        let mut err = Vec::new();
+        r.write(0, Timestamp(5), &[0x01, 0x03, 0x00, 0x00], &mut err);
+        let mut e = mbtap_core::framer::ObserverEstimate::default();
+        r.note_observer(mbtap_core::chunk::PortId(0), &e, &mut err);
+        e.learned_latency_ns = Some(15_900_000);
+        r.note_observer(mbtap_core::chunk::PortId(0), &e, &mut err);
+        r.finish(&mut err).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        let mut reader = mbtap_core::capture::CaptureReader::new(&bytes[..]);
+        while reader.next_item().unwrap().is_some() {}
+        assert_eq!(reader.recorded_latency, [(0, 15_900_000)]);
+        let blocks = String::from_utf8_lossy(&bytes).matches("mbtap observer").count();
+        assert_eq!(blocks, 1, "one comment, none before anything was learned");
     }
 }

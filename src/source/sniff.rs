@@ -54,7 +54,8 @@ pub async fn sniff<W: Write>(
     };
     let config = AnalyzerConfig {
         mode: opts.mode,
-        framer: FramerConfig::new(opts.line, latency_ns),
+        // A latency the user gave is kept; otherwise valid frames may show the reads later.
+        framer: FramerConfig { learn_latency: opts.latency_ns.is_none(), ..FramerConfig::new(opts.line, latency_ns) },
         ..AnalyzerConfig::default()
     };
     let mut analyzer = Analyzer::new(config);
@@ -131,5 +132,12 @@ fn finish<W: Write>(
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
     analyzer.finish(&mut |e: &Event<'_>| writer.write(e));
+    let mut recorder = recorder;
+    for (port, estimate) in analyzer.observers() {
+        writer.observer(port, &estimate);
+        if let Some(r) = recorder.as_mut() {
+            r.note_observer(port, &estimate, err);
+        }
+    }
     recorder.map_or(Ok(()), |r| r.finish(err))
 }

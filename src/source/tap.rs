@@ -75,8 +75,9 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
     };
     let pairing =
         PairingConfig { request_port: Some(APP_PORT), response_port: Some(BUS_PORT), ..PairingConfig::default() };
-    let mut analyzer =
-        Analyzer::new(AnalyzerConfig { mode: opts.mode, framer: FramerConfig::new(opts.line, latency_ns), pairing });
+    // A latency the user gave is kept; otherwise valid frames may show the reads later.
+    let framer = FramerConfig { learn_latency: opts.latency_ns.is_none(), ..FramerConfig::new(opts.line, latency_ns) };
+    let mut analyzer = Analyzer::new(AnalyzerConfig { mode: opts.mode, framer, pairing });
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     // The deadline is part of the stop, so it holds while the port is away too.
     let mut stop = Box::pin(crate::signals::stop_or_deadline(deadline));
@@ -143,6 +144,12 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
         }
     }
     analyzer.finish(&mut |e: &Event<'_>| writer.write(e));
+    for (port, estimate) in analyzer.observers() {
+        writer.observer(port, &estimate);
+        if let Some(r) = recorder.as_mut() {
+            r.note_observer(port, &estimate, err);
+        }
+    }
     if let Some(r) = recorder {
         r.finish(err)?;
     }

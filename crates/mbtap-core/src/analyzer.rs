@@ -67,6 +67,11 @@ pub trait Sink {
     fn settings(&mut self, line: crate::framer::LineSettings) {
         let _ = line;
     }
+
+    /// At the end: what a port's framer learned about its observer's reads.
+    fn observer(&mut self, port: PortId, estimate: &crate::framer::ObserverEstimate) {
+        let _ = (port, estimate);
+    }
 }
 
 impl<F: FnMut(&Event<'_>)> Sink for F {
@@ -166,7 +171,7 @@ impl Analyzer {
         self.pairing.tick(now, &mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
     }
 
-    /// End of input.
+    /// End of input. The sink is told what each RTU port's framer learned about its reads.
     pub fn finish<S: Sink>(&mut self, sink: &mut S) {
         for (_, framer) in &mut self.ports {
             let (pairing, scratch) = (&mut self.pairing, &mut self.scratch);
@@ -177,6 +182,29 @@ impl Analyzer {
             }
         }
         self.pairing.finish_all(&mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
+        for (port, estimate) in self.observers() {
+            sink.observer(port, &estimate);
+        }
+    }
+
+    /// What the session that recorded `port` learned about its reads (see
+    /// [`RtuFramer::set_recorded_latency`]).
+    pub fn set_recorded_latency(&mut self, port: PortId, ns: u64) {
+        if let Some((_, PortFramer::Rtu(f))) = self.ports.iter_mut().find(|(p, _)| *p == port) {
+            f.set_recorded_latency(ns);
+        }
+    }
+
+    /// What each RTU port's framer learned about its observer's reads so far.
+    #[must_use]
+    pub fn observers(&self) -> Vec<(PortId, crate::framer::ObserverEstimate)> {
+        self.ports
+            .iter()
+            .filter_map(|(p, f)| match f {
+                PortFramer::Rtu(f) => Some((*p, f.observer())),
+                PortFramer::Ascii(_) => None,
+            })
+            .collect()
     }
 }
 

@@ -49,7 +49,10 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
             ));
         }
         sink.settings(line);
-        Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(line, latency_ns), pairing })
+        // A latency given on the command line is kept; one the capture stores (or none) is
+        // what the recorder knew, and valid frames may show the reads were later still.
+        let framer = FramerConfig { learn_latency: cli.latency_ns.is_none(), ..FramerConfig::new(line, latency_ns) };
+        Analyzer::new(AnalyzerConfig { mode, framer, pairing })
     };
     loop {
         let item = reader.next_item()?;
@@ -105,6 +108,11 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
     if let Some(a) = analyzer.as_mut() {
         while let Some(Reverse((t, _, p, bytes))) = held.pop() {
             a.push(&Chunk { port: PortId(p), t: Timestamp(t), bytes: &bytes }, sink);
+        }
+        for &(iface, ns) in &reader.recorded_latency {
+            if let Ok(p) = u8::try_from(iface) {
+                a.set_recorded_latency(PortId(p), ns);
+            }
         }
         a.finish(sink);
         // Nothing framed: say what the bytes look like, rather than leave "noise" unexplained.
@@ -189,5 +197,9 @@ impl<S: Sink> Sink for Watch<'_, S> {
 
     fn settings(&mut self, line: crate::framer::LineSettings) {
         self.inner.settings(line);
+    }
+
+    fn observer(&mut self, port: PortId, estimate: &crate::framer::ObserverEstimate) {
+        self.inner.observer(port, estimate);
     }
 }

@@ -51,6 +51,9 @@ pub const SHB: u32 = 0x0A0D_0D0A;
 pub const BYTE_ORDER_MAGIC: u32 = 0x1A2B_3C4D;
 pub const IDB: u32 = 1;
 pub const SPB: u32 = 3;
+/// Interface statistics block: mbtap writes what it learned about a port's reads into its
+/// comment at the end of a recording.
+pub const ISB: u32 = 5;
 pub const EPB: u32 = 6;
 /// Option codes: end of options, comment, if_name, if_description, if_tsresol.
 pub const OPT_END: u16 = 0;
@@ -207,6 +210,17 @@ pub fn parse_idb(body: &[u8], e: Endianness) -> Result<Interface, FormatError> {
         }
     }
     Ok(iface)
+}
+
+/// The interface and comments of an interface statistics block body (pcapng: interface id,
+/// timestamp high and low, options).
+pub fn parse_isb(body: &[u8], e: Endianness) -> Result<(u32, Vec<String>), FormatError> {
+    let interface = u32_at(body, 0, e).ok_or(FormatError::Short { what: "interface statistics block" })?;
+    let comments = options(body.get(12..).unwrap_or(&[]), e)
+        .filter(|(code, _)| *code == OPT_COMMENT)
+        .map(|(_, v)| String::from_utf8_lossy(v).into_owned())
+        .collect();
+    Ok((interface, comments))
 }
 
 /// An enhanced (or simple) packet.

@@ -15,8 +15,8 @@ use thiserror::Error;
 use super::LINKTYPE_USER0;
 use super::clock::{Clock, Verdict};
 use super::format::{
-    EPB, FileKind, FormatError, IDB, Interface, MAX_BLOCK, SHB, SPB, Step, parse_block, parse_epb, parse_file_kind,
-    parse_idb, parse_pcap_record, parse_shb_endian, parse_spb, ticks_to_ns,
+    EPB, FileKind, FormatError, IDB, ISB, Interface, MAX_BLOCK, SHB, SPB, Step, parse_block, parse_epb,
+    parse_file_kind, parse_idb, parse_isb, parse_pcap_record, parse_shb_endian, parse_spb, ticks_to_ns,
 };
 use crate::chunk::{PortId, Timestamp};
 
@@ -86,6 +86,9 @@ pub struct CaptureReader<R> {
     /// Packets delivered, and the first link type skipped (for the verdict at the end).
     pub packets: u64,
     pub skipped_linktype: Option<u16>,
+    /// What the recording session learned about each interface's reads (`mbtap observer
+    /// latency_ns=…` in an interface statistics block's comment): (interface, latency ns).
+    pub recorded_latency: Vec<(u32, u64)>,
     /// Each interface's clock, and where its last packet ended (to name a bad one).
     clocks: Vec<(Clock, u64)>,
     time_warnings: u32,
@@ -134,6 +137,7 @@ impl<R: Read> CaptureReader<R> {
             queued_warning: None,
             packets: 0,
             skipped_linktype: None,
+            recorded_latency: Vec::new(),
             clocks: Vec::new(),
             time_warnings: 0,
             pending_packet: None,
@@ -349,8 +353,16 @@ impl<R: Read> CaptureReader<R> {
                             self.consume(used);
                             self.packet(interface, t, data_at, len)
                         }
-                        // Section headers were handled above; name resolution, statistics,
-                        // custom and unknown blocks carry nothing for us.
+                        ISB => {
+                            // A damaged statistics block costs nothing but its comment.
+                            if let Ok((iface, comments)) = parse_isb(block.body, self.endian) {
+                                self.note_observer(iface, &comments);
+                            }
+                            self.consume(used);
+                            Next::Continue
+                        }
+                        // Section headers were handled above; name resolution, custom and
+                        // unknown blocks carry nothing for us.
                         _ => {
                             self.consume(used);
                             Next::Continue
@@ -388,6 +400,21 @@ impl<R: Read> CaptureReader<R> {
         self.warned_linktype.push(false);
         self.clocks.push((Clock::default(), 0));
         Next::Interface(id, iface)
+    }
+
+    /// Keeps the latency a recording session learned for `iface`, from its comments.
+    fn note_observer(&mut self, iface: u32, comments: &[String]) {
+        let learned = comments
+            .iter()
+            .filter_map(|c| c.strip_prefix("mbtap observer "))
+            .flat_map(str::split_whitespace)
+            .find_map(|w| w.strip_prefix("latency_ns=").and_then(|v| v.parse::<u64>().ok()));
+        if let Some(ns) = learned {
+            self.recorded_latency.retain(|(i, _)| *i != iface);
+            if self.recorded_latency.len() < MAX_INTERFACES {
+                self.recorded_latency.push((iface, ns));
+            }
+        }
     }
 
     fn packet(&mut self, interface: u32, t: u64, at: usize, len: usize) -> Next {

@@ -6,7 +6,7 @@
 use std::io::{self, Write};
 
 use super::LINKTYPE_USER0;
-use super::format::{BYTE_ORDER_MAGIC, EPB, IDB, IF_DESCRIPTION, IF_NAME, IF_TSRESOL, OPT_END, SHB};
+use super::format::{BYTE_ORDER_MAGIC, EPB, IDB, IF_DESCRIPTION, IF_NAME, IF_TSRESOL, ISB, OPT_COMMENT, OPT_END, SHB};
 use crate::chunk::Timestamp;
 
 /// A pcapng writer for raw serial chunks.
@@ -88,6 +88,22 @@ impl<W: Write> PcapNgWriter<W> {
             b.push(0);
         }
         write_block(&mut self.out, EPB, b)
+    }
+
+    /// Writes an interface statistics block for `interface` at time `t` carrying `comment`
+    /// (mbtap's `mbtap observer latency_ns=…`: what the framer learned about the port's reads,
+    /// known only at the end; Wireshark shows it among the capture file's properties).
+    ///
+    /// # Errors
+    /// I/O errors.
+    pub fn write_statistics_comment(&mut self, interface: u32, t: Timestamp, comment: &str) -> io::Result<()> {
+        let mut b = Vec::with_capacity(32 + comment.len());
+        b.extend_from_slice(&interface.to_le_bytes());
+        b.extend_from_slice(&u32::try_from(t.0 >> 32).unwrap_or(0).to_le_bytes());
+        b.extend_from_slice(&u32::try_from(t.0 & 0xFFFF_FFFF).unwrap_or(0).to_le_bytes());
+        push_option(&mut b, OPT_COMMENT, comment.as_bytes());
+        push_option(&mut b, OPT_END, &[]);
+        write_block(&mut self.out, ISB, &b)
     }
 
     /// Flushes buffered output.

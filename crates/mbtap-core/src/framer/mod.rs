@@ -4,10 +4,12 @@
 pub mod ascii;
 pub mod event;
 mod glitch;
+pub mod observer;
 pub mod rtu;
 pub mod timing;
 
 pub use ascii::AsciiFramer;
 pub use event::{Frame, FrameEvent, Noise};
+pub use observer::ObserverEstimate;
 pub use rtu::{FramerConfig, RtuFramer};
 pub use timing::{LineSettings, Parity};

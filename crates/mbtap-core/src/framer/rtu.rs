@@ -31,6 +31,7 @@
 
 use super::event::{Frame, FrameEvent, Noise};
 use super::glitch::{Sender, TurnaroundStats};
+use super::observer::{ObserverEstimate, ObserverLearner};
 use super::timing::LineSettings;
 use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::proto::checksum::{crc16, crc16_update};
@@ -50,6 +51,9 @@ pub struct FramerConfig {
     /// line falls silent. Slow slaves pause inside their frames far beyond t1.5 and even t3.5;
     /// cutting at t3.5 (as gap-only sniffers do) breaks such a frame in two.
     pub incomplete_timeout_ns: u64,
+    /// Whether the latency may be raised by what valid frames show of this observer's reads
+    /// (see [`super::observer`]); off when the user gave it (`--latency-ms`).
+    pub learn_latency: bool,
 }
 
 /// Default for [`FramerConfig::incomplete_timeout_ns`]: 50 ms.
@@ -57,7 +61,12 @@ pub const DEFAULT_INCOMPLETE_TIMEOUT_NS: u64 = 50_000_000;
 
 impl Default for FramerConfig {
     fn default() -> Self {
-        Self { line: LineSettings::default(), latency_ns: 0, incomplete_timeout_ns: DEFAULT_INCOMPLETE_TIMEOUT_NS }
+        Self {
+            line: LineSettings::default(),
+            latency_ns: 0,
+            incomplete_timeout_ns: DEFAULT_INCOMPLETE_TIMEOUT_NS,
+            learn_latency: true,
+        }
     }
 }
 
@@ -173,6 +182,8 @@ pub struct RtuFramer {
     last_sender: Sender,
     /// The other length of the frame about to be emitted, if any (see [`Frame::alt_len`]).
     next_alt: Option<usize>,
+    /// What the valid frames show of this observer's reads.
+    learner: ObserverLearner,
     /// The last thing emitted (glitches aside) was a failed frame or noise: nothing is
     /// expected, and a CRC match right after damage must be confirmed by what follows.
     after_damage: bool,
@@ -210,6 +221,7 @@ impl RtuFramer {
             last_sender: Sender::Unknown,
             next_alt: None,
             after_damage: false,
+            learner: ObserverLearner::new(config.latency_ns, config.learn_latency),
         }
     }
 
@@ -249,6 +261,18 @@ impl RtuFramer {
         }
     }
 
+    /// What this framer learned about its observer's reads.
+    #[must_use]
+    pub fn observer(&self) -> ObserverEstimate {
+        self.learner.estimate
+    }
+
+    /// What the session that recorded the input learned about its reads (the capture says so
+    /// at its end): shown beside what this run learned.
+    pub fn set_recorded_latency(&mut self, ns: u64) {
+        self.learner.estimate.recorded_latency_ns = Some(ns);
+    }
+
     /// Bytes waiting for a decision.
     #[must_use]
     pub fn pending(&self) -> usize {
@@ -264,6 +288,9 @@ impl RtuFramer {
             self.tick(Timestamp(first_end.saturating_sub(self.char_ns)), emit);
         }
         let n = chunk.bytes.len();
+        if n > 0 {
+            self.learner.read(n);
+        }
         let c = self.char_ns;
         if self.pending() == 0
             && let Some(reading) = Self::whole_frame(chunk.bytes)
@@ -1130,6 +1157,7 @@ impl RtuFramer {
         if check_ok {
             self.known_units[usize::from(self.buf[a])] = true;
             self.turn.frame(self.last_sender);
+            self.learn_from(a, b);
         }
         self.expect = next_expect(self.expect, &self.buf[a..b], reading);
         self.since_glitch = self.since_glitch.saturating_add(1);
@@ -1137,6 +1165,25 @@ impl RtuFramer {
         self.head = b;
         self.wait_at = usize::MAX;
         self.after_frame = true;
+    }
+
+    /// A valid frame at absolute `a..b` that came in several reads: its bytes were sent back to
+    /// back, so the longest apparent silence between two of its reads is the observer's delay.
+    fn learn_from(&mut self, a: usize, b: usize) {
+        let c = self.char_ns;
+        let mut delay = None::<u64>;
+        for i in a + 1..b {
+            // A read began at `i` (inside a read the gap is unknown and set to `u64::MAX`).
+            if self.gap_ub[i] != u64::MAX {
+                let gap = self.end[i].saturating_sub(c).saturating_sub(self.end[i - 1]);
+                delay = Some(delay.map_or(gap, |d| d.max(gap)));
+            }
+        }
+        if let Some(d) = delay
+            && self.learner.sample(d).is_some()
+        {
+            self.latency = self.learner.estimate.effective_latency_ns();
+        }
     }
 
     /// Emits the live byte at absolute `a` (`== self.head`) as a turnaround glitch.

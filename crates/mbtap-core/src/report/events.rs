@@ -8,6 +8,7 @@ use serde_json::{Map, Value as J, json};
 
 use super::fields::{Field, Value, request_fields, response_fields};
 use crate::analyzer::Event;
+use crate::framer::ObserverEstimate;
 use crate::pairing::{Outcome, Role, Transaction};
 use crate::proto::{DecodedPdu, DirectionHint, FunctionCode, Pdu, PduDecode, decode_pdu};
 use crate::report::format::{clock_us, hex_compact, hex_spaced};
@@ -282,6 +283,8 @@ pub struct Stats {
     pub bad_responses: u64,
     pub orphans: u64,
     pub wrong_unit: u64,
+    /// What the framers learned about the reads of the first two ports (a tap has two).
+    pub observers: [Option<(u8, ObserverEstimate)>; 2],
 }
 
 impl Stats {
@@ -315,9 +318,46 @@ impl Stats {
         }
     }
 
+    /// Keeps what a port's framer learned about its reads (the first two ports).
+    pub fn observe(&mut self, port: u8, estimate: &ObserverEstimate) {
+        if let Some(slot) = self.observers.iter_mut().find(|o| o.is_none_or(|(p, _)| p == port)) {
+            *slot = Some((port, *estimate));
+        }
+    }
+
+    /// The observers that learned something (a batch of frames split across reads).
+    fn learned(&self) -> impl Iterator<Item = &(u8, ObserverEstimate)> {
+        self.observers
+            .iter()
+            .flatten()
+            .filter(|(_, e)| e.learned_latency_ns.is_some() || e.recorded_latency_ns.is_some())
+    }
+
     /// The summary as JSON.
     #[must_use]
     pub fn json(&self) -> J {
+        let mut j = self.counts_json();
+        let observers: Vec<J> = self
+            .learned()
+            .map(|(port, e)| {
+                json!({
+                    "port": port, "reads": e.reads, "read_bytes": e.read_bytes, "longest_read": e.longest_read,
+                    "shape": e.shape(), "split_frames": e.split_frames,
+                    "learned_latency_ns": e.learned_latency_ns, "configured_latency_ns": e.configured_latency_ns,
+                    "learning": e.learning, "latency_ns": e.effective_latency_ns(),
+                    "recorded_latency_ns": e.recorded_latency_ns,
+                })
+            })
+            .collect();
+        if !observers.is_empty()
+            && let Some(m) = j.as_object_mut()
+        {
+            m.insert("observers".into(), J::Array(observers));
+        }
+        j
+    }
+
+    fn counts_json(&self) -> J {
         json!({
             "event": "summary",
             "frames": self.frames, "frame_bytes": self.frame_bytes, "bad_frames": self.bad_frames,
@@ -352,6 +392,34 @@ impl Stats {
             self.bad_responses,
             self.orphans,
             self.wrong_unit
-        )
+        ) + &self.learned().map(|(port, e)| observer_text(*port, e)).collect::<String>()
     }
+}
+
+/// What a port's framer learned about its reads, as a line of the summary.
+fn observer_text(port: u8, e: &ObserverEstimate) -> String {
+    let ms = |ns: u64| {
+        #[allow(clippy::cast_precision_loss)]
+        let v = ns as f64 / 1e6;
+        v
+    };
+    let learned = e.learned_latency_ns.unwrap_or(0);
+    let given = e.configured_latency_ns;
+    let verdict = if !e.learning {
+        format!("the latency given, {:.1} ms, kept", ms(given))
+    } else if learned > given {
+        format!("given {:.1} ms, timing now trusted only beyond {:.1} ms", ms(given), ms(learned))
+    } else {
+        format!("within the {:.1} ms given", ms(given))
+    };
+    let recorded = e
+        .recorded_latency_ns
+        .map(|r| format!("; the session that recorded it learned {:.1} ms", ms(r)))
+        .unwrap_or_default();
+    format!(
+        "\nreads on port {port}: {}; valid frames split across reads show bytes delivered up to {:.1} ms late (learned from {} frames; {verdict}){recorded}",
+        e.shape(),
+        ms(learned),
+        e.split_frames
+    )
 }
