@@ -63,6 +63,12 @@ impl Line {
         }
     }
 
+    /// Bytes that arrived in one read, `chars` character times after the last.
+    fn read(&mut self, chars: u64, bytes: &[u8]) {
+        self.t += chars * L9600.char_ns();
+        self.chunks.push((self.t, bytes.to_vec()));
+    }
+
     /// A read of 1 register and its answer, each followed by its driver's glitch when asked.
     fn poll(&mut self, master_glitch: bool, slave_glitch: bool) {
         self.send(10, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
@@ -76,7 +82,13 @@ impl Line {
     }
 
     fn events(&self) -> Vec<Seen> {
-        let mut a = Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(L9600, 0), ..AnalyzerConfig::default() });
+        self.events_with_latency(0)
+    }
+
+    /// As read by an observer that delivers up to `latency_ns` late (told so).
+    fn events_with_latency(&self, latency_ns: u64) -> Vec<Seen> {
+        let mut a =
+            Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(L9600, latency_ns), ..AnalyzerConfig::default() });
         let mut out = Vec::new();
         let mut sink = |e: &Event<'_>| match e {
             Event::Frame { frame, .. } => {
@@ -195,4 +207,43 @@ fn the_other_length_is_said_in_text_and_json() {
     assert!(text.contains(&format!("[or {n} bytes: the 00 after it checks as its CRC's high byte too")), "{text}");
     let json = mbtap_core::report::events::json(&e);
     assert_eq!(json["or_len"], n, "{json}");
+}
+
+/// Was: on a line that never glitched, a vendor request ending in `00` that came in one read
+/// (a 16 ms USB timer) with a damaged frame after it lost its `00` — taken for a glitch because
+/// `00 01 …` looked like a frame start too.
+#[test]
+fn a_vendor_frame_glued_to_a_damaged_one_keeps_its_00_where_nothing_glitched() {
+    let mut line = Line::new();
+    for _ in 0..60 {
+        line.poll(false, false);
+    }
+    let request = ending_in_zero(1, &[VENDOR, 0x15, 0xF3, 0x1F]);
+    // The answer of unit 1 to the vendor code, its function code hit on the way (0x41 → 0x6D).
+    let damaged = [0x01, 0x6D, 0xEF, 0xC3, 0x96, 0xEC, 0x97];
+    line.read(30, &[request.clone(), damaged.to_vec()].concat());
+    line.send(40, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let e = tail(&line.events_with_latency(16_000_000), &request);
+    assert_eq!(e[..2], [("F+", request, None), ("F-", damaged.to_vec(), None)], "{e:02X?}");
+}
+
+/// Was: `01 C0 00 70 00` — a damaged answer's first five bytes — was reported as a valid
+/// exception "00" to function 0x40; exception codes start at 01 (MAP v1.1b3 §7).
+#[test]
+fn an_exception_with_code_00_is_no_frame() {
+    let mut line = Line::new();
+    for _ in 0..60 {
+        line.poll(true, true);
+    }
+    let request = rtu(1, &[0x0F, 0x00, 0x70, 0x00, 0x06, 0x01, 0x1F]);
+    let mut answer = rtu(1, &[0x0F, 0x00, 0x70, 0x00, 0x06]);
+    answer[1] = 0xC0; // the function code hit on the way
+    assert_eq!(crc16(&answer[..3]).to_le_bytes(), [answer[3], answer[4]], "the look-alike this pins");
+    line.send(10, &request);
+    line.send(0, &[0x00]);
+    line.read(5 + 8, &[answer.clone(), vec![0xFE]].concat());
+    line.send(40, &rtu(0x11, &[0x2B, 0x0E, 0x01, 0x00]));
+    let e = tail(&line.events_with_latency(16_000_000), &request);
+    assert!(!e.iter().any(|(k, b, _)| *k == "F+" && b[..] == answer[..5]), "{e:02X?}");
+    assert_eq!(e[2], ("F-", answer, None), "{e:02X?}");
 }

@@ -791,7 +791,11 @@ impl RtuFramer {
                         let shorter_strong = self.boundary_at(g + l)
                             || self.exact_frame_at(g + l)
                             || (odds.glitch_likelier && !longer_glitch);
-                        let alt = |other: usize| (longer_ok && !evidence && odds.ambiguous).then_some(other);
+                        // A lone `00` between two silences is noise after the frame, or its CRC's
+                        // high byte after a slave paused longer than t3.5 inside it: both check.
+                        let lone_zero = self.boundary_at(g + l) && self.boundary_at(g + l + 1);
+                        let alt =
+                            |other: usize| (longer_ok && ((!evidence && odds.ambiguous) || lone_zero)).then_some(other);
                         if longer_ok && !shorter_strong {
                             return Try::Found(l + 1, Reading::Unknown, alt(l));
                         }
@@ -1001,6 +1005,21 @@ impl RtuFramer {
                     && self.plausible_frame(&piece[..e])
                     && self.looks_like_frame(&piece[e..])
             }) {
+                // The shift property again: when the frame checks one byte longer too (its next
+                // byte a `00`) and a frame starts after that byte as well, the odds on this line
+                // decide whether the `00` is a glitch or the CRC's high byte.
+                let twin = piece.get(e) == Some(&0)
+                    && e + 1 < piece.len()
+                    && self.plausible_frame(&piece[..=e])
+                    && self.looks_like_frame(&piece[e + 1..]);
+                let e = if twin {
+                    let odds = self.turn.zero_tail(self.sender_at(a - self.head));
+                    let (take, other) = if odds.glitch_likelier { (e, e + 1) } else { (e + 1, e) };
+                    self.next_alt = odds.ambiguous.then_some(other);
+                    take
+                } else {
+                    e
+                };
                 self.emit_frame(e, Some(Reading::Unknown), emit);
                 a += e;
                 continue;
@@ -1292,11 +1311,13 @@ fn next_expect(expect: Expect, f: &[u8], reading: Option<Reading>) -> Expect {
 
 /// Could a frame start with these bytes at all? Function code 0 does not exist (MAP v1.1b3
 /// §5: codes 1–127), nor its exception 0x80; a broadcast (address 0) carries a write only
-/// (Serial Line v1.02 §2.1). A CRC that matches by chance over damage (1 in 65 536) is taken
-/// only where the header is possible.
+/// (Serial Line v1.02 §2.1); an exception carries a code from 01 (MAP v1.1b3 §7). A CRC that
+/// matches by chance over damage (1 in 65 536) is taken only where the header is possible.
 fn sane_header(f: &[u8]) -> bool {
     match *f {
         [_, fc, ..] if fc & !EXCEPTION_FLAG == 0 => false,
+        // Exception codes start at 01 (MAP v1.1b3 §7): an "exception 00" is a chance match.
+        [_, fc, 0, ..] if fc & EXCEPTION_FLAG != 0 => false,
         [0, fc, ..] => matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16),
         _ => true,
     }
