@@ -14,18 +14,23 @@ use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe};
 
 const L9600: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
 
-/// Traffic read through a USB adapter at its 16 ms latency timer, written as a capture whose
+/// Traffic (`transactions` of it, from `seed`) read through `model`, written as a capture whose
 /// interface says the line settings but no latency (`latency_ns=` absent, as a recorder that
 /// did not know it writes).
-fn capture_without_latency() -> Vec<u8> {
-    let wire = generate(&TrafficConfig { seed: 77, line: L9600, transactions: 3000, ..TrafficConfig::default() });
-    let chunks = observe(&wire, Observation::USB_16MS, L9600.char_ns());
+fn capture_without_latency_of(seed: u64, transactions: usize, model: Observation) -> Vec<u8> {
+    let wire = generate(&TrafficConfig { seed, line: L9600, transactions, ..TrafficConfig::default() });
+    let chunks = observe(&wire, model, L9600.char_ns());
     let mut w = PcapNgWriter::new(Vec::new()).unwrap();
     let i = w.add_serial_interface("/dev/ttyUSB0", "mbtap rtu 9600 8E1").unwrap();
     for (t, r) in &chunks {
         w.write_packet(i, Timestamp(*t), &wire.bytes[r.clone()]).unwrap();
     }
     w.into_inner()
+}
+
+/// Through a USB adapter at its 16 ms latency timer.
+fn capture_without_latency() -> Vec<u8> {
+    capture_without_latency_of(77, 3000, Observation::USB_16MS)
 }
 
 #[derive(Default)]
@@ -83,14 +88,7 @@ fn a_capture_that_stores_no_latency_learns_it_from_its_valid_frames() {
 
 #[test]
 fn per_byte_timestamps_learn_no_latency() {
-    let wire = generate(&TrafficConfig { seed: 78, line: L9600, transactions: 1000, ..TrafficConfig::default() });
-    let chunks = observe(&wire, Observation::PerByte, L9600.char_ns());
-    let mut w = PcapNgWriter::new(Vec::new()).unwrap();
-    let i = w.add_serial_interface("/dev/ttyS0", "mbtap rtu 9600 8E1").unwrap();
-    for (t, r) in &chunks {
-        w.write_packet(i, Timestamp(*t), &wire.bytes[r.clone()]).unwrap();
-    }
-    let seen = replay(&w.into_inner(), LineOverrides::default());
+    let seen = replay(&capture_without_latency_of(78, 1000, Observation::PerByte), LineOverrides::default());
     let e = seen.observers[0].1;
     assert_eq!(e.learned_latency_ns, Some(0), "{e:?}");
     assert_eq!(e.shape(), "1.0 bytes per read on average, at most 1");
