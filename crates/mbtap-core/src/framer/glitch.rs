@@ -19,7 +19,7 @@ pub(crate) enum Sender {
     Unknown,
 }
 
-#[derive(Debug, Default, Clone, Copy)]
+#[derive(Debug, Clone, Copy)]
 struct Counts {
     /// Valid frames from this sender.
     frames: u32,
@@ -27,6 +27,15 @@ struct Counts {
     glitches: u32,
     /// Of those glitches, `00`.
     zeros: u32,
+    /// How often each value was this sender's glitch, and the commonest's count.
+    values: [u32; 256],
+    top: u32,
+}
+
+impl Default for Counts {
+    fn default() -> Self {
+        Self { frames: 0, glitches: 0, zeros: 0, values: [0; 256], top: 0 }
+    }
 }
 
 /// The learned turnaround behaviour of the master and the slaves.
@@ -64,6 +73,9 @@ impl TurnaroundStats {
             if value == 0 {
                 c.zeros = c.zeros.saturating_add(1);
             }
+            let n = &mut c.values[usize::from(value)];
+            *n = n.saturating_add(1);
+            c.top = c.top.max(*n);
         }
     }
 
@@ -75,29 +87,53 @@ impl TurnaroundStats {
         }
     }
 
-    /// The odds of the two readings of a frame from `sender` ending in `00`: a CRC high byte
-    /// `00` after a frame not followed by a glitch (1/256 of those), against a shorter frame
-    /// followed by a `00` glitch (this sender's share of frames followed by one). An unknown
-    /// sender takes the master's and the slaves' together.
-    pub(crate) fn zero_tail(&self, sender: Sender) -> ZeroTail {
+    /// Is `value` one this sender's driver leaves (seen at least 4 times, and at least an
+    /// eighth as often as its commonest)? `None` for an unknown sender or one never seen to
+    /// glitch: the caller falls back on the line's values.
+    pub(crate) fn sender_value(&self, sender: Sender, value: u8) -> Option<bool> {
         let c = match sender {
-            Sender::Master => self.master,
-            Sender::Slave => self.slave,
-            Sender::Unknown => Counts {
-                frames: self.master.frames.saturating_add(self.slave.frames),
-                glitches: self.master.glitches.saturating_add(self.slave.glitches),
-                zeros: self.master.zeros.saturating_add(self.slave.zeros),
-            },
+            Sender::Master => &self.master,
+            Sender::Slave => &self.slave,
+            Sender::Unknown => return None,
         };
-        // P(glitch reading) ∝ zeros / frames; P(CRC reading) ∝ (frames − glitches) / frames / 256.
-        let glitch = u64::from(c.zeros) * 256;
-        let crc = u64::from(c.frames.saturating_sub(c.glitches)) + 1;
+        (c.top >= 4).then(|| {
+            let n = c.values[usize::from(value)];
+            n >= 4 && n.saturating_mul(8) >= c.top
+        })
+    }
+
+    /// The odds of the two readings of a frame ending in `00` that `sender` most likely sent:
+    /// the frame's CRC high byte `00` with no glitch after it (1/256 of the frames this sender
+    /// leaves no glitch after), against a one byte shorter frame and a `00` glitch (this
+    /// sender's share of frames followed by one). The other side sent it now and then (a master
+    /// repeating a vendor request to a unit that never answers looks like that unit's answer):
+    /// it weighs 1 in 1000, so a reading impossible for the likely sender (a slave that glitches
+    /// after every frame, here followed by none) still falls to the other. An unknown sender
+    /// weighs both sides alike.
+    pub(crate) fn zero_tail(&self, sender: Sender) -> ZeroTail {
+        let (m, s) = match sender {
+            Sender::Master => (0.999, 0.001),
+            Sender::Slave => (0.001, 0.999),
+            Sender::Unknown => (0.5, 0.5),
+        };
+        let (mc, mg) = Self::readings(&self.master);
+        let (sc, sg) = Self::readings(&self.slave);
+        let crc = m * mc + s * sc;
+        let glitch = m * mg + s * sg;
+        #[allow(clippy::cast_precision_loss)]
+        let odds = AMBIGUOUS_ODDS as f64;
         ZeroTail {
             glitch_likelier: glitch > crc,
-            ambiguous: glitch > 0
-                && glitch.saturating_mul(AMBIGUOUS_ODDS) >= crc
-                && crc.saturating_mul(AMBIGUOUS_ODDS) >= glitch,
+            ambiguous: glitch > 0.0 && glitch * odds >= crc && crc * odds >= glitch,
         }
+    }
+
+    /// (CRC reading, glitch reading) likelihoods for one sender's counts; a sender never seen
+    /// counts as one that leaves no glitch.
+    fn readings(c: &Counts) -> (f64, f64) {
+        let n = f64::from(c.frames) + 2.0;
+        let clean = f64::from(c.frames.saturating_sub(c.glitches)) + 1.0;
+        (clean / n / 256.0, f64::from(c.zeros) / n)
     }
 }
 
@@ -127,7 +163,23 @@ mod tests {
     }
 
     #[test]
-    fn slaves_that_glitch_ff_say_nothing_about_a_zero_after_their_frames() {
+    fn a_zero_ending_a_slaves_frame_is_its_crc_where_only_the_master_glitches_00() {
+        let mut s = TurnaroundStats::default();
+        for _ in 0..1000 {
+            s.frame(Sender::Slave);
+            s.frame(Sender::Master);
+            s.glitch(Sender::Master, 0x00);
+        }
+        assert_eq!(s.zero_tail(Sender::Slave), ZeroTail { glitch_likelier: false, ambiguous: true });
+        assert_eq!(s.zero_tail(Sender::Master), ZeroTail { glitch_likelier: true, ambiguous: false });
+    }
+
+    /// A master repeating a vendor request to a unit that never answers looks like that unit's
+    /// answer; where slaves leave `FF` after every frame, a "slave" frame ending in `00` with no
+    /// `FF` after it is likelier the master's, with its `00` glitch (and both lengths are shown:
+    /// a slave's frame is a thousand times likelier to begin with).
+    #[test]
+    fn a_slave_that_always_glitches_ff_did_not_send_a_frame_followed_by_none() {
         let mut s = TurnaroundStats::default();
         for _ in 0..1000 {
             s.frame(Sender::Slave);
@@ -135,7 +187,9 @@ mod tests {
             s.frame(Sender::Master);
             s.glitch(Sender::Master, 0x00);
         }
-        assert_eq!(s.zero_tail(Sender::Slave), ZeroTail { glitch_likelier: false, ambiguous: false });
-        assert_eq!(s.zero_tail(Sender::Master), ZeroTail { glitch_likelier: true, ambiguous: false });
+        assert_eq!(s.zero_tail(Sender::Slave), ZeroTail { glitch_likelier: true, ambiguous: true });
+        assert_eq!(s.sender_value(Sender::Slave, 0xFF), Some(true));
+        assert_eq!(s.sender_value(Sender::Slave, 0x00), Some(false));
+        assert_eq!(s.sender_value(Sender::Unknown, 0x00), None);
     }
 }

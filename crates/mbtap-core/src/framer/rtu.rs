@@ -239,6 +239,29 @@ impl RtuFramer {
         n >= 4 && n.saturating_mul(8) >= self.glitch_top
     }
 
+    /// Is `v` a value the driver of `sender` leaves (the line's values when nobody can say who
+    /// sent the frame, or the sender was never seen to glitch)?
+    fn glitch_value_after(&self, sender: Sender, v: u8) -> bool {
+        self.turn.sender_value(sender, v).unwrap_or_else(|| self.glitch_value(v))
+    }
+
+    /// Is `n` bytes the length a damaged frame at absolute `a` (`== self.head`) must have: the
+    /// awaited answer's (an exception's 5), or — a request awaited — its own structure's?
+    fn expected_len_at(&self, a: usize, n: usize) -> bool {
+        match self.expect {
+            Expect::Response { unit, fc, len: Some(l) } if self.buf[a] == unit => {
+                n == if self.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { l }
+            }
+            Expect::Request => {
+                let f = &self.buf[a..a + n];
+                f.len() >= 2
+                    && f[1] & EXCEPTION_FLAG == 0
+                    && matches!(request_len(&f[1..]), PduLength::Exact(k) if k + 3 == n)
+            }
+            _ => false,
+        }
+    }
+
     /// Does reading `l` bytes at live index `g` as `reading` give what the bus expects next?
     fn expected(&self, g: usize, l: usize, reading: Reading) -> bool {
         let s = &self.buf[self.head + g..];
@@ -1075,7 +1098,13 @@ impl RtuFramer {
                 _ => None,
             })
             .collect();
-        cands.sort_unstable();
+        // The expected reading first (a request after a completed transaction), then the shorter.
+        let expected_request = self.expect == Expect::Request && a == self.head;
+        let req_len = match req {
+            PduLength::Exact(k) => Some(k + 3),
+            _ => None,
+        };
+        cands.sort_unstable_by_key(|&l| (!(expected_request && Some(l) == req_len), l));
         // Only when the rest starts like a frame of a known unit: a short rest is as likely the
         // tail of this frame read with the wrong reading (a request's response reading is 5
         // bytes) as noise that followed it.
@@ -1110,7 +1139,7 @@ impl RtuFramer {
                 // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line
                 // is known to glitch, only the values drivers leave (`FE`, `FF`) count.
                 || (v > MAX_ADDRESS && (self.glitchy() || v >= 0xFE))
-                || (self.glitchy() && self.glitch_value(v))
+                || (self.glitchy() && self.glitch_value_after(self.last_sender, v))
                 || ((self.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
                     && !self.looks_like_frame_start(i)
                     && self.looks_like_frame_start(i + 1)))
@@ -1123,10 +1152,26 @@ impl RtuFramer {
         }
         // A damaged frame with its turnaround glitch, on a line that glitches: the last byte
         // takes a value this line's glitches take.
-        if b - a > RTU_MIN_LEN && self.glitchy() && self.glitch_value(self.buf[b - 1]) {
+        if b - a > RTU_MIN_LEN
+            && self.glitchy()
+            && self.glitch_value_after(self.sender_at(a - self.head), self.buf[b - 1])
+            && !self.expected_len_at(a, b - a)
+        {
             self.emit_frame(b - a - 1, None, emit);
             self.emit_unframed(b - 1, b, emit);
             return;
+        }
+        // The awaited answer, damaged, with more after it: the request fixed its length
+        // (an exception's is 5), whatever its damaged byte count says.
+        if let Expect::Response { unit, fc, len: Some(n) } = self.expect
+            && self.buf[a] == unit
+        {
+            let n = if self.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { n };
+            if b - a > n && self.latency >= self.t35 {
+                self.emit_frame(n, None, emit);
+                self.emit_unframed(a + n, b, emit);
+                return;
+            }
         }
         // Two damaged frames back to back (no silence between them to go by): cut the first
         // at its structural length when what follows starts like a frame of a known unit.
