@@ -322,3 +322,67 @@ fn scan_of_a_raw_dump_that_starts_mid_frame_finds_the_frames() {
         assert!(best.score.valid_frames * 100 >= good * 99, "cut {cut}: {} of {good} frames", best.score.valid_frames);
     }
 }
+
+/// Mask Write Register 0x004D of unit 5 (AND F2F2, OR 0025), and its answer (the same echo):
+/// 10 bytes each way, fixed by the request.
+fn mask_write(unit: u8) -> Vec<u8> {
+    rtu(unit, &[0x16, 0x00, 0x4D, 0xF2, 0xF2, 0x00, 0x25])
+}
+
+/// Was (16 ms USB timer): a damaged answer (its function code hit: 0x16 → 0x58) and the
+/// damaged request after it, in one read, were one 17-byte failed frame — the request had
+/// fixed the answer's length at 10.
+#[test]
+fn a_damaged_answer_glued_to_more_damage_is_cut_at_the_length_its_request_fixed() {
+    let c = L9600.char_ns();
+    let request = mask_write(5);
+    let mut answer = mask_write(5);
+    answer[1] = 0x58;
+    let mut next = rtu(1, &[0x2B, 0x0E, 0x01, 0x00]);
+    next[0] = 0xEE;
+    let t0 = 3_000_000_000u64;
+    // A transaction before it, so the bus is known to await a request (an echo-shaped frame
+    // alone could be either).
+    let chunks = vec![
+        (t0 - 100_000_000, rtu(5, &[0x03, 0x00, 0x10, 0x00, 0x01])),
+        (t0 - 80_000_000, rtu(5, &[0x03, 0x02, 0x12, 0x34])),
+        (t0, request.clone()),
+        (t0 + 16_000_000, [answer.clone(), next.clone()].concat()),
+        (t0 + 200_000_000 + 8 * c, rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01])),
+    ];
+    let e = events(&chunks, L9600, 16_000_000);
+    assert_eq!(e[2..4], [("F+".to_owned(), request), ("F-".to_owned(), answer)], "{e:02X?}");
+}
+
+/// Was: on a line whose slaves leave `FE` after their frames, a damaged answer whose last byte
+/// the damage made `FE` lost that byte to a "glitch" — but the request fixed the answer at 10
+/// bytes, and 10 arrived.
+#[test]
+fn a_damaged_answer_ending_in_fe_keeps_its_last_byte_where_slaves_glitch_fe() {
+    let c = L9600.char_ns();
+    let mut chunks = Vec::new();
+    let mut t = 4_000_000_000u64;
+    let mut send = |gap_chars: u64, bytes: &[u8], chunks: &mut Vec<(u64, Vec<u8>)>| {
+        t += gap_chars * c;
+        for &b in bytes {
+            t += c;
+            chunks.push((t, vec![b]));
+        }
+    };
+    for _ in 0..40 {
+        send(10, &rtu(0x11, &[0x03, 0x00, 0x10, 0x00, 0x01]), &mut chunks);
+        send(0, &[0x00], &mut chunks);
+        send(5, &rtu(0x11, &[0x03, 0x02, 0x12, 0x34]), &mut chunks);
+        send(0, &[0xFE], &mut chunks);
+    }
+    let request = mask_write(0x11);
+    let mut answer = mask_write(0x11);
+    answer[9] = 0xFE;
+    send(10, &request, &mut chunks);
+    send(0, &[0x00], &mut chunks);
+    send(5, &answer, &mut chunks);
+    send(20, &rtu(0x11, &[0x03, 0x00, 0x10, 0x00, 0x01]), &mut chunks);
+    let e = events(&chunks, L9600, 0);
+    let at = e.iter().position(|(_, b)| *b == request).expect("the request");
+    assert_eq!(e[at + 2], ("F-".to_owned(), answer), "{:02X?}", &e[at..]);
+}
