@@ -81,9 +81,20 @@ fn sniff_records_what_play_sends_through_a_pty() {
     // t3.5 is real evidence of a boundary), but no byte may be lost or added.
     assert_eq!(good_frames(&recorded), good_frames(&want), "the recording replays to the original's valid frames");
     assert_eq!(all_bytes(&recorded), all_bytes(&want), "every byte is in the recording");
-    // Live and replayed output agree event for event (the summary line included).
+    // Live and replayed output agree event for event (the summary line included) — but for
+    // what the replay adds: the latency the live session learned, which the recording stores
+    // at its end and the replay reads back.
     assert_eq!(live.lines().count(), recorded.lines().count());
-    assert_eq!(live, recorded);
+    let (live_events, live_summary) = live.trim_end().rsplit_once('\n').unwrap();
+    let (recorded_events, recorded_summary) = recorded.trim_end().rsplit_once('\n').unwrap();
+    assert_eq!(live_events, recorded_events);
+    let live_summary: serde_json::Value = serde_json::from_str(live_summary).unwrap();
+    let mut recorded_summary: serde_json::Value = serde_json::from_str(recorded_summary).unwrap();
+    let learned_live = &live_summary["observers"][0]["learned_latency_ns"];
+    assert!(learned_live.is_u64(), "the live session learned its reads: {live_summary}");
+    let stored = recorded_summary["observers"][0].as_object_mut().unwrap().remove("recorded_latency_ns");
+    assert_eq!(stored.as_ref(), Some(learned_live), "the recording stores what the live session learned");
+    assert_eq!(live_summary, recorded_summary);
 }
 
 /// The adapter is pulled mid-session (socat killed, its pty gone) and comes back (a new socat

@@ -340,13 +340,17 @@ impl Stats {
         let observers: Vec<J> = self
             .learned()
             .map(|(port, e)| {
-                json!({
+                let mut o = json!({
                     "port": port, "reads": e.reads, "read_bytes": e.read_bytes, "longest_read": e.longest_read,
                     "shape": e.shape(), "split_frames": e.split_frames,
                     "learned_latency_ns": e.learned_latency_ns, "configured_latency_ns": e.configured_latency_ns,
                     "learning": e.learning, "latency_ns": e.effective_latency_ns(),
-                    "recorded_latency_ns": e.recorded_latency_ns,
-                })
+                });
+                // Only a replay of a recording that stored it has one.
+                if let (Some(r), Some(m)) = (e.recorded_latency_ns, o.as_object_mut()) {
+                    m.insert("recorded_latency_ns".into(), json!(r));
+                }
+                o
             })
             .collect();
         if !observers.is_empty()
