@@ -215,3 +215,46 @@ fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
     assert_eq!(shared.model().line, "19200 7E1".parse::<LineSettings>().unwrap());
     assert!(shared.model().total_rows() > 0);
 }
+
+/// A frame that checks at another length too (a vendor request ending in `00` on a line whose
+/// master leaves a `00` glitch after some frames) marks its row `len?`.
+#[test]
+fn a_frame_with_two_possible_lengths_is_marked_in_the_traffic_view() {
+    let line = LineSettings { baud: 9600, ..LineSettings::default() };
+    let c = line.char_ns();
+    let mut model = Model::new(std::collections::BTreeMap::new(), mbtap_core::profile::annotate::Lang::En, line, 1000);
+    let mut analyzer =
+        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
+    let rtu = |pdu: &[u8]| {
+        let mut f = Vec::new();
+        mbtap_core::proto::encode_rtu(1, pdu, &mut f);
+        f
+    };
+    // A vendor request (user-defined 0x41) whose last byte makes its CRC end in 00.
+    let request = (0..=255u8).map(|v| rtu(&[0x41, 0x10, 0x20, v])).find(|f| f.last() == Some(&0)).unwrap();
+    let mut t = START_NS;
+    let mut send = |gap: u64, bytes: &[u8], model: &mut Model| {
+        t += gap * c;
+        for &b in bytes {
+            t += c;
+            analyzer.push(&Chunk { port: PortId(0), t: Timestamp(t), bytes: &[b] }, &mut |e: &Event<'_>| {
+                model.event(e);
+            });
+        }
+    };
+    for i in 0..60 {
+        send(10, &rtu(&[0x03, 0x00, 0x10, 0x00, 0x01]), &mut model);
+        if i % 3 == 0 {
+            send(0, &[0x00], &mut model);
+        }
+        send(5, &rtu(&[0x03, 0x02, 0x12, 0x34]), &mut model);
+    }
+    send(10, &request, &mut model);
+    send(5, &rtu(&[0x41, 0x55]), &mut model);
+    send(40, &rtu(&[0x03, 0x00, 0x10, 0x00, 0x01]), &mut model);
+    analyzer.finish(&mut |e: &Event<'_>| model.event(e));
+    let mut app = App::new(true);
+    app.refresh(&model);
+    let s = screen(&mut app, &model, 120, 30);
+    assert_eq!(s.matches("len?").count(), 1, "{s}");
+}

@@ -31,6 +31,9 @@ pub struct TimingFlags {
     pub gap_inside: bool,
     /// A frame that followed the previous one after less than t3.5.
     pub short_gap: bool,
+    /// A frame whose bytes check at another length too (`Frame::alt_len`: a `00` that may be a
+    /// turnaround glitch or its CRC's high byte).
+    pub two_lengths: bool,
 }
 
 /// One row of the traffic view.
@@ -150,6 +153,7 @@ impl Model {
                 self.bus.frame(frame.bytes.len(), frame.check_ok, frame.t_end.0, self.line);
                 self.pending.gap_inside |= frame.gap_violation_ns.is_some();
                 self.pending.short_gap |= frame.short_gap_before_ns.is_some();
+                self.pending.two_lengths |= frame.alt_len.is_some();
             }
             // A turnaround glitch is not traffic: the devices view shows it as a finding
             // (the health collector above counted it), the traffic view shows no row.

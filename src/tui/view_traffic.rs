@@ -43,6 +43,9 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
             if r.timing.short_gap {
                 status.push_str(" <t3.5");
             }
+            if r.timing.two_lengths {
+                status.push_str(" len?");
+            }
             let style =
                 if Some(i) == selected { status_style(r).add_modifier(Modifier::REVERSED) } else { status_style(r) };
             let mut cells = vec![Cell::from(clock(r.t_ns))];
