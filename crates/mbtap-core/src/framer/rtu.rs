@@ -103,6 +103,20 @@ enum Reading {
     Unknown,
 }
 
+impl Reading {
+    /// The reading of one direction.
+    fn of(is_request: bool) -> Self {
+        if is_request { Self::Request } else { Self::Response }
+    }
+}
+
+/// Does `pdu`, read in this direction, decode as one PDU without findings (no absurd quantity,
+/// no byte count its quantity contradicts)?
+fn decodes_clean(pdu: &[u8], is_request: bool) -> bool {
+    let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
+    matches!(decode_pdu(pdu, hint), PduDecode::One(d) if d.findings.is_empty())
+}
+
 /// What the next frame on the bus should be.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Expect {
@@ -262,13 +276,17 @@ impl RtuFramer {
         }
     }
 
+    /// What the bus expects of a frame at live index `g`: bytes before it that are not a lone
+    /// glitch are damage nobody can read — one frame or several, requests or answers: after
+    /// them nothing is expected.
+    fn expect_at(&self, g: usize) -> Expect {
+        if g == 0 || (g == 1 && self.at_glitch(self.head)) { self.expect } else { Expect::Unknown }
+    }
+
     /// Does reading `l` bytes at live index `g` as `reading` give what the bus expects next?
     fn expected(&self, g: usize, l: usize, reading: Reading) -> bool {
         let s = &self.buf[self.head + g..];
-        // Bytes before `g` that are not a lone glitch are damage nobody can read — one frame or
-        // several, requests or answers: after them nothing is expected.
-        let expect = if g == 0 || (g == 1 && self.at_glitch(self.head)) { self.expect } else { Expect::Unknown };
-        match expect {
+        match self.expect_at(g) {
             Expect::Unknown => false,
             Expect::Request => reading == Reading::Request,
             Expect::Response { unit, fc, len } => {
@@ -577,23 +595,22 @@ impl RtuFramer {
                 found[slot] = Some((l, is_request));
             }
         }
-        let reading_of = |is_request: bool| if is_request { Reading::Request } else { Reading::Response };
-        let clean = |l: usize, is_request: bool| {
-            let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
-            matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty())
-        };
-        // A reading whose byte count its own quantity contradicts is no frame, whatever its CRC
-        // says: valid frames glued together check as one (each leaves the CRC at zero), and a
-        // chance match over damage does in 1 of 65 536.
+        let reading_of = Reading::of;
+        let clean = |l: usize, is_request: bool| decodes_clean(&s[1..l - 2], is_request);
         let answer_expected = (g == 0 || after_glitch) && matches!(self.expect, Expect::Response { .. });
+        // Bytes before `g` that are not a lone glitch are damage too, not yet emitted.
+        let inside_damage = g > 0 && !after_glitch;
         for slot in &mut found {
             if let Some((l, is_request)) = *slot
+                // A reading whose byte count its own quantity contradicts is no frame, whatever
+                // its CRC says: valid frames glued together check as one (each leaves the CRC at
+                // zero), and a chance match over damage does in 1 of 65 536.
                 && (!consistent(&s[1..l - 2], is_request)
                     // While an answer is awaited, a reading that is not it must at least be well
                     // formed: a damaged answer ending in `00` checks one byte shorter, as a
-                    // request with an absurd quantity.
-                    || (answer_expected
-                        && !self.expected(g, l, reading_of(is_request))
+                    // request with an absurd quantity. Inside damage too: a CRC matching by
+                    // chance over a damaged byte count gives absurd quantities.
+                    || ((inside_damage || (answer_expected && !self.expected(g, l, reading_of(is_request))))
                         && !clean(l, is_request)))
             {
                 *slot = None;
@@ -602,26 +619,12 @@ impl RtuFramer {
         // Right after damage nothing is expected, and a damaged byte count can make a shorter
         // frame whose CRC matches by chance (1 in 65 536): what follows must confirm it.
         let after_damage = self.after_damage && (g == 0 || after_glitch) && found.iter().any(Option::is_some);
-        // Bytes before `g` that are not a lone glitch are damage too, not yet emitted: a reading
-        // found there must at least decode without findings (a CRC matching by chance over a
-        // damaged byte count gives absurd quantities).
-        if g > 0 && !after_glitch {
-            for (slot, is_request) in found.iter_mut().zip([true, false]) {
-                let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
-                if slot.is_some_and(
-                    |(l, _)| !matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty()),
-                ) {
-                    *slot = None;
-                }
-            }
-        }
         if unconfirmed_start || after_damage {
             // Confirmed by what follows, and well formed: no findings in its decode.
             let confirmed = |(l, is_request): (usize, bool)| {
-                let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
                 (self.ends_at(g + l) || self.glitch_then_end(g + l) || (flushing && g + l == live.len()))
                     && consistent(&s[1..l - 2], is_request)
-                    && matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty())
+                    && clean(l, is_request)
             };
             let found_any = found.iter().any(Option::is_some);
             for slot in &mut found {
@@ -678,28 +681,17 @@ impl RtuFramer {
     /// silence, a valid frame, or a lone glitch byte before either), then the shorter.
     fn best(&self, g: usize, a: (usize, bool), b: (usize, bool)) -> (usize, bool) {
         let score = |(l, is_request): (usize, bool)| {
-            let reading = if is_request { Reading::Request } else { Reading::Response };
             let confirmed = self.ends_at(g + l) || self.glitch_then_end(g + l);
             let s = &self.buf[self.head + g..self.head + g + l];
-            let hint = if is_request { DirectionHint::Request } else { DirectionHint::Response };
-            let clean = matches!(decode_pdu(&s[1..l - 2], hint), PduDecode::One(d) if d.findings.is_empty());
-            (self.expected(g, l, reading), clean, confirmed, std::cmp::Reverse(l))
+            let clean = decodes_clean(&s[1..l - 2], is_request);
+            (self.expected(g, l, Reading::of(is_request)), clean, confirmed, std::cmp::Reverse(l))
         };
         if score(b) > score(a) { b } else { a }
     }
 
     /// Who sends the frame starting at live index `g`, as far as the expectation says.
     fn sender_at(&self, g: usize) -> Sender {
-        let expect = if g == 0 || (g == 1 && self.at_glitch(self.head)) { self.expect } else { Expect::Unknown };
-        match (expect, &self.buf[self.head + g..]) {
-            (Expect::Request, _) => Sender::Master,
-            (Expect::Response { unit, fc, .. }, [u, f, ..])
-                if *u == unit && (*f == fc || *f == fc | EXCEPTION_FLAG) =>
-            {
-                Sender::Slave
-            }
-            _ => Sender::Unknown,
-        }
+        sender_of(self.expect_at(g), &self.buf[self.head + g..], None)
     }
 
     /// Does a frame end before live index `i`: a known silence or a valid frame starts there?
@@ -1004,14 +996,7 @@ impl RtuFramer {
             if piece.len() > RTU_MIN_LEN && piece.last() == Some(&0) && self.plausible_frame(&piece[..piece.len() - 1])
             {
                 let n = piece.len();
-                let odds = self.turn.zero_tail(self.sender_at(a - self.head));
-                let shorter = if let Some(even) = diagnostics_even_len(piece, n - 1) {
-                    even < n
-                } else {
-                    self.next_alt = odds.ambiguous.then_some(if odds.glitch_likelier { n } else { n - 1 });
-                    odds.glitch_likelier
-                };
-                if shorter {
+                if self.twin_len(a, n, self.sender_at(a - self.head)) < n {
                     self.emit_frame(n - 1, Some(Reading::Unknown), emit);
                     self.emit_unframed(b - 1, b, emit);
                 } else {
@@ -1035,14 +1020,7 @@ impl RtuFramer {
                     && e + 1 < piece.len()
                     && self.plausible_frame(&piece[..=e])
                     && self.looks_like_frame(&piece[e + 1..]);
-                let e = if twin {
-                    let odds = self.turn.zero_tail(self.sender_at(a - self.head));
-                    let (take, other) = if odds.glitch_likelier { (e, e + 1) } else { (e + 1, e) };
-                    self.next_alt = odds.ambiguous.then_some(other);
-                    take
-                } else {
-                    e
-                };
+                let e = if twin { self.twin_len(a, e + 1, self.sender_at(a - self.head)) } else { e };
                 self.emit_frame(e, Some(Reading::Unknown), emit);
                 a += e;
                 continue;
@@ -1054,17 +1032,8 @@ impl RtuFramer {
                 // structure or the odds on this line say the `00` is a glitch.
                 let n = piece.len() - s;
                 let both = piece.last() == Some(&0) && self.plausible_frame(&piece[s..piece.len() - 1]);
-                let odds = self.turn.zero_tail(Sender::Unknown);
-                let (trim, alt) = match diagnostics_even_len(&piece[s..], n - 1) {
-                    Some(even) if both => (even < n, None),
-                    _ if both => {
-                        (odds.glitch_likelier, odds.ambiguous.then_some(if odds.glitch_likelier { n } else { n - 1 }))
-                    }
-                    _ => (false, None),
-                };
                 self.emit_unframed(a, a + s, emit);
-                self.next_alt = alt;
-                if trim {
+                if both && self.twin_len(a + s, n, Sender::Unknown) < n {
                     self.emit_frame(n - 1, Some(Reading::Unknown), emit);
                     self.emit_unframed(b - 1, b, emit);
                 } else {
@@ -1075,6 +1044,21 @@ impl RtuFramer {
             self.emit_unframed(a, b, emit);
             return;
         }
+    }
+
+    /// The `n` bytes at absolute `at` end in `00` and check one byte shorter too (CRC-16's shift
+    /// property): the length to take — Diagnostics' structure decides where it can, else the
+    /// odds that `sender` leaves a `00` glitch — with the other length kept for the frame event
+    /// (see [`Frame::alt_len`]) when it is not negligible.
+    fn twin_len(&mut self, at: usize, n: usize, sender: Sender) -> usize {
+        if let Some(even) = diagnostics_even_len(&self.buf[at..], n - 1) {
+            self.next_alt = None;
+            return even;
+        }
+        let odds = self.turn.zero_tail(sender);
+        let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
+        self.next_alt = odds.ambiguous.then_some(other);
+        take
     }
 
     /// Where a damaged frame at absolute `a` ends inside `a..b`, if its structure says so and a
