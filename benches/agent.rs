@@ -10,13 +10,11 @@
 
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod support;
 use support::{Kill, call, percentile};
 
-const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
 /// Holding registers 100–109 (MAP v1.1b3 §6.3: 03, address 100, quantity 10).
 const PDU: [u8; 5] = [0x03, 0x00, 0x64, 0x00, 0x0A];
 
@@ -27,18 +25,7 @@ fn dir() -> PathBuf {
 }
 
 fn line(link: &Path) -> Kill {
-    let _ = std::fs::remove_file(link);
-    let k = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", link.to_str().unwrap(), "--paced", "--baud", "9600"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    while !link.exists() {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    k
+    support::simulate(link, &["--paced", "--baud", "9600"])
 }
 
 fn bridge(link: &Path, extra: &[&str]) -> (Kill, String, String) {

@@ -30,18 +30,7 @@ mod support;
 use support::{Kill, percentile};
 
 fn simulator(link: &Path) -> Kill {
-    let _ = std::fs::remove_file(link);
-    let k = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", link.to_str().unwrap(), "--turnaround-ms", "0", "--baud", BAUD])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    while !link.exists() {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    k
+    support::simulate(link, &["--turnaround-ms", "0", "--baud", BAUD])
 }
 
 fn rtu(pdu: &[u8]) -> Vec<u8> {
@@ -183,17 +172,7 @@ fn main() {
 fn line_at_9600(dir: &Path) {
     let bus = dir.join("bus9600");
     let app = dir.join("app9600");
-    let _ = std::fs::remove_file(&bus);
-    let _sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--paced", "--baud", "9600"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    while !bus.exists() {
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let _sim = support::simulate(&bus, &["--paced", "--baud", "9600"]);
     // The tap's output goes to a file: a pipe nobody reads until the end would fill and stall it.
     let tap_out = dir.join("tap9600.jsonl");
     let mut tap = Command::new(BIN)

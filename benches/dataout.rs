@@ -32,18 +32,7 @@ fn dir() -> PathBuf {
 }
 
 fn simulator(link: &Path) -> Kill {
-    let _ = std::fs::remove_file(link);
-    let k = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", link.to_str().unwrap(), "--turnaround-ms", "0"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    while !link.exists() {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    k
+    support::simulate(link, &["--turnaround-ms", "0"])
 }
 
 /// `watch` for `n` rounds at `interval` (start to start); its rate and round latency.
@@ -108,31 +97,7 @@ fn watch_vs_mbpoll(d: &Path) {
 }
 
 fn spy(_d: &Path) {
-    let capture = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/mk4-doc-examples-rtu.pcapng");
-    let mut child = Command::new(BIN)
-        .args([
-            "replay",
-            capture.to_str().unwrap(),
-            "--format",
-            "summary",
-            "--serve",
-            "127.0.0.1:0",
-            "--max-age",
-            "none",
-        ])
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let addr = loop {
-        let l = lines.next().unwrap().unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: spy server listening on ") {
-            break rest.split_whitespace().next().unwrap().to_owned();
-        }
-    };
-    std::thread::spawn(move || for _ in lines {});
-    let _server = Kill(child);
+    let (_server, addr) = support::spy_replay("none");
     // Coils 0–7 of unit 1, heard in the capture (MAP v1.1b3 §6.1: 01, address 0, quantity 8).
     let pdu = [0x01, 0x00, 0x00, 0x00, 0x08];
     let until = Instant::now() + Duration::from_secs(3);

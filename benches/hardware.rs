@@ -11,13 +11,11 @@
 
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod support;
 use support::{Kill, call, percentile};
 
-const BIN: &str = env!("CARGO_BIN_EXE_mbtap");
 /// Read input registers 430–433 (MAP v1.1b3 §6.4): the MK4's voltages, the Display's
 /// registers…
 const PDU: [u8; 5] = [0x04, 0x01, 0xAE, 0x00, 0x04];
@@ -31,19 +29,7 @@ fn dir() -> PathBuf {
 }
 
 fn simulator(link: &Path, extra: &[&str]) -> Kill {
-    let _ = std::fs::remove_file(link);
-    let k = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", link.to_str().unwrap(), "--paced", "--baud", "9600", "--turnaround-ms", "2"])
-            .args(extra)
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    while !link.exists() {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    k
+    support::simulate(link, &[&["--paced", "--baud", "9600", "--turnaround-ms", "2"][..], extra].concat())
 }
 
 fn bridge(link: &Path, extra: &[&str]) -> (Kill, String, String) {

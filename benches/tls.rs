@@ -136,17 +136,7 @@ fn round_trips<S: Read + Write>(s: &mut S, n: usize) -> Vec<f64> {
 fn main() {
     let d = certificates();
     let bus = d.join("bus");
-    let _ = std::fs::remove_file(&bus);
-    let _sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--turnaround-ms", "0", "--baud", "115200"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    while !bus.exists() {
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let _sim = support::simulate(&bus, &["--turnaround-ms", "0", "--baud", "115200"]);
     let f = |n: &str| d.join(n).to_str().unwrap().to_owned();
     let mut child = Command::new(BIN)
         .args([

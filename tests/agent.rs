@@ -8,11 +8,11 @@
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{BIN, Kill, wait_for};
+use common::{BIN, Kill};
 
 fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mbtap-agent-{name}-{}", std::process::id()));
@@ -21,15 +21,7 @@ fn dir(name: &str) -> PathBuf {
 }
 
 fn paced_line(link: &Path) -> Kill {
-    let sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", link.to_str().unwrap(), "--paced", "--baud", "9600", "--duration", "120"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(link);
-    sim
+    common::simulate(link, &["--paced", "--baud", "9600", "--duration", "120"])
 }
 
 fn bridge(link: &Path, extra: &[&str]) -> (Kill, String, String) {

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
 mod common;
-use common::{BIN, Kill, socat_pair, wait_for};
+use common::{BIN, Kill, socat_pair};
 
 fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mbtap-hw-{name}-{}", std::process::id()));
@@ -19,11 +19,7 @@ fn dir(name: &str) -> PathBuf {
 }
 
 fn simulator(link: &Path, extra: &[&str]) -> Kill {
-    let mut args = vec!["simulate", "--link", link.to_str().unwrap(), "--duration", "120"];
-    args.extend_from_slice(extra);
-    let sim = Kill(Command::new(BIN).args(&args).stderr(Stdio::null()).spawn().unwrap());
-    wait_for(link);
-    sim
+    common::simulate(link, &[&["--duration", "120"][..], extra].concat())
 }
 
 /// Starts `mbtap bridge` with `args`; the process, the addresses it listens on (Modbus TCP,

@@ -10,7 +10,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::Duration;
 
 mod common;
-use common::{BIN, Kill, socat_pair, wait_for, wait_port};
+use common::{BIN, Kill, socat_pair, wait_port};
 
 fn mbtap(args: &[&str]) -> Output {
     Command::new(BIN).args(args).output().unwrap()
@@ -38,14 +38,7 @@ fn dir(name: &str) -> std::path::PathBuf {
 #[ignore = "needs mbpoll; .ci/run installs it and runs this with --ignored"]
 fn read_gives_the_values_mbpoll_reads() {
     let bus = dir("mbpoll").join("bus");
-    let _sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "60"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(&bus);
+    let _sim = common::simulate(&bus, &["--duration", "60"]);
     // The MK4's set points 104–112 (holding registers, stable while nobody writes).
     let o = Command::new("mbpoll")
         .args(["-m", "rtu", "-b", "19200", "-P", "even", "-0", "-o", "2", "-1"])

@@ -5,10 +5,10 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 
 mod common;
-use common::{BIN, Kill, wait_for};
+use common::Kill;
 
 /// Runs mbpoll on `bus` with `args` (reads pass `-1` to poll once; mbpoll refuses it on writes,
 /// which it does once anyway); returns (success, stdout + stderr).
@@ -43,14 +43,7 @@ fn simulator(name: &str) -> (Kill, std::path::PathBuf) {
     let dir = std::env::temp_dir().join(format!("mbtap-sim-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let bus = dir.join("bus");
-    let sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "60"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(&bus);
+    let sim = common::simulate(&bus, &["--duration", "60"]);
     (sim, bus)
 }
 

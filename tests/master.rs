@@ -8,20 +8,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
 mod common;
-use common::{BIN, Kill, wait_for};
+use common::{BIN, Kill};
 
 fn simulator(name: &str) -> (Kill, PathBuf) {
     let dir = std::env::temp_dir().join(format!("mbtap-master-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let bus = dir.join("bus");
-    let sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "60"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(&bus);
+    let sim = common::simulate(&bus, &["--duration", "60"]);
     (sim, bus)
 }
 

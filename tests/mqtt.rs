@@ -218,14 +218,7 @@ fn a_broker_that_never_reads_does_not_change_the_analysis() {
 
 fn simulator(d: &std::path::Path) -> (Kill, PathBuf) {
     let bus = d.join("bus");
-    let sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "60"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    common::wait_for(&bus);
+    let sim = common::simulate(&bus, &["--duration", "60"]);
     (sim, bus)
 }
 

@@ -156,39 +156,9 @@ fn mbpoll_and_pymodbus_read_what_the_sniffer_heard_and_nothing_is_sent() {
 fn a_replayed_image_goes_stale_by_its_own_bus_time() {
     // The MK4 document's examples, replayed: served with no age limit, then with 1 ms (the
     // capture spans longer, so its first values are stale by the capture's newest time).
-    let capture = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/mk4-doc-examples-rtu.pcapng");
     let serve = |age: &str| {
-        let mut child = Command::new(BIN)
-            .args([
-                "replay",
-                capture.to_str().unwrap(),
-                "--format",
-                "summary",
-                "--serve",
-                "127.0.0.1:0",
-                "--max-age",
-                age,
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut err = BufReader::new(child.stderr.take().unwrap()).lines();
-        let port: u16 = loop {
-            let l = err.next().expect("replay ended before serving").unwrap();
-            if let Some(rest) = l.strip_prefix("mbtap: spy server listening on ") {
-                break rest.split_whitespace().next().unwrap().rsplit(':').next().unwrap().parse().unwrap();
-            }
-        };
-        // Served once the replay is done.
-        loop {
-            let l = err.next().expect("replay ended").unwrap();
-            if l.contains("serving its register image") {
-                break;
-            }
-        }
-        std::thread::spawn(move || for _ in err {});
-        (Kill(child), port)
+        let (server, addr) = common::spy_replay(age);
+        (server, addr.rsplit(':').next().unwrap().parse::<u16>().unwrap())
     };
     let (_fresh, port) = serve("none");
     let (ok, text, got) = mbpoll(port, &["-a", "1", "-t", "0", "-r", "0", "-c", "8"]);
@@ -207,33 +177,9 @@ const READ_COILS: [u8; 12] = [0, 1, 0, 0, 0, 6, 1, 0x01, 0x00, 0x00, 0x00, 0x08]
 #[test]
 fn the_spy_server_holds_at_most_64_connections() {
     use std::io::{Read, Write};
-    let capture = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/mk4-doc-examples-rtu.pcapng");
-    let mut child = Command::new(BIN)
-        .args([
-            "replay",
-            capture.to_str().unwrap(),
-            "--format",
-            "summary",
-            "--serve",
-            "127.0.0.1:0",
-            "--max-age",
-            "none",
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut err = BufReader::new(child.stderr.take().unwrap()).lines();
-    let addr = loop {
-        let l = err.next().expect("replay ended before serving").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: spy server listening on ") {
-            break rest.split_whitespace().next().unwrap().to_owned();
-        }
-    };
-    std::thread::spawn(move || for _ in err {});
-    let _server = Kill(child);
-    // Answered at all — with the coils, or (while the replay has not reached them yet, on a
-    // busy machine) with an exception: the MBAP header's length says how much follows.
+    let (_server, addr) = common::spy_replay("none");
+    // Answered at all — the coils, or any exception: the MBAP header's length says how much
+    // follows (this test is about the connection limit, not the image).
     let ask = |s: &mut std::net::TcpStream| -> bool {
         s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
         let mut header = [0u8; 6];

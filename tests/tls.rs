@@ -7,10 +7,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Command;
 
 mod common;
-use common::{BIN, Kill, wait_for};
 
 fn openssl(d: &Path, args: &[&str]) {
     let o = Command::new("openssl").args(args).current_dir(d).output().expect("openssl must be installed");
@@ -115,14 +114,7 @@ fn roles_certificates_and_refusals_as_the_specification_says() {
     let d = certificates("roles");
     std::thread::sleep(std::time::Duration::from_millis(1500));
     let bus = d.join("bus");
-    let _sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "120"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(&bus);
+    let _sim = common::simulate(&bus, &["--duration", "120"]);
     let f = |n: &str| d.join(n).to_str().unwrap().to_owned();
     let (server, server_key, ca) = (f("server.pem"), f("server.key"), f("ca.pem"));
     let b = common::bridge(&[
@@ -183,14 +175,7 @@ fn roles_certificates_and_refusals_as_the_specification_says() {
 fn sighup_reloads_the_client_ca_and_the_tls_listener_has_its_own_allow_list() {
     let d = certificates("hup");
     let bus = d.join("bus-hup");
-    let _sim = Kill(
-        Command::new(BIN)
-            .args(["simulate", "--link", bus.to_str().unwrap(), "--duration", "120"])
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(&bus);
+    let _sim = common::simulate(&bus, &["--duration", "120"]);
     let trusted = d.join("trusted-ca.pem");
     std::fs::copy(d.join("ca.pem"), &trusted).unwrap();
     let f = |n: &str| d.join(n).to_str().unwrap().to_owned();

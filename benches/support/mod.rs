@@ -11,7 +11,7 @@ use std::net::TcpStream;
 #[path = "../../tests/common/mod.rs"]
 mod common;
 #[allow(unused_imports)] // each bench uses some of them
-pub use common::{Kill, bridge, counter};
+pub use common::{Kill, bridge, counter, simulate, spy_replay};
 
 /// The `p` quantile (0..=1) of `v` (sorted in place).
 pub fn percentile(v: &mut [f64], p: f64) -> f64 {

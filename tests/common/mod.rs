@@ -26,6 +26,55 @@ pub fn wait_for(path: &std::path::Path) {
     }
 }
 
+/// Starts `mbtap simulate` (the MK4, Display and MKZP-0.4 on a pseudo-terminal) linked at
+/// `link`, with `args` after the link and its stderr dropped; waits for the link.
+pub fn simulate(link: &std::path::Path, args: &[&str]) -> Kill {
+    // A link left by an earlier run would be taken for this one's.
+    let _ = std::fs::remove_file(link);
+    let sim = Kill(
+        std::process::Command::new(BIN)
+            .args(["simulate", "--link", link.to_str().unwrap()])
+            .args(args)
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_for(link);
+    sim
+}
+
+/// `mbtap replay` of the MK4 document's examples (`captures/mk4-doc-examples-rtu.pcapng`)
+/// serving what it heard (`--serve` on a free port, `--max-age AGE`), once the replay is done:
+/// the process and the address it listens on.
+pub fn spy_replay(max_age: &str) -> (Kill, String) {
+    use std::io::BufRead;
+    let capture = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/mk4-doc-examples-rtu.pcapng");
+    let mut child = std::process::Command::new(BIN)
+        .args(["replay", capture.to_str().unwrap(), "--format", "summary", "--serve", "127.0.0.1:0"])
+        .args(["--max-age", max_age])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let addr = loop {
+        let l = err.next().expect("replay ended before serving").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: spy server listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    // Served once the replay is done.
+    loop {
+        let l = err.next().expect("replay ended").unwrap();
+        if l.contains("serving its register image") {
+            break;
+        }
+    }
+    // Keep draining stderr so the server never blocks on a full pipe.
+    std::thread::spawn(move || for _ in err {});
+    (Kill(child), addr)
+}
+
 /// A running `mbtap bridge`: the addresses it said it listens on, and what it wrote on stderr
 /// after that.
 pub struct Bridge {
