@@ -5,7 +5,6 @@
 //! `cargo test`, run by `.ci/run` with `--ignored`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -36,22 +35,6 @@ fn metric(addr: &str, series: &str) -> u64 {
     common::counter(addr, series.trim_end())
 }
 
-/// One Modbus TCP request (MBAP, Modbus Messaging on TCP/IP v1.0b §3.1.3); the answer's PDU.
-fn call(s: &mut TcpStream, tid: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
-    let mut f = vec![0u8; 7];
-    f[..2].copy_from_slice(&tid.to_be_bytes());
-    f[4..6].copy_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
-    f[6] = unit;
-    f.extend_from_slice(pdu);
-    s.write_all(&f).unwrap();
-    let mut head = [0u8; 7];
-    s.read_exact(&mut head).unwrap();
-    assert_eq!(head[..2], tid.to_be_bytes(), "each client gets its own transaction id back");
-    let mut answer = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
-    s.read_exact(&mut answer).unwrap();
-    answer
-}
-
 fn mbtap(args: &[&str]) -> Output {
     Command::new(BIN).args(args).output().unwrap()
 }
@@ -75,7 +58,7 @@ fn sixteen_clients_reading_the_same_registers_share_the_line() {
                 let (mut n, mut tid) = (0u64, 0u16);
                 while Instant::now() < until {
                     tid = tid.wrapping_add(1);
-                    let answer = call(&mut s, tid, 1, &VOLTAGES);
+                    let answer = common::call(&mut s, tid, 1, &VOLTAGES);
                     assert_eq!(answer[0], 0x04, "a normal answer: {answer:02X?}");
                     n += 1;
                 }
@@ -139,7 +122,7 @@ fn agent_polling_keeps_the_cache_fresh_without_any_client() {
     }
     let mut s = TcpStream::connect(&tcp).unwrap();
     for tid in 1..=5 {
-        let answer = call(&mut s, tid, 1, &[0x03, 0x00, 0x64, 0x00, 0x0A]);
+        let answer = common::call(&mut s, tid, 1, &[0x03, 0x00, 0x64, 0x00, 0x0A]);
         assert_eq!(answer[..2], [0x03, 20], "ten registers: {answer:02X?}");
     }
     assert_eq!(metric(&m, "mbtap_bridge_cache_hits_total "), 5, "every read from memory");

@@ -168,3 +168,19 @@ pub fn wait_port(port: u16) {
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+
+/// One Modbus TCP request (MBAP, Modbus Messaging on TCP/IP v1.0b §3.1.3); the answer's PDU.
+pub fn call(s: &mut std::net::TcpStream, tid: u16, unit: u8, pdu: &[u8]) -> Vec<u8> {
+    let mut f = vec![0u8; 7];
+    f[..2].copy_from_slice(&tid.to_be_bytes());
+    f[4..6].copy_from_slice(&u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+    f[6] = unit;
+    f.extend_from_slice(pdu);
+    std::io::Write::write_all(s, &f).unwrap();
+    let mut head = [0u8; 7];
+    std::io::Read::read_exact(s, &mut head).unwrap();
+    assert_eq!(head[..2], tid.to_be_bytes(), "each client gets its own transaction id back");
+    let mut answer = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])) - 1];
+    std::io::Read::read_exact(s, &mut answer).unwrap();
+    answer
+}
