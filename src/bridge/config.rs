@@ -68,7 +68,25 @@ pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
     let doc: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
     let roles = doc.get("roles").cloned();
     let table = match doc.get("bridge") {
-        Some(toml::Value::Table(t)) => t.clone(),
+        Some(toml::Value::Table(t)) => {
+            // Keys above `[bridge]` (or tables beside it) were ignored (issue 24: `read-only =
+            // true` at the top of the file had no effect): the file defines `[bridge]` and
+            // `[roles.NAME]` only, and anything else stops the start.
+            let mut outside: Vec<(usize, &String)> = doc
+                .keys()
+                .filter(|k| !matches!(k.as_str(), "bridge" | "roles"))
+                .map(|k| (line_of(text, k), k))
+                .collect();
+            outside.sort();
+            if !outside.is_empty() {
+                let named: Vec<String> = outside.iter().map(|(l, k)| format!("line {l}: {k:?}")).collect();
+                return Err(format!(
+                    "{} outside [bridge]; this file defines [bridge] and [roles.NAME] only — move the settings under [bridge]",
+                    named.join(", ")
+                ));
+            }
+            t.clone()
+        }
         Some(_) => return Err("[bridge] must be a table".into()),
         None => doc,
     };
@@ -99,9 +117,17 @@ pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
             // refusal then names the key and the value.
             // An empty allow-list would let everyone in (the lists restrict only when given):
             // refuse it rather than fail open.
-            toml::Value::Array(items) if items.is_empty() && matches!(long.as_str(), "allow-ip" | "allow-function") => {
+            // One rule for every list (issue 24: `tls-allow-ip = []` and `crl = []` passed
+            // silently): an empty list is refused, naming the key and its line.
+            toml::Value::Array(items) if items.is_empty() => {
+                let what = if matches!(long.as_str(), "allow-ip" | "allow-function" | "tls-allow-ip") {
+                    "an empty allow-list would let every client (or function) through"
+                } else {
+                    "an empty list says nothing and may hide a setting that was meant to be there"
+                };
                 return Err(format!(
-                    "{key} = []: an empty allow-list would let every client (or function) through; list what is allowed, or remove the key to allow all"
+                    "line {}: {key} = []: {what}; list what is meant, or remove the key",
+                    line_of(text, key)
                 ));
             }
             toml::Value::Array(items) => {
@@ -113,6 +139,22 @@ pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
         }
     }
     Ok(out)
+}
+
+/// The 1-based line where `key` is set or opens a table (`key =`, `"key" =`, `[key]`,
+/// `[key.…]`), for error messages; 0 when not found.
+fn line_of(text: &str, key: &str) -> usize {
+    text.lines()
+        .position(|l| {
+            let l = l.trim_start();
+            let rest = l.strip_prefix('[').map_or(l, str::trim_start);
+            let rest = rest.strip_prefix('"').unwrap_or(rest);
+            rest.strip_prefix(key).is_some_and(|r| {
+                let r = r.trim_start_matches('"').trim_start();
+                r.starts_with('=') || r.starts_with(']') || r.starts_with('.')
+            })
+        })
+        .map_or(0, |i| i + 1)
 }
 
 /// `[roles.operator] functions = [3, 4, 6] units = ["1-20"] read-only = false` as `--role`

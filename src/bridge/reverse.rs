@@ -145,20 +145,26 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
             metrics.request(r.unit);
             let fc = r.pdu.first().copied().unwrap_or(0);
             let listed = opts.allow_functions.as_ref().map(|a| a.contains(&fc));
-            let refused = if opts.read_only {
-                (!super::server::read_only_safe(&r.pdu) && listed != Some(true)).then_some("read_only")
+            let illegal = super::server::ILLEGAL_FUNCTION;
+            let refused = if mbtap_core::proto::request_len_problem(&r.pdu).is_some() {
+                // An ASCII frame may carry any length: one longer than its function allows is
+                // not forwarded (its extra bytes are no part of the request; issue 24).
+                Some(("malformed_request", super::server::ILLEGAL_DATA_VALUE))
+            } else if opts.read_only {
+                (!super::server::read_only_safe(&r.pdu) && listed != Some(true)).then_some(("read_only", illegal))
             } else if listed == Some(false) {
-                Some("function_not_allowed")
+                Some(("function_not_allowed", illegal))
             } else if broadcast && !matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16) {
                 // Broadcasts carry writes only (Serial Line v1.02 §2.1).
-                Some("broadcast_not_write")
+                Some(("broadcast_not_write", illegal))
             } else {
                 None
             };
-            let pdu = if let Some(reason) = refused {
-                // Refused here: never forwarded, answered 01 (MAP v1.1b3 §7: Illegal Function).
+            let pdu = if let Some((reason, code)) = refused {
+                // Refused here: never forwarded, answered 01 (MAP v1.1b3 §7: Illegal Function)
+                // or 03 for a request of the wrong length.
                 metrics.refused(reason);
-                vec![fc | 0x80, super::server::ILLEGAL_FUNCTION]
+                vec![fc | 0x80, code]
             } else {
                 match forward(opts, side.tcp, side.tid, r.unit, &r.pdu).await {
                     Ok(pdu) => {

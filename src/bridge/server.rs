@@ -19,7 +19,7 @@ use tokio::time::Instant;
 use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, Job, LineShared, Reply, SERVER_DEVICE_BUSY};
 use super::queue::ClientId;
 use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
-use mbtap_core::proto::{encode_rtu, encode_tcp};
+use mbtap_core::proto::{encode_rtu, encode_tcp, request_len_problem};
 
 /// A pause that ends an RTU-over-TCP frame of unknown length.
 const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
@@ -93,6 +93,8 @@ fn evict_idlest(table: &Table) -> bool {
 
 /// Exception 0x01: the function is not allowed here (MAP v1.1b3 §7).
 pub(crate) const ILLEGAL_FUNCTION: u8 = 0x01;
+/// Exception 0x03: the request's length or a value in it is wrong (MAP v1.1b3 §7).
+pub(crate) const ILLEGAL_DATA_VALUE: u8 = 0x03;
 /// Bytes an RTU-over-TCP client may send without a request among them before it is cut off:
 /// sixteen of the longest frames.
 const RTU_GARBAGE_LIMIT: u64 = 16 * 256;
@@ -213,13 +215,15 @@ impl IpNet {
 /// §6.14), Read FIFO Queue (18, §6.18), Read Device Identification (2B / MEI 0E, §6.21), and
 /// Diagnostics only as sub-function 0000 Return Query Data (08, §6.8: an echo; every other
 /// sub-function restarts, silences or clears something — 0001 restarts communications, 0004
-/// forces listen-only mode, 000A clears counters).
+/// forces listen-only mode, 000A clears counters) with one data word: its data field has no
+/// length of its own, and a longer echo could carry a whole frame for a slave that frames by
+/// structure. The caller also checks every length the function fixes ([`request_len_problem`]).
 #[must_use]
 pub fn read_only_safe(pdu: &[u8]) -> bool {
     matches!(
         *pdu,
         [0x01 | 0x02 | 0x03 | 0x04 | 0x07 | 0x0B | 0x0C | 0x11 | 0x14 | 0x18, ..]
-            | [0x08, 0x00, 0x00, ..]
+            | [0x08, 0x00, 0x00, _, _]
             | [0x2B, 0x0E, ..]
     )
 }
@@ -508,10 +512,19 @@ fn request(
         }
         reply(Answer::Now(Reply::Gateway(code)))
     };
+    // A PDU longer (or shorter) than its function allows is never forwarded: on the line its
+    // extra bytes would follow the request as a frame of their own (issue 24: a write smuggled
+    // behind a read, past --read-only). Nothing is sent; the client gets 03.
+    if request_len_problem(&pdu).is_some() {
+        return refuse("malformed_request", ILLEGAL_DATA_VALUE);
+    }
+    // The serial address the request will reach: roles and routes judge that, not the TCP
+    // unit id (a role limited to units 2–20 must not reach unit 1 through --map-unit 10=1).
+    let target = opts.unit_map.get(&unit).copied().unwrap_or(unit);
     // MODBUS/TCP Security: a request the client's role does not authorise is answered 01.
     match role {
         Role::Tls(None) => return refuse("no_role", ILLEGAL_FUNCTION),
-        Role::Tls(Some(p)) if !p.allows(unit, &pdu) => return refuse("role", ILLEGAL_FUNCTION),
+        Role::Tls(Some(p)) if !p.allows(target, &pdu) => return refuse("role", ILLEGAL_FUNCTION),
         Role::Plain | Role::Tls(Some(_)) => {}
     }
     let listed = opts.allow_functions.as_ref().map(|a| a.contains(&function));
@@ -533,7 +546,6 @@ fn request(
         }
         *tokens -= 1.0;
     }
-    let target = opts.unit_map.get(&unit).copied().unwrap_or(unit);
     if target == 0 && !broadcastable(function) {
         // A broadcast read would make every device on the line answer at once (or none): the
         // serial-line spec allows broadcast for writes only. Nothing goes on the line.

@@ -39,10 +39,11 @@ pub struct TlsArgs {
     /// Certificate revocation lists (PEM) for client certificates.
     #[arg(long, value_name = "FILE")]
     pub crl: Vec<std::path::PathBuf>,
-    /// What a role may do (repeatable): `NAME=RULES`, RULES `;`-separated from
-    /// `functions:3,4,6` (only these codes), `units:1-10,17` (only these units), `read-only`
-    /// (only what cannot change a device). `--role viewer=read-only --role operator=units:1-20`.
-    /// A role no rule names may do nothing.
+    /// What a role may do (repeatable, once per role): `NAME=RULES`, RULES `;`-separated from
+    /// `functions:3,4,6` (only these codes), `units:1-10,17` (only these serial addresses, as the
+    /// request reaches the line after --map-unit), `read-only` (only what cannot change a
+    /// device), `all` (everything, said on purpose). `--role viewer=read-only --role
+    /// operator=units:1-20`. A role no rule names may do nothing; a role without rules is refused.
     #[arg(long, value_name = "NAME=RULES")]
     pub role: Vec<String>,
     /// Only these client addresses may connect to the TLS listener (repeatable; default: the
@@ -82,10 +83,16 @@ pub fn parse_roles(values: &[String]) -> anyhow::Result<Roles> {
     for v in values {
         let (name, rules) =
             v.split_once('=').with_context(|| format!("--role {v:?}: expected NAME=RULES, e.g. viewer=read-only"))?;
+        let name = name.trim();
+        anyhow::ensure!(!name.is_empty(), "--role {v:?}: the role has no name");
         let mut p = Policy::default();
+        let mut any = false;
         for rule in rules.split(';').map(str::trim).filter(|r| !r.is_empty()) {
+            any = true;
             match rule.split_once(':') {
                 None if rule == "read-only" => p.read_only = true,
+                // Everything, said on purpose: an empty rule set is never taken for it.
+                None if rule == "all" => {}
                 Some(("functions", list)) => {
                     let codes = super::run::parse_function_codes(list)
                         .with_context(|| format!("--role {v:?}: {list:?} is not a list of function codes"))?;
@@ -94,10 +101,19 @@ pub fn parse_roles(values: &[String]) -> anyhow::Result<Roles> {
                 Some(("units", list)) => {
                     p.units = Some(super::run::parse_units(list).with_context(|| format!("--role {v:?}"))?);
                 }
-                _ => anyhow::bail!("--role {v:?}: {rule:?} is not functions:…, units:… or read-only"),
+                _ => anyhow::bail!("--role {v:?}: {rule:?} is not functions:…, units:…, read-only or all"),
             }
         }
-        out.insert(name.trim().to_owned(), p);
+        // Fail closed (issue 24): `admin=` or an empty [roles.admin] let a client do everything.
+        anyhow::ensure!(
+            any,
+            "--role {v:?}: role {name:?} has no rules; an empty rule set would allow everything — give functions:…, units:…, read-only, or `all` to allow everything on purpose"
+        );
+        anyhow::ensure!(
+            !out.contains_key(name),
+            "--role {v:?}: role {name:?} is given twice; a second rule set would silently replace the first — merge them into one"
+        );
+        out.insert(name.to_owned(), p);
     }
     Ok(out)
 }
@@ -231,5 +247,18 @@ mod tests {
         assert!(!op.allows(1, &[0x10, 0, 0, 0, 1, 2, 0, 0]), "function 16 is not the role's");
         assert!(parse_roles(&["x=everything".into()]).is_err());
         assert!(parse_roles(&["x".into()]).is_err());
+        assert!(parse_roles(&["admin=all".into()]).unwrap()["admin"].allows(1, &[0x06, 0, 0, 0, 1]));
+    }
+
+    /// Issue 24: `--role admin=` let a client do everything; a second `--role admin=…` silently
+    /// replaced the first.
+    #[test]
+    fn an_empty_or_repeated_role_is_refused() {
+        for empty in ["admin=", "admin= ; ;", "=read-only"] {
+            let e = parse_roles(&[empty.into()]).unwrap_err().to_string();
+            assert!(e.contains("no rules") || e.contains("no name"), "{empty}: {e}");
+        }
+        let e = parse_roles(&["admin=read-only".into(), "admin=all".into()]).unwrap_err().to_string();
+        assert!(e.contains("twice"), "{e}");
     }
 }

@@ -606,6 +606,31 @@ mod tests {
         assert!(e.contains("allow-ip = []") && e.contains(file.to_str().unwrap()), "{e}");
     }
 
+    /// Issue 24: `read-only = true` and `allow-ip` above `[bridge]` had no effect.
+    #[test]
+    fn keys_outside_the_bridge_table_refuse_to_start() {
+        let file = file("outside", "read-only = true\nallow-ip = [\"10.9.9.9\"]\n\n[bridge]\nserial = \"/dev/ttyS0\"\n");
+        let (cli, m) = parse(&["mbtap", "bridge", "--config", file.to_str().unwrap()]);
+        let e = format!("{:#}", merge(&file, cli, Some(&m)).unwrap_err());
+        assert!(e.contains(file.to_str().unwrap()) && e.contains("line 1") && e.contains("read-only"), "{e}");
+        let e = options("[bridge]\nlisten = \"x\"\n[bridg]\nread-only = true\n", &known_keys()).unwrap_err();
+        assert!(e.contains("line 3") && e.contains("bridg"), "{e}");
+    }
+
+    /// Issue 24: `tls-allow-ip = []` and `crl = []` passed silently while `allow-ip = []` was
+    /// refused; an empty `[roles.admin]` let a client do everything.
+    #[test]
+    fn every_empty_list_and_empty_role_is_refused() {
+        for (key, line) in [("tls-allow-ip", 3), ("crl", 3), ("allow-function", 3), ("route", 3)] {
+            let e = options(&format!("[bridge]\nlisten = \"x\"\n{key} = []\n"), &known_keys()).unwrap_err();
+            assert!(e.contains(&format!("{key} = []")) && e.contains(&format!("line {line}")), "{e}");
+        }
+        let opts = options("[bridge]\nlisten = \"x\"\n[roles.admin]\n", &known_keys()).unwrap();
+        let roles: Vec<String> =
+            opts.iter().filter_map(|o| o.strip_prefix("--role=")).map(str::to_owned).collect();
+        assert!(crate::bridge::tls::parse_roles(&roles).is_err(), "{roles:?}");
+    }
+
     #[test]
     fn every_bridge_option_is_merged() {
         let file = file("all", "");

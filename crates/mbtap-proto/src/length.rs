@@ -157,6 +157,62 @@ pub fn answer_len(request: &[u8]) -> PduLength {
     }
 }
 
+/// What is wrong with the length of a whole request PDU, or `None` when its function's
+/// structure agrees with it (or fixes no length: vendor codes, Diagnostics 0000).
+///
+/// A gateway that forwards a PDU longer than its function allows puts the extra bytes on the
+/// serial line right behind the request, where a slave that frames by structure reads them as
+/// a second frame (a CRC-valid write smuggled behind a read). Layouts: MAP v1.1b3 §6 (01–06
+/// five bytes; 0F/10/17 by their byte counts; 2B/0E four bytes).
+#[must_use]
+pub fn request_len_problem(pdu: &[u8]) -> Option<String> {
+    match request_len(pdu) {
+        PduLength::Exact(n) if n == pdu.len() => None,
+        PduLength::Exact(n) => Some(format!(
+            "function 0x{:02X} takes a {n}-byte PDU (its structure{}), this one has {}",
+            pdu.first().copied().unwrap_or(0),
+            if matches!(pdu.first(), Some(0x0F | 0x10 | 0x17 | 0x14 | 0x15)) { " and byte count" } else { "" },
+            pdu.len()
+        )),
+        PduLength::AtLeast(n) => Some(format!("a {}-byte PDU is cut short: at least {n} bytes needed", pdu.len())),
+        PduLength::Unknown => None,
+    }
+}
+
+/// Whether `answer` (a response PDU) can be the answer to `request` (its request PDU): the
+/// same function (or its exception, MAP v1.1b3 §7), as long as the request fixes, and for the
+/// functions that echo (05, 06, 0F, 10, 16, 08) the same address, sub-function or echo. An
+/// answer that fails this is another request's (a late answer after a timeout), never this
+/// one's.
+#[must_use]
+pub fn answer_fits(request: &[u8], answer: &[u8]) -> bool {
+    let (Some(&fc), Some(&afc)) = (request.first(), answer.first()) else {
+        return false;
+    };
+    if afc == fc | EXCEPTION_FLAG {
+        return answer.len() == 2;
+    }
+    if afc != fc {
+        return false;
+    }
+    if let PduLength::Exact(n) = answer_len(request)
+        && n != answer.len()
+    {
+        return false;
+    }
+    match fc {
+        // Single writes, Mask Write and Diagnostics echo their request (§6.5, 6.6, 6.16, 6.8);
+        // Diagnostics sub-functions other than 0000 answer their own data field.
+        0x05 | 0x06 | 0x16 => answer == request,
+        0x08 => answer.get(..3) == request.get(..3),
+        // Multiple writes answer address and quantity (§6.11, 6.12).
+        0x0F | 0x10 => answer.get(..5) == request.get(..5),
+        // Device identification answers its MEI type and read code (§6.21).
+        0x2B => answer.get(..3) == request.get(..3),
+        _ => true,
+    }
+}
+
 /// fc, MEI, read code, conformity, more follows, next object id, object count, then per object:
 /// id, length, value (MAP v1.1b3 §6.21).
 fn device_id_response_len(prefix: &[u8]) -> PduLength {
@@ -223,5 +279,40 @@ mod tests {
         let pdu = [0x2B, 0x0E, 1, 1, 0, 0, 2, 0, 1, b'A', 1, 2, b'B', b'C'];
         assert_eq!(response_len(&pdu), PduLength::Exact(pdu.len()));
         assert_eq!(response_len(&pdu[..8]), PduLength::AtLeast(9));
+    }
+    /// Issue 24: a read with a whole write frame behind it reached the line as two frames.
+    #[test]
+    fn a_request_longer_than_its_function_allows_is_named() {
+        // FC 03, address 0x0064, quantity 1 — then `01 06 00 65 00 2A` + CRC smuggled behind.
+        let smuggled = [0x03, 0x00, 0x64, 0x00, 0x01, 0x01, 0x06, 0x00, 0x65, 0x00, 0x2A, 0x18, 0x0B];
+        let why = request_len_problem(&smuggled).unwrap();
+        assert!(why.contains("5-byte") && why.contains("13"), "{why}");
+        assert_eq!(request_len_problem(&smuggled[..5]), None);
+        // 0x10 by its byte count: 2 registers, byte count 4, 4 data bytes (10 bytes), then one more.
+        let long = [0x10, 0x00, 0x01, 0x00, 0x02, 0x04, 0, 1, 0, 2, 0xFF];
+        assert!(request_len_problem(&long).is_some());
+        assert_eq!(request_len_problem(&long[..10]), None);
+        assert!(request_len_problem(&[0x03, 0x00]).is_some(), "short");
+        assert!(request_len_problem(&[0x2B, 0x0E, 1, 0, 9]).is_some());
+        assert_eq!(request_len_problem(&[0x41, 1, 2, 3]), None, "a vendor code fixes no length");
+    }
+
+    /// Issue 24: a late answer to another request was handed to the next client.
+    #[test]
+    fn an_answer_must_fit_its_request() {
+        let read2 = [0x03, 0x00, 0xA0, 0x00, 0x02];
+        assert!(answer_fits(&read2, &[0x03, 0x04, 0, 1, 0, 2]));
+        assert!(!answer_fits(&read2, &[0x03, 0x08, 0, 1, 0, 2, 0, 3, 0, 4]), "four registers to a request for two");
+        assert!(!answer_fits(&read2, &[0x03, 0x04, 0, 1, 0]), "short");
+        assert!(!answer_fits(&read2, &[0x04, 0x04, 0, 1, 0, 2]), "another function");
+        assert!(answer_fits(&read2, &[0x83, 0x02]));
+        let write = [0x06, 0x00, 0x65, 0x00, 0x2A];
+        assert!(answer_fits(&write, &write));
+        assert!(!answer_fits(&write, &[0x06, 0x00, 0x66, 0x00, 0x2A]), "another register's echo");
+        let multi = [0x10, 0x00, 0x01, 0x00, 0x01, 0x02, 0x00, 0x07];
+        assert!(answer_fits(&multi, &[0x10, 0x00, 0x01, 0x00, 0x01]));
+        assert!(!answer_fits(&multi, &[0x10, 0x00, 0x02, 0x00, 0x01]));
+        assert!(answer_fits(&[0x41, 1], &[0x41, 9, 9, 9]), "vendor codes: the function only");
+        assert!(!answer_fits(&[], &[0x03]));
     }
 }

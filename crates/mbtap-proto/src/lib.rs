@@ -38,7 +38,7 @@ pub use decode::{DecodedPdu, DirectionHint, Pdu, PduDecode, decode_pdu, pair_fin
 pub use error::{AduError, EncodeError, PduError};
 pub use findings::{Finding, Severity};
 pub use function::{DiagnosticSubFunction, EXCEPTION_FLAG, ExceptionCode, FunctionCode, MeiType};
-pub use length::{PduLength, answer_len, request_len, response_len};
+pub use length::{PduLength, answer_fits, answer_len, request_len, request_len_problem, response_len};
 pub use request::{Request, parse_request};
 pub use response::{Response, parse_response};
 pub use rtu::{RtuFrame, encode_rtu, parse_rtu};
