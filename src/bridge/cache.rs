@@ -188,20 +188,38 @@ impl Cache {
     /// A write `request` sent to `unit` (broadcast: every unit): what it may have changed is
     /// forgotten — holding registers for 06/10/16/17, coils for 05/0F.
     pub fn invalidate(&mut self, unit: u8, request: &[u8]) {
-        let field = |i: usize| request.get(i..i + 2).map(|p| u16::from_be_bytes([p[0], p[1]]));
-        let (table, address, quantity) = match request.first() {
-            Some(0x05) => (Table::Coils, field(1), Some(1)),
-            Some(0x0F) => (Table::Coils, field(1), field(3)),
-            Some(0x06 | 0x16) => (Table::HoldingRegisters, field(1), Some(1)),
-            Some(0x10) => (Table::HoldingRegisters, field(1), field(3)),
-            // 17: the write part starts at byte 5 (MAP v1.1b3 §6.17).
-            Some(0x17) => (Table::HoldingRegisters, field(5), field(7)),
-            _ => return,
-        };
-        let (Some(address), Some(quantity)) = (address, quantity) else { return };
-        let last = address.saturating_add(quantity.saturating_sub(1));
+        let Some((table, address, last)) = written_range(request) else { return };
         self.values.retain(|&(u, t, a), _| !((u == unit || unit == 0) && t == table && (address..=last).contains(&a)));
     }
+}
+
+/// What a write request may change: its table and first and last address — holding registers
+/// for 06/10/16/17, coils for 05/0F (MAP v1.1b3 §6.5, 6.6, 6.11, 6.12, 6.16, 6.17).
+#[must_use]
+pub fn written_range(request: &[u8]) -> Option<(Table, u16, u16)> {
+    let field = |i: usize| request.get(i..i + 2).map(|p| u16::from_be_bytes([p[0], p[1]]));
+    let (table, address, quantity) = match request.first() {
+        Some(0x05) => (Table::Coils, field(1), Some(1)),
+        Some(0x0F) => (Table::Coils, field(1), field(3)),
+        Some(0x06 | 0x16) => (Table::HoldingRegisters, field(1), Some(1)),
+        Some(0x10) => (Table::HoldingRegisters, field(1), field(3)),
+        // 17: the write part starts at byte 5 (MAP v1.1b3 §6.17).
+        Some(0x17) => (Table::HoldingRegisters, field(5), field(7)),
+        _ => return None,
+    };
+    let (address, quantity) = (address?, quantity?);
+    Some((table, address, address.saturating_add(quantity.saturating_sub(1))))
+}
+
+/// Whether the read `read` (a request PDU) overlaps what the write `write` may change, on the
+/// same unit (a broadcast write overlaps every unit).
+#[must_use]
+pub fn read_overlaps_write(unit: u8, read: &[u8], write_unit: u8, write: &[u8]) -> bool {
+    let (Some((table, address, quantity)), Some((wt, first, last))) = (read_of(read), written_range(write)) else {
+        return false;
+    };
+    let end = address.saturating_add(quantity - 1);
+    (unit == write_unit || write_unit == 0) && table == wt && address <= last && first <= end
 }
 
 #[cfg(test)]
@@ -228,6 +246,18 @@ mod tests {
         c.invalidate(1, &[0x06, 0x00, 0x01, 0x00, 0x07]);
         assert_eq!(c.lookup(1, &READ, t0), None);
         assert_eq!(c.lookup(1, &[0x03, 0x00, 0x00, 0x00, 0x01], t0), Some(vec![0x03, 0x02, 0x00, 0x0A]));
+    }
+
+    #[test]
+    fn a_read_overlaps_the_writes_that_may_change_it() {
+        let write_101 = [0x06, 0x00, 0x65, 0x00, 0x09];
+        assert!(read_overlaps_write(1, &[0x03, 0x00, 0x65, 0x00, 0x01], 1, &write_101));
+        assert!(read_overlaps_write(1, &[0x03, 0x00, 0x60, 0x00, 0x08], 1, &write_101));
+        assert!(!read_overlaps_write(1, &[0x03, 0x00, 0x66, 0x00, 0x02], 1, &write_101), "after it");
+        assert!(!read_overlaps_write(2, &[0x03, 0x00, 0x65, 0x00, 0x01], 1, &write_101), "another unit");
+        assert!(read_overlaps_write(2, &[0x03, 0x00, 0x65, 0x00, 0x01], 0, &write_101), "a broadcast");
+        assert!(!read_overlaps_write(1, &[0x04, 0x00, 0x65, 0x00, 0x01], 1, &write_101), "input registers");
+        assert!(read_overlaps_write(1, &[0x01, 0x00, 0x00, 0x00, 0x10], 1, &[0x0F, 0x00, 0x08, 0x00, 0x02, 0x01, 0x03]));
     }
 
     #[test]

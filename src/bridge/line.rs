@@ -47,6 +47,26 @@ pub struct Job {
     pub queued: Instant,
     /// `--priority high=…` matched: goes before the round-robin (see `FairQueue::pop_prefer`).
     pub high: bool,
+    /// A write's place among the writes not yet done: while it is held, the cache answers no
+    /// read it may change (issue 24: a client pipelining "write h101, read h101" read the old
+    /// value from the cache). Dropped with the job, however it ends.
+    pub write: Option<WriteGuard>,
+}
+
+/// Writes queued or on the line, not yet done: (id, unit, request PDU).
+type PendingWrites = Arc<Mutex<Vec<(u64, u8, Vec<u8>)>>>;
+
+/// One write among [`PendingWrites`]; removed when dropped.
+#[derive(Debug)]
+pub struct WriteGuard {
+    set: PendingWrites,
+    id: u64,
+}
+
+impl Drop for WriteGuard {
+    fn drop(&mut self) {
+        self.set.lock().unwrap_or_else(PoisonError::into_inner).retain(|(id, ..)| *id != self.id);
+    }
 }
 
 /// Line settings of the bridge.
@@ -95,11 +115,13 @@ pub enum EchoMode {
     Off,
 }
 
-/// The answer a request waits for: from whom, to which function, from when, how long.
+/// The answer a request waits for: from whom, to which request, from when, how long.
 #[derive(Debug, Clone, Copy)]
-struct Awaited {
+struct Awaited<'r> {
     unit: u8,
     function: u8,
+    /// The request PDU: the answer must fit it ([`mbtap_core::proto::answer_fits`]).
+    request: &'r [u8],
     /// When the request's last character left.
     sent: Instant,
     timeout: Duration,
@@ -127,6 +149,9 @@ pub struct LineShared {
     /// Answers from memory (`--cache`), filled and invalidated by the line, read by the
     /// connections before they queue.
     cache: Mutex<super::cache::Cache>,
+    /// Writes not yet done: reads they may change are not answered from the cache.
+    pending_writes: PendingWrites,
+    next_write: std::sync::atomic::AtomicU64,
 }
 
 impl LineShared {
@@ -137,7 +162,27 @@ impl LineShared {
             wake: Notify::new(),
             metrics: Metrics::default(),
             cache: Mutex::new(super::cache::Cache::new(cache)),
+            pending_writes: PendingWrites::default(),
+            next_write: std::sync::atomic::AtomicU64::new(0),
         })
+    }
+
+    /// Registers a write to `unit` before it is queued (none for a request that writes
+    /// nothing the cache holds); the job carries the guard.
+    pub fn write_pending(&self, unit: u8, pdu: &[u8]) -> Option<WriteGuard> {
+        super::cache::written_range(pdu)?;
+        let id = self.next_write.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.pending_writes.lock().unwrap_or_else(PoisonError::into_inner).push((id, unit, pdu.to_vec()));
+        Some(WriteGuard { set: Arc::clone(&self.pending_writes), id })
+    }
+
+    /// Whether a write not yet done may change what `pdu` reads from `unit`.
+    fn read_behind_write(&self, unit: u8, pdu: &[u8]) -> bool {
+        self.pending_writes
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .any(|(_, u, w)| super::cache::read_overlaps_write(unit, pdu, *u, w))
     }
 
     fn cache(&self) -> std::sync::MutexGuard<'_, super::cache::Cache> {
@@ -151,7 +196,9 @@ impl LineShared {
         if !cache.is_on() {
             return None;
         }
-        let answer = cache.lookup(unit, pdu, Instant::now().into_std());
+        // A read queued behind a write it overlaps waits for the write (read your own write).
+        let answer =
+            if self.read_behind_write(unit, pdu) { None } else { cache.lookup(unit, pdu, Instant::now().into_std()) };
         drop(cache);
         self.metrics.cache(answer.is_some());
         answer
@@ -240,7 +287,7 @@ pub async fn poll(polls: Vec<super::cache::Poll>, shared: Arc<LineShared>) {
             loop {
                 tick.tick().await;
                 let (tx, rx) = oneshot::channel();
-                let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now(), high: false };
+                let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now(), high: false, write: None };
                 if shared.submit(POLL_CLIENT, job).is_ok() {
                     // Waiting keeps one poll of this range in the queue at a time.
                     let _ = rx.await;
@@ -312,6 +359,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         buf: Vec::with_capacity(600),
         timeouts,
         echo_found: None,
+        suspect: std::collections::HashSet::new(),
     };
     let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
     let mut watch = crate::source::serial::DeviceWatch::default();
@@ -356,9 +404,13 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let twins = shared.twins(client, &job);
         // A write may change what the cache holds, whatever its outcome.
         shared.cache().invalidate(job.unit, &job.pdu);
+        let was_suspect = master.suspect.remove(&job.unit);
         match master.transact(p, &job).await {
             Ok((reply, last_byte)) => {
-                if let Reply::Pdu(answer) = &reply {
+                if let Reply::Pdu(answer) = &reply
+                    && !was_suspect
+                    && !master.suspect.contains(&job.unit)
+                {
                     shared.cache().fill(job.unit, &job.pdu, answer, Instant::now().into_std());
                 }
                 let class = if client == POLL_CLIENT {
@@ -445,6 +497,9 @@ struct Master<'a> {
     timeouts: super::timing::Timeouts,
     /// With `--echo auto`: what the first telling request found.
     echo_found: Option<bool>,
+    /// Units that timed out: their next answer is passed on but not cached (it may still be a
+    /// late one whose shape matched).
+    suspect: std::collections::HashSet<u8>,
 }
 
 impl Master<'_> {
@@ -497,7 +552,7 @@ impl Master<'_> {
             }
             let timeout = self.timeouts.get(job.unit);
             self.shared.metrics.unit_timeout(job.unit, timeout);
-            let awaited = Awaited { unit: job.unit, function, sent, timeout };
+            let awaited = Awaited { unit: job.unit, function, sent, timeout, request: &job.pdu };
             let initial = match self.echo_expected(function) {
                 None => Vec::new(),
                 Some(decided) => match self.consume_echo(port, &adu, sent + timeout, decided).await? {
@@ -548,12 +603,17 @@ impl Master<'_> {
                     }
                 },
             };
-            let outcome = self.read_answer(port, awaited, initial, false).await?;
+            let mut outcome = self.read_answer(port, awaited, initial, false).await?;
             match &outcome {
                 (Some(_), last) => self.timeouts.answered(job.unit, last.saturating_duration_since(sent)),
                 (None, last) if last.saturating_duration_since(sent) >= timeout => {
                     self.timeouts.timed_out(job.unit);
                     self.shared.metrics.waited_in_vain(job.unit, timeout);
+                    // A unit slower than the timeout answers later: that answer must reach no
+                    // one (issue 24: the answer to h150 went to the client asking h160).
+                    self.suspect.insert(job.unit);
+                    let flushed = self.flush_late(port, job.unit, timeout).await?;
+                    outcome.1 = outcome.1.max(flushed);
                 }
                 (None, _) => {}
             }
@@ -570,6 +630,35 @@ impl Master<'_> {
                 (None, last) => wait_until(last + self.opts.line_guard()).await,
             }
         }
+    }
+
+    /// After a timeout: listens up to `window` (at most 1 s) for what the unit says late and
+    /// drops it, ending at the silence after the last late byte; when the line was last busy.
+    async fn flush_late(&mut self, port: &mut SerialStream, unit: u8, window: Duration) -> std::io::Result<Instant> {
+        let start = Instant::now();
+        let until = start + window.min(Duration::from_secs(1));
+        // Noise that never stops cannot hold the line longer than twice the window.
+        let hard_stop = until + window.min(Duration::from_secs(1));
+        let silence = Duration::from_nanos(self.opts.line.t35_ns()) + Duration::from_millis(1) + self.opts.latency;
+        let mut last = None;
+        let mut chunk = [0u8; 512];
+        loop {
+            let quiet_until = last.map_or(until, |t: Instant| (t + silence).min(hard_stop));
+            match tokio::time::timeout_at(quiet_until, port.read(&mut chunk)).await {
+                Ok(Ok(0)) => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
+                Ok(Ok(n)) => {
+                    self.observe(1, chunk.get(..n).unwrap_or_default());
+                    if last.is_none() {
+                        self.shared.metrics.late_answer(unit);
+                    }
+                    last = Some(Instant::now());
+                }
+                Ok(Err(e)) if e.kind() == std::io::ErrorKind::TimedOut => break,
+                Ok(Err(e)) => return Err(e),
+                Err(_) => break,
+            }
+        }
+        Ok(last.unwrap_or(start))
     }
 
     /// Whether to read the frame back before the answer: `Some(true)` when the adapter is known
@@ -630,11 +719,11 @@ impl Master<'_> {
     async fn read_answer(
         &mut self,
         port: &mut SerialStream,
-        wait: Awaited,
+        wait: Awaited<'_>,
         initial: Vec<u8>,
         strict_start: bool,
     ) -> std::io::Result<(Option<Vec<u8>>, Instant)> {
-        let Awaited { unit, function, sent, timeout } = wait;
+        let Awaited { unit, function, sent, timeout, request } = wait;
         let deadline = sent + timeout;
         // RTU: t3.5 of silence ends a frame; ASCII: the 1 s inter-character timeout (Serial
         // Line v1.02 §2.5.2.1). Plus one timer tick, as reads come in 1 ms steps.
@@ -652,29 +741,43 @@ impl Master<'_> {
             last = Instant::now();
         }
         let mut chunk = [0u8; 512];
+        // Bytes already in hand are judged before waiting for more: the answer may be whole
+        // (issue 25: an ASCII answer that came in place of an echo waited for the 1 s silence).
+        let mut judge_now = !self.buf.is_empty();
         loop {
-            let now = Instant::now();
-            if now >= deadline {
-                if !self.buf.is_empty() {
-                    self.shared.metrics.crc_error(unit);
+            let silent = if std::mem::take(&mut judge_now) {
+                false
+            } else {
+                let now = Instant::now();
+                if now >= deadline {
+                    if !self.buf.is_empty() {
+                        self.shared.metrics.crc_error(unit);
+                    }
+                    self.shared.metrics.timeout(unit);
+                    return Ok((None, last.max(now)));
                 }
-                self.shared.metrics.timeout(unit);
-                return Ok((None, last.max(now)));
-            }
-            let quiet_until = if self.buf.is_empty() { deadline } else { (last + silence).min(deadline) };
-            let silent = match tokio::time::timeout_at(quiet_until, port.read(&mut chunk)).await {
-                Ok(Ok(0)) => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
-                Ok(Ok(n)) => {
-                    let got = chunk.get(..n).unwrap_or_default();
-                    self.observe(1, got);
-                    self.buf.extend_from_slice(got);
-                    last = Instant::now();
-                    false
+                let quiet_until = if self.buf.is_empty() { deadline } else { (last + silence).min(deadline) };
+                match tokio::time::timeout_at(quiet_until, port.read(&mut chunk)).await {
+                    Ok(Ok(0)) => {
+                        return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed"));
+                    }
+                    Ok(Ok(n)) => {
+                        let got = chunk.get(..n).unwrap_or_default();
+                        self.observe(1, got);
+                        self.buf.extend_from_slice(got);
+                        last = Instant::now();
+                        false
+                    }
+                    Ok(Err(e)) if e.kind() == std::io::ErrorKind::TimedOut => !self.buf.is_empty(),
+                    Ok(Err(e)) => return Err(e),
+                    Err(_) => !self.buf.is_empty(),
                 }
-                Ok(Err(e)) if e.kind() == std::io::ErrorKind::TimedOut => !self.buf.is_empty(),
-                Ok(Err(e)) => return Err(e),
-                Err(_) => !self.buf.is_empty(),
             };
+            if self.opts.mode == SerialMode::Rtu && turnaround_glitch(&self.buf, unit) {
+                // A transceiver's turnaround glitch before the answer (00, FE or FF): dropped,
+                // as `read` and the sniffer do (issue 24: the bridge answered 0x0B).
+                self.buf.remove(0);
+            }
             let verdict = match self.opts.mode {
                 SerialMode::Rtu => judge_rtu(&self.buf, unit, function, silent),
                 SerialMode::Ascii => judge_ascii(&self.buf, unit, silent),
@@ -692,6 +795,17 @@ impl Master<'_> {
                                 .map(|f| f.pdu().to_vec())
                         }
                     };
+                    if let Some(p) = &pdu
+                        && !mbtap_core::proto::answer_fits(request, p)
+                    {
+                        // Another request's answer (a late one after a timeout: another
+                        // quantity, address or function): never this client's. Dropped, counted;
+                        // the real answer may follow it.
+                        self.shared.metrics.late_answer(unit);
+                        self.buf.drain(..len);
+                        judge_now = !self.buf.is_empty();
+                        continue;
+                    }
                     return Ok((pdu, last));
                 }
                 Verdict::BadCheck => {
@@ -705,6 +819,12 @@ impl Master<'_> {
             }
         }
     }
+}
+
+/// Whether `buf` starts with a turnaround glitch before the awaited unit's answer: a byte a
+/// transceiver leaves when it switches (00, FE, FF), not the unit's address, followed by it.
+fn turnaround_glitch(buf: &[u8], unit: u8) -> bool {
+    matches!(buf, [g @ (0x00 | 0xFE | 0xFF), u, ..] if *g != unit && *u == unit)
 }
 
 /// The normal response a write would get, for `--broadcast-reply`: 05/06 echo the request,

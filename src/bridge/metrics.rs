@@ -28,6 +28,8 @@ struct Unit {
     collisions: u64,
     /// `--echo on` and the request did not come back.
     echo_missing: u64,
+    /// Answers that did not fit the request on the line (late answers to earlier requests).
+    late_answers: u64,
     buckets: [u64; BUCKETS.len()],
     latency_count: u64,
     latency_sum: f64,
@@ -121,6 +123,11 @@ impl Metrics {
     }
 
     /// A request to `unit` did not come back from an echoing adapter.
+    /// An answer from `unit` that fits another request than the one on the line: dropped.
+    pub fn late_answer(&self, unit: u8) {
+        self.with(|m| m.units.entry(unit).or_default().late_answers += 1);
+    }
+
     pub fn echo_missing(&self, unit: u8) {
         self.with(|m| m.units.entry(unit).or_default().echo_missing += 1);
     }
@@ -262,6 +269,10 @@ impl Metrics {
             counter(&mut s, "mbtap_bridge_echo_missing_total", "Requests an echoing adapter (--echo on) did not give back.");
             for (u, v) in m.units.iter().filter(|(_, v)| v.echo_missing > 0) {
                 let _ = writeln!(s, "mbtap_bridge_echo_missing_total{{unit=\"{u}\"}} {}", v.echo_missing);
+            }
+            counter(&mut s, "mbtap_bridge_late_answers_total", "Answers that fit another request than the one on the line (late answers after a timeout): dropped.");
+            for (u, v) in m.units.iter().filter(|(_, v)| v.late_answers > 0) {
+                let _ = writeln!(s, "mbtap_bridge_late_answers_total{{unit=\"{u}\"}} {}", v.late_answers);
             }
             counter(&mut s, "mbtap_bridge_crc_errors_total", "Answers whose CRC or LRC failed.");
             for (u, v) in &m.units {

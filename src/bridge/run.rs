@@ -215,6 +215,8 @@ pub async fn bridge<W: Write>(
             );
         }
         let routes = Arc::new(routes);
+        // One table of connections for every listener: one limit, eviction across them.
+        let connections: Arc<server::Table> = Arc::default();
         for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
             let Some(addr) = addr else { continue };
             let listener = TcpListener::bind(addr).await.with_context(|| format!("listening on {addr}"))?;
@@ -222,7 +224,7 @@ pub async fn bridge<W: Write>(
             let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
             let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
-            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, None));
+            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, None, Arc::clone(&connections)));
         }
         if let Some(addr) = &opts.tls.listen_tls {
             // Files are read (and checked) before listening: a bad certificate stops the start.
@@ -243,7 +245,7 @@ pub async fn bridge<W: Write>(
                     .collect::<anyhow::Result<Vec<_>>>()?
             };
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, allow_ips, ..opts.server.clone() });
-            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, Some(tls)));
+            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, Some(tls), Arc::clone(&connections)));
         }
         (mode, settings) =
             opts.lines.first().map_or(

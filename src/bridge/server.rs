@@ -35,15 +35,17 @@ const FIRST_REQUEST_GRACE: Duration = Duration::from_millis(200);
 
 /// One open connection: when it opened, when it last sent a whole request, how to end it.
 #[derive(Debug)]
-struct Conn {
+pub struct Conn {
     opened: Instant,
     last_request: Option<Instant>,
     abort: tokio::task::AbortHandle,
 }
 
-/// The open connections of one listener — so a full table evicts a socket that never asked,
-/// or its idlest member, instead of refusing everyone new.
-type Table = std::sync::Mutex<std::collections::HashMap<ClientId, Conn>>;
+/// The open connections of every listener (plain, RTU over TCP, TLS) — the connection limit is
+/// theirs together, so a full table evicts a socket that never asked (a TLS handshake in
+/// progress counts as one), or its idlest member, whichever listener holds it, instead of
+/// refusing everyone new (issue 24: 64 idle RTU sockets locked out every Modbus TCP client).
+pub type Table = std::sync::Mutex<std::collections::HashMap<ClientId, Conn>>;
 
 /// Ends a connection's bookkeeping however it ends — closed, failed or evicted (an aborted
 /// task runs its destructors, not its remaining code).
@@ -245,10 +247,10 @@ pub async fn serve(
     routes: Arc<Vec<Route>>,
     opts: Arc<ServerOptions>,
     tls: Option<super::tls::Tls>,
+    table: Arc<Table>,
 ) {
     static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1);
     let metrics_line = routes.first().map(|r| Arc::clone(&r.line));
-    let table: Arc<Table> = Arc::default();
     loop {
         let Ok((stream, peer)) = listener.accept().await else {
             // Out of file descriptors or similar: back off a little, keep serving.
@@ -301,14 +303,21 @@ pub async fn serve(
                     let Some(acceptor) = tls.current() else { return };
                     match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(stream)).await {
                         Ok(Ok(tls_stream)) => {
-                            let role = tls_stream
-                                .get_ref()
-                                .1
-                                .peer_certificates()
-                                .and_then(|c| c.first())
-                                .and_then(|c| super::tls::role_of(c));
+                            let cert = tls_stream.get_ref().1.peer_certificates().and_then(|c| c.first()).map(|c| c.to_vec());
+                            let role = cert.as_deref().and_then(super::tls::role_of);
                             let policy = role.as_ref().and_then(|r| tls.roles.get(r));
-                            connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy)).await;
+                            // A session whose certificate a reloaded CRL revokes ends at once
+                            // (issue 24: it was still answered after SIGHUP).
+                            let revoked = tls.revocation(cert.as_deref().unwrap_or_default());
+                            tokio::select! {
+                                () = connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy)) => {}
+                                () = revoked => {
+                                    if let Some(m) = metrics {
+                                        m.refused("revoked");
+                                    }
+                                    eprintln!("mbtap: TLS client {peer}: its certificate is revoked by the reloaded CRL; session closed");
+                                }
+                            }
                         }
                         // No certificate, an expired one, one from another CA, a slow or
                         // broken handshake: the connection ends here, counted.
@@ -564,7 +573,8 @@ fn request(
             Priority::Net(_) => false,
         });
     let (tx, rx) = oneshot::channel();
-    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high };
+    let write = route.line.write_pending(target, &pdu);
+    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high, write };
     match route.line.submit(client, job) {
         Ok(()) => reply(Answer::Later(rx)),
         Err(_) => refuse("queue_full", SERVER_DEVICE_BUSY),

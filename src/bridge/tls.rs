@@ -185,11 +185,44 @@ pub fn acceptor(args: &TlsArgs) -> anyhow::Result<TlsAcceptor> {
     Ok(TlsAcceptor::from(Arc::new(config)))
 }
 
-/// The listener's TLS state: the acceptor (replaced on SIGHUP) and the roles.
+/// Certificates the CRLs revoke: (issuer name DER, serial number bytes).
+pub type Revoked = std::collections::BTreeSet<(Vec<u8>, Vec<u8>)>;
+
+/// What the `--crl` files revoke, read with x509-parser (rustls checks them at the handshake;
+/// this set re-checks the sessions already open when the files are reloaded).
+///
+/// # Errors
+/// A file that cannot be read or holds a list that does not parse.
+pub fn revoked(args: &TlsArgs) -> anyhow::Result<Revoked> {
+    let mut out = Revoked::new();
+    for path in &args.crl {
+        for der in CertificateRevocationListDer::pem_slice_iter(&read(path, "--crl")?) {
+            let der = der.map_err(|e| anyhow::anyhow!("--crl {}: {e:?}", path.display()))?;
+            let (_, crl) = x509_parser::parse_x509_crl(der.as_ref())
+                .map_err(|e| anyhow::anyhow!("--crl {}: {e}", path.display()))?;
+            let issuer = crl.issuer().as_raw().to_vec();
+            for r in crl.iter_revoked_certificates() {
+                out.insert((issuer.clone(), r.raw_serial().to_vec()));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The (issuer, serial) a client certificate is known by in a CRL.
+#[must_use]
+pub fn identity(cert: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
+    let (_, cert) = x509_parser::parse_x509_certificate(cert).ok()?;
+    Some((cert.issuer().as_raw().to_vec(), cert.raw_serial().to_vec()))
+}
+
+/// The listener's TLS state: the acceptor (replaced on SIGHUP), the roles, and what the CRLs
+/// revoke now (open sessions watch it: a client revoked by a reloaded CRL is disconnected).
 #[derive(Clone)]
 pub struct Tls {
     pub acceptor: Arc<RwLock<TlsAcceptor>>,
     pub roles: Arc<Roles>,
+    pub revoked: Arc<tokio::sync::watch::Sender<Arc<Revoked>>>,
 }
 
 impl std::fmt::Debug for Tls {
@@ -205,16 +238,22 @@ impl Tls {
     /// # Errors
     /// As [`acceptor`], and roles that do not parse.
     pub fn start(args: &TlsArgs) -> anyhow::Result<Self> {
-        let tls = Self { acceptor: Arc::new(RwLock::new(acceptor(args)?)), roles: Arc::new(parse_roles(&args.role)?) };
-        let (slot, args) = (Arc::clone(&tls.acceptor), args.clone());
+        let tls = Self {
+            acceptor: Arc::new(RwLock::new(acceptor(args)?)),
+            roles: Arc::new(parse_roles(&args.role)?),
+            revoked: Arc::new(tokio::sync::watch::channel(Arc::new(revoked(args)?)).0),
+        };
+        let (slot, list, args) = (Arc::clone(&tls.acceptor), Arc::clone(&tls.revoked), args.clone());
         tokio::spawn(async move {
             let Ok(mut hup) = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup()) else { return };
             while hup.recv().await.is_some() {
-                match acceptor(&args) {
-                    Ok(a) => {
+                match acceptor(&args).and_then(|a| Ok((a, revoked(&args)?))) {
+                    Ok((a, r)) => {
                         if let Ok(mut s) = slot.write() {
                             *s = a;
                         }
+                        // Sessions already open re-check their certificate against it.
+                        list.send_replace(Arc::new(r));
                         eprintln!("mbtap: SIGHUP: certificates, key, CA and CRLs reloaded");
                     }
                     Err(e) => eprintln!("mbtap: SIGHUP: keeping the previous certificates: {e:#}"),
@@ -222,6 +261,21 @@ impl Tls {
             }
         });
         Ok(tls)
+    }
+
+    /// Completes when the certificate `cert` is revoked by the CRLs in force (now or after a
+    /// reload); never for a certificate that cannot be read (the handshake accepted it).
+    pub async fn revocation(&self, cert: &[u8]) {
+        let Some(id) = identity(cert) else { return std::future::pending().await };
+        let mut rx = self.revoked.subscribe();
+        loop {
+            if rx.borrow_and_update().contains(&id) {
+                return;
+            }
+            if rx.changed().await.is_err() {
+                return std::future::pending().await;
+            }
+        }
     }
 
     /// The acceptor now in force.

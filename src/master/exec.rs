@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use mbtap_core::profile::Table;
 use mbtap_core::proto::function::ExceptionCode;
 use mbtap_core::query::encode::Write;
+use mbtap_core::query::is_bits;
 use mbtap_core::query::plan::Read;
 use tokio_modbus::prelude::{Reader as _, Writer as _};
 
@@ -70,6 +71,13 @@ async fn once(link: &mut Link, unit: u8, op: Op<'_>) -> anyhow::Result<Result<Op
     Ok(r?.map_err(u8::from))
 }
 
+/// Whether `got` values can answer `read`: registers exactly, bits padded to whole bytes
+/// (MAP v1.1b3 §6.1–6.4).
+fn fits(read: Read, got: usize) -> bool {
+    let q = usize::from(read.quantity);
+    if is_bits(read.table) { got == q.div_ceil(8) * 8 || got == q } else { got == q }
+}
+
 /// Sends `op` to `unit`, waiting `timeout` for each try. Returns the answer and how long the
 /// last try took.
 pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retries: u32) -> (Answer, Duration) {
@@ -77,7 +85,20 @@ pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retr
     loop {
         let started = Instant::now();
         let answer = match tokio::time::timeout(timeout, once(link, unit, op)).await {
-            Ok(Ok(Ok(Some(v)))) => Answer::Values(v),
+            Ok(Ok(Ok(Some(v)))) => match op {
+                Op::Read(r) if !fits(r, v.len()) => {
+                    // Another request's answer (a late one), or a damaged one: never values
+                    // (issue 24: a 4-register answer to a 2-register read gave rc=0).
+                    link.reset();
+                    Answer::Failed(format!(
+                        "unit {unit} answered {} {} to a request for {} (a late answer to another request, or a damaged one)",
+                        v.len(),
+                        if is_bits(r.table) { "bits" } else { "registers" },
+                        r.quantity
+                    ))
+                }
+                _ => Answer::Values(v),
+            },
             Ok(Ok(Ok(None))) => Answer::Done,
             Ok(Ok(Err(code))) => Answer::Exception(code),
             Ok(Err(e)) => {
@@ -128,4 +149,20 @@ pub async fn read_all(
         }
     }
     (rows, failures)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 24: `read` took a 4-register (late) answer to a 2-register request, and 3 of 4.
+    #[test]
+    fn answers_of_the_wrong_length_are_not_values() {
+        let regs = Read { target: 0, table: Table::HoldingRegisters, address: 160, quantity: 2 };
+        assert!(fits(regs, 2));
+        assert!(!fits(regs, 4) && !fits(regs, 1) && !fits(regs, 3));
+        let bits = Read { target: 0, table: Table::Coils, address: 0, quantity: 10 };
+        assert!(fits(bits, 16) && fits(bits, 10));
+        assert!(!fits(bits, 8) && !fits(bits, 24));
+    }
 }
