@@ -193,3 +193,47 @@ fn profiles_show_into_a_closed_pipe_does_not_panic() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success() && !err.contains("panicked"), "{err}");
 }
+
+/// A profile whose names and units carry terminal escape sequences (a hostile or mangled
+/// import): MK4 input registers 430–431 under names that would retitle and clear a terminal.
+const HOSTILE_PROFILE: &str = "[profile]\nname = \"evil\\u001b]0;pwned\\u0007\"\ndevice = \"Pump\\u001b[2J\"\n\
+    functions = [3, 4]\n\n[[input_registers]]\naddress = 430\nname = \"Volts\\u001b[31m\"\nunit = \"V\\u009b1m\"\nscale = 0.1\n";
+
+/// Issue 24: control characters in profile names and units reached the terminal in
+/// `profiles show` and `read`'s text output.
+#[test]
+fn control_characters_in_profiles_never_reach_the_terminal() {
+    let (_sim, bus) = simulator("escape");
+    let file = bus.with_file_name("evil.toml");
+    std::fs::write(&file, HOSTILE_PROFILE).unwrap();
+    let f = file.to_str().unwrap();
+    let shown = mbtap(&["profiles", "show", f]);
+    let read = mbtap(&["read", bus.to_str().unwrap(), "--device", f, "--format", "text", "input", "430"]);
+    for o in [&shown, &read] {
+        let all = text(o);
+        assert!(o.status.success(), "{all}");
+        assert!(!all.chars().any(|c| c.is_control() && c != '\n'), "{all:?}");
+        assert!(all.contains("\\u{1b}"), "shown escaped: {all}");
+    }
+    assert!(text(&read).contains("Volts"), "{}", text(&read));
+}
+
+/// Issue 24: `write --unit 0` broadcast a profile write without --force; a command register
+/// took any number.
+#[test]
+fn a_broadcast_write_or_an_undocumented_command_needs_force() {
+    let (_sim, bus) = simulator("broadcast");
+    let b = bus.to_str().unwrap();
+    let o = mbtap(&["write", b, "--device", "mk4", "--unit", "0", "Level 2 set point=1.23"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("broadcast") && text(&o).contains("--force"), "{}", text(&o));
+    let o = mbtap(&["read", b, "--device", "mk4", "--format", "jsonl", "Level 2 set point"]);
+    assert_ne!(json_lines(&o)[0]["raw"], 123, "nothing was sent: {}", text(&o));
+    // MK4 holding 126 "Clear alarm log" documents one command, 30.
+    let o = mbtap(&["write", b, "--device", "mk4", "Clear alarm log=31"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("not one of the documented commands"), "{}", text(&o));
+    // On purpose: sent once, said as a broadcast, nothing read back, success.
+    let o = mbtap(&["write", b, "--device", "mk4", "--unit", "0", "--force", "--format", "text", "Level 2 set point=1.23"]);
+    assert!(o.status.success() && text(&o).contains("broadcast holding 105"), "{}", text(&o));
+}

@@ -1,5 +1,6 @@
 //! `mbtap profiles list|check|show`: the device profiles — built in, the user's, a file.
 
+use mbtap_core::report::format::printable;
 use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -33,7 +34,8 @@ fn list() -> anyhow::Result<ExitCode> {
     let mut out = std::io::stdout().lock();
     for name in mbtap_core::profile::builtin::names() {
         if let Some(Ok(p)) = mbtap_core::profile::builtin::get(name) {
-            writeln!(out, "{name:<8} built-in  {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""))?;
+            let line = format!("{name:<8} built-in  {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""));
+            writeln!(out, "{}", printable(&line))?;
         }
     }
     if let Some(dir) = user_profile_dir()
@@ -44,10 +46,11 @@ fn list() -> anyhow::Result<ExitCode> {
         files.sort();
         for f in files {
             let name = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-            match load_profile_file(&f) {
-                Ok(p) => writeln!(out, "{name:<8} user      {} — {}", p.meta.device, f.display())?,
-                Err(e) => writeln!(out, "{name:<8} user      does not load: {e:#}")?,
-            }
+            let line = match load_profile_file(&f) {
+                Ok(p) => format!("{name:<8} user      {} — {}", p.meta.device, f.display()),
+                Err(e) => format!("{name:<8} user      does not load: {e:#}"),
+            };
+            writeln!(out, "{}", printable(&line))?;
         }
     }
     Ok(ExitCode::SUCCESS)
@@ -58,8 +61,7 @@ fn check(file: &std::path::Path) -> anyhow::Result<ExitCode> {
     let mut out = std::io::stdout().lock();
     let p = load_profile_file(file)?;
     let count = |t| p.addresses(t).count();
-    writeln!(
-        out,
+    let line = format!(
         "{}: ok — {} ({}): {} coils, {} discrete inputs, {} holding registers, {} input registers, {} reserved ranges",
         file.display(),
         p.meta.name,
@@ -69,7 +71,8 @@ fn check(file: &std::path::Path) -> anyhow::Result<ExitCode> {
         count(Table::HoldingRegisters),
         count(Table::InputRegisters),
         p.reserved.len()
-    )?;
+    );
+    writeln!(out, "{}", printable(&line))?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -77,7 +80,8 @@ fn check(file: &std::path::Path) -> anyhow::Result<ExitCode> {
 fn show(profile: &str) -> anyhow::Result<ExitCode> {
     let p = resolve_profile(profile)?;
     let mut out = std::io::stdout().lock();
-    writeln!(out, "{} — {}", p.meta.name, p.meta.device)?;
+    // Names, units and devices come from files anyone may have written: escaped (issue 24).
+    writeln!(out, "{}", printable(&format!("{} — {}", p.meta.name, p.meta.device)))?;
     for t in [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters] {
         writeln!(out, "[{}]", t.name())?;
         for a in p.addresses(t) {
@@ -86,7 +90,7 @@ fn show(profile: &str) -> anyhow::Result<ExitCode> {
             {
                 let ru = def.name_ru.as_deref().map(|r| format!(" ({r})")).unwrap_or_default();
                 let unit = def.unit.as_deref().map(|u| format!(" [{u}]")).unwrap_or_default();
-                writeln!(out, "  {a:>5} {}{ru}{unit}", slot.name)?;
+                writeln!(out, "{}", printable(&format!("  {a:>5} {}{ru}{unit}", slot.name)))?;
             }
         }
     }

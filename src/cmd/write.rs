@@ -10,6 +10,7 @@ use mbtap_core::query::encode::{Write, encode_write};
 use mbtap_core::query::plan::{Plan, Read};
 use mbtap_core::query::rows::{rows, short_table};
 use mbtap_core::query::{QueryError, items, resolve};
+use mbtap_core::report::format::printable;
 
 use crate::master::link::{Endpoint, Link};
 use crate::master::{MasterArgs, MasterFormat, exec, show};
@@ -85,13 +86,20 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         }
         writes.push((target, w));
     }
+    // Unit 0 is a broadcast (Serial Line v1.02 §2.1): every device on the line executes it,
+    // none answers, nothing can be read back. Never by accident (issue 24).
+    if unit == 0 && !args.force && !args.dry_run {
+        anyhow::bail!(
+            "unit 0 is a broadcast: every device on the line would execute this write and none would answer or be read back; give the unit's own address, or add --force to broadcast on purpose"
+        );
+    }
     let mut out = std::io::stdout().lock();
     let endpoint = Endpoint::parse(&m.target);
     if args.dry_run {
         let profiles: mbtap_core::profile::Profiles = p.map(|p| (unit, p.clone())).into_iter().collect();
         for (target, w) in &writes {
             let (bytes, mode) = frame(&endpoint, unit, &w.pdu());
-            writeln!(out, "would send to unit {unit}: {}", describe(w, target, p, unit))?;
+            writeln!(out, "would send to unit {unit}: {}", printable(&describe(w, target, p, unit)))?;
             writeln!(out, "  {}", hex(&bytes))?;
             mbtap_core::decode::run_with_profiles(
                 &[hex(&bytes)],
@@ -112,6 +120,13 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let rt = crate::cmd::runtime()?;
     let mut failed = false;
     for (target, w) in &writes {
+        if unit == 0 {
+            // No answer comes to a broadcast: sent once, said as such, nothing read back.
+            let _ = rt.block_on(exec::send(&mut link, 0, exec::Op::Write(w), timeout, 0));
+            let what = describe(w, target, p, 0);
+            writeln!(out, "broadcast {} (no device answers a broadcast; nothing read back)", printable(&what))?;
+            continue;
+        }
         let (answer, _) = rt.block_on(exec::send(&mut link, unit, exec::Op::Write(w), timeout, m.retries));
         let what = describe(w, target, p, unit);
         if let Some(problem) = answer.problem() {
@@ -126,7 +141,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             continue;
         }
         if format == MasterFormat::Text {
-            writeln!(out, "wrote {what}")?;
+            writeln!(out, "wrote {}", printable(&what))?;
         }
         // The echo: read the same registers back and show what the device kept.
         let quantity = u16::try_from(w.words.len()).unwrap_or(1);

@@ -5,6 +5,7 @@ use std::io::Write;
 
 use mbtap_core::query::plan::Read;
 use mbtap_core::query::rows::{Row, short_table};
+use mbtap_core::report::format::printable;
 
 use super::MasterFormat;
 
@@ -54,12 +55,14 @@ pub fn print(
 ) -> std::io::Result<()> {
     match format {
         MasterFormat::Text => {
+            // Names and units come from profiles (user files, imports): control characters in
+            // them never reach the terminal (issue 24), as `decode` escapes them.
             for r in rows {
-                writeln!(out, "{}", r.line())?;
+                writeln!(out, "{}", printable(&r.line()))?;
             }
             out.flush()?;
             for f in failures {
-                eprintln!("mbtap: {}", f.text());
+                eprintln!("mbtap: {}", printable(&f.text()));
             }
         }
         MasterFormat::Jsonl => {

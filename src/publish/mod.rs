@@ -5,6 +5,7 @@
 
 pub mod mqtt;
 pub mod spy;
+pub mod watched;
 
 use std::sync::Arc;
 use std::time::Duration;

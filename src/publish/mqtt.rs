@@ -77,6 +77,40 @@ pub fn topic_level(s: &str) -> String {
     if t.is_empty() { "_".into() } else { t }
 }
 
+/// Room left after the prefix for the topic levels mbtap adds (`/unit/247/holding_registers/65535`,
+/// discovery ids): a whole topic is at most 65 535 bytes (MQTT v3.1.1 §1.5.3, §4.7.3).
+const MAX_PREFIX_BYTES: usize = 65_535 - 1_024;
+
+/// Whether `prefix` can start every topic mbtap publishes: the broker drops a publication to a
+/// topic it cannot take without telling a QoS 0 publisher, so a prefix it would refuse is
+/// refused here (issue 24: `$SYS/x`, a tab, 70 kB: every message dropped, "0 dropped" said).
+///
+/// # Errors
+/// What is wrong, with the rule: no `+`/`#` (MQTT v3.1.1 §4.7.1), no leading `$` (topics
+/// starting with `$` are the broker's, §4.7.2), no control characters (U+0000 is forbidden,
+/// §1.5.3, and the others never reach a subscriber intact), not empty, not too long (§1.5.3).
+pub fn check_prefix(prefix: &str) -> Result<(), String> {
+    if prefix.is_empty() {
+        return Err("the prefix is empty; give one like site/line1".into());
+    }
+    if prefix.contains(['+', '#']) {
+        return Err("a topic prefix cannot contain + or # (wildcards, MQTT v3.1.1 §4.7.1)".into());
+    }
+    if prefix.starts_with('$') {
+        return Err("topics starting with $ are the broker's own ($SYS…, MQTT v3.1.1 §4.7.2): it drops publications to them".into());
+    }
+    if let Some((at, c)) = prefix.char_indices().find(|(_, c)| c.is_control()) {
+        return Err(format!("a control character (U+{:04X}) at byte {at}; topics are printable UTF-8 (MQTT v3.1.1 §1.5.3)", u32::from(c)));
+    }
+    if prefix.len() > MAX_PREFIX_BYTES {
+        return Err(format!(
+            "{} bytes; a topic is at most 65 535 bytes (MQTT v3.1.1 §1.5.3) and mbtap adds levels after the prefix: at most {MAX_PREFIX_BYTES}",
+            prefix.len()
+        ));
+    }
+    Ok(())
+}
+
 /// This machine's name, for the default prefix.
 fn hostname() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
@@ -209,10 +243,7 @@ impl Mqtt {
                 .map_or_else(|| source.to_owned(), |n| n.to_string_lossy().into_owned());
             format!("mbtap/{}/{}", hostname(), topic_level(&name))
         });
-        anyhow::ensure!(
-            !prefix.contains(['+', '#']) && !prefix.is_empty(),
-            "--mqtt-prefix {prefix:?}: a topic prefix cannot contain + or # (MQTT v3.1.1 §4.7.1)"
-        );
+        check_prefix(&prefix).map_err(|why| anyhow::anyhow!("--mqtt-prefix {prefix:?}: {why}"))?;
         let status = format!("{prefix}/status");
         let mut options = MqttOptions::new(format!("mbtap-{}-{}", hostname(), std::process::id()), host.clone(), port);
         options.set_keep_alive(Duration::from_secs(10));
@@ -495,6 +526,24 @@ impl crate::output::Tap for Mqtt {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 24: `$SYS/x`, a tab or 70 kB were accepted and every message silently dropped.
+    #[test]
+    fn a_prefix_the_broker_would_drop_is_refused() {
+        assert!(check_prefix("mbtap/site/line1").is_ok());
+        for (bad, why) in [
+            ("$SYS/x", "broker"),
+            ("a\tb", "U+0009"),
+            ("", "empty"),
+            ("a/+/b", "wildcards"),
+            ("a/#", "wildcards"),
+            ("a\u{0}b", "U+0000"),
+        ] {
+            let e = check_prefix(bad).unwrap_err();
+            assert!(e.contains(why), "{bad:?}: {e}");
+        }
+        assert!(check_prefix(&"x".repeat(70_000)).unwrap_err().contains("65 535"));
+    }
 
     #[test]
     fn broker_urls_and_topic_levels() {

@@ -15,6 +15,8 @@ use mbtap_core::analyzer::Event;
 use mbtap_core::profile::Table;
 use mbtap_core::profile::image::{ILLEGAL_FUNCTION, RegisterImage};
 use tokio_modbus::server::tcp::Server;
+
+use super::watched::{Table as Connections, Watched};
 use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 
 /// The image, its clock, and what the server did.
@@ -28,6 +30,9 @@ pub struct Spy {
     /// Connections open now, and those refused because [`MAX_CLIENTS`] were.
     open: std::sync::atomic::AtomicUsize,
     refused_connections: AtomicU64,
+    /// Idle connections closed to make room, and failed accepts.
+    evicted: AtomicU64,
+    accept_errors: AtomicU64,
     /// Refusals by exception code (index = code, 0..=15).
     refused: [AtomicU64; 16],
 }
@@ -69,6 +74,8 @@ impl Spy {
             answered: AtomicU64::new(0),
             open: std::sync::atomic::AtomicUsize::new(0),
             refused_connections: AtomicU64::new(0),
+            evicted: AtomicU64::new(0),
+            accept_errors: AtomicU64::new(0),
             refused: std::array::from_fn(|_| AtomicU64::new(0)),
         });
         let server_spy = Arc::clone(&spy);
@@ -85,23 +92,44 @@ impl Spy {
                         }
                     };
                     let server = Server::new(listener);
+                    let table = Arc::new(Connections::default());
                     let on_connected = |stream, peer| {
-                        let spy = Arc::clone(&server_spy);
+                        let (spy, table) = (Arc::clone(&server_spy), Arc::clone(&table));
                         async move {
-                            // A client opening connection after connection gets no more than
-                            // MAX_CLIENTS: the rest are closed at once, counted.
+                            // When MAX_CLIENTS are open, a socket that never asked or the
+                            // idlest gives its place (the bridge's rule); only when all are busy
+                            // is the newcomer closed at once, counted.
                             if spy.open.fetch_add(1, Ordering::SeqCst) >= MAX_CLIENTS {
-                                spy.open.fetch_sub(1, Ordering::SeqCst);
-                                spy.refused_connections.fetch_add(1, Ordering::Relaxed);
-                                return Ok(None);
+                                if table.evict_idlest(tokio::time::Instant::now()) {
+                                    spy.evicted.fetch_add(1, Ordering::Relaxed);
+                                } else {
+                                    spy.open.fetch_sub(1, Ordering::SeqCst);
+                                    spy.refused_connections.fetch_add(1, Ordering::Relaxed);
+                                    return Ok(None);
+                                }
                             }
                             let _ = peer;
+                            let stream = Watched::new(stream, IDLE_TIMEOUT, table.open());
                             std::io::Result::Ok(Some((Service { spy: Arc::clone(&spy) }, stream)))
                         }
                     };
-                    // A client that breaks its connection ends only that connection.
-                    if let Err(e) = server.serve(&on_connected, |_err| {}).await {
-                        eprintln!("mbtap: --serve: the server stopped: {e}");
+                    // A client that breaks its connection ends only that connection. An accept
+                    // error (out of file descriptors) ends tokio-modbus's loop: it is said once
+                    // per spell, counted, and serving starts again (issue 24: the server stopped
+                    // for good while the process went on).
+                    let mut said = false;
+                    loop {
+                        match server.serve(&on_connected, |_err| {}).await {
+                            Ok(()) => break,
+                            Err(e) => {
+                                server_spy.accept_errors.fetch_add(1, Ordering::Relaxed);
+                                if !said {
+                                    eprintln!("mbtap: --serve: accepting a connection failed: {e}; serving on");
+                                    said = true;
+                                }
+                                tokio::time::sleep(Duration::from_millis(100)).await;
+                            }
+                        }
                     }
                 });
             })
@@ -169,6 +197,14 @@ impl Spy {
         if turned_away > 0 {
             let _ = write!(full, "; {turned_away} connections refused ({MAX_CLIENTS} open at most)");
         }
+        let evicted = self.evicted.load(Ordering::Relaxed);
+        if evicted > 0 {
+            let _ = write!(full, "; {evicted} idle connections closed to make room");
+        }
+        let accept_errors = self.accept_errors.load(Ordering::Relaxed);
+        if accept_errors > 0 {
+            let _ = write!(full, "; {accept_errors} failed accepts");
+        }
         let detail = refused.iter().map(|(c, n)| format!("{c:02X}: {n}")).collect::<Vec<_>>().join(", ");
         format!(
             "spy server on {}: {} answered, {total} refused{}{full}",
@@ -181,6 +217,8 @@ impl Spy {
 
 /// Connections the spy server holds open at once.
 const MAX_CLIENTS: usize = 64;
+/// A connection silent this long is closed (the bridge's default `--idle-timeout`).
+const IDLE_TIMEOUT: Duration = Duration::from_secs(300);
 
 /// One connection's service; its end frees the connection's place.
 struct Service {

@@ -234,6 +234,19 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
             if !(lo..=hi).contains(&raw) {
                 return Err(c.hard(format!("raw value {raw} does not fit the register's type ({lo}..={hi})")));
             }
+            // A command register (its documented values are commands) takes those values, and
+            // numbers in its documented range if it has one — like an enumeration's labels
+            // (issue 24: any number went to the line).
+            if !def.commands.is_empty()
+                && !def.commands.contains_key(&raw)
+                && !def.labels.contains_key(&raw)
+                && def.range.is_none_or(|(min, max)| !(min..=max).contains(&raw))
+            {
+                c.soft(format!(
+                    "{raw} is not one of the documented commands ({})",
+                    def.commands.iter().map(|(k, v)| format!("{k} = {v:?}")).collect::<Vec<_>>().join(", ")
+                ))?;
+            }
             if let Some((min, max)) = def.range
                 && !(min..=max).contains(&raw)
                 && !def.commands.contains_key(&raw)
@@ -333,6 +346,19 @@ mod tests {
         );
         // Function 06, address 105 (0x0069), value 150 (0x0096).
         assert_eq!(w.pdu(), [0x06, 0x00, 0x69, 0x00, 0x96]);
+    }
+
+    /// Issue 24: a command register took any number (an enumeration outside its list is
+    /// refused; commands now are too).
+    #[test]
+    fn a_command_register_takes_its_documented_commands_only() {
+        // MK4 holding 126 "Clear alarm log": 30 = clear the alarm log.
+        let w = write("Clear alarm log=30", false).unwrap();
+        assert_eq!(w.pdu(), [0x06, 0x00, 0x7E, 0x00, 0x1E]);
+        assert_eq!(write("Clear alarm log=clear the alarm log", false).unwrap().words, [30]);
+        let e = write("Clear alarm log=31", false).unwrap_err().to_string();
+        assert!(e.contains("not one of the documented commands") && e.contains("30") && e.contains("--force"), "{e}");
+        assert_eq!(write("Clear alarm log=31", true).unwrap().words, [31], "--force still sends it");
     }
 
     #[test]
