@@ -6,6 +6,7 @@
 pub mod demo;
 pub mod link;
 pub mod play;
+pub mod pty;
 pub mod record;
 pub mod rs485;
 pub mod scan;

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio_serial::{SerialPort, SerialStream};
+use tokio_serial::SerialStream;
 
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
@@ -41,6 +41,9 @@ pub struct TapOptions {
     pub duration: Option<Duration>,
 }
 
+/// How long a write to the application's side may wait for it to read before it is dropped.
+const APP_STALL: Duration = Duration::from_millis(50);
+
 /// Runs the tap until Ctrl-C, SIGTERM or the duration ends.
 ///
 /// # Errors
@@ -50,11 +53,9 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
     let mut watch = crate::source::serial::DeviceWatch::default();
     let mut bus = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err)
         .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?;
-    let (mut app, slave) = SerialStream::pair().context("creating a pseudo-terminal")?;
-    let slave_path = slave.name().context("the pseudo-terminal has no name")?;
-    // Our handle on the application's end holds an exclusive lock: let it go, so the
-    // application can open the path. The pty lives as long as we hold the master.
-    drop(slave);
+    // The pty lives as long as we hold the master; the application opens the slave's path.
+    let (mut app, slave_path) = super::pty::open()?;
+    let slave_path = slave_path.to_string_lossy().into_owned();
     super::link::make(&opts.link, &slave_path)?;
     let _ = writeln!(
         err,
@@ -83,6 +84,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
     let mut stop = Box::pin(crate::signals::stop_or_deadline(deadline));
     let (mut from_app, mut from_bus) = (vec![0u8; 4096], vec![0u8; 4096]);
     let mut last_flush = tokio::time::Instant::now();
+    let mut app_closed = false;
     loop {
         if deadline.is_some_and(|d| tokio::time::Instant::now() >= d) {
             break;
@@ -91,19 +93,31 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
             () = &mut stop => break,
             r = app.read(&mut from_app) => match r {
                 Ok(n) if n > 0 => {
+                    app_closed = false;
                     AsyncWriteExt::write_all(&mut bus, &from_app[..n]).await.context("writing to the serial port")?;
                     (APP_PORT, n)
                 }
                 // The application closed its end (EIO on the master): wait for it to reopen.
+                // What was heard so far is flushed now (issue 24: a SIGKILL after the
+                // application closed lost the last transactions), and the loop goes on to its
+                // own flushes (a `continue` here skipped them for as long as it stayed closed).
                 _ => {
+                    if !app_closed {
+                        app_closed = true;
+                        if let Some(r) = recorder.as_mut() {
+                            r.flush(err);
+                        }
+                        let _ = writer.out.flush();
+                    }
                     tokio::time::sleep(Duration::from_millis(20)).await;
-                    continue;
+                    (APP_PORT, 0)
                 }
             },
             r = bus.read(&mut from_bus) => match r {
                 Ok(n) if n > 0 => {
-                    // Nobody reading the pty is not an error worth stopping for.
-                    let _ = AsyncWriteExt::write_all(&mut app, &from_bus[..n]).await;
+                    // Nobody reading the pty is not an error worth stopping for, nor a reason
+                    // to stall the line: what the application does not take soon is dropped.
+                    let _ = tokio::time::timeout(APP_STALL, app.write_all(&from_bus[..n])).await;
                     (BUS_PORT, n)
                 }
                 // The real port went away (an adapter pulled): the application's side stays
@@ -162,7 +176,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
 /// block). `None` when a stop was asked for.
 async fn reopen(
     opts: &TapOptions,
-    app: &mut SerialStream,
+    app: &mut super::pty::PtyMaster,
     stop: &mut std::pin::Pin<Box<impl std::future::Future<Output = ()>>>,
     mut recorder: Option<&mut Recorder>,
     watch: &mut crate::source::serial::DeviceWatch,
