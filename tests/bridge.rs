@@ -735,3 +735,118 @@ fn pulling_the_adapter_under_load_answers_every_client_and_recovers() {
     // and got 20 correct answers after it came back.
     assert!(results.iter().all(|&(ok, gateway)| ok > 20 && gateway > 0), "{results:?}");
 }
+
+/// `pdu` with a whole CRC-valid RTU frame `hidden` (unit, PDU) behind it: what a slave that
+/// frames by structure (`mbtap simulate`, pymodbus, many devices) reads as a second request.
+fn smuggle(pdu: &[u8], hidden: &[u8]) -> Vec<u8> {
+    let mut out = pdu.to_vec();
+    out.extend_from_slice(hidden);
+    out.extend_from_slice(&mbtap_core::proto::crc16(hidden).to_le_bytes());
+    out
+}
+
+/// MK4 (unit 1) holding 105, Level 2 set point, := 42: `01 06 0069 002A`.
+const WRITE_105_42: [u8; 6] = [0x01, 0x06, 0x00, 0x69, 0x00, 0x2A];
+
+/// Issue 24: under `--read-only` a Modbus TCP "read" longer than its function allows was
+/// forwarded whole, and the slave executed the write smuggled behind it (FC 03, 08/0000 and
+/// 2B/0E as carriers), with and without the cache and polling. Now each is answered 03 and
+/// nothing reaches the line.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_write_smuggled_behind_a_read_never_reaches_the_line() {
+    for (name, extra) in
+        [("plain", &[][..]), ("cache", &["--cache", "1:holding:100-110=10s", "--poll", "1:holding:100-101@1s"][..])]
+    {
+        let d = dir(&format!("smuggle-{name}"));
+        let _sim = simulator(&d.join("bus"), &[]);
+        let mut args = vec!["--read-only", "--metrics", "127.0.0.1:0"];
+        args.extend_from_slice(extra);
+        let (_bridge, addr, others) = bridge(&d.join("bus"), &args);
+        let mut c = Client::connect(&addr);
+        let before = c.call(1, 1, &[0x03, 0x00, 0x69, 0x00, 0x01]);
+        assert_ne!(before, [0x03, 0x02, 0x00, 0x2A], "{name}: the test needs another value first");
+        let carriers: [&[u8]; 3] = [
+            &[0x03, 0x00, 0x69, 0x00, 0x01], // read holding 105
+            &[0x08, 0x00, 0x00, 0x12, 0x34], // diagnostics: return query data
+            &[0x2B, 0x0E, 0x01, 0x00],       // read device identification
+        ];
+        for (tid, carrier) in (10u16..).zip(carriers) {
+            let answer = c.call(tid, 1, &smuggle(carrier, &WRITE_105_42));
+            let code = if carrier[0] == 0x08 { 0x01 } else { 0x03 };
+            assert_eq!(answer, [carrier[0] | 0x80, code], "{name}: {carrier:02X?} + a write");
+        }
+        std::thread::sleep(Duration::from_millis(300));
+        let after = c.call(20, 1, &[0x03, 0x00, 0x69, 0x00, 0x01]);
+        assert_eq!(after, before, "{name}: holding 105 unchanged");
+        let text = metrics(&others[0]);
+        assert!(text.lines().any(|l| l == "mbtap_bridge_refused_total{reason=\"malformed_request\"} 2"), "{text}");
+    }
+}
+
+/// Issue 24: with a device slower than the timeout, the answer to one read was given to the
+/// next client's read (4 registers to a request for 2). Now an answer must fit its request,
+/// late bytes are flushed after a timeout, and the next client gets its own answer or 0x0B.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_late_answer_never_reaches_the_next_request() {
+    let d = dir("late");
+    // Every answer 400 ms after its request; the bridge waits 300 ms.
+    let _sim = simulator(&d.join("bus"), &["--turnaround-ms", "400"]);
+    let (_bridge, addr, others) = bridge(&d.join("bus"), &["--timeout-ms", "300", "--metrics", "127.0.0.1:0"]);
+    let mut a = Client::connect(&addr);
+    let mut b = Client::connect(&addr);
+    for round in 0..3u16 {
+        // Four phase voltages, then two: the first answer arrives while the second waits.
+        a.send(round * 2, 1, &READ_VOLTAGES);
+        b.send(round * 2 + 1, 1, &[0x04, 0x01, 0xAE, 0x00, 0x02]);
+        let (_, _, first) = a.recv();
+        let (_, _, second) = b.recv();
+        assert!(first == [0x84, 0x0B] || first.len() == 10, "round {round}: {first:02X?}");
+        assert!(
+            second == [0x84, 0x0B] || (second.len() == 6 && second[1] == 4),
+            "round {round}: the read of 2 registers got {second:02X?}"
+        );
+    }
+    let text = metrics(&others[0]);
+    assert!(text.contains("mbtap_bridge_late_answers_total{unit=\"1\"}"), "{text}");
+}
+
+/// Issue 24: with `--cache`, a client pipelining "write h105 = V, read h105" read the old value
+/// from the cache. A read queued behind an overlapping write waits for it.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn a_read_behind_its_own_write_reads_the_new_value() {
+    let d = dir("ryow");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, _) = bridge(&d.join("bus"), &["--cache", "1:holding:100-110=60s"]);
+    let mut c = Client::connect(&addr);
+    for (round, value) in (0u16..).zip([150u16, 275, 990]) {
+        // Fill the cache, then write and read back in one segment.
+        let _ = c.call(round * 10, 1, &[0x03, 0x00, 0x69, 0x00, 0x01]);
+        let [hi, lo] = value.to_be_bytes();
+        c.send(round * 10 + 1, 1, &[0x06, 0x00, 0x69, hi, lo]);
+        c.send(round * 10 + 2, 1, &[0x03, 0x00, 0x69, 0x00, 0x01]);
+        assert_eq!(c.recv().2, [0x06, 0x00, 0x69, hi, lo]);
+        assert_eq!(c.recv().2, [0x03, 0x02, hi, lo], "round {round}: the read sees its own write");
+    }
+}
+
+/// Issue 24: the connection limit was shared but eviction looked only at the listener taking
+/// the connection: idle sockets on `--listen-rtu` locked every Modbus TCP client out.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn idle_sockets_on_one_listener_lock_no_one_out_of_another() {
+    let d = dir("cross-evict");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, addr, others) =
+        bridge(&d.join("bus"), &["--listen-rtu", "127.0.0.1:0", "--max-connections", "8", "--metrics", "127.0.0.1:0"]);
+    // The RTU listener is said before the metrics endpoint.
+    let rtu = others[0].clone();
+    let _idle: Vec<TcpStream> = (0..8).map(|_| TcpStream::connect(&rtu).unwrap()).collect();
+    std::thread::sleep(Duration::from_millis(400));
+    for tid in 0..5u16 {
+        let mut c = Client::connect(&addr);
+        assert_eq!(c.call(tid, 17, &[0x03, 0x00, 0x32, 0x00, 0x01])[..2], [0x03, 0x02], "client {tid} is served");
+    }
+}

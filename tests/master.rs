@@ -234,6 +234,7 @@ fn a_broadcast_write_or_an_undocumented_command_needs_force() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("not one of the documented commands"), "{}", text(&o));
     // On purpose: sent once, said as a broadcast, nothing read back, success.
-    let o = mbtap(&["write", b, "--device", "mk4", "--unit", "0", "--force", "--format", "text", "Level 2 set point=1.23"]);
+    let o =
+        mbtap(&["write", b, "--device", "mk4", "--unit", "0", "--force", "--format", "text", "Level 2 set point=1.23"]);
     assert!(o.status.success() && text(&o).contains("broadcast holding 105"), "{}", text(&o));
 }

@@ -193,6 +193,10 @@ fn the_spy_server_holds_at_most_64_connections() {
     for s in &mut held {
         assert!(ask(s), "each of the first 64 is served");
     }
+    // All 64 busy (each asked within the last second, so none may be evicted for idling).
+    for s in &mut held {
+        assert!(ask(s));
+    }
     let mut extra = std::net::TcpStream::connect(&addr).unwrap();
     assert!(!ask(&mut extra), "the 65th is closed");
     drop(held.pop());
@@ -201,5 +205,23 @@ fn the_spy_server_holds_at_most_64_connections() {
     while !ask(&mut std::net::TcpStream::connect(&addr).unwrap()) {
         assert!(start.elapsed() < Duration::from_secs(10), "the freed place never came back");
         std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Issue 24: 64 sockets that never asked held every place of the spy server (0 of 48 clients
+/// served) until they closed themselves. As on the bridge, a socket that has not asked within
+/// its grace gives its place to a newcomer.
+#[test]
+fn idle_sockets_give_their_places_to_clients_that_ask() {
+    use std::io::{Read, Write};
+    let (_server, addr) = common::spy_replay("none");
+    let _idle: Vec<_> = (0..64).map(|_| std::net::TcpStream::connect(&addr).unwrap()).collect();
+    std::thread::sleep(Duration::from_millis(400));
+    for n in 0..10 {
+        let mut s = std::net::TcpStream::connect(&addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        s.write_all(&READ_COILS).unwrap();
+        let mut header = [0u8; 7];
+        assert!(s.read_exact(&mut header).is_ok(), "client {n} is served");
     }
 }

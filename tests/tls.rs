@@ -211,3 +211,123 @@ fn sighup_reloads_the_client_ca_and_the_tls_listener_has_its_own_allow_list() {
     let (_bridge2, port, _) = start(&["--tls-allow-ip", "10.0.0.0/8"]);
     assert!(client(port, &d, Some("operator"))["handshake"].is_string(), "refused by the TLS allow-list");
 }
+
+/// One TLS session driven line by line ([`tests/interop/tls_session.py`]).
+struct Session {
+    child: common::Kill,
+    stdin: std::process::ChildStdin,
+    lines: std::io::Lines<std::io::BufReader<std::process::ChildStdout>>,
+}
+
+impl Session {
+    fn open(port: u16, d: &Path, who: &str) -> Self {
+        use std::io::BufRead as _;
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/tls_session.py");
+        let mut child = Command::new("python3")
+            .arg(script)
+            .arg(port.to_string())
+            .arg(d.join("ca.pem"))
+            .arg(d.join(format!("{who}.pem")))
+            .arg(d.join(format!("{who}.key")))
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+        assert!(lines.next().unwrap().unwrap().contains("ready"));
+        Self { child: common::Kill(child), stdin, lines }
+    }
+
+    /// The answer PDU in hex, or "closed: …".
+    fn call(&mut self, unit: u8, pdu: &str) -> String {
+        use std::io::Write as _;
+        writeln!(self.stdin, "{unit} {pdu}").unwrap();
+        let v: serde_json::Value = serde_json::from_str(&self.lines.next().unwrap().unwrap()).unwrap();
+        v["answer"].as_str().map_or_else(|| format!("closed: {}", v["closed"]), str::to_owned)
+    }
+}
+
+/// An openssl CA database beside `ca.pem`, and an (empty) CRL of it in `crl.pem`.
+fn crl_setup(d: &Path) {
+    std::fs::write(
+        d.join("ca.cnf"),
+        "[ ca ]\ndefault_ca = CA_default\n[ CA_default ]\ndatabase = index.txt\ncrlnumber = crlnumber\ndefault_md = sha256\ndefault_crl_days = 2\n",
+    )
+    .unwrap();
+    std::fs::write(d.join("index.txt"), "").unwrap();
+    std::fs::write(d.join("crlnumber"), "01\n").unwrap();
+    openssl(d, &["ca", "-config", "ca.cnf", "-keyfile", "ca.key", "-cert", "ca.pem", "-gencrl", "-out", "crl.pem"]);
+}
+
+/// Issue 24: a session whose certificate a reloaded CRL revokes was still answered; a role's
+/// `units:` rule was checked before `--map-unit` (a role for units 2–20 wrote to serial unit 1
+/// through TCP unit 10); a read-only role forwarded a read with a whole write frame behind it.
+#[test]
+#[ignore = "needs openssl and python3; .ci/run installs them and runs this with --ignored"]
+fn revoked_sessions_close_roles_judge_the_line_unit_and_reads_carry_no_writes() {
+    let d = certificates("revoke");
+    crl_setup(&d);
+    let bus = d.join("bus-revoke");
+    let _sim = common::simulate(&bus, &["--duration", "120"]);
+    let f = |n: &str| d.join(n).to_str().unwrap().to_owned();
+    let b = common::bridge(&[
+        "--serial",
+        bus.to_str().unwrap(),
+        "--listen-tls",
+        "127.0.0.1:0",
+        "--metrics",
+        "127.0.0.1:0",
+        "--cert",
+        &f("server.pem"),
+        "--key",
+        &f("server.key"),
+        "--client-ca",
+        &f("ca.pem"),
+        "--crl",
+        &f("crl.pem"),
+        "--map-unit",
+        "10=1",
+        "--role",
+        "operator=units:2-20",
+        "--role",
+        "viewer=read-only",
+    ]);
+    let port: u16 = b.tls.as_deref().unwrap().rsplit(':').next().unwrap().parse().unwrap();
+    let m = b.metrics.clone().unwrap();
+    let (bridge, log) = (b.child, b.log);
+
+    // The operator may reach units 2–20 on the line; TCP unit 10 is serial unit 1: refused 01.
+    let mut op = Session::open(port, &d, "operator");
+    assert_eq!(op.call(10, "0600690007"), "8601", "unit 10 maps to serial unit 1, outside the role");
+    assert_eq!(op.call(17, "0300320001")[..4], *"0302", "unit 17 is the role's");
+
+    // The viewer's read with `01 06 00 69 00 2A` + CRC behind it: 03, nothing forwarded.
+    let mut viewer = Session::open(port, &d, "viewer");
+    let hidden = [0x01, 0x06, 0x00, 0x69, 0x00, 0x2A];
+    let mut smuggled = vec![0x03, 0x00, 0x69, 0x00, 0x01];
+    smuggled.extend_from_slice(&hidden);
+    smuggled.extend_from_slice(&mbtap_core::proto::crc16(&hidden).to_le_bytes());
+    let hex = smuggled.iter().fold(String::new(), |mut s, b| {
+        use std::fmt::Write as _;
+        let _ = write!(s, "{b:02x}");
+        s
+    });
+    assert_eq!(viewer.call(1, &hex), "8303");
+    assert_ne!(viewer.call(1, "0300690001"), "0302002a", "holding 105 did not become 42");
+
+    // The operator's certificate is revoked and the CRL reloaded: its open session ends.
+    openssl(&d, &["ca", "-config", "ca.cnf", "-keyfile", "ca.key", "-cert", "ca.pem", "-revoke", "operator.pem"]);
+    openssl(&d, &["ca", "-config", "ca.cnf", "-keyfile", "ca.key", "-cert", "ca.pem", "-gencrl", "-out", "crl.pem"]);
+    assert!(Command::new("kill").args(["-HUP", &bridge.0.id().to_string()]).status().unwrap().success());
+    let t = std::time::Instant::now();
+    while !log.lock().unwrap().iter().any(|l| l.contains("revoked")) {
+        assert!(t.elapsed() < std::time::Duration::from_secs(10), "no revocation: {:?}", log.lock().unwrap());
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    assert!(op.call(17, "0300320001").starts_with("closed"), "the revoked session is not answered");
+    assert_eq!(viewer.call(17, "0300320001")[..4], *"0302", "the viewer's session goes on");
+    assert_eq!(metric(&m, "mbtap_bridge_refused_total{reason=\"revoked\"} "), 1);
+    assert_eq!(metric(&m, "mbtap_bridge_refused_total{reason=\"malformed_request\"} "), 1);
+    drop(op.child);
+}

@@ -245,7 +245,13 @@ pub async fn bridge<W: Write>(
                     .collect::<anyhow::Result<Vec<_>>>()?
             };
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, allow_ips, ..opts.server.clone() });
-            tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, Some(tls), Arc::clone(&connections)));
+            tokio::spawn(server::serve(
+                listener,
+                Arc::clone(&routes),
+                server_opts,
+                Some(tls),
+                Arc::clone(&connections),
+            ));
         }
         (mode, settings) =
             opts.lines.first().map_or(

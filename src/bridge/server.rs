@@ -303,7 +303,8 @@ pub async fn serve(
                     let Some(acceptor) = tls.current() else { return };
                     match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(stream)).await {
                         Ok(Ok(tls_stream)) => {
-                            let cert = tls_stream.get_ref().1.peer_certificates().and_then(|c| c.first()).map(|c| c.to_vec());
+                            let cert =
+                                tls_stream.get_ref().1.peer_certificates().and_then(|c| c.first()).map(|c| c.to_vec());
                             let role = cert.as_deref().and_then(super::tls::role_of);
                             let policy = role.as_ref().and_then(|r| tls.roles.get(r));
                             // A session whose certificate a reloaded CRL revokes ends at once

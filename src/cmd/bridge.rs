@@ -609,7 +609,8 @@ mod tests {
     /// Issue 24: `read-only = true` and `allow-ip` above `[bridge]` had no effect.
     #[test]
     fn keys_outside_the_bridge_table_refuse_to_start() {
-        let file = file("outside", "read-only = true\nallow-ip = [\"10.9.9.9\"]\n\n[bridge]\nserial = \"/dev/ttyS0\"\n");
+        let file =
+            file("outside", "read-only = true\nallow-ip = [\"10.9.9.9\"]\n\n[bridge]\nserial = \"/dev/ttyS0\"\n");
         let (cli, m) = parse(&["mbtap", "bridge", "--config", file.to_str().unwrap()]);
         let e = format!("{:#}", merge(&file, cli, Some(&m)).unwrap_err());
         assert!(e.contains(file.to_str().unwrap()) && e.contains("line 1") && e.contains("read-only"), "{e}");
@@ -626,8 +627,7 @@ mod tests {
             assert!(e.contains(&format!("{key} = []")) && e.contains(&format!("line {line}")), "{e}");
         }
         let opts = options("[bridge]\nlisten = \"x\"\n[roles.admin]\n", &known_keys()).unwrap();
-        let roles: Vec<String> =
-            opts.iter().filter_map(|o| o.strip_prefix("--role=")).map(str::to_owned).collect();
+        let roles: Vec<String> = opts.iter().filter_map(|o| o.strip_prefix("--role=")).map(str::to_owned).collect();
         assert!(crate::bridge::tls::parse_roles(&roles).is_err(), "{roles:?}");
     }
 

@@ -97,10 +97,16 @@ pub fn check_prefix(prefix: &str) -> Result<(), String> {
         return Err("a topic prefix cannot contain + or # (wildcards, MQTT v3.1.1 §4.7.1)".into());
     }
     if prefix.starts_with('$') {
-        return Err("topics starting with $ are the broker's own ($SYS…, MQTT v3.1.1 §4.7.2): it drops publications to them".into());
+        return Err(
+            "topics starting with $ are the broker's own ($SYS…, MQTT v3.1.1 §4.7.2): it drops publications to them"
+                .into(),
+        );
     }
     if let Some((at, c)) = prefix.char_indices().find(|(_, c)| c.is_control()) {
-        return Err(format!("a control character (U+{:04X}) at byte {at}; topics are printable UTF-8 (MQTT v3.1.1 §1.5.3)", u32::from(c)));
+        return Err(format!(
+            "a control character (U+{:04X}) at byte {at}; topics are printable UTF-8 (MQTT v3.1.1 §1.5.3)",
+            u32::from(c)
+        ));
     }
     if prefix.len() > MAX_PREFIX_BYTES {
         return Err(format!(

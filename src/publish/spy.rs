@@ -218,7 +218,7 @@ impl Spy {
 /// Connections the spy server holds open at once.
 const MAX_CLIENTS: usize = 64;
 /// A connection silent this long is closed (the bridge's default `--idle-timeout`).
-const IDLE_TIMEOUT: Duration = Duration::from_secs(300);
+const IDLE_TIMEOUT: Duration = Duration::from_mins(5);
 
 /// One connection's service; its end frees the connection's place.
 struct Service {

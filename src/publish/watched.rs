@@ -126,7 +126,7 @@ impl<S: AsyncRead + Unpin> AsyncRead for Watched<S> {
                 Poll::Ready(()) => Poll::Ready(Ok(())),
                 Poll::Pending => Poll::Pending,
             },
-            other => other,
+            other @ Poll::Ready(_) => other,
         }
     }
 }
@@ -177,7 +177,7 @@ mod tests {
         drop(client);
         let (_client, server) = tokio::io::duplex(64);
         let conn = t.open();
-        let mut w = Watched::new(server, Duration::from_secs(3600), Arc::clone(&conn));
+        let mut w = Watched::new(server, Duration::from_hours(1), Arc::clone(&conn));
         let reader = tokio::spawn(async move { w.read(&mut buf).await.unwrap_or(99) });
         tokio::task::yield_now().await;
         conn.evict();

@@ -201,14 +201,13 @@ pub fn answer_fits(request: &[u8], answer: &[u8]) -> bool {
         return false;
     }
     match fc {
-        // Single writes, Mask Write and Diagnostics echo their request (§6.5, 6.6, 6.16, 6.8);
-        // Diagnostics sub-functions other than 0000 answer their own data field.
+        // Single writes and Mask Write echo their request (§6.5, 6.6, 6.16).
         0x05 | 0x06 | 0x16 => answer == request,
-        0x08 => answer.get(..3) == request.get(..3),
+        // Diagnostics answers its sub-function (§6.8; sub-functions other than 0000 answer
+        // their own data field), device identification its MEI type and read code (§6.21).
+        0x08 | 0x2B => answer.get(..3) == request.get(..3),
         // Multiple writes answer address and quantity (§6.11, 6.12).
         0x0F | 0x10 => answer.get(..5) == request.get(..5),
-        // Device identification answers its MEI type and read code (§6.21).
-        0x2B => answer.get(..3) == request.get(..3),
         _ => true,
     }
 }
