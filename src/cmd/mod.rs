@@ -9,11 +9,13 @@ use anyhow::Context;
 use clap::{ArgMatches, Parser, Subcommand};
 
 pub mod bridge;
+pub mod completions;
 pub mod decode;
 pub mod demo;
 pub mod export;
 pub mod generate;
 pub mod generate_config;
+pub mod man;
 pub mod play;
 pub mod profiles;
 pub mod read;
@@ -28,7 +30,7 @@ pub mod write;
 
 /// mbtap — a Modbus RTU/ASCII bus analyzer: sniff, decode, record, replay, bridge, read and write.
 #[derive(Debug, Parser)]
-#[command(name = "mbtap", version, about, long_about = None)]
+#[command(name = "mbtap", version = long_version(), about, long_about = None)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -55,6 +57,15 @@ pub enum Command {
     Read(read::Args),
     Write(write::Args),
     Watch(watch::Args),
+    Completions(completions::Args),
+    Man(man::Args),
+}
+
+/// `0.1.0 (commit 1a2b3c4d 2026-12-02)`: the version, and the commit and its date when the
+/// build had a git checkout (set by build.rs; a build from a source archive says so).
+#[must_use]
+pub fn long_version() -> &'static str {
+    concat!(env!("CARGO_PKG_VERSION"), " (", env!("MBTAP_BUILD_COMMIT"), ")")
 }
 
 /// Runs one command; the exit code on success. `matches` is the whole command line as parsed,
@@ -81,6 +92,8 @@ pub fn run(command: Command, matches: &ArgMatches) -> anyhow::Result<ExitCode> {
         Command::Read(args) => read::run(&args),
         Command::Write(args) => write::run(&args),
         Command::Watch(args) => watch::run(&args),
+        Command::Completions(args) => completions::run(&args),
+        Command::Man(args) => man::run(&args),
     }
 }
 
