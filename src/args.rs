@@ -189,9 +189,14 @@ impl From<EventFormatArg> for EventFormat {
     }
 }
 
-/// `--duration SECONDS` as a duration (negative as 0, absurdly large capped).
-pub fn seconds(s: Option<f64>) -> Option<std::time::Duration> {
-    s.map(|s| std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)))
+/// One duration syntax for every option that takes one (`--duration`, `--idle-timeout`, as
+/// `--interval` and `--max-age` already did): `250ms`, `90s`, `2min`, `1h`, or a bare number of
+/// seconds (what these options took before), at most 100 days.
+///
+/// # Errors
+/// What is wrong with the value, with examples.
+pub fn duration_arg(s: &str) -> Result<std::time::Duration, String> {
+    mbtap_core::duration::parse_duration(s, std::time::Duration::ZERO, std::time::Duration::from_hours(24 * 100))
 }
 
 /// The faults named on the command line (`all`: every one, taking turns).

@@ -429,3 +429,14 @@ fn a_truncated_response_is_shown_as_both_readings() {
     let o = mbtap(&["decode", "01 03 00 65 00 03 15 D5"], None);
     assert!(!String::from_utf8_lossy(&o.stdout).contains("truncated"));
 }
+
+/// Issue 31: `decode -` took `-` for a frame instead of standard input, and Modbus Poll's log
+/// lines (`Tx:000001-…`) decoded their counter as noise.
+#[test]
+fn a_dash_reads_stdin_and_modbus_poll_logs_decode() {
+    let log = "Tx:000001-01 03 00 65 00 03 15 D4\nRx:000002-01 03 06 00 00 00 00 01 90 20 89\n";
+    let o = mbtap(&["decode", "-"], Some(log));
+    let out = stdout(&o);
+    assert!(o.status.success(), "{out}{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.contains("Read Holding Registers") && !out.contains("noise"), "{out}");
+}

@@ -85,3 +85,25 @@ fn no_fault_no_finding() {
     }
     assert!(s["transactions"].as_u64().unwrap() > 50, "{s}");
 }
+
+/// Issue 31: `demo --duration 2s` was refused while `--interval 1s` worked elsewhere: one
+/// duration syntax everywhere (a bare number is still seconds).
+#[test]
+fn durations_take_one_syntax_everywhere() {
+    for d in ["1500ms", "1.5s", "1.5"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+            .args(["demo", "--format", "summary", "--duration", d])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "--duration {d}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_mbtap")).args(["demo", "--duration", "2x"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("250ms, 1s, 2min or 1h"));
+    // The bridge's --idle-timeout the same way.
+    let out = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["bridge", "--serial", "/nonexistent/tty", "--listen", "127.0.0.1:0", "--idle-timeout", "5min"])
+        .args(["--duration", "200ms"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -34,7 +34,7 @@ read-only = false
 # allow-function = ["3", "4"]
 # allow-ip = ["10.0.0.0/24", "127.0.0.1"]
 max-connections = 64
-idle-timeout = 300.0     # seconds
+idle-timeout = "300s"    # 250ms, 90s, 5min, 1h
 # rate-limit = 50.0      # requests per second per connection
 queue-per-client = 32
 # map-unit = ["10=1"]    # TCP unit id = serial address

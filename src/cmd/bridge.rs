@@ -11,7 +11,7 @@ use clap::parser::ValueSource;
 use clap::{ArgMatches, FromArgMatches};
 use std::path::Path;
 
-use crate::args::{EventFormatArg, LineArgs, seconds};
+use crate::args::{EventFormatArg, LineArgs};
 use crate::cmd::runtime;
 use crate::output::EventWriter;
 use crate::tui::source::TuiSource;
@@ -94,9 +94,9 @@ pub struct Args {
     /// Connections open at once; more are refused.
     #[arg(long, default_value_t = 64)]
     pub max_connections: usize,
-    /// Close a connection silent this long, s.
-    #[arg(long, default_value_t = 300.0)]
-    pub idle_timeout: f64,
+    /// Close a connection silent this long: `300s`, `5min` (a bare number is seconds).
+    #[arg(long, default_value = "300s", value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    pub idle_timeout: std::time::Duration,
     /// Requests per second per connection; above it exception 0x06 (busy).
     #[arg(long)]
     pub rate_limit: Option<f64>,
@@ -129,9 +129,9 @@ pub struct Args {
     /// Annotate unit UNIT's values in the monitor: `UNIT=NAME` or `UNIT=FILE.toml`.
     #[arg(long = "device", value_name = "UNIT=PROFILE")]
     pub devices: Vec<String>,
-    /// Stop after this many seconds.
-    #[arg(long)]
-    pub duration: Option<f64>,
+    /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
+    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    pub duration: Option<std::time::Duration>,
     /// RS-485 direction control of the serial lines.
     #[command(flatten)]
     pub rs485: crate::source::rs485::Rs485Args,
@@ -248,10 +248,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         turnaround_ms.is_finite() && turnaround_ms >= 0.0,
         "--turnaround-ms {turnaround_ms}: expected 0 or more"
     );
-    anyhow::ensure!(
-        idle_timeout.is_finite() && idle_timeout > 0.0,
-        "--idle-timeout {idle_timeout}: expected seconds above 0"
-    );
+    anyhow::ensure!(!idle_timeout.is_zero(), "--idle-timeout {idle_timeout:?}: expected a duration above 0, e.g. 300s");
     let unit_timeouts = crate::bridge::timing::parse_unit_timeouts(&unit_timeout).map_err(anyhow::Error::msg)?;
     let polls = poll
         .iter()
@@ -311,7 +308,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             allow_functions,
             allow_ips,
             max_connections,
-            idle_timeout: std::time::Duration::from_secs_f64(idle_timeout),
+            idle_timeout,
             rate_limit,
             unit_map: crate::bridge::run::parse_unit_map(&unit_map)?,
             priority: priority
@@ -322,7 +319,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         },
         queue_per_client,
         metrics,
-        duration: seconds(duration),
+        duration,
         reverse,
         tls,
     };

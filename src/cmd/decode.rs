@@ -24,7 +24,8 @@ use crate::args::LangArg;
     after_help = "Examples:\n  mbtap decode \"01 03 06 00 00 00 00 01 90 20 89\"\n  mbtap decode ':01030065000394'\n  mbtap decode 010300650003 15D4 0103060000000001902089\n  echo 0183030131 | mbtap decode --format jsonl"
 )]
 pub struct Args {
-    /// Frames, one per argument (read from stdin, one per line, when none are given).
+    /// Frames, one per argument (read from stdin, one per line, when none are given or the
+    /// only one is `-`, as other Unix tools take it).
     pub frames: Vec<String>,
     /// Framing; detected per frame when not given (':' = ASCII, valid CRC = RTU, consistent MBAP = TCP).
     #[arg(long, value_enum)]
@@ -57,7 +58,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut out = io::BufWriter::new(stdout.lock());
     let mut err = io::stderr();
     let mut decoder = decode_cmd::Decoder::new(mode, format, &profiles, lang.into());
-    if frames.is_empty() {
+    if frames.is_empty() || frames == ["-"] {
         // Streamed: a line in, its result out, in constant memory (`tail -f log | mbtap decode`).
         let stdin = io::stdin();
         let mut lines = Lines::new(io::BufReader::new(stdin.lock()));

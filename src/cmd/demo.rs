@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use mbtap_core::framer::LineSettings;
 
-use crate::args::{EventFormatArg, FaultArg, LangArg, fault_list, seconds};
+use crate::args::{EventFormatArg, FaultArg, LangArg, fault_list};
 use crate::cmd::runtime;
 use crate::output::EventWriter;
 use crate::tui::source::TuiSource;
@@ -22,9 +22,9 @@ pub struct Args {
     /// Language of register names in annotations.
     #[arg(long, value_enum, default_value_t = LangArg::En)]
     pub lang: LangArg,
-    /// Stop after this many seconds (of line time).
-    #[arg(long)]
-    pub duration: Option<f64>,
+    /// Stop after this long (of line time): `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
+    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    pub duration: Option<std::time::Duration>,
     /// Inject a fault into every fourth transaction, faults taking turns (repeatable).
     #[arg(long = "fault", value_enum)]
     pub faults: Vec<FaultArg>,
@@ -43,7 +43,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { format, lang, duration, faults, speed, heard_at, publish } = args;
     let faults = fault_list(&faults);
     anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
-    let duration = seconds(duration);
     let opts = crate::source::demo::DemoOptions { duration, faults, speed, heard_at };
     let format =
         format.unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use mbtap_core::framer::LineSettings;
 
-use crate::args::{FaultArg, LineArgs, fault_list, seconds};
+use crate::args::{FaultArg, LineArgs, fault_list};
 
 #[derive(Debug, clap::Args)]
 // Command-line switches are bools by nature; each is an independent option, not a state.
@@ -22,9 +22,9 @@ pub struct Args {
     pub devices: Vec<String>,
     #[command(flatten)]
     pub line: LineArgs,
-    /// Stop after this many seconds.
-    #[arg(long)]
-    pub duration: Option<f64>,
+    /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
+    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    pub duration: Option<std::time::Duration>,
     /// A slave's time from the end of a request to its answer, ms.
     #[arg(long, default_value_t = 3.0)]
     pub turnaround_ms: f64,
@@ -71,7 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         devices,
         line: settings,
         mode,
-        duration: seconds(duration),
+        duration,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         paced,
         echo,

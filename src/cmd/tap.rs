@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use crate::args::event_writer;
-use crate::args::{EventFormatArg, LineArgs, OutputArgs, seconds};
+use crate::args::{EventFormatArg, LineArgs, OutputArgs};
 use crate::cmd::runtime;
 
 #[derive(Debug, clap::Args)]
@@ -28,9 +28,9 @@ pub struct Args {
     /// Record both directions to this pcapng file.
     #[arg(long)]
     pub record: Option<PathBuf>,
-    /// Stop after this many seconds.
-    #[arg(long)]
-    pub duration: Option<f64>,
+    /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
+    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    pub duration: Option<std::time::Duration>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
@@ -43,7 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         line: settings,
         latency_ns: line.latency_ms.is_some().then_some(latency_ns),
         record,
-        duration: seconds(duration),
+        duration,
     };
     let profiles = crate::config::devices::load_devices(&output.devices)?;
     let publishing = crate::publish::Publishing::start(&output.publish, true, &opts.port, &profiles)?;

@@ -67,6 +67,14 @@ pub fn parse_log_line(line: &str) -> Result<LogLine, HexInputError> {
     if let Some((t, dir, after)) = leading_tag(rest.trim_start()) {
         tag = Some((t.to_owned(), dir));
         rest = after;
+        // Modbus Poll's and Modbus Slave's logs number their lines after the tag:
+        // `Tx:000001-01 03 00 00 00 0A C5 CD`. The counter is set aside, not read as bytes.
+        if let Some((counter, frame)) = rest.split_once('-')
+            && (1..=10).contains(&counter.len())
+            && counter.bytes().all(|b| b.is_ascii_digit())
+        {
+            rest = frame;
+        }
     }
     let rest = rest.trim_start();
     let offset = line.len() - rest.len();
@@ -274,6 +282,20 @@ mod tests {
     }
 
     /// Issue 16: `decode ":"` said "ASCII frame of 3 bytes" (its added CR LF counted).
+    /// Issue 31: Modbus Poll's log lines decoded their line counter as noise.
+    #[test]
+    fn modbus_polls_line_counter_is_set_aside() {
+        // Modbus Poll log: Tx:COUNTER-request, Rx:COUNTER-response (MK4 §3.3 read of 101..103).
+        let tx = parse_log_line("Tx:000001-01 03 00 65 00 03 15 D4").unwrap();
+        assert_eq!(tx.bytes, [0x01, 0x03, 0x00, 0x65, 0x00, 0x03, 0x15, 0xD4]);
+        assert_eq!(tx.tag.unwrap().1, Tagged::Request);
+        let rx = parse_log_line("Rx:000002-01 03 06 00 00 00 00 01 90 20 89").unwrap();
+        assert_eq!(rx.bytes.len(), 11);
+        assert_eq!(rx.tag.unwrap().1, Tagged::Response);
+        // Without a tag, digits and a dash are bytes as before.
+        assert_eq!(parse_log_line("01-03-00-65-00-03-15-D4").unwrap().bytes.len(), 8);
+    }
+
     #[test]
     fn a_short_ascii_frame_counts_what_was_typed() {
         assert_eq!(parse_frame_text(":"), Err(HexInputError::AsciiTooShort { chars: 0 }));
