@@ -63,3 +63,32 @@ fn an_empty_allow_list_in_the_file_refuses_to_start() {
         assert!(stderr(&o).contains(&format!("{key} = []")), "{}", stderr(&o));
     }
 }
+
+/// Issue 31: with no such serial port the bridge said only "listening", and every client got
+/// "gateway path unavailable" with no word why. It says so at once (and once a minute).
+#[test]
+fn a_missing_serial_port_is_said_at_start() {
+    let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .env("MBTAP_CONFIG", "/nonexistent/mbtap-config.toml")
+        .args(["bridge", "--serial", "/nonexistent/ttyUSB-test", "--listen", "127.0.0.1:0", "--duration", "1s"])
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("serial port /nonexistent/ttyUSB-test: cannot open it") && err.contains("0x0A"),
+        "{err}"
+    );
+}
+
+/// Issue 31: `sniff` on a missing port printed an empty summary to stdout beside the error.
+#[test]
+fn sniff_on_a_missing_port_says_only_the_error() {
+    let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["sniff", "/nonexistent/ttyUSB-test", "--duration", "1"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(o.stdout.is_empty(), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(stderr(&o).contains("/nonexistent/ttyUSB-test"), "{}", stderr(&o));
+}

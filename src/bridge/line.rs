@@ -363,12 +363,14 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
     };
     let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
     let mut watch = crate::source::serial::DeviceWatch::default();
+    // Since when the port has been said missing (None: open, or not tried yet).
+    let mut missing: Option<Instant> = None;
     loop {
         let Some((client, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
             let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
             if port.is_none() && Instant::now() >= next_open {
-                port = open(&opts, &shared, &mut watch);
+                port = open(&opts, &shared, &mut watch, &mut missing);
             }
             continue;
         };
@@ -378,7 +380,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             continue;
         }
         if port.is_none() && Instant::now() >= next_open {
-            port = open(&opts, &shared, &mut watch);
+            port = open(&opts, &shared, &mut watch, &mut missing);
             if port.is_some() {
                 backoff = Duration::from_millis(100);
                 shared.metrics.reopened();
@@ -465,17 +467,43 @@ fn open(
     opts: &LineOptions,
     shared: &LineShared,
     watch: &mut crate::source::serial::DeviceWatch,
+    missing: &mut Option<Instant>,
 ) -> Option<SerialStream> {
-    let path = crate::source::serial::resolve_port(&opts.port).ok()?;
-    // Checked at start-up; a port that comes back must take the mode again.
-    opts.rs485.prepare(&path).ok()?;
-    let port = crate::source::serial::builder(&path, opts.line).open_native_async().ok()?;
-    let _ = port.clear(tokio_serial::ClearBuffer::All);
-    if let Some(said) = watch.opened(&opts.port, &path) {
-        shared.metrics.note(&said);
+    let opened = (|| -> Result<SerialStream, String> {
+        let path = crate::source::serial::resolve_port(&opts.port).map_err(|e| format!("{e:#}"))?;
+        // Checked at start-up; a port that comes back must take the mode again.
+        opts.rs485.prepare(&path).map_err(|e| format!("{e:#}"))?;
+        let port = crate::source::serial::builder(&path, opts.line).open_native_async().map_err(|e| e.to_string())?;
+        let _ = port.clear(tokio_serial::ClearBuffer::All);
+        if let Some(said) = watch.opened(&opts.port, &path) {
+            shared.metrics.note(&said);
+        }
+        Ok(port)
+    })();
+    match opened {
+        Ok(port) => {
+            if missing.take().is_some() {
+                shared.metrics.note(&format!("serial port {}: open; forwarding requests again", opts.port));
+            }
+            Some(port)
+        }
+        Err(why) => {
+            // Said at once and then once a minute while it lasts (issue 31: the bridge said only
+            // "listening" and every client got 0x0A with no word why).
+            if missing.is_none_or(|said| said.elapsed() >= MISSING_PORT_REMINDER) {
+                *missing = Some(Instant::now());
+                shared.metrics.note(&format!(
+                    "serial port {}: cannot open it ({why}); clients get exception 0x0A (gateway path unavailable) until it opens; trying again every few seconds",
+                    opts.port
+                ));
+            }
+            None
+        }
     }
-    Some(port)
 }
+
+/// How often a port that stays missing is said again.
+const MISSING_PORT_REMINDER: Duration = Duration::from_mins(1);
 
 /// Sleeps until `at`: the timer for all but the last millisecond (its granularity), then
 /// yields until the moment, so the line's quiet time is t3.5, not t3.5 rounded up to a tick.

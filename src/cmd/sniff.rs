@@ -55,8 +55,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
     writer.taps = taps;
     let result = runtime()?.block_on(crate::source::sniff::sniff(opts, &mut writer, &mut io::stderr()));
-    // The summary is written even when the recording failed; the exit status says it did.
-    writer.finish()?;
+    // The summary is written even when the recording failed; the exit status says it did. A
+    // port that never opened heard nothing: only the error is said.
+    let opened = !matches!(&result, Err(e) if e.downcast_ref::<crate::source::sniff::NeverOpened>().is_some());
+    if opened {
+        writer.finish()?;
+    }
     publishing.finish();
     result?;
     Ok(ExitCode::SUCCESS)

@@ -41,6 +41,20 @@ const FLUSH: Duration = Duration::from_secs(1);
 ///
 /// # Errors
 /// When the port cannot be opened at start, or the recording cannot be written.
+/// The error of a sniff that never opened its port: nothing was heard, so no summary is due
+/// (issue 31: an empty summary went to stdout beside the real error).
+/// It says the opening error as it was.
+#[derive(Debug, Clone)]
+pub struct NeverOpened(String);
+
+impl std::fmt::Display for NeverOpened {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for NeverOpened {}
+
 pub async fn sniff<W: Write>(
     opts: SniffOptions,
     writer: &mut EventWriter<W>,
@@ -61,7 +75,8 @@ pub async fn sniff<W: Write>(
     let mut analyzer = Analyzer::new(config);
     let mut watch = crate::source::serial::DeviceWatch::default();
     let mut stream = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err)
-        .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?;
+        .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))
+        .map_err(|e| anyhow::Error::new(NeverOpened(format!("{e:#}"))))?;
     let _ = writeln!(
         err,
         "mbtap: sniffing {} at {} {} (reads trusted to {} µs: --latency-ms)",
