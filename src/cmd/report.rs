@@ -29,8 +29,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let input = crate::output::progress::open_capture(&file, true)?;
     let mut health = mbtap_core::health::Health::new(crate::config::devices::load_devices(&devices)?);
     let mut warnings = Vec::new();
+    let (mut settings, mut observers) = (None, Vec::new());
     {
-        let mut sink = HealthSink { health: &mut health, warnings: &mut warnings };
+        let mut sink =
+            HealthSink { health: &mut health, warnings: &mut warnings, settings: &mut settings, observers: &mut observers };
         mbtap_core::replay::replay_into(input, line.overrides(), &mut sink)
             .context("reading the capture")
             .with_context(|| format!("reading {}", file.display()))?;
@@ -38,7 +40,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     for w in &warnings {
         eprintln!("mbtap: warning: {w}");
     }
-    let report = health.report();
+    let mut report = health.report();
+    // What the report worked with: the line settings and the observer latency (issue 25/31).
+    report.line = settings.map(|l| l.to_string());
+    report.observers = observers;
     let text = match format {
         ReportFormatArg::Text => mbtap_core::report::format::printable(&report.text()).into_owned(),
         ReportFormatArg::Json => serde_json::to_string_pretty(&report.json())? + "\n",
@@ -66,6 +71,8 @@ pub enum ReportFormatArg {
 struct HealthSink<'a> {
     health: &'a mut mbtap_core::health::Health,
     warnings: &'a mut Vec<String>,
+    settings: &'a mut Option<mbtap_core::framer::LineSettings>,
+    observers: &'a mut Vec<String>,
 }
 
 impl mbtap_core::analyzer::Sink for HealthSink<'_> {
@@ -75,5 +82,15 @@ impl mbtap_core::analyzer::Sink for HealthSink<'_> {
 
     fn warning(&mut self, message: &str) {
         self.warnings.push(message.to_owned());
+    }
+
+    fn settings(&mut self, line: mbtap_core::framer::LineSettings) {
+        *self.settings = Some(line);
+    }
+
+    fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
+        if estimate.split_frames > 0 || estimate.reads > 0 {
+            self.observers.push(mbtap_core::report::events::observer_text(port.0, estimate).trim().to_owned());
+        }
     }
 }

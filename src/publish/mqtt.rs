@@ -117,6 +117,63 @@ pub fn check_prefix(prefix: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// The discovery object id of a row: `u1_holding_registers_105`.
+fn discovery_object(r: &Row) -> String {
+    format!("u{}_{}_{}", r.unit, r.table.name(), r.address)
+}
+
+/// A Home Assistant discovery message for `r`: (node id, object id, component, config).
+/// Keys without a value are left out (issue 31: `"manufacturer": null` for a profile without a
+/// vendor, which Home Assistant's schema refuses: a string or no key); coils and discrete inputs
+/// are binary sensors with the raw 1/0 as their state, not numeric sensors.
+///
+/// Writable registers are announced as sensors, not `number`/`switch`/`select` controls: a
+/// control whose commands nothing executes would mislead; they come with writes from the broker.
+pub fn discovery(
+    prefix: &str,
+    r: &Row,
+    profile: Option<&mbtap_core::profile::Profile>,
+    state_topic: &str,
+) -> (String, String, &'static str, serde_json::Value) {
+    let node = topic_level(&prefix.replace('/', "_"));
+    let object = discovery_object(r);
+    let mut device = serde_json::json!({
+        "identifiers": [format!("{node}_u{}", r.unit)],
+        "name": format!("{} (unit {})", profile.map_or("Modbus device", |p| p.meta.device.as_str()), r.unit),
+        "via_device": node,
+    });
+    if let Some(d) = device.as_object_mut() {
+        if let Some(vendor) = profile.and_then(|p| p.meta.vendor.clone()) {
+            d.insert("manufacturer".into(), vendor.into());
+        }
+        if let Some(p) = profile {
+            d.insert("model".into(), p.meta.name.clone().into());
+        }
+    }
+    let bits = mbtap_core::query::is_bits(r.table);
+    let mut config = serde_json::json!({
+        "name": r.name,
+        "unique_id": format!("{node}_{object}"),
+        "object_id": format!("{node}_{object}"),
+        "state_topic": state_topic,
+        "availability_topic": format!("{prefix}/status"),
+        "device": device,
+    });
+    if let Some(o) = config.as_object_mut() {
+        if bits {
+            o.insert("value_template".into(), "{{ value_json.raw }}".into());
+            o.insert("payload_on".into(), "1".into());
+            o.insert("payload_off".into(), "0".into());
+        } else {
+            o.insert("value_template".into(), "{{ value_json.value }}".into());
+            if let Some(u) = &r.unit_of_measure {
+                o.insert("unit_of_measurement".into(), u.clone().into());
+            }
+        }
+    }
+    (node, object, if bits { "binary_sensor" } else { "sensor" }, config)
+}
+
 /// This machine's name, for the default prefix.
 fn hostname() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
@@ -356,30 +413,12 @@ impl Mqtt {
         }
     }
 
-    /// Home Assistant MQTT discovery: one sensor per named value, grouped by device.
+    /// Home Assistant MQTT discovery: one entity per named value, grouped by device — a
+    /// `binary_sensor` for coils and discrete inputs (on/off), a `sensor` for registers.
     fn announce(&self, r: &Row, state_topic: &str) {
-        let node = topic_level(&self.prefix.replace('/', "_"));
-        let object = format!("u{}_{}_{}", r.unit, r.table.name(), r.address);
-        let profile = self.profiles.get(&r.unit);
-        let mut config = serde_json::json!({
-            "name": r.name,
-            "unique_id": format!("{node}_{object}"),
-            "object_id": format!("{node}_{object}"),
-            "state_topic": state_topic,
-            "value_template": "{{ value_json.value }}",
-            "availability_topic": format!("{}/status", self.prefix),
-            "device": {
-                "identifiers": [format!("{node}_u{}", r.unit)],
-                "name": format!("{} (unit {})", profile.map_or("Modbus device", |p| p.meta.device.as_str()), r.unit),
-                "manufacturer": profile.and_then(|p| p.meta.vendor.clone()),
-                "model": profile.map(|p| p.meta.name.clone()),
-                "via_device": node,
-            },
-        });
-        if let (Some(u), Some(o)) = (&r.unit_of_measure, config.as_object_mut()) {
-            o.insert("unit_of_measurement".into(), u.clone().into());
-        }
-        self.send(&format!("homeassistant/sensor/{node}/{object}/config"), QoS::AtLeastOnce, true, config.to_string());
+        let (node, object, component, config) = discovery(&self.prefix, r, self.profiles.get(&r.unit), state_topic);
+        let _ = object;
+        self.send(&format!("homeassistant/{component}/{node}/{}/config", discovery_object(r)), QoS::AtLeastOnce, true, config.to_string());
     }
 
     /// Takes rows read at bus time `t_ns`: each one published if it changed and its last
@@ -532,6 +571,28 @@ impl crate::output::Tap for Mqtt {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 31: the MKZP (a profile without a vendor) was announced with `"manufacturer":
+    /// null`, which Home Assistant's schema refuses, and coils as numeric sensors.
+    #[test]
+    fn discovery_leaves_out_absent_keys_and_announces_bits_as_binary_sensors() {
+        use mbtap_core::profile::Table;
+        let mkzp = mbtap_core::profile::builtin::get("mkzp").unwrap().unwrap();
+        assert!(mkzp.meta.vendor.is_none(), "the test needs a profile without a vendor");
+        let regs = mbtap_core::query::rows::rows(17, Table::HoldingRegisters, 50, &[123], Some(&mkzp));
+        let (_, _, component, config) = discovery("mbtap/site", &regs[0], Some(&mkzp), "t");
+        assert_eq!(component, "sensor");
+        assert!(!config.to_string().contains("null"), "{config}");
+        assert!(config["device"].get("manufacturer").is_none(), "{config}");
+        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
+        let coil = mbtap_core::query::rows::rows(1, Table::Coils, 0, &[1], Some(&mk4));
+        let (_, _, component, config) = discovery("mbtap/site", &coil[0], Some(&mk4), "t");
+        assert_eq!(component, "binary_sensor");
+        assert_eq!((config["payload_on"].as_str(), config["payload_off"].as_str()), (Some("1"), Some("0")));
+        assert_eq!(config["value_template"], "{{ value_json.raw }}");
+        assert!(config.get("unit_of_measurement").is_none());
+        assert!(config["device"]["manufacturer"].is_string(), "the MK4 has a vendor: {config}");
+    }
 
     /// Issue 24: `$SYS/x`, a tab or 70 kB were accepted and every message silently dropped.
     #[test]

@@ -51,26 +51,31 @@ impl Health {
             };
             push("no_valid_frames", None, &t, summary);
         }
+        // Bytes that belong to no valid frame: noise and frames that failed with nothing awaited.
+        let junk = self.noise_bytes + self.stray_bytes;
         let total_bytes = self.noise_bytes + self.frame_bytes;
-        let garbage = total_bytes > 64 && ratio(self.noise_bytes, total_bytes) > GARBAGE_SHARE;
+        let garbage = total_bytes > 64 && ratio(junk, total_bytes) > GARBAGE_SHARE;
+        let noise_and_strays = self.noise.merged(&self.stray);
         if garbage {
-            let share = ratio(self.noise_bytes, total_bytes) * 100.0;
+            let share = ratio(junk, total_bytes) * 100.0;
             push(
                 "wrong_line_settings",
                 None,
-                &self.noise,
+                &noise_and_strays,
                 format!(
                     "{share:.0} % of the bytes belong to no valid frame: the baud rate, parity or mode is probably not the line's (try mbtap scan)"
                 ),
             );
         } else {
-            let n = self.noise.count;
-            push(
-                "noise",
-                None,
-                &self.noise,
-                format!("{n} burst(s) of bytes that belong to no frame: interference, termination or biasing"),
-            );
+            let (n, m) = (self.noise.count, self.stray.count);
+            let what = match (n, m) {
+                (_, 0) => format!("{n} burst(s) of bytes that belong to no frame"),
+                (0, _) => format!("{m} frame(s) that failed their check with no answer awaited"),
+                _ => format!(
+                    "{n} burst(s) of bytes that belong to no frame and {m} frame(s) that failed their check with no answer awaited"
+                ),
+            };
+            push("noise", None, &noise_and_strays, format!("{what}: interference, termination or biasing"));
         }
         // Check errors on every unit that answers at all point at the bus, not a device.
         let answering: Vec<u8> = self.units.iter().filter(|(_, u)| u.ok > 0).map(|(&k, _)| k).collect();
@@ -220,7 +225,10 @@ impl Health {
                 "value_out_of_range",
                 Some(unit),
                 &u.out_of_range,
-                format!("unit {unit} reports values outside its profile's range"),
+                format!(
+                    "unit {unit} reports values outside its profile's range: {}",
+                    u.out_of_range_examples.join("; ")
+                ),
             );
             let mut periods = u.periods.clone();
             periods.sort_unstable();
@@ -259,6 +267,9 @@ impl Health {
             frames: self.frames,
             bad_frames: self.bad_frames,
             noise_bytes: self.noise_bytes,
+            noise_bursts: self.noise.count,
+            stray_frames: self.stray.count,
+            stray_bytes: self.stray_bytes,
             cut_at_start_bytes: self.cut_at_start,
             frame_bytes: self.frame_bytes,
             transactions: self.transactions,
@@ -266,6 +277,8 @@ impl Health {
             findings,
             timeline,
             latencies,
+            line: None,
+            observers: Vec::new(),
         }
     }
 

@@ -14,6 +14,21 @@ const MARGIN: f64 = 40.0;
 /// Colours for units, in turn.
 const PALETTE: [&str; 8] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2"];
 
+/// `2026-12-02` (UTC) of a time in ns since the Unix epoch (civil date from days: the
+/// proleptic Gregorian calendar).
+fn date(t_ns: u64) -> String {
+    let days = i64::try_from(t_ns / 86_400_000_000_000).unwrap_or(0) + 719_468;
+    let era = days.div_euclid(146_097);
+    let doe = days.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}-{month:02}-{day:02}")
+}
+
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
@@ -33,18 +48,27 @@ pub fn render(report: &Report, title: &str) -> String {
          <style>body{{font:14px system-ui,sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}\
          td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}th{{background:#eee}}td.l{{text-align:left}}\
          .finding{{margin:.5em 0;padding:.4em .8em;border-left:4px solid #d62728;background:#fdf3f3}}\
-         .ok{{border-left-color:#2ca02c;background:#f3fdf3}}svg{{background:#fafafa;border:1px solid #ddd}}\
+         .warning{{border-left-color:#e6a100;background:#fdf8ec}}.info{{border-left-color:#1f77b4;background:#f1f6fb}}\
+         .ok{{border-left-color:#2ca02c;background:#f3fdf3}}td.alarm{{background:#fdf3f3}}td.warning{{background:#fdf8ec}}svg{{background:#fafafa;border:1px solid #ddd}}\
          .kind{{font-family:monospace;font-weight:bold}}</style></head><body>\n<h1>Bus report: {t}</h1>\n",
         t = esc(title)
     );
+    // The date as well as the time (issue 31: a page handed to a customer said neither date
+    // nor line settings).
     let span = match (report.first_t_ns, report.last_t_ns) {
-        (Some(a), Some(b)) => format!("{} to {} ({:.1} s)", clock(a), clock(b), f(b - a) / 1e9),
+        (Some(a), Some(b)) => format!("{} {} to {} ({:.1} s)", date(a), clock(a), clock(b), f(b - a) / 1e9),
         _ => "no traffic".into(),
     };
+    if let Some(line) = &report.line {
+        let _ = writeln!(s, "<p>Line: {}</p>", esc(line));
+    }
+    for o in &report.observers {
+        let _ = writeln!(s, "<p><small>{}</small></p>", esc(o.trim()));
+    }
     let _ = write!(
         s,
-        "<p>{span}: {} frames ({} failed checks), {} transactions, {} bytes of noise.</p>\n<h2>Findings</h2>\n",
-        report.frames, report.bad_frames, report.transactions, report.noise_bytes
+        "<p>{span}: {} frames ({} failed checks, {} of them with no answer awaited), {} transactions, {} noise bursts ({} bytes).</p>\n<h2>Findings</h2>\n",
+        report.frames, report.bad_frames, report.stray_frames, report.transactions, report.noise_bursts, report.noise_bytes
     );
     if report.findings.is_empty() {
         s.push_str("<div class=\"finding ok\">None — the bus looks healthy.</div>\n");
@@ -54,14 +78,15 @@ pub fn render(report: &Report, title: &str) -> String {
         let times: Vec<String> = fi.evidence.iter().map(|&t| clock(t)).collect();
         let _ = writeln!(
             s,
-            "<div class=\"finding\" data-kind=\"{k}\"><span class=\"kind\">{k}</span> — {who}: {} \
+            "<div class=\"finding {sev}\" data-kind=\"{k}\" data-severity=\"{sev}\"><span class=\"kind\">{k}</span> — {who}: {} \
              <br><small>{}×, from {} to {}; first at {}</small></div>",
             esc(&fi.summary),
             fi.count,
             clock(fi.first_t_ns),
             clock(fi.last_t_ns),
             times.join(", "),
-            k = fi.kind
+            k = fi.kind,
+            sev = crate::health::severity(fi)
         );
     }
     s.push_str("<h2>Units</h2>\n<table><tr><th>unit</th>");
@@ -71,8 +96,15 @@ pub fn render(report: &Report, title: &str) -> String {
     s.push_str("</tr>\n");
     for u in &report.units {
         let _ = write!(s, "<tr><td>{}</td>", u.unit);
-        for (_, value) in u.figures() {
-            let _ = write!(s, "<td>{}</td>", esc(&value));
+        for (label, value) in u.figures() {
+            // Availability coloured by what it means: ≥ 99 % plain, ≥ 90 % a warning, below an
+            // alarm — not every figure in alarm red.
+            let class = match (label, value.trim_end_matches(" %").parse::<f64>()) {
+                ("availability", Ok(a)) if a < 90.0 => " class=\"alarm\"",
+                ("availability", Ok(a)) if a < 99.0 => " class=\"warning\"",
+                _ => "",
+            };
+            let _ = write!(s, "<td{class}>{}</td>", esc(&value));
         }
         s.push_str("</tr>\n");
     }

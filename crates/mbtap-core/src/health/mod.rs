@@ -22,7 +22,7 @@ mod report;
 
 use std::collections::BTreeMap;
 
-pub use report::{BINS, Bin, Finding, LATENCY_POINTS, LatencyPoint, Report, UnitHealth, clock};
+pub use report::{severity, BINS, Bin, Finding, LATENCY_POINTS, LatencyPoint, Report, UnitHealth, clock};
 
 use crate::analyzer::Event;
 use crate::pairing::{Outcome, Role};
@@ -98,6 +98,8 @@ struct UnitState {
     bad_response: Tally,
     gaps: Tally,
     out_of_range: Tally,
+    /// The first few registers and values outside their range, for the finding's sentence.
+    out_of_range_examples: Vec<String>,
     /// Answers that came twice: two devices on one address.
     doubled: Tally,
     /// Answers garbled the way two devices answering together garble them.
@@ -154,8 +156,14 @@ struct Asked {
 #[derive(Debug, Default)]
 pub struct Health {
     units: BTreeMap<u8, UnitState>,
+    /// Noise bursts: bytes the framer could read as no frame (the same count `replay` gives).
     noise: Tally,
     noise_bytes: u64,
+    /// Frames that failed their check while no answer was awaited: garbage that only looked
+    /// like a frame, counted apart from noise so every output means the same by "noise"
+    /// (issue 31: the report counted them as noise bursts, replay as failed frames).
+    stray: Tally,
+    stray_bytes: u64,
     frame_bytes: u64,
     frames: u64,
     bad_frames: u64,
@@ -274,6 +282,20 @@ impl Health {
         self.noise_bytes += len;
     }
 
+    /// A failed frame nothing awaited, `len` bytes from `t`: a stray — or, before the first
+    /// good frame, part of the frame the listener joined halfway.
+    fn stray_frame(&mut self, t: u64, len: usize) {
+        let len = len as u64;
+        if !self.in_step && self.cut_at_start + len <= JOINED_MID_FRAME {
+            self.cut_at_start += len;
+            return;
+        }
+        thin(&mut self.noise_times);
+        self.noise_times.push(t);
+        self.stray.add(t);
+        self.stray_bytes += len;
+    }
+
     fn frame(&mut self, frame: &crate::framer::Frame<'_>, role: Role, unit: Option<u8>) {
         self.seen(frame.t_end.0);
         self.frames += 1;
@@ -295,8 +317,7 @@ impl Health {
             self.last_ok = None;
             if self.pending.is_none() {
                 // Nothing awaited an answer: garbage that only looked like a frame.
-                self.frame_bytes -= frame.bytes.len() as u64;
-                self.garbage(frame.t_start.0, frame.bytes.len());
+                self.stray_frame(frame.t_start.0, frame.bytes.len());
             }
         }
         if frame.check_ok
@@ -441,6 +462,24 @@ impl Health {
         };
         if annotations.iter().any(|a| a.notes.iter().any(|n| matches!(n, Note::OutOfRange { .. }))) {
             u.out_of_range.add(at);
+            // Which register and value (issue 31: the finding named neither).
+            for a in annotations {
+                for n in &a.notes {
+                    if let Note::OutOfRange { min, max } = n {
+                        let example = format!(
+                            "{} {}{} = raw {} (documented {min}..={max})",
+                            crate::query::rows::short_table(a.table),
+                            a.address,
+                            a.name.as_deref().map(|n| format!(" {n}")).unwrap_or_default(),
+                            a.raw
+                        );
+                        let key = format!("{} {}", crate::query::rows::short_table(a.table), a.address);
+                        if u.out_of_range_examples.len() < 3 && !u.out_of_range_examples.iter().any(|e| e.starts_with(&key)) {
+                            u.out_of_range_examples.push(example);
+                        }
+                    }
+                }
+            }
         }
         let mut jumped = false;
         for a in annotations {

@@ -87,8 +87,14 @@ pub struct Report {
     pub first_t_ns: Option<u64>,
     pub last_t_ns: Option<u64>,
     pub frames: u64,
+    /// Frames that failed their check: the units' failed answers, and [`Self::stray_frames`].
     pub bad_frames: u64,
+    /// Noise bursts and their bytes: what the framer read as no frame (as `replay` counts).
     pub noise_bytes: u64,
+    pub noise_bursts: u64,
+    /// Failed frames while no answer was awaited (no unit they can be laid on), and their bytes.
+    pub stray_frames: u64,
+    pub stray_bytes: u64,
     /// Garbage before the first good frame (the listener joined mid-frame), not counted as noise.
     pub cut_at_start_bytes: u64,
     pub frame_bytes: u64,
@@ -99,6 +105,25 @@ pub struct Report {
     pub timeline: Vec<Bin>,
     /// Latencies over time (every one up to [`LATENCY_POINTS`], then evenly thinned).
     pub latencies: Vec<LatencyPoint>,
+    /// The line settings the capture was read with (`19200 8E1 rtu`), when the caller knows.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<String>,
+    /// What each port's framer learned about its observer's reads (the latency worked with and
+    /// where it came from), one sentence each.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub observers: Vec<String>,
+}
+
+/// How much a finding should worry the reader, for the HTML page's colours: `alarm` (the bus
+/// or a unit does not work), `warning` (it works, with faults), `info` (worth knowing).
+#[must_use]
+pub fn severity(f: &Finding) -> &'static str {
+    match f.kind {
+        "no_valid_frames" | "wrong_line_settings" | "second_master" | "duplicate_address" => "alarm",
+        "no_response" if f.summary.contains("never answers") => "alarm",
+        "turnaround_glitch" => "info",
+        _ => "warning",
+    }
 }
 
 /// Slices of time in the timeline.
@@ -116,11 +141,22 @@ impl Report {
             (Some(a), Some(b)) => format!("{:.1} s", ratio(b - a, 1_000_000_000)),
             _ => "nothing".into(),
         };
+        let strays = if self.stray_frames > 0 {
+            format!(", {} of them with no answer awaited", self.stray_frames)
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             s,
-            "bus: {span} of traffic, {} frames ({} failed checks), {} transactions, {} bytes of noise",
-            self.frames, self.bad_frames, self.transactions, self.noise_bytes
+            "bus: {span} of traffic, {} frames ({} failed checks{strays}), {} transactions, {} noise bursts ({} bytes)",
+            self.frames, self.bad_frames, self.transactions, self.noise_bursts, self.noise_bytes
         );
+        if let Some(line) = &self.line {
+            let _ = writeln!(s, "line: {line}");
+        }
+        for o in &self.observers {
+            let _ = writeln!(s, "{o}");
+        }
         if self.cut_at_start_bytes > 0 && self.frames > self.bad_frames {
             let _ = writeln!(
                 s,

@@ -400,8 +400,10 @@ impl Stats {
     }
 }
 
-/// What a port's framer learned about its reads, as a line of the summary.
-fn observer_text(port: u8, e: &ObserverEstimate) -> String {
+/// What a port's framer learned about its reads, as a line of the summary (and the health
+/// report's).
+#[must_use]
+pub fn observer_text(port: u8, e: &ObserverEstimate) -> String {
     let ms = |ns: u64| {
         #[allow(clippy::cast_precision_loss)]
         let v = ns as f64 / 1e6;

@@ -1,0 +1,33 @@
+"""Validates mbtap's Home Assistant MQTT discovery messages with Home Assistant's own schemas
+(the `homeassistant` package's MQTT sensor and binary_sensor DISCOVERY_SCHEMA), as Home
+Assistant does when the message arrives. Reads "TOPIC PAYLOAD" lines (mosquitto_sub -v) on
+stdin; prints one JSON object: {"checked": N, "by_component": {...}, "refused": [[topic, why]]}.
+Exit status 1 when any was refused or none was checked."""
+import json
+import sys
+
+# Importing the bootstrap first settles an import cycle among the http, websocket_api and
+# persistent_notification components that a direct import of the MQTT platforms runs into.
+import homeassistant.bootstrap  # noqa: F401
+from homeassistant.components.mqtt import binary_sensor, sensor
+
+schemas = {"sensor": sensor.DISCOVERY_SCHEMA, "binary_sensor": binary_sensor.DISCOVERY_SCHEMA}
+checked, refused, by_component = 0, [], {}
+for line in sys.stdin:
+    topic, _, payload = line.rstrip("\n").partition(" ")
+    parts = topic.split("/")
+    if len(parts) < 4 or parts[-1] != "config" or not payload:
+        continue
+    component = parts[1]
+    schema = schemas.get(component)
+    if schema is None:
+        refused.append([topic, f"component {component} is not one mbtap announces"])
+        continue
+    checked += 1
+    by_component[component] = by_component.get(component, 0) + 1
+    try:
+        schema(json.loads(payload))
+    except Exception as e:  # voluptuous.Invalid and JSON errors alike
+        refused.append([topic, str(e)])
+print(json.dumps({"checked": checked, "by_component": by_component, "refused": refused}))
+sys.exit(1 if refused or checked == 0 else 0)
