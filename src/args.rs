@@ -67,20 +67,40 @@ pub struct LineArgs {
     /// 1 ms; captures: what they were recorded with; else 0]
     #[arg(long)]
     pub latency_ms: Option<f64>,
+}
+
+/// Line settings of a command that reads a capture: those of [`LineArgs`], each one over what
+/// the capture stores, and which link types carry serial bytes. Live commands (`simulate`,
+/// `bridge`, `sniff`, `tap`) take [`LineArgs`] alone: no option that cannot apply to them is
+/// listed in their help (issue 31).
+#[derive(Debug, Clone, Args)]
+pub struct CaptureLineArgs {
+    /// Mode, baud rate, parity, stop and data bits not given are what the capture stores (then
+    /// the serial-line defaults).
+    #[command(flatten)]
+    pub line: LineArgs,
     /// Read a capture's interfaces of this link type as raw serial bytes too (147–162, the
     /// user link types, always are).
     #[arg(long, value_name = "DLT")]
     pub link_type: Option<u16>,
 }
 
+impl CaptureLineArgs {
+    /// These settings over whatever the capture supplies.
+    #[must_use]
+    pub fn overrides(&self) -> LineOverrides {
+        LineOverrides { link_type: self.link_type, ..self.line.overrides() }
+    }
+}
+
 /// The settings of a serial line a master speaks on (`read`, `write`, `watch`) or anything
 /// listens to (inside [`LineArgs`]).
 #[derive(Debug, Args, Clone, Default)]
 pub struct SerialLineArgs {
-    /// RTU or ASCII framing [default: rtu, or what the capture says].
+    /// RTU or ASCII framing [default: rtu].
     #[arg(long, value_enum)]
     pub mode: Option<SerialModeArg>,
-    /// Baud rate [default: 19200, or what the capture says].
+    /// Baud rate [default: 19200].
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: Option<u32>,
     /// Parity [default: even, as the serial-line spec says].
@@ -126,7 +146,6 @@ impl LineArgs {
             // Milliseconds given by a person; negative or absurd values clamp to 0..=10 s.
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
             latency_ns: a.latency_ms.map(|ms| (ms.clamp(0.0, 10_000.0) * 1e6) as u64),
-            link_type: a.link_type,
             ..self.serial.overrides()
         }
     }

@@ -92,3 +92,20 @@ fn sniff_on_a_missing_port_says_only_the_error() {
     assert!(o.stdout.is_empty(), "{}", String::from_utf8_lossy(&o.stdout));
     assert!(stderr(&o).contains("/nonexistent/ttyUSB-test"), "{}", stderr(&o));
 }
+
+/// Issue 31: `--link-type` (a capture's link type) and "or what the capture says" were listed in
+/// the help of commands that read no capture.
+#[test]
+fn help_lists_only_options_that_apply() {
+    let help = |cmd: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_mbtap")).args([cmd, "--help"]).output().unwrap();
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    for live in ["simulate", "bridge", "sniff", "tap", "read"] {
+        let h = help(live);
+        assert!(!h.contains("--link-type") && !h.contains("what the capture says"), "{live}:\n{h}");
+    }
+    for capture in ["replay", "report", "export"] {
+        assert!(help(capture).contains("--link-type"), "{capture}");
+    }
+}

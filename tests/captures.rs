@@ -50,3 +50,21 @@ fn jsonl_contract_on_every_capture() {
         assert!(frames > 0, "{}", path.display());
     });
 }
+
+/// Issue 31: `replay` did not use the `NAME.devices` file beside a capture (the tests above
+/// read it themselves). The real binary annotates the MKZP examples with no `--device`, says
+/// where the profiles came from, and `--device` still wins.
+#[test]
+fn replay_uses_the_devices_file_beside_the_capture() {
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mkzp-examples-rtu.pcapng");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap")).args(["replay", capture]).output().unwrap();
+    let (out, err) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("mkzp-examples-rtu.devices: 5=mkzp, 247=mkzp"), "{err}");
+    assert!(out.contains("Current_Faza_A: phase A current"), "annotated by the MKZP profile:\n{out}");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["replay", capture, "--device", "5=display"])
+        .output()
+        .unwrap();
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("     50 Current_Faza_A"), "--device 5=display wins for unit 5");
+}

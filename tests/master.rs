@@ -238,3 +238,16 @@ fn a_broadcast_write_or_an_undocumented_command_needs_force() {
         mbtap(&["write", b, "--device", "mk4", "--unit", "0", "--force", "--format", "text", "Level 2 set point=1.23"]);
     assert!(o.status.success() && text(&o).contains("broadcast holding 105"), "{}", text(&o));
 }
+
+/// Issue 31: `read --device mkzp holding 50` asked unit 1 (the profile's default address, where
+/// the simulated line has the MK4) and the error blamed the register. It says which unit was
+/// asked and why.
+#[test]
+fn a_failure_at_the_default_unit_says_which_unit_was_asked() {
+    let (_sim, bus) = simulator("default-unit");
+    let o = mbtap(&["read", bus.to_str().unwrap(), "--device", "mkzp", "--format", "text", "holding", "50"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("unit 1 was asked because it is the mkzp profile's default address"), "{}", text(&o));
+    let o = mbtap(&["read", bus.to_str().unwrap(), "--device", "mkzp", "--unit", "17", "--format", "text", "holding", "50"]);
+    assert!(o.status.success(), "{}", text(&o));
+}

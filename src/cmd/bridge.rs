@@ -448,7 +448,6 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "stop_bits" => line.serial.stop_bits,
         "data_bits" => line.serial.data_bits,
         "latency_ms" => line.latency_ms,
-        "link_type" => line.link_type,
         "listen" => listen,
         "listen_rtu" => listen_rtu,
         "routes" => routes,

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 
-use crate::args::LineArgs;
+use crate::args::CaptureLineArgs;
 
 #[derive(Debug, clap::Args)]
 /// Export the rebuilt frames for Wireshark (pcapng, link type 252, `mbrtu` dissector).
@@ -22,7 +22,7 @@ pub struct Args {
     #[arg(short, long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub line: LineArgs,
+    pub line: CaptureLineArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use crate::args::LineArgs;
+use crate::args::CaptureLineArgs;
 
 #[derive(Debug, clap::Args)]
 /// Play a line capture into a serial port with its recorded timing.
@@ -13,7 +13,7 @@ pub struct Args {
     /// The serial port to write to.
     pub port: String,
     #[command(flatten)]
-    pub line: LineArgs,
+    pub line: CaptureLineArgs,
     /// Speed factor (2 = twice as fast).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,

@@ -57,6 +57,16 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         timeout,
         m.retries,
     ));
+    let mut failures = failures;
+    if let Some(hint) = m.unit_hint(profile.as_ref()) {
+        // Every read failed at an address the user did not choose: the device may be elsewhere,
+        // not the register wrong (issue 31: the error blamed the register).
+        if rows.is_empty() {
+            for f in &mut failures {
+                f.problem = format!("{}; {hint}", f.problem);
+            }
+        }
+    }
     show::print(m.format(), &rows, &failures, &[], &mut std::io::stdout().lock()).context("writing the values")?;
     Ok(if failures.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }

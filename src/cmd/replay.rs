@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 
 use crate::args::event_writer;
-use crate::args::{EventFormatArg, LineArgs, OutputArgs};
+use crate::args::{CaptureLineArgs, EventFormatArg, OutputArgs};
 
 #[derive(Debug, clap::Args)]
 /// Replay a line capture (pcap/pcapng, link type 147) through the analyzer.
@@ -23,13 +23,15 @@ pub struct Args {
     #[arg(long)]
     pub image: Option<PathBuf>,
     #[command(flatten)]
-    pub line: LineArgs,
+    pub line: CaptureLineArgs,
     #[command(flatten)]
     pub output: OutputArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { file, image, line, output } = args;
+    let Args { file, image, line, mut output } = args;
+    // The profiles a capture ships with (NAME.devices beside it) under the command line's.
+    output.devices = [crate::config::devices::devices_beside(&file)?, output.devices].concat();
     let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
     let profiles = crate::config::devices::load_devices(&output.devices)?;
     let publishing = crate::publish::Publishing::start(&output.publish, false, &file.display().to_string(), &profiles)?;

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::ValueEnum;
 
-use crate::args::LineArgs;
+use crate::args::CaptureLineArgs;
 
 #[derive(Debug, clap::Args)]
 /// A bus health report from a capture: per unit and per bus, and findings with evidence.
@@ -15,7 +15,7 @@ pub struct Args {
     /// The capture file (pcap or pcapng, as `sniff --record` writes).
     pub file: PathBuf,
     #[command(flatten)]
-    pub line: LineArgs,
+    pub line: CaptureLineArgs,
     /// Output format.
     #[arg(long, value_enum, default_value_t = ReportFormatArg::Text)]
     pub format: ReportFormatArg,
@@ -26,6 +26,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, line, format, devices } = args;
+    let devices = [crate::config::devices::devices_beside(&file)?, devices].concat();
     let input = crate::output::progress::open_capture(&file, true)?;
     let mut health = mbtap_core::health::Health::new(crate::config::devices::load_devices(&devices)?);
     let mut warnings = Vec::new();

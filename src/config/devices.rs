@@ -45,6 +45,31 @@ pub fn resolve_profile(spec: &str) -> anyhow::Result<mbtap_core::profile::Profil
     )
 }
 
+/// The `UNIT=PROFILE` lines of the `NAME.devices` file beside a capture `NAME.pcapng`, if there
+/// is one (blank lines and `#` comments skipped), said on stderr when used; `--device` entries
+/// given after them win unit by unit (issue 31: `replay` ignored the file the captures ship with).
+///
+/// # Errors
+/// A line that is not `UNIT=PROFILE`, with the file and line.
+pub fn devices_beside(capture: &std::path::Path) -> anyhow::Result<Vec<String>> {
+    let path = capture.with_extension("devices");
+    let Ok(text) = std::fs::read_to_string(&path) else { return Ok(Vec::new()) };
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or_default().trim();
+        if line.is_empty() {
+            continue;
+        }
+        let ok = line.split_once('=').is_some_and(|(u, p)| u.trim().parse::<u8>().is_ok() && !p.trim().is_empty());
+        anyhow::ensure!(ok, "{}:{}: {line:?} is not UNIT=PROFILE (e.g. 1=mk4)", path.display(), i + 1);
+        out.push(line.to_owned());
+    }
+    if !out.is_empty() {
+        eprintln!("mbtap: profiles from {}: {} (--device overrides)", path.display(), out.join(", "));
+    }
+    Ok(out)
+}
+
 /// `--device UNIT=PROFILE` values: a unit address and a built-in name or a profile file.
 /// The configuration file's `[devices]` come first; `--device` replaces them unit by unit.
 pub fn load_devices(devices: &[String]) -> anyhow::Result<Profiles> {

@@ -59,6 +59,21 @@ impl MasterArgs {
         self.device.as_deref().map(crate::config::devices::resolve_profile).transpose()
     }
 
+    /// When the unit was not given: which address was asked and why, for a failure's message.
+    #[must_use]
+    pub fn unit_hint(&self, profile: Option<&mbtap_core::profile::Profile>) -> Option<String> {
+        if self.unit.is_some() {
+            return None;
+        }
+        let unit = self.unit(profile);
+        Some(match profile.and_then(|p| p.meta.default_address.map(|_| p.meta.name.as_str())) {
+            Some(name) => format!(
+                "unit {unit} was asked because it is the {name} profile's default address: give --unit N if the device answers at another"
+            ),
+            None => format!("unit {unit} was asked by default: give --unit N for the device's address"),
+        })
+    }
+
     /// `--unit`, else the profile's default address, else 1.
     #[must_use]
     pub fn unit(&self, profile: Option<&mbtap_core::profile::Profile>) -> u8 {

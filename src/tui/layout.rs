@@ -45,9 +45,12 @@ fn u16_at(b: &[u8], i: usize) -> Option<u16> {
     Some(u16::from_be_bytes([*b.get(i)?, *b.get(i.checked_add(1)?)?]))
 }
 
-/// The fields of a frame (`bytes` as from [`binary`]); `ascii` says the check is one LRC byte.
+/// The fields of a frame (`bytes` as from [`binary`]); `ascii` says the check is one LRC byte;
+/// `first` is the first register address a response's values belong to (its request's), so
+/// they are numbered as the device numbers them — as the decode beside them does (issue 31:
+/// they were numbered from 0).
 #[must_use]
-pub fn fields(bytes: &[u8], is_request: bool, ascii: bool) -> Vec<Field> {
+pub fn fields(bytes: &[u8], is_request: bool, ascii: bool, first: Option<u16>) -> Vec<Field> {
     let mut out = Vec::new();
     let check_len = if ascii { 1 } else { 2 };
     if bytes.len() < 2 + check_len {
@@ -86,14 +89,16 @@ pub fn fields(bytes: &[u8], is_request: bool, ascii: bool) -> Vec<Field> {
             push("byte count", next..next + 1, bytes[next.min(end)].to_string());
             next += 1;
             if fc != 0x0F {
-                next = registers(&mut push, bytes, next, end, "value");
+                // 10 writes from its address, 17 from its write address (MAP v1.1b3 §6.12, 6.17).
+                let at = if fc == 0x10 { 2 } else { 6 };
+                next = registers(&mut push, bytes, next, end, "value", u16_at(bytes, at));
             }
         }
     } else {
         match fc {
             0x03 | 0x04 | 0x17 => {
                 push("byte count", 2..3, bytes[2].to_string());
-                next = registers(&mut push, bytes, 3, end, "register");
+                next = registers(&mut push, bytes, 3, end, "register", first);
             }
             0x01 | 0x02 => {
                 push("byte count", 2..3, bytes[2].to_string());
@@ -117,20 +122,26 @@ pub fn fields(bytes: &[u8], is_request: bool, ascii: bool) -> Vec<Field> {
     out
 }
 
-/// Register-sized fields from `start` up to `end`; returns where they stopped.
+/// Register-sized fields from `start` up to `end`, labelled with their register address from
+/// `first` (or their offset `+n` when no request says it); returns where they stopped.
 fn registers(
     push: &mut impl FnMut(&str, Range<usize>, String),
     bytes: &[u8],
     start: usize,
     end: usize,
     label: &str,
+    first: Option<u16>,
 ) -> usize {
     let mut i = start;
-    let mut n = 0;
+    let mut n: u16 = 0;
     while i + 2 <= end {
-        push(&format!("{label} {n}"), i..i + 2, u16_at(bytes, i).map_or_else(String::new, |v| v.to_string()));
+        let name = match first.and_then(|f| f.checked_add(n)) {
+            Some(a) => format!("{label} {a}"),
+            None => format!("{label} +{n}"),
+        };
+        push(&name, i..i + 2, u16_at(bytes, i).map_or_else(String::new, |v| v.to_string()));
         i += 2;
-        n += 1;
+        n = n.saturating_add(1);
     }
     i
 }
@@ -150,7 +161,7 @@ mod tests {
 
     #[test]
     fn a_read_request_is_unit_function_address_quantity_crc() {
-        let f = fields(&READ_REQUEST, true, false);
+        let f = fields(&READ_REQUEST, true, false, None);
         let labels: Vec<(&str, Range<usize>, &str)> =
             f.iter().map(|f| (f.label.as_str(), f.range.clone(), f.value.as_str())).collect();
         assert_eq!(
@@ -168,16 +179,19 @@ mod tests {
     #[test]
     fn a_register_response_has_one_field_per_register() {
         let resp = [0x01, 0x03, 0x04, 0x00, 0x0A, 0x01, 0x02, 0xAA, 0xBB];
-        let f = fields(&resp, false, false);
+        let f = fields(&resp, false, false, Some(128));
         let labels: Vec<&str> = f.iter().map(|f| f.label.as_str()).collect();
-        assert_eq!(labels, ["unit", "function", "byte count", "register 0", "register 1", "CRC"]);
+        // Issue 31: numbered as the device numbers them (from the request's 128), not from 0.
+        assert_eq!(labels, ["unit", "function", "byte count", "register 128", "register 129", "CRC"]);
+        let unknown: Vec<String> = fields(&resp, false, false, None).into_iter().map(|f| f.label).collect();
+        assert_eq!(unknown[3..5], ["register +0", "register +1"]);
         assert_eq!(f[4].value, "258");
         assert_eq!(f[4].range, 5..7);
     }
 
     #[test]
     fn exceptions_ascii_and_short_or_lying_frames() {
-        let exc = fields(&[0x01, 0x83, 0x02, 0xC0, 0xF1], false, false);
+        let exc = fields(&[0x01, 0x83, 0x02, 0xC0, 0xF1], false, false, None);
         assert_eq!(exc[2].label, "exception code");
         let ascii = binary(b":010300650003 94\r\n");
         assert_eq!(ascii.first(), Some(&b':'), "an unparseable ASCII frame stays as it is");
@@ -186,7 +200,7 @@ mod tests {
         // A byte count that lies, and frames too short for their function: never out of range.
         for bytes in [&[0x01, 0x03, 0xFF, 0x00, 0x00][..], &[0x01, 0x10, 0x00][..], &[0x01][..], &[][..]] {
             for request in [true, false] {
-                for f in fields(bytes, request, false) {
+                for f in fields(bytes, request, false, Some(65_535)) {
                     assert!(f.range.end <= bytes.len(), "{f:?} in {bytes:02X?}");
                 }
             }

@@ -186,14 +186,29 @@ fn ui_loop(terminal: &mut ratatui::DefaultTerminal, shared: &Shared, source: &st
             Action::Speed => *shared.speed.lock().unwrap_or_else(PoisonError::into_inner) = app.speed,
             Action::ExportJsonl | Action::ExportPcapng => {
                 let model = shared.model();
+                let shown = app.visible().len();
                 let rows: Vec<&Row> = app.visible().iter().filter_map(|&s| model.row(s)).collect();
                 let pcap = action == Action::ExportPcapng;
                 app.message = Some(match export(&rows, &model, pcap) {
-                    Ok((path, n)) => format!("exported {n} rows to {path}"),
+                    Ok((path, n)) => export_said(&path, n, shown),
                     Err(e) => format!("export failed: {e:#}"),
                 });
             }
         }
+    }
+}
+
+/// What an export says: every row shown, or how many of them and why the rest were not
+/// (issue 31: "(27 shown)" beside "exported 26 rows" — a row the model had already let go of,
+/// the oldest when memory is full, was shown in the list but could not be written).
+fn export_said(path: &str, exported: usize, shown: usize) -> String {
+    if exported >= shown {
+        format!("exported all {exported} rows shown to {path}")
+    } else {
+        format!(
+            "exported {exported} of the {shown} rows shown to {path}: the {} oldest were already dropped from memory",
+            shown - exported
+        )
     }
 }
 
@@ -280,6 +295,14 @@ fn write_pcapng(rows: &[&Row], model: &Model, out: &mut dyn Write) -> std::io::R
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 31: "(27 shown)" and "exported 26 rows" with nothing said of the difference.
+    #[test]
+    fn an_export_says_what_it_left_out_and_why() {
+        assert_eq!(export_said("x.jsonl", 27, 27), "exported all 27 rows shown to x.jsonl");
+        let said = export_said("x.jsonl", 26, 27);
+        assert!(said.contains("26 of the 27") && said.contains("1 oldest were already dropped"), "{said}");
+    }
 
     #[test]
     fn the_pacer_follows_line_time_at_the_chosen_speed() {
