@@ -440,3 +440,27 @@ fn a_dash_reads_stdin_and_modbus_poll_logs_decode() {
     assert!(o.status.success(), "{out}{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.contains("Read Holding Registers") && !out.contains("noise"), "{out}");
 }
+
+/// Issue 25, pasted verbatim: a request to unit 254 and the `00` a transceiver left after it
+/// was one 9-byte "request, CRC ok (0x00C5)" with a trailing byte (units 248–255 did not get the
+/// glitch split every other unit gets).
+#[test]
+fn a_reserved_unit_gets_its_glitch_split_like_any_other() {
+    let o = mbtap(&["decode", "FE 04 00 03 00 01 D5 C5 00"], None);
+    let out = stdout(&o);
+    assert!(out.contains("RTU unit 254 · 0x04 Read Input Registers · request · CRC ok (0xC5D5)"), "{out}");
+    assert!(out.contains("glitch: 00 right after the frame"), "{out}");
+    assert!(!out.contains("trailing"), "{out}");
+}
+
+/// Issue 25, pasted verbatim: two CRC-valid 5-byte exception answers glued (a slave answering
+/// for an absent one) were one 10-byte frame with a failed CRC; the first, function 0, is shown
+/// as such with a finding.
+#[test]
+fn glued_exceptions_are_split_and_function_zero_is_named() {
+    let o = mbtap(&["decode", "21 80 01 81 CA 21 8A 01 87 6A"], None);
+    let out = stdout(&o);
+    assert!(out.contains("CRC ok (0xCA81)") && out.contains("CRC ok (0x6A87)"), "{out}");
+    assert!(out.contains("an exception to function 0, which does not exist"), "{out}");
+    assert!(!out.contains("CRC FAILED"), "{out}");
+}

@@ -874,6 +874,21 @@ impl Metrics {
 mod tests {
     use super::*;
 
+    /// Issue 24: an answer preceded by a transceiver's turnaround glitch (FE) was judged
+    /// foreign and the client got 0x0B, where `read` tolerated it.
+    #[test]
+    fn a_turnaround_glitch_before_the_answer_is_set_aside() {
+        // FE glitch, then unit 1's answer: 01 03 02 00 2A + CRC.
+        let answer = [0xFE, 0x01, 0x03, 0x02, 0x00, 0x2A, 0x39, 0x9B];
+        assert!(turnaround_glitch(&answer, 1));
+        assert!(turnaround_glitch(&[0x00, 0x11, 0x03], 0x11));
+        assert!(turnaround_glitch(&[0xFF, 0x05], 5));
+        assert!(!turnaround_glitch(&answer[1..], 1), "no glitch: the answer itself");
+        assert!(!turnaround_glitch(&[0xFE, 0x02, 0x03], 1), "another unit's frame is no glitch of ours");
+        assert!(!turnaround_glitch(&[0xFE, 0xFE, 0x03], 0xFE), "unit 254's own address");
+        assert!(!turnaround_glitch(&[0x07, 0x01], 1), "not a value a driver leaves");
+    }
+
     /// Issue 15: eight clients polling a dead unit cost the line a timeout each; a good unit's
     /// client got 3 answers in 8. The breaker opens after three failures, probes once per
     /// backoff (doubling to 30 s), and closes on the first answer.

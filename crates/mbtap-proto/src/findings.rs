@@ -94,6 +94,9 @@ pub enum Finding {
     ReservedAddress {
         unit: u8,
     },
+    /// An exception to function 0, which does not exist (MAP v1.1b3 §5.1: codes 1–127): a
+    /// slave answering garbage, or answering for an absent unit.
+    ExceptionToFunctionZero,
     AduTooLong {
         len: usize,
         max: usize,
@@ -127,6 +130,7 @@ impl Finding {
             Self::BroadcastAddress => "broadcast",
             Self::ResponseFromBroadcastAddress => "response_from_broadcast_address",
             Self::ReservedAddress { .. } => "reserved_address",
+            Self::ExceptionToFunctionZero => "exception_to_function_zero",
             Self::AduTooLong { .. } => "adu_too_long",
             Self::LowercaseHex => "lowercase_hex",
             Self::MissingCrLf => "missing_crlf",
@@ -179,6 +183,10 @@ impl fmt::Display for Finding {
             Self::BroadcastAddress => write!(f, "broadcast (unit 0): no response is expected"),
             Self::ResponseFromBroadcastAddress => write!(f, "a response from unit 0: nobody may answer a broadcast"),
             Self::ReservedAddress { unit } => write!(f, "unit {unit} is in the reserved range 248..=255"),
+            Self::ExceptionToFunctionZero => write!(
+                f,
+                "an exception to function 0, which does not exist: a slave answering garbage, or answering for an absent unit"
+            ),
             Self::AduTooLong { len, max } => write!(f, "frame is {len} bytes, longer than the spec's {max}"),
             Self::LowercaseHex => write!(f, "lower-case hex digits (the spec uses upper case)"),
             Self::MissingCrLf => write!(f, "no CR LF at the end of the ASCII frame"),
@@ -311,6 +319,9 @@ fn quantity_and_span(out: &mut Vec<Finding>, address: u16, q: u16, limit: (u16, 
 
 /// Findings on a response by itself.
 pub fn check_response(resp: &Response<'_>, out: &mut Vec<Finding>) {
+    if let Response::Exception { function: 0, .. } = resp {
+        out.push(Finding::ExceptionToFunctionZero);
+    }
     match *resp {
         Response::ReadHoldingRegisters { values }
         | Response::ReadInputRegisters { values }

@@ -54,6 +54,12 @@ pub struct FramerConfig {
     /// Whether the latency may be raised by what valid frames show of this observer's reads
     /// (see [`super::observer`]); off when the user gave it (`--latency-ms`).
     pub learn_latency: bool,
+    /// Frames pasted from logs (`decode`) rather than heard on a line: they may start with a
+    /// reserved address (248–255, Serial Line v1.02 §2.2) — devices configured at 254 or 255,
+    /// which many answer as a "whoever is connected" address, are cut like any other unit's —
+    /// and an exception may carry function 0 (`80`, shown with a finding). On a line both are
+    /// far likelier a glitch or garbage, so it is off there.
+    pub pasted: bool,
 }
 
 /// Default for [`FramerConfig::incomplete_timeout_ns`]: 50 ms.
@@ -66,6 +72,7 @@ impl Default for FramerConfig {
             latency_ns: 0,
             incomplete_timeout_ns: DEFAULT_INCOMPLETE_TIMEOUT_NS,
             learn_latency: true,
+            pasted: false,
         }
     }
 }
@@ -148,6 +155,10 @@ enum Try {
 #[derive(Debug)]
 pub struct RtuFramer {
     port: PortId,
+    /// The highest address a frame may start with: 247, or 255 for pasted frames.
+    max_address: u8,
+    /// Pasted frames (see [`FramerConfig::pasted`]).
+    pasted: bool,
     char_ns: u64,
     t15: u64,
     t35: u64,
@@ -236,6 +247,8 @@ impl RtuFramer {
             next_alt: None,
             after_damage: false,
             learner: ObserverLearner::new(config.latency_ns, config.learn_latency),
+            max_address: if config.pasted { u8::MAX } else { MAX_ADDRESS },
+            pasted: config.pasted,
         }
     }
 
@@ -519,9 +532,9 @@ impl RtuFramer {
         let live = &self.buf[self.head..];
         let s = &live[g..];
         let [addr, fc, ..] = *s else { return if flushing { Try::NotHere } else { Try::NeedMore(2) } };
-        // Addresses 248–255 are reserved (Modbus over Serial Line v1.02 §2.2): no frame starts
-        // with one, whatever its CRC says.
-        if addr > MAX_ADDRESS {
+        // Addresses 248–255 are reserved (Modbus over Serial Line v1.02 §2.2): no frame on a line
+        // starts with one, whatever its CRC says (pasted frames may: `FramerConfig::pasted`).
+        if addr > self.max_address {
             return Try::NotHere;
         }
         // While resynchronising through garbage, a chance CRC match (1 in 65 536 per
@@ -541,7 +554,7 @@ impl RtuFramer {
         // Address 0 is a broadcast: a request, of a write, never answered (Serial Line v1.02
         // §2.1) — no other reading of it is worth waiting for.
         let broadcast = addr == 0;
-        if !sane_header(s) {
+        if !sane_header(s, self.pasted) {
             return Try::NotHere;
         }
         let resp = if broadcast { PduLength::Unknown } else { response_len(pdu) };
@@ -730,7 +743,9 @@ impl RtuFramer {
         // A code with no public layout from an address never seen before is far more likely
         // garbage than a vendor frame; such frames are still reported, with their boundaries,
         // once a silence or a valid frame ends them (`emit_piece`).
-        if s[0] > 247 || !(base.name().is_some() || base.is_user_defined() || self.known_units[usize::from(s[0])]) {
+        if s[0] > self.max_address
+            || !(base.name().is_some() || base.is_user_defined() || self.known_units[usize::from(s[0])])
+        {
             return Try::NotHere;
         }
         // After damage (bytes before `g` that are not a lone glitch), a known unit's frame must
@@ -742,7 +757,7 @@ impl RtuFramer {
         }
         // Broadcasts carry writes only (Modbus over Serial Line v1.02 §2.1), and every write has
         // a fixed layout: address 0 with a length the structure cannot tell is garbage.
-        if s[0] == 0 || !sane_header(s) {
+        if s[0] == 0 || !sane_header(s, self.pasted) {
             return Try::NotHere;
         }
         let max = s.len().min(RTU_MAX_LEN);
@@ -945,7 +960,7 @@ impl RtuFramer {
         let [addr, fc, ..] = *piece else { return false };
         let base = FunctionCode::from(fc & !EXCEPTION_FLAG);
         (RTU_MIN_LEN..=RTU_MAX_LEN).contains(&piece.len())
-            && addr <= 247
+            && addr <= self.max_address
             && ((fc != 0 && (base.name().is_some() || base.is_user_defined())) || self.known_units[usize::from(addr)])
     }
 
@@ -969,7 +984,7 @@ impl RtuFramer {
         // from garbage, a chance CRC match is likelier than such a frame.
         let base = FunctionCode::from(f.get(1).map_or(0, |fc| fc & !EXCEPTION_FLAG));
         if !self.looks_like_frame(f)
-            || !sane_header(f)
+            || !sane_header(f, self.pasted)
             || !(base.name().is_some() || base.is_user_defined())
             || !Self::crc_ok(f)
         {
@@ -1342,8 +1357,11 @@ fn next_expect(expect: Expect, f: &[u8], reading: Option<Reading>) -> Expect {
 /// §5: codes 1–127), nor its exception 0x80; a broadcast (address 0) carries a write only
 /// (Serial Line v1.02 §2.1); an exception carries a code from 01 (MAP v1.1b3 §7). A CRC that
 /// matches by chance over damage (1 in 65 536) is taken only where the header is possible.
-fn sane_header(f: &[u8]) -> bool {
+fn sane_header(f: &[u8], pasted: bool) -> bool {
     match *f {
+        // Function 0 does not exist (MAP v1.1b3 §5.1); its exception `80` is kept only in pasted
+        // text, where a slave answering for an absent one has been seen to send it.
+        [_, 0x80, ..] if pasted => true,
         [_, fc, ..] if fc & !EXCEPTION_FLAG == 0 => false,
         // Exception codes start at 01 (MAP v1.1b3 §7): an "exception 00" is a chance match.
         [_, fc, 0, ..] if fc & EXCEPTION_FLAG != 0 => false,
