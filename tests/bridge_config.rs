@@ -75,10 +75,7 @@ fn a_missing_serial_port_is_said_at_start() {
         .unwrap();
     let err = stderr(&o);
     assert!(o.status.success(), "{err}");
-    assert!(
-        err.contains("serial port /nonexistent/ttyUSB-test: cannot open it") && err.contains("0x0A"),
-        "{err}"
-    );
+    assert!(err.contains("serial port /nonexistent/ttyUSB-test: cannot open it") && err.contains("0x0A"), "{err}");
 }
 
 /// Issue 31: `sniff` on a missing port printed an empty summary to stdout beside the error.

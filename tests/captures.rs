@@ -66,5 +66,8 @@ fn replay_uses_the_devices_file_beside_the_capture() {
         .args(["replay", capture, "--device", "5=display"])
         .output()
         .unwrap();
-    assert!(!String::from_utf8_lossy(&o.stdout).contains("     50 Current_Faza_A"), "--device 5=display wins for unit 5");
+    assert!(
+        !String::from_utf8_lossy(&o.stdout).contains("     50 Current_Faza_A"),
+        "--device 5=display wins for unit 5"
+    );
 }

@@ -248,6 +248,17 @@ fn a_failure_at_the_default_unit_says_which_unit_was_asked() {
     let o = mbtap(&["read", bus.to_str().unwrap(), "--device", "mkzp", "--format", "text", "holding", "50"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("unit 1 was asked because it is the mkzp profile's default address"), "{}", text(&o));
-    let o = mbtap(&["read", bus.to_str().unwrap(), "--device", "mkzp", "--unit", "17", "--format", "text", "holding", "50"]);
+    let o = mbtap(&[
+        "read",
+        bus.to_str().unwrap(),
+        "--device",
+        "mkzp",
+        "--unit",
+        "17",
+        "--format",
+        "text",
+        "holding",
+        "50",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
 }

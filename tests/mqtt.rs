@@ -416,7 +416,13 @@ fn every_discovery_message_passes_home_assistants_schema() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     sub.wait_for("the MKZP's discovery", |g| g.iter().any(|(t, _)| t.contains("/u17_")));
     std::thread::sleep(Duration::from_millis(300));
-    let lines: String = sub.got().iter().map(|(t, p)| format!("{t} {p}\n")).collect();
+    let lines = sub.got().iter().fold(String::new(), |mut all, (t, p)| {
+        all.push_str(t);
+        all.push(' ');
+        all.push_str(p);
+        all.push('\n');
+        all
+    });
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/ha_discovery_check.py");
     let mut check = Command::new("python3")
         .arg(script)

@@ -60,7 +60,11 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let pages = pages()?;
     let Some((_, page)) = pages.iter().find(|(n, _)| *n == wanted) else {
         let known: Vec<&str> = pages.iter().filter_map(|(n, _)| n.strip_prefix("mbtap-")?.strip_suffix(".1")).collect();
-        anyhow::bail!("no command {:?}; the commands are {}", args.command.as_deref().unwrap_or_default(), known.join(", "));
+        anyhow::bail!(
+            "no command {:?}; the commands are {}",
+            args.command.as_deref().unwrap_or_default(),
+            known.join(", ")
+        );
     };
     match std::io::stdout().lock().write_all(page) {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e).context("writing the page"),

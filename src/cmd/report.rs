@@ -32,8 +32,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut warnings = Vec::new();
     let (mut settings, mut observers) = (None, Vec::new());
     {
-        let mut sink =
-            HealthSink { health: &mut health, warnings: &mut warnings, settings: &mut settings, observers: &mut observers };
+        let mut sink = HealthSink {
+            health: &mut health,
+            warnings: &mut warnings,
+            settings: &mut settings,
+            observers: &mut observers,
+        };
         mbtap_core::replay::replay_into(input, line.overrides(), &mut sink)
             .context("reading the capture")
             .with_context(|| format!("reading {}", file.display()))?;

@@ -418,7 +418,12 @@ impl Mqtt {
     fn announce(&self, r: &Row, state_topic: &str) {
         let (node, object, component, config) = discovery(&self.prefix, r, self.profiles.get(&r.unit), state_topic);
         let _ = object;
-        self.send(&format!("homeassistant/{component}/{node}/{}/config", discovery_object(r)), QoS::AtLeastOnce, true, config.to_string());
+        self.send(
+            &format!("homeassistant/{component}/{node}/{}/config", discovery_object(r)),
+            QoS::AtLeastOnce,
+            true,
+            config.to_string(),
+        );
     }
 
     /// Takes rows read at bus time `t_ns`: each one published if it changed and its last

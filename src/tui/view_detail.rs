@@ -28,8 +28,7 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
     let bytes = binary(wire);
     // The request's address numbers the response's registers.
     let first = row.request.as_deref().map(binary).and_then(|r| Some(u16::from_be_bytes([*r.get(2)?, *r.get(3)?])));
-    let layout =
-        if row.function.is_some() { fields(&bytes, side == Side::Request, ascii, first) } else { Vec::new() };
+    let layout = if row.function.is_some() { fields(&bytes, side == Side::Request, ascii, first) } else { Vec::new() };
     app.field = app.field.min(layout.len().saturating_sub(1));
     let hex_lines = u16::try_from(bytes.len().div_ceil(16)).unwrap_or(16).clamp(1, 8);
     let [head, middle, hex] =

@@ -68,7 +68,12 @@ pub fn render(report: &Report, title: &str) -> String {
     let _ = write!(
         s,
         "<p>{span}: {} frames ({} failed checks, {} of them with no answer awaited), {} transactions, {} noise bursts ({} bytes).</p>\n<h2>Findings</h2>\n",
-        report.frames, report.bad_frames, report.stray_frames, report.transactions, report.noise_bursts, report.noise_bytes
+        report.frames,
+        report.bad_frames,
+        report.stray_frames,
+        report.transactions,
+        report.noise_bursts,
+        report.noise_bytes
     );
     if report.findings.is_empty() {
         s.push_str("<div class=\"finding ok\">None — the bus looks healthy.</div>\n");

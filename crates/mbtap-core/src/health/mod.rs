@@ -22,7 +22,7 @@ mod report;
 
 use std::collections::BTreeMap;
 
-pub use report::{severity, BINS, Bin, Finding, LATENCY_POINTS, LatencyPoint, Report, UnitHealth, clock};
+pub use report::{BINS, Bin, Finding, LATENCY_POINTS, LatencyPoint, Report, UnitHealth, clock, severity};
 
 use crate::analyzer::Event;
 use crate::pairing::{Outcome, Role};
@@ -474,7 +474,9 @@ impl Health {
                             a.raw
                         );
                         let key = format!("{} {}", crate::query::rows::short_table(a.table), a.address);
-                        if u.out_of_range_examples.len() < 3 && !u.out_of_range_examples.iter().any(|e| e.starts_with(&key)) {
+                        if u.out_of_range_examples.len() < 3
+                            && !u.out_of_range_examples.iter().any(|e| e.starts_with(&key))
+                        {
                             u.out_of_range_examples.push(example);
                         }
                     }
