@@ -360,6 +360,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         timeouts,
         echo_found: None,
         suspect: std::collections::HashSet::new(),
+        flush_after: None,
     };
     let mut breakers: std::collections::HashMap<u8, Breaker> = std::collections::HashMap::new();
     let mut watch = crate::source::serial::DeviceWatch::default();
@@ -434,6 +435,18 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
                 free_at = last_byte + opts.line_guard();
                 shared.metrics.latency(job.unit, job.queued.elapsed());
                 let _ = job.reply.send(reply);
+                // The client has its answer (or 0x0B); now what a slow unit says late is heard
+                // and dropped before the next request goes out.
+                if let Some((unit, window)) = master.flush_after.take() {
+                    match master.flush_late(p, unit, window).await {
+                        Ok(last) => free_at = free_at.max(last + opts.line_guard()),
+                        Err(lost) => {
+                            shared.metrics.port_lost(&lost);
+                            port = None;
+                            next_open = Instant::now() + backoff;
+                        }
+                    }
+                }
             }
             Err(lost) => {
                 for twin in twins {
@@ -528,6 +541,9 @@ struct Master<'a> {
     /// Units that timed out: their next answer is passed on but not cached (it may still be a
     /// late one whose shape matched).
     suspect: std::collections::HashSet<u8>,
+    /// After a timeout: the unit, and how long to listen for its late answer once the client
+    /// has been answered.
+    flush_after: Option<(u8, Duration)>,
 }
 
 impl Master<'_> {
@@ -631,17 +647,18 @@ impl Master<'_> {
                     }
                 },
             };
-            let mut outcome = self.read_answer(port, awaited, initial, false).await?;
+            let outcome = self.read_answer(port, awaited, initial, false).await?;
             match &outcome {
                 (Some(_), last) => self.timeouts.answered(job.unit, last.saturating_duration_since(sent)),
                 (None, last) if last.saturating_duration_since(sent) >= timeout => {
                     self.timeouts.timed_out(job.unit);
                     self.shared.metrics.waited_in_vain(job.unit, timeout);
                     // A unit slower than the timeout answers later: that answer must reach no
-                    // one (issue 24: the answer to h150 went to the client asking h160).
+                    // one (issue 24: the answer to h150 went to the client asking h160). The
+                    // line is listened to once this client has its 0x0B (a retry of the same
+                    // request may take the late answer: it is that request's).
                     self.suspect.insert(job.unit);
-                    let flushed = self.flush_late(port, job.unit, timeout).await?;
-                    outcome.1 = outcome.1.max(flushed);
+                    self.flush_after = Some((job.unit, timeout));
                 }
                 (None, _) => {}
             }
