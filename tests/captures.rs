@@ -71,3 +71,35 @@ fn replay_uses_the_devices_file_beside_the_capture() {
         "--device 5=display wins for unit 5"
     );
 }
+
+/// Issue 28: `mbtap learn` on a recorded line (the simulated bus, polled many times) drafts a
+/// profile per unit that `profiles check` accepts, and finds the blocks the master polls.
+#[test]
+fn learn_drafts_profiles_that_load() {
+    let dir = std::env::temp_dir().join(format!("mbtap-learn-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let capture = dir.join("line.pcapng");
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let o = std::process::Command::new(bin)
+        .args(["generate", capture.to_str().unwrap(), "--transactions", "600", "--seed", "3"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let draft = dir.join("draft.toml");
+    let o = std::process::Command::new(bin)
+        .args(["learn", capture.to_str().unwrap(), "-o", draft.to_str().unwrap(), "--format", "json"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let units = report["units"].as_array().unwrap();
+    assert!(units.len() >= 2, "{report}");
+    assert!(units.iter().all(|u| !u["blocks"].as_array().unwrap().is_empty()), "{report}");
+    for u in units {
+        let n = u["unit"].as_u64().unwrap();
+        let file = dir.join(format!("draft-unit-{n}.toml"));
+        let check =
+            std::process::Command::new(bin).args(["profiles", "check", file.to_str().unwrap()]).output().unwrap();
+        assert!(check.status.success(), "{}: {}", file.display(), String::from_utf8_lossy(&check.stderr));
+    }
+}

@@ -15,6 +15,7 @@ pub mod demo;
 pub mod export;
 pub mod generate;
 pub mod generate_config;
+pub mod learn;
 pub mod man;
 pub mod play;
 pub mod profiles;
@@ -57,6 +58,7 @@ pub enum Command {
     Read(read::Args),
     Write(write::Args),
     Watch(watch::Args),
+    Learn(learn::Args),
     Completions(completions::Args),
     Man(man::Args),
 }
@@ -92,6 +94,7 @@ pub fn run(command: Command, matches: &ArgMatches) -> anyhow::Result<ExitCode> {
         Command::Read(args) => read::run(&args),
         Command::Write(args) => write::run(&args),
         Command::Watch(args) => watch::run(&args),
+        Command::Learn(args) => learn::run(&args),
         Command::Completions(args) => completions::run(&args),
         Command::Man(args) => man::run(&args),
     }

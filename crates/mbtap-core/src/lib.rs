@@ -39,6 +39,7 @@ pub mod duration;
 pub mod framer;
 pub mod fuzzing;
 pub mod health;
+pub mod learn;
 pub mod line_args;
 pub mod pairing;
 pub mod profile;

@@ -57,7 +57,7 @@ pub fn annotate_transaction(p: &Profile, request: &Request<'_>, response: Option
 }
 
 /// The unit's PDU of a frame as on the wire (RTU with CRC, or ASCII characters).
-fn wire_pdu(wire: &[u8]) -> Option<Vec<u8>> {
+pub(crate) fn wire_pdu(wire: &[u8]) -> Option<Vec<u8>> {
     if wire.first() == Some(&b':') {
         crate::proto::parse_ascii(wire).ok().map(|f| f.pdu().to_vec())
     } else {

@@ -1,0 +1,218 @@
+//! What `learn` writes: a draft profile per unit (TOML in the format of `docs/profiles.md`, each
+//! entry named `reg_<table>_<address>` with a comment giving its evidence and confidence), and
+//! the same findings as text or JSON.
+
+use std::fmt::Write as _;
+
+use super::infer::{Guess, Kind};
+use super::{Learner, Unit};
+use crate::profile::Table;
+
+const TABLES: [Table; 4] = [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters];
+
+fn short(t: Table) -> &'static str {
+    match t {
+        Table::Coils => "coil",
+        Table::DiscreteInputs => "discrete",
+        Table::HoldingRegisters => "holding",
+        Table::InputRegisters => "input",
+    }
+}
+
+fn toml_str(s: &str) -> String {
+    // A TOML basic string: quotes, backslashes and control characters escaped.
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if c.is_control() => {
+                let _ = write!(out, "\\u{:04X}", u32::from(c));
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+fn one_line(s: &str) -> String {
+    s.chars().map(|c| if c.is_control() { ' ' } else { c }).collect()
+}
+
+/// The draft profile of `unit`, learned from `source` (a capture or port, for the comments).
+#[must_use]
+pub fn profile_toml(unit: u8, u: &Unit, source: &str) -> String {
+    let mut s = String::new();
+    let _ =
+        writeln!(s, "# Drafted by `mbtap learn` from {} — check every entry before relying on it:", one_line(source));
+    let _ =
+        writeln!(s, "# names are placeholders; each comment says what the traffic showed and how sure the guess is.");
+    let _ = writeln!(s, "\n[profile]\nname = \"learned-unit-{unit}\"");
+    let _ = writeln!(s, "device = {}", toml_str(&format!("unit {unit} (drafted by mbtap learn)")));
+    let functions: Vec<String> = u.functions.iter().filter(|&&f| f & 0x80 == 0).map(u8::to_string).collect();
+    let _ = writeln!(s, "functions = [{}]\ndefault_address = {unit}", functions.join(", "));
+    for table in TABLES {
+        let guesses = if u.tables().contains(&table) { u.guesses(table) } else { Vec::new() };
+        for g in &guesses {
+            entry(&mut s, table, g, u);
+        }
+        // Written but never read: a setpoint or command register.
+        for (&(t, a), values) in u.writes.range((table, 0)..=(table, u16::MAX)) {
+            if guesses.iter().any(|g| (g.address..g.address.saturating_add(g.kind.width())).contains(&a)) {
+                continue;
+            }
+            let shown: Vec<String> = values.iter().map(u16::to_string).collect();
+            let _ = writeln!(
+                s,
+                "\n# written, never read back: values {}\n[[{}]]\naddress = {a}\nname = \"reg_{}_{a}\"\naccess = \"w\"",
+                shown.join(", "),
+                t.name(),
+                short(t)
+            );
+        }
+    }
+    s
+}
+
+fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit) {
+    let a = g.address;
+    let _ = writeln!(s, "\n# {} — {} (confidence {:.2})", g.kind.name(), one_line(&g.evidence), g.confidence);
+    if let Some(values) = u.writes.get(&(table, a)) {
+        let shown: Vec<String> = values.iter().map(u16::to_string).collect();
+        let _ = writeln!(s, "# the master wrote: {}", shown.join(", "));
+    }
+    let _ = writeln!(s, "[[{}]]\naddress = {a}\nname = \"reg_{}_{a}\"", table.name(), short(table));
+    let writable = matches!(table, Table::Coils | Table::HoldingRegisters) && u.writes.contains_key(&(table, a));
+    if writable {
+        let _ = writeln!(s, "access = \"rw\"");
+    }
+    if matches!(table, Table::Coils | Table::DiscreteInputs) {
+        return;
+    }
+    let order = |h: bool| if h { "high_first" } else { "low_first" };
+    match &g.kind {
+        Kind::Constant | Kind::Counter | Kind::U16 => {}
+        Kind::I16 => {
+            let _ = writeln!(s, "type = \"i16\"");
+        }
+        Kind::Enum(values) => {
+            let labels: Vec<String> = values.iter().map(|v| format!("{v} = \"value {v}\"")).collect();
+            let _ = writeln!(s, "type = \"enum\"\nenum = {{ {} }}", labels.join(", "));
+        }
+        Kind::Bits(mask) => {
+            let labels: Vec<String> =
+                (0..16).filter(|b| mask & (1 << b) != 0).map(|b| format!("{b} = \"bit {b}\"")).collect();
+            let _ = writeln!(s, "type = \"bits\"\nbits = {{ {} }}", labels.join(", "));
+        }
+        Kind::U32 { high_first, .. } => {
+            let _ = writeln!(s, "type = \"u32\"\nword_order = \"{}\"", order(*high_first));
+        }
+        Kind::I32 { high_first } => {
+            let _ = writeln!(s, "type = \"i32\"\nword_order = \"{}\"", order(*high_first));
+        }
+        Kind::F32 { high_first } => {
+            let _ = writeln!(s, "type = \"f32\"\nword_order = \"{}\"", order(*high_first));
+        }
+        Kind::Text { registers, .. } => {
+            let _ = writeln!(s, "type = \"string\"\nlength = {registers}\nchars_per_register = 2");
+        }
+    }
+}
+
+/// The findings for people: per unit, the blocks polled, writes, exceptions and each guess.
+#[must_use]
+pub fn text(l: &Learner) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "learned from {} answered transactions", l.transactions);
+    for (unit, u) in &l.units {
+        let functions: Vec<String> = u.functions.iter().map(|f| format!("{f:02X}")).collect();
+        let _ = writeln!(s, "\nunit {unit}: functions {}", functions.join(", "));
+        for (&(t, first, q), b) in &u.blocks {
+            let period = b.period_ns().map_or_else(|| "once".to_owned(), |p| format!("every {:.2} s", ms(p) / 1000.0));
+            let _ = writeln!(
+                s,
+                "  polls {} {first}..{} ({q}), {} times, {period}",
+                short(t),
+                u32::from(first) + u32::from(q) - 1,
+                b.polls
+            );
+        }
+        for (&(t, first, q), code) in &u.exceptions {
+            let _ = writeln!(
+                s,
+                "  {} {first} ({q}): exception {code:02X}{}",
+                short(t),
+                if *code == 2 { " — no such address" } else { "" }
+            );
+        }
+        for (&(t, a), values) in &u.writes {
+            let shown: Vec<String> = values.iter().map(u16::to_string).collect();
+            let _ = writeln!(s, "  wrote {} {a}: {}", short(t), shown.join(", "));
+        }
+        for t in u.tables() {
+            for g in u.guesses(t) {
+                let _ = writeln!(
+                    s,
+                    "  {} {}: {} — {} (confidence {:.2})",
+                    short(t),
+                    g.address,
+                    g.kind.name(),
+                    one_line(&g.evidence),
+                    g.confidence
+                );
+            }
+        }
+    }
+    s
+}
+
+#[allow(clippy::cast_precision_loss)]
+fn ms(ns: u64) -> f64 {
+    ns as f64 / 1e6
+}
+
+/// The same as JSON: `{"transactions": N, "units": [{"unit", "functions", "blocks", "writes",
+/// "exceptions", "registers": [{"table", "address", "type", "width", "confidence", "evidence"}]}]}`.
+#[must_use]
+pub fn json(l: &Learner) -> serde_json::Value {
+    let units: Vec<serde_json::Value> = l
+        .units
+        .iter()
+        .map(|(unit, u)| {
+            let registers: Vec<serde_json::Value> = u
+                .tables()
+                .into_iter()
+                .flat_map(|t| u.guesses(t).into_iter().map(move |g| (t, g)))
+                .map(|(t, g)| {
+                    serde_json::json!({
+                        "table": t.name(), "address": g.address, "type": g.kind.name(), "width": g.kind.width(),
+                        "confidence": g.confidence, "evidence": g.evidence,
+                    })
+                })
+                .collect();
+            let blocks: Vec<serde_json::Value> = u
+                .blocks
+                .iter()
+                .map(|(&(t, first, q), b)| {
+                    serde_json::json!({"table": t.name(), "first": first, "quantity": q, "polls": b.polls, "period_ns": b.period_ns()})
+                })
+                .collect();
+            let writes: Vec<serde_json::Value> = u
+                .writes
+                .iter()
+                .map(|(&(t, a), v)| serde_json::json!({"table": t.name(), "address": a, "values": v}))
+                .collect();
+            let exceptions: Vec<serde_json::Value> = u
+                .exceptions
+                .iter()
+                .map(|(&(t, first, q), c)| serde_json::json!({"table": t.name(), "first": first, "quantity": q, "code": c}))
+                .collect();
+            serde_json::json!({
+                "unit": unit, "functions": u.functions, "blocks": blocks, "writes": writes,
+                "exceptions": exceptions, "registers": registers,
+            })
+        })
+        .collect();
+    serde_json::json!({"transactions": l.transactions, "units": units})
+}

@@ -1,0 +1,360 @@
+//! What a register (or two, or a run of them) probably holds, from what was heard: the tests
+//! and their order. Every guess carries its evidence in words. Two adjacent registers are read
+//! as one 32-bit value only when the series say so — a float whose every sample is a plausible
+//! number that moves smoothly, or an integer whose high word changes only as the carry of its
+//! low word — so two registers that move independently are never joined.
+
+use std::collections::BTreeSet;
+
+use super::stats::{PairStat, RegStat};
+
+/// The type a guess gives.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Kind {
+    /// Never changed while heard.
+    Constant,
+    /// Only counts up (and wraps at 65 536).
+    Counter,
+    /// A few distinct small values: the values seen.
+    Enum(Vec<u16>),
+    /// Changes flip single bits: the bits that ever changed.
+    Bits(u16),
+    /// A signed 16-bit value: it wraps around zero.
+    I16,
+    /// Any other 16-bit value.
+    U16,
+    /// Two registers: an unsigned 32-bit value (`counter` when it only grew).
+    U32 { high_first: bool, counter: bool },
+    /// Two registers: a signed 32-bit value.
+    I32 { high_first: bool },
+    /// Two registers: an IEEE-754 float.
+    F32 { high_first: bool },
+    /// A run of registers holding text, two characters each.
+    Text { registers: u16, text: String },
+}
+
+impl Kind {
+    /// Registers this guess covers.
+    #[must_use]
+    pub fn width(&self) -> u16 {
+        match self {
+            Self::U32 { .. } | Self::I32 { .. } | Self::F32 { .. } => 2,
+            Self::Text { registers, .. } => *registers,
+            _ => 1,
+        }
+    }
+
+    /// A short stable name (`f32 low word first`), for text and JSON.
+    #[must_use]
+    pub fn name(&self) -> String {
+        let order = |h: bool| if h { "high word first" } else { "low word first" };
+        match self {
+            Self::Constant => "constant".into(),
+            Self::Counter => "counter".into(),
+            Self::Enum(_) => "enum".into(),
+            Self::Bits(_) => "bits".into(),
+            Self::I16 => "i16".into(),
+            Self::U16 => "u16".into(),
+            Self::U32 { high_first, counter } => {
+                format!("{} {}", if *counter { "u32 counter" } else { "u32" }, order(*high_first))
+            }
+            Self::I32 { high_first } => format!("i32 {}", order(*high_first)),
+            Self::F32 { high_first } => format!("f32 {}", order(*high_first)),
+            Self::Text { .. } => "string".into(),
+        }
+    }
+}
+
+/// One guess: where, what, how sure, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Guess {
+    pub address: u16,
+    pub kind: Kind,
+    /// 0–1: how much evidence there was (samples and changes).
+    pub confidence: f64,
+    pub evidence: String,
+}
+
+/// Samples a series needs before its shape is trusted.
+const ENOUGH: usize = 8;
+
+#[allow(clippy::cast_precision_loss)]
+fn confidence(samples: u64, changes: u64) -> f64 {
+    let s = (samples as f64 / 32.0).min(1.0);
+    let c = if changes == 0 { 0.5 } else { (changes as f64 / 8.0).min(1.0) };
+    (s * c * 100.0).round() / 100.0
+}
+
+fn join(a: u16, b: u16, high_first: bool) -> u32 {
+    let (hi, lo) = if high_first { (a, b) } else { (b, a) };
+    (u32::from(hi) << 16) | u32::from(lo)
+}
+
+fn plausible_float(bits: u32) -> bool {
+    let f = f32::from_bits(bits);
+    f == 0.0 || (f.is_normal() && (1e-4..=1e8).contains(&f.abs()))
+}
+
+/// How the high word's steps of one agree with the low word: (carries, contradictions).
+/// A carry is the high word moving by one while the low word wraps the other way (up by one as
+/// the low word falls from near the top to near zero, or down as it climbs back); a
+/// contradiction is a step of one with the low word moving the same way, as two registers that
+/// move independently do half the time.
+fn carries(words: &[(u16, u16)]) -> (u32, u32) {
+    let (mut yes, mut no) = (0, 0);
+    for w in words.windows(2) {
+        let ((h0, l0), (h1, l1)) = (w[0], w[1]);
+        let up = h1 == h0.wrapping_add(1);
+        let down = h1 == h0.wrapping_sub(1);
+        if !(up || down) {
+            continue;
+        }
+        let wrapped_down = l0 >= 0x8000 && l1 < 0x8000;
+        let wrapped_up = l0 < 0x8000 && l1 >= 0x8000;
+        if (up && wrapped_down) || (down && wrapped_up) {
+            yes += 1;
+        } else {
+            no += 1;
+        }
+    }
+    (yes, no)
+}
+
+fn ordered(pair: &PairStat, high_first: bool) -> Vec<(u16, u16)> {
+    pair.recent.iter().map(|&(a, b)| if high_first { (a, b) } else { (b, a) }).collect()
+}
+
+/// Mean absolute step of a series, over its span: 0 for a constant, about 1/3 for noise.
+#[allow(clippy::cast_precision_loss)]
+fn roughness(v: &[f64]) -> f64 {
+    let (lo, hi) = v.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+    if v.len() < 2 || hi <= lo {
+        return 0.0;
+    }
+    v.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>() / (v.len() - 1) as f64 / (hi - lo)
+}
+
+/// A float in this word order, and how well it fits: every sample a plausible number, several
+/// values, moving smoothly (the median change under 5 % of the value), its low word varying
+/// like a mantissa's, and where the high word steps by one, a carry (never a contradiction
+/// more often than a carry). The score counts carries.
+#[allow(clippy::cast_precision_loss)]
+fn float_fit(pair: &PairStat, high_first: bool) -> Option<u32> {
+    let words = ordered(pair, high_first);
+    let values: Vec<u32> = words.iter().map(|&(h, l)| (u32::from(h) << 16) | u32::from(l)).collect();
+    if values.len() < ENOUGH || !values.iter().all(|&v| plausible_float(v)) {
+        return None;
+    }
+    let mut lows: Vec<u16> = words.iter().map(|&(_, l)| l).collect();
+    lows.sort_unstable();
+    lows.dedup();
+    if lows.len() < ENOUGH {
+        return None;
+    }
+    let f: Vec<f64> = values.iter().map(|&v| f64::from(f32::from_bits(v))).collect();
+    let mut rel: Vec<f64> =
+        f.windows(2).map(|w| (w[1] - w[0]).abs() / (w[0].abs().max(w[1].abs()).max(1e-9))).collect();
+    rel.sort_by(f64::total_cmp);
+    if rel.get(rel.len() / 2).copied().unwrap_or(1.0) >= 0.05 {
+        return None;
+    }
+    let (yes, no) = carries(&words);
+    (no <= yes / 4).then_some(yes + 1)
+}
+
+/// A 32-bit integer in this word order: the high word takes more than one value and either
+/// changes only as its low word's carry, or the low word alone jumps about (wrapping) while
+/// the two together move smoothly. Signed when the high word is found on both sides of zero
+/// (0xFFFF… and 0x0000…). The score counts carries.
+fn int_fit(pair: &PairStat, high_first: bool) -> Option<(Kind, u32)> {
+    let words = ordered(pair, high_first);
+    if words.len() < ENOUGH {
+        return None;
+    }
+    let highs: BTreeSet<u16> = words.iter().map(|&(h, _)| h).collect();
+    if highs.len() < 2 {
+        return None;
+    }
+    let (yes, no) = carries(&words);
+    let small_high_steps = words.windows(2).all(|w| {
+        let d = w[1].0.wrapping_sub(w[0].0);
+        d <= 16 || d >= 0xFFF0
+    });
+    let signed = highs.iter().any(|&h| h >= 0xFFF0) && highs.iter().any(|&h| h <= 0x000F);
+    let combined: Vec<f64> = words
+        .iter()
+        .map(|&(h, l)| {
+            let v = (u32::from(h) << 16) | u32::from(l);
+            if signed { f64::from(v.cast_signed()) } else { f64::from(v) }
+        })
+        .collect();
+    let low: Vec<f64> = words.iter().map(|&(_, l)| f64::from(l)).collect();
+    // Two carries and no contradiction; or a low word that jumps about (a large value's low
+    // half) while the whole moves smoothly — there steps of one in the high word come with big
+    // moves of the low word either way, so carries cannot be counted.
+    let by_carries = yes >= 2 && no == 0;
+    let by_smoothing = small_high_steps && roughness(&low) > 0.15 && roughness(&combined) < 0.1;
+    if !(by_carries || by_smoothing) {
+        return None;
+    }
+    let only_up = combined.windows(2).all(|w| w[1] >= w[0]);
+    let kind = if signed { Kind::I32 { high_first } } else { Kind::U32 { high_first, counter: only_up } };
+    Some((kind, yes + 1))
+}
+
+/// Text: a run of at least two registers whose every sample is printable ASCII, and which
+/// (as names, models and serial numbers do) changes rarely if ever — a float's high word can be
+/// printable in every sample too (0x43 0x66 is "Cf"), but it moves.
+fn texty(r: &RegStat) -> bool {
+    r.samples > 0 && r.ascii == r.samples && r.changes * 20 <= r.samples
+}
+
+fn text_of(regs: &[&RegStat]) -> String {
+    regs.iter().filter_map(|r| r.last).flat_map(u16::to_be_bytes).filter(|&b| b != 0).map(char::from).collect()
+}
+
+/// One register on its own.
+#[allow(clippy::cast_possible_wrap)]
+fn single(address: u16, r: &RegStat) -> Guess {
+    let c = confidence(r.samples, r.changes);
+    let (kind, evidence) = if r.changes == 0 {
+        (Kind::Constant, format!("{} samples, always {}", r.samples, r.min))
+    } else if r.downs == 0 && r.ups >= 3 && r.wraps <= (r.ups / 4).max(1) {
+        (Kind::Counter, format!("{} samples, rose {} times, wrapped {} times, never fell", r.samples, r.ups, r.wraps))
+    } else if r.low_quarter > 0 && r.high_quarter > 0 && {
+        let (lo, hi) = r.recent.iter().fold((i16::MAX, i16::MIN), |(lo, hi), &v| (lo.min(v as i16), hi.max(v as i16)));
+        lo > -16_384 && hi < 16_384
+    } {
+        (Kind::I16, format!("{} samples, values on both sides of zero (wrapping 0 ↔ 65535)", r.samples))
+    } else if r.one_bit_changes == r.changes && r.flipped_bits.count_ones() >= 2 && r.changes >= 3 {
+        (
+            Kind::Bits(r.flipped_bits),
+            format!("{} changes, each flipping one bit; bits that changed: {:#06X}", r.changes, r.flipped_bits),
+        )
+    } else if !r.many_distinct && r.distinct.len() <= 8 && r.max <= 255 {
+        let mut values = r.distinct.clone();
+        values.sort_unstable();
+        let shown: Vec<String> = values.iter().map(u16::to_string).collect();
+        (Kind::Enum(values), format!("{} samples, only {} values: {}", r.samples, shown.len(), shown.join(", ")))
+    } else {
+        (Kind::U16, format!("{} samples from {} to {}, {} changes", r.samples, r.min, r.max, r.changes))
+    };
+    Guess { address, kind, confidence: c, evidence }
+}
+
+/// Guesses for one table's registers: `regs` by address, `pair(a)` the joint samples of `a` and
+/// `a + 1` when they were read together.
+pub fn guess_table<'a>(regs: &[(u16, &'a RegStat)], pair: &dyn Fn(u16) -> Option<&'a PairStat>) -> Vec<Guess> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while let Some(&(a, r)) = regs.get(i) {
+        // A run of text: consecutive addresses, every sample printable.
+        let run = regs[i..]
+            .iter()
+            .enumerate()
+            .take_while(|(k, (addr, reg))| usize::from(*addr) == usize::from(a) + k && texty(reg))
+            .count();
+        if run >= 2 {
+            let part: Vec<&RegStat> = regs[i..i + run].iter().map(|(_, r)| *r).collect();
+            let text = text_of(&part);
+            let registers = u16::try_from(run).unwrap_or(u16::MAX);
+            out.push(Guess {
+                address: a,
+                confidence: confidence(r.samples, 8),
+                evidence: format!("{run} registers of printable ASCII in every sample: {text:?}"),
+                kind: Kind::Text { registers, text },
+            });
+            i += run;
+            continue;
+        }
+        if let Some((g, score)) = wide_at(regs, pair, i) {
+            // The pair starting one register later may be the real one (this register being a
+            // value of its own): the better evidence wins.
+            let later = wide_at(regs, pair, i + 1).map_or(0, |(_, s)| s);
+            if later <= score {
+                out.push(g);
+                i += 2;
+                continue;
+            }
+        }
+        out.push(single(a, r));
+        i += 1;
+    }
+    out
+}
+
+/// The pair at `regs[i]`, `regs[i + 1]` (adjacent addresses, read together, at least one
+/// moving) as one 32-bit value, with its score.
+fn wide_at<'a>(
+    regs: &[(u16, &'a RegStat)],
+    pair: &dyn Fn(u16) -> Option<&'a PairStat>,
+    i: usize,
+) -> Option<(Guess, u32)> {
+    let &(a, r) = regs.get(i)?;
+    let &(b, r2) = regs.get(i + 1)?;
+    if u32::from(b) != u32::from(a) + 1 || (r.changes == 0 && r2.changes == 0) {
+        return None;
+    }
+    wide(a, pair(a)?, r, r2)
+}
+
+/// The pair `a`, `a + 1` as one 32-bit value, when the series say so, with its score (how much
+/// evidence: carries seen).
+fn wide(a: u16, p: &PairStat, r: &RegStat, r2: &RegStat) -> Option<(Guess, u32)> {
+    let c = confidence(p.samples, r.changes.max(r2.changes));
+    let floats = [true, false].map(|h| float_fit(p, h).map(|score| (h, score)));
+    let float = match floats {
+        [Some(x), Some(y)] => Some(if x.1 >= y.1 { x } else { y }),
+        [x, y] => x.or(y),
+    };
+    // No carry seen and the high word never moved: nothing couples the two registers but a
+    // plausible number — unless the low word is a plain analog value on its own, a register
+    // with a shape of its own (counter, signed, bits, enumeration) is read alone.
+    let float = float.filter(|&(high_first, score)| {
+        let (high, low) = if high_first { (r, r2) } else { (r2, r) };
+        score > 1 || high.changes > 0 || matches!(single(0, low).kind, Kind::U16)
+    });
+    if let Some((high_first, score)) = float {
+        let last = p.recent.back().map(|&(x, y)| f32::from_bits(join(x, y, high_first))).unwrap_or_default();
+        return Some((
+            Guess {
+                address: a,
+                kind: Kind::F32 { high_first },
+                confidence: c,
+                evidence: format!(
+                    "{} joint samples, every one a plausible float moving smoothly, {} carries between the words ({}: last {last})",
+                    p.samples,
+                    score - 1,
+                    if high_first { "high word first" } else { "low word first" }
+                ),
+            },
+            score,
+        ));
+    }
+    let ints = [true, false].map(|h| int_fit(p, h));
+    let (kind, score) = match ints {
+        [Some(x), Some(y)] => {
+            if x.1 >= y.1 {
+                x
+            } else {
+                y
+            }
+        }
+        [x, y] => x.or(y)?,
+    };
+    let first = matches!(kind, Kind::U32 { high_first: true, .. } | Kind::I32 { high_first: true });
+    Some((
+        Guess {
+            address: a,
+            evidence: format!(
+                "{} joint samples; the {} word moves as the other's carry ({} carries seen), the two together smoothly",
+                p.samples,
+                if first { "first" } else { "second" },
+                score - 1
+            ),
+            kind,
+            confidence: c,
+        },
+        score,
+    ))
+}
