@@ -28,6 +28,7 @@ fn run_dir(dir: &Path) -> usize {
             "bridge_response" => mbtap_core::fuzzing::bridge_response,
             "health" => mbtap_core::fuzzing::health,
             "query" => mbtap_core::fuzzing::query,
+            "learn" => mbtap_core::fuzzing::learn,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

@@ -345,3 +345,27 @@ pub fn query(data: &[u8]) {
         }
     }
 }
+
+/// Any bytes as answered transactions for `learn` (records of unit, request length, request,
+/// response length, response): observed, guessed, drafted — never a panic, and the draft of
+/// every unit always loads as a profile.
+pub fn learn(data: &[u8]) {
+    let mut l = crate::learn::Learner::default();
+    let mut rest = data;
+    let mut t = 0u64;
+    while let [unit, n, tail @ ..] = rest {
+        let Some((req, tail)) = tail.split_at_checked(usize::from(*n)) else { break };
+        let [m, tail @ ..] = tail else { break };
+        let Some((resp, tail)) = tail.split_at_checked(usize::from(*m)) else { break };
+        l.observe(*unit, req, resp, t);
+        t += 1_000_000;
+        rest = tail;
+    }
+    let _ = (crate::learn::draft::text(&l), crate::learn::draft::json(&l));
+    for (unit, u) in &l.units {
+        let toml = crate::learn::draft::profile_toml(*unit, u, "fuzz");
+        if let Err(e) = crate::profile::load("draft.toml", &toml) {
+            panic!("a draft that does not load: {e}\n{toml}");
+        }
+    }
+}

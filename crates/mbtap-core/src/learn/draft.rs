@@ -134,7 +134,7 @@ pub fn text(l: &Learner) -> String {
                 s,
                 "  polls {} {first}..{} ({q}), {} times, {period}",
                 short(t),
-                u32::from(first) + u32::from(q) - 1,
+                (u32::from(first) + u32::from(q)).saturating_sub(1),
                 b.polls
             );
         }

@@ -29,7 +29,7 @@ impl Block {
     /// The mean time between two polls, when it was polled more than once.
     #[must_use]
     pub fn period_ns(&self) -> Option<u64> {
-        (self.polls > 1).then(|| (self.last_t_ns - self.first_t_ns) / (self.polls - 1))
+        (self.polls > 1).then(|| self.last_t_ns.saturating_sub(self.first_t_ns) / (self.polls - 1))
     }
 }
 
@@ -88,6 +88,7 @@ impl Learner {
         // A read: block, exception, and the values it returned (MAP v1.1b3 §6.1–6.4).
         if let Some(table) = table_read_by(fc)
             && let (Some(first), Some(quantity)) = (word(request, 1), word(request, 3))
+            && quantity > 0
         {
             if rfc == fc | 0x80 {
                 u.exceptions.insert((table, first, quantity), response.get(1).copied().unwrap_or(0));

@@ -1,0 +1,3 @@
+//! Any bytes as answered transactions for `mbtap learn`: guessed and drafted, the draft loading.
+#![no_main]
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::learn(data));
