@@ -349,6 +349,9 @@ pub fn query(data: &[u8]) {
 /// Any bytes as answered transactions for `learn` (records of unit, request length, request,
 /// response length, response): observed, guessed, drafted — never a panic, and the draft of
 /// every unit always loads as a profile.
+///
+/// # Panics
+/// When a draft does not load: the fuzzer's finding.
 pub fn learn(data: &[u8]) {
     let mut l = crate::learn::Learner::default();
     let mut rest = data;
@@ -364,8 +367,7 @@ pub fn learn(data: &[u8]) {
     let _ = (crate::learn::draft::text(&l), crate::learn::draft::json(&l));
     for (unit, u) in &l.units {
         let toml = crate::learn::draft::profile_toml(*unit, u, "fuzz");
-        if let Err(e) = crate::profile::load("draft.toml", &toml) {
-            panic!("a draft that does not load: {e}\n{toml}");
-        }
+        let loaded = crate::profile::load("draft.toml", &toml);
+        assert!(loaded.is_ok(), "a draft that does not load: {loaded:?}\n{toml}");
     }
 }
