@@ -103,3 +103,40 @@ fn learn_drafts_profiles_that_load() {
         assert!(check.status.success(), "{}: {}", file.display(), String::from_utf8_lossy(&check.stderr));
     }
 }
+
+/// Issue 28: `mbtap diff` — a capture against its own register image is the same (exit 0); an
+/// image where the operating mode was changed shows that register, named and labelled by the
+/// profile, before and after (exit 1, as diff(1)).
+#[test]
+fn diff_names_what_changed_between_a_capture_and_an_image() {
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-rtu.pcapng");
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let dir = std::env::temp_dir().join(format!("mbtap-diff-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let image = dir.join("before.csv");
+    let o =
+        std::process::Command::new(bin).args(["replay", capture, "--image", image.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let same = std::process::Command::new(bin).args(["diff", capture, image.to_str().unwrap()]).output().unwrap();
+    assert_eq!(same.status.code(), Some(0), "{}", String::from_utf8_lossy(&same.stdout));
+    // Holding 101 (operating mode) from 0 to 2 in the image.
+    let text = std::fs::read_to_string(&image).unwrap();
+    let changed: String = text
+        .lines()
+        .map(|l| if l.starts_with("1,holding_registers,101,") { l.replacen(",0,\"", ",2,\"", 1) } else { l.to_owned() })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let after = dir.join("after.csv");
+    std::fs::write(&after, changed).unwrap();
+    let o = std::process::Command::new(bin)
+        .args(["diff", capture, after.to_str().unwrap(), "--device", "1=mk4"])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(
+        out.contains("unit 1 holding 101 Operating mode: drain by level sensors (0) → control over RS-485 (2)"),
+        "{out}"
+    );
+    assert!(out.contains("1 differ"), "{out}");
+}

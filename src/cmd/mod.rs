@@ -12,6 +12,7 @@ pub mod bridge;
 pub mod completions;
 pub mod decode;
 pub mod demo;
+pub mod diff;
 pub mod export;
 pub mod generate;
 pub mod generate_config;
@@ -59,6 +60,7 @@ pub enum Command {
     Write(write::Args),
     Watch(watch::Args),
     Learn(learn::Args),
+    Diff(diff::Args),
     Completions(completions::Args),
     Man(man::Args),
 }
@@ -95,6 +97,7 @@ pub fn run(command: Command, matches: &ArgMatches) -> anyhow::Result<ExitCode> {
         Command::Write(args) => write::run(&args),
         Command::Watch(args) => watch::run(&args),
         Command::Learn(args) => learn::run(&args),
+        Command::Diff(args) => diff::run(&args),
         Command::Completions(args) => completions::run(&args),
         Command::Man(args) => man::run(&args),
     }

@@ -5,6 +5,7 @@
 //! report and a draft profile out. Memory grows with the registers heard, never with the
 //! length of the capture ([`stats`]).
 
+pub mod diff;
 pub mod draft;
 pub mod infer;
 pub mod stats;

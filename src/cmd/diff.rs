@@ -1,0 +1,94 @@
+//! `mbtap diff A B`: which registers changed between two captures or register images, and how
+//! ([`mbtap_core::learn::diff`]), named and scaled by profiles when given.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context as _;
+use mbtap_core::learn::diff::{Image, diff, parse_image_csv, parse_image_json};
+
+/// Which registers changed between two captures or register images (`replay --image` CSV or
+/// JSON) — before and after a settings change or a firmware update.
+///
+/// The latest value of every register heard in each is compared. Exit status: 0 nothing
+/// differs, 1 something does (as diff(1)), 2 an input cannot be read.
+/// Example: `mbtap diff before.pcapng after.pcapng --device 1=mk4`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Before: a capture (pcap/pcapng) or a register image (.csv, .json).
+    pub before: PathBuf,
+    /// After: the same kinds.
+    pub after: PathBuf,
+    /// Name and scale unit UNIT's registers with a profile: `UNIT=NAME` or `UNIT=FILE.toml`.
+    #[arg(long = "device", value_name = "UNIT=PROFILE")]
+    pub devices: Vec<String>,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = Format::Text)]
+    pub format: Format,
+}
+
+/// Output of `diff`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    Text,
+    Jsonl,
+}
+
+/// The register image of a capture or an image file.
+fn load(path: &Path) -> anyhow::Result<Image> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or_default().to_ascii_lowercase();
+    let read = || std::fs::read_to_string(path).with_context(|| format!("{}: cannot read it", path.display()));
+    match ext.as_str() {
+        "json" => parse_image_json(&read()?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display())),
+        "csv" => parse_image_csv(&read()?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display())),
+        _ => {
+            let input = crate::output::progress::open_capture(path, false)?;
+            let mut image = mbtap_core::profile::image::RegisterImage::default();
+            let mut sink = |e: &mbtap_core::analyzer::Event<'_>| crate::output::update_image(&mut image, e);
+            mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut sink)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Ok(image.values.iter().map(|(&k, v)| (k, v.raw)).collect())
+        }
+    }
+}
+
+pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
+    let profiles = crate::config::devices::load_devices(&args.devices)?;
+    let (a, b) = (load(&args.before)?, load(&args.after)?);
+    let (changes, same) = diff(&a, &b);
+    let mut out = std::io::stdout().lock();
+    let shown = |unit: u8, table, address: u16, raw: Option<u16>| -> String {
+        let Some(raw) = raw else { return "—".into() };
+        let named = profiles
+            .get(&unit)
+            .and_then(|p| mbtap_core::query::rows::rows(unit, table, address, &[raw], Some(p)).into_iter().next());
+        named.map_or_else(|| raw.to_string(), |r| format!("{} ({})", r.shown, raw))
+    };
+    for c in &changes {
+        let name = profiles
+            .get(&c.unit)
+            .and_then(|p| p.slot(c.table, c.address).map(|(s, _)| format!(" {}", s.name)))
+            .unwrap_or_default();
+        let line = match args.format {
+            Format::Text => format!(
+                "unit {} {} {}{name}: {} → {}",
+                c.unit,
+                mbtap_core::query::rows::short_table(c.table),
+                c.address,
+                shown(c.unit, c.table, c.address, c.before),
+                shown(c.unit, c.table, c.address, c.after)
+            ),
+            Format::Jsonl => serde_json::json!({
+                "unit": c.unit, "table": c.table.name(), "address": c.address,
+                "before": c.before, "after": c.after,
+            })
+            .to_string(),
+        };
+        writeln!(out, "{}", mbtap_core::report::format::printable(&line)).context("writing the differences")?;
+    }
+    if args.format == Format::Text {
+        writeln!(out, "{} differ, {same} the same", changes.len()).context("writing the differences")?;
+    }
+    Ok(if changes.is_empty() { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
