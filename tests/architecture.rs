@@ -106,3 +106,69 @@ fn the_pure_crates_name_no_edge_crate() {
         }
     }
 }
+
+/// Per directory module: file → the sibling files its code names (`super::X`, `self::X` in
+/// mod.rs, `crate::…::DIR::X`), comments left out. Issue 26: the top-level check did not see
+/// circles between the files of one module (`src/bridge/`, `src/tui/`).
+fn file_graphs(src: &Path) -> Vec<(PathBuf, BTreeMap<String, BTreeSet<String>>)> {
+    let mut dirs = vec![src.to_path_buf()];
+    let mut out = Vec::new();
+    while let Some(dir) = dirs.pop() {
+        let mut siblings = BTreeSet::new();
+        let mut files = Vec::new();
+        for e in std::fs::read_dir(&dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                siblings.insert(p.file_name().unwrap().to_string_lossy().into_owned());
+                dirs.push(p);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                siblings.insert(p.file_stem().unwrap().to_string_lossy().into_owned());
+                files.push(p);
+            }
+        }
+        let module = dir.strip_prefix(src).unwrap().to_string_lossy().replace('/', "::");
+        let mut g: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+        for f in files {
+            let me = f.file_stem().unwrap().to_string_lossy().into_owned();
+            if matches!(me.as_str(), "mod" | "lib" | "main") {
+                continue;
+            }
+            let text = std::fs::read_to_string(&f).unwrap();
+            let deps = g.entry(me.clone()).or_default();
+            let prefixes = if module.is_empty() {
+                vec!["crate::".to_owned()]
+            } else {
+                vec!["super::".to_owned(), format!("crate::{module}::")]
+            };
+            for line in text.lines().filter(|l| !l.trim_start().starts_with("//")) {
+                for prefix in &prefixes {
+                    for (i, _) in line.match_indices(prefix.as_str()) {
+                        // `super::super::…` leaves this directory: not a sibling.
+                        let rest = &line[i + prefix.len()..];
+                        let name: String =
+                            rest.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+                        if name != me && siblings.contains(&name) && name != "super" {
+                            deps.insert(name);
+                        }
+                    }
+                }
+            }
+        }
+        out.push((dir, g));
+    }
+    out
+}
+
+#[test]
+fn no_import_circles_between_the_files_of_a_module() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut circles = Vec::new();
+    for src in [root.join("src"), root.join("crates/mbtap-core/src"), root.join("crates/mbtap-proto/src")] {
+        for (dir, g) in file_graphs(&src) {
+            if let Some(c) = cycle(&g) {
+                circles.push(format!("{}: {}", dir.display(), c.join(" → ")));
+            }
+        }
+    }
+    assert!(circles.is_empty(), "import circles between files:\n{}", circles.join("\n"));
+}

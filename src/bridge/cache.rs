@@ -31,7 +31,7 @@ pub fn parse_rule(spec: &str) -> Result<Rule, String> {
     let (head, age) = spec.split_once('=').ok_or_else(|| bad("no =MAX_AGE"))?;
     let mut parts = head.splitn(3, ':');
     let (units, table, range) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""), parts.next().unwrap_or(""));
-    let units = super::run::parse_units(units).map_err(|e| bad(&format!("{e:#}")))?;
+    let units = super::parse::parse_units(units).map_err(|e| bad(&format!("{e:#}")))?;
     if units.is_empty() {
         return Err(bad("no unit"));
     }

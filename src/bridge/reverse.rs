@@ -44,7 +44,7 @@ pub struct ReverseOptions {
     /// Time from the end of a request to the answer (a slave's turnaround).
     pub turnaround: Duration,
     /// As on the forward bridge: only what cannot change a device is forwarded
-    /// ([`super::server::read_only_safe`], plus `allow_functions`); the rest is answered 01.
+    /// ([`super::rules::read_only_safe`], plus `allow_functions`); the rest is answered 01.
     pub read_only: bool,
     /// Without `read_only`: only these function codes are forwarded (None: all); with it, these
     /// are forwarded too.
@@ -145,13 +145,13 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
             metrics.request(r.unit);
             let fc = r.pdu.first().copied().unwrap_or(0);
             let listed = opts.allow_functions.as_ref().map(|a| a.contains(&fc));
-            let illegal = super::server::ILLEGAL_FUNCTION;
+            let illegal = super::rules::ILLEGAL_FUNCTION;
             let refused = if mbtap_core::proto::request_len_problem(&r.pdu).is_some() {
                 // An ASCII frame may carry any length: one longer than its function allows is
                 // not forwarded (its extra bytes are no part of the request; issue 24).
-                Some(("malformed_request", super::server::ILLEGAL_DATA_VALUE))
+                Some(("malformed_request", super::rules::ILLEGAL_DATA_VALUE))
             } else if opts.read_only {
-                (!super::server::read_only_safe(&r.pdu) && listed != Some(true)).then_some(("read_only", illegal))
+                (!super::rules::read_only_safe(&r.pdu) && listed != Some(true)).then_some(("read_only", illegal))
             } else if listed == Some(false) {
                 Some(("function_not_allowed", illegal))
             } else if broadcast && !matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16) {

@@ -18,6 +18,7 @@ use tokio::time::Instant;
 
 use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, Job, LineShared, Reply, SERVER_DEVICE_BUSY};
 use super::queue::ClientId;
+pub use super::rules::{ILLEGAL_DATA_VALUE, ILLEGAL_FUNCTION, read_only_safe};
 use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
 use mbtap_core::proto::{encode_rtu, encode_tcp, request_len_problem};
 
@@ -93,10 +94,6 @@ fn evict_idlest(table: &Table) -> bool {
     }
 }
 
-/// Exception 0x01: the function is not allowed here (MAP v1.1b3 §7).
-pub(crate) const ILLEGAL_FUNCTION: u8 = 0x01;
-/// Exception 0x03: the request's length or a value in it is wrong (MAP v1.1b3 §7).
-pub(crate) const ILLEGAL_DATA_VALUE: u8 = 0x03;
 /// Bytes an RTU-over-TCP client may send without a request among them before it is cut off:
 /// sixteen of the longest frames.
 const RTU_GARBAGE_LIMIT: u64 = 16 * 256;
@@ -150,8 +147,10 @@ pub fn parse_priority(spec: &str) -> Result<Priority, String> {
     let rule = spec.strip_prefix("high=").ok_or_else(|| bad("only the class \"high\" exists".into()))?;
     match rule.split_once(':') {
         Some(("ip", net)) => net.parse().map(Priority::Net).map_err(bad),
-        Some(("unit", units)) => super::run::parse_units(units).map(Priority::Units).map_err(|e| bad(format!("{e:#}"))),
-        Some(("fc", codes)) => super::run::parse_function_codes(codes)
+        Some(("unit", units)) => {
+            super::parse::parse_units(units).map(Priority::Units).map_err(|e| bad(format!("{e:#}")))
+        }
+        Some(("fc", codes)) => super::parse::parse_function_codes(codes)
             .map(Priority::Functions)
             .ok_or_else(|| bad(format!("{codes:?} is not a list of function codes"))),
         _ => Err(bad(format!("{rule:?}"))),
@@ -208,26 +207,6 @@ impl IpNet {
             _ => false,
         }
     }
-}
-
-/// Can this request not change a device? The read-only allow-list — everything not on it,
-/// vendor and unknown codes included, is refused in read-only mode. From MAP v1.1b3 §6: reads
-/// of bits and registers (01, 02, 03, 04, §6.1–6.4), Read Exception Status (07, §6.7), Get Comm
-/// Event Counter / Log (0B, 0C, §6.9–6.10), Report Server ID (11, §6.13), Read File Record (14,
-/// §6.14), Read FIFO Queue (18, §6.18), Read Device Identification (2B / MEI 0E, §6.21), and
-/// Diagnostics only as sub-function 0000 Return Query Data (08, §6.8: an echo; every other
-/// sub-function restarts, silences or clears something — 0001 restarts communications, 0004
-/// forces listen-only mode, 000A clears counters) with one data word: its data field has no
-/// length of its own, and a longer echo could carry a whole frame for a slave that frames by
-/// structure. The caller also checks every length the function fixes ([`request_len_problem`]).
-#[must_use]
-pub fn read_only_safe(pdu: &[u8]) -> bool {
-    matches!(
-        *pdu,
-        [0x01 | 0x02 | 0x03 | 0x04 | 0x07 | 0x0B | 0x0C | 0x11 | 0x14 | 0x18, ..]
-            | [0x08, 0x00, 0x00, _, _]
-            | [0x2B, 0x0E, ..]
-    )
 }
 
 /// Function codes a broadcast may carry (Serial Line v1.02 §2.1: broadcasts are writes only,

@@ -98,7 +98,7 @@ pub fn parse_unit_timeouts(values: &[String]) -> Result<BTreeMap<u8, Duration>, 
             .ok()
             .filter(|&m| (1..=60_000).contains(&m))
             .ok_or_else(|| format!("--unit-timeout {v:?}: {ms:?} is not a number of ms from 1 to 60000"))?;
-        for unit in super::run::parse_units(units).map_err(|e| format!("--unit-timeout {v:?}: {e:#}"))? {
+        for unit in super::parse::parse_units(units).map_err(|e| format!("--unit-timeout {v:?}: {e:#}"))? {
             out.insert(unit, Duration::from_millis(ms));
         }
     }

@@ -67,7 +67,7 @@ impl Policy {
         let function = pdu.first().copied().unwrap_or(0);
         self.functions.as_ref().is_none_or(|f| f.contains(&function))
             && self.units.as_ref().is_none_or(|u| u.contains(&unit))
-            && (!self.read_only || super::server::read_only_safe(pdu))
+            && (!self.read_only || super::rules::read_only_safe(pdu))
     }
 }
 
@@ -94,12 +94,12 @@ pub fn parse_roles(values: &[String]) -> anyhow::Result<Roles> {
                 // Everything, said on purpose: an empty rule set is never taken for it.
                 None if rule == "all" => {}
                 Some(("functions", list)) => {
-                    let codes = super::run::parse_function_codes(list)
+                    let codes = super::parse::parse_function_codes(list)
                         .with_context(|| format!("--role {v:?}: {list:?} is not a list of function codes"))?;
                     p.functions = Some(codes);
                 }
                 Some(("units", list)) => {
-                    p.units = Some(super::run::parse_units(list).with_context(|| format!("--role {v:?}"))?);
+                    p.units = Some(super::parse::parse_units(list).with_context(|| format!("--role {v:?}"))?);
                 }
                 _ => anyhow::bail!("--role {v:?}: {rule:?} is not functions:…, units:…, read-only or all"),
             }

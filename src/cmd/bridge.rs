@@ -209,7 +209,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             allow_functions
                 .iter()
                 .map(|f| {
-                    crate::bridge::run::parse_function_code(f)
+                    crate::bridge::parse::parse_function_code(f)
                         .with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
                 })
                 .collect::<anyhow::Result<Vec<u8>>>()?,
@@ -228,7 +228,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             port,
             line: settings,
             mode,
-            units: crate::bridge::run::parse_units(answer_as.as_deref().unwrap_or(""))?,
+            units: crate::bridge::parse::parse_units(answer_as.as_deref().unwrap_or(""))?,
             target,
             target_rtu,
             timeout: std::time::Duration::from_millis(timeout_ms),
@@ -280,7 +280,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     };
     let mut lines = Vec::new();
     for r in &routes {
-        let (units, port) = crate::bridge::run::parse_route(r)?;
+        let (units, port) = crate::bridge::parse::parse_route(r)?;
         lines.push((units, line_for(port)));
     }
     if let (Some(port), None) = (serial, &reverse) {
@@ -310,7 +310,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             max_connections,
             idle_timeout,
             rate_limit,
-            unit_map: crate::bridge::run::parse_unit_map(&unit_map)?,
+            unit_map: crate::bridge::parse::parse_unit_map(&unit_map)?,
             priority: priority
                 .iter()
                 .map(|p| crate::bridge::server::parse_priority(p))

@@ -12,6 +12,7 @@ pub mod registers;
 pub mod render;
 pub mod source;
 pub mod stats;
+pub mod style;
 pub mod terminal;
 mod view_detail;
 mod view_devices;

@@ -11,7 +11,7 @@ use ratatui::widgets::{Block, Paragraph, Wrap};
 use super::app::{App, Side};
 use super::layout::{Field, binary, fields};
 use super::model::{Model, Row};
-use super::render::{clock, duration, status_style};
+use super::style::{clock, duration, status_style};
 use mbtap_core::proto::FunctionCode;
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {

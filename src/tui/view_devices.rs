@@ -8,7 +8,7 @@ use ratatui::widgets::{Block, Cell, Paragraph, Row, Table};
 
 use super::app::App;
 use super::model::Model;
-use super::render::{clock, duration};
+use super::style::{clock, duration};
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &App, model: &Model) {
     let shown = u16::try_from(app.findings.len().min(6)).unwrap_or(6);

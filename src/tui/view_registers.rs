@@ -9,7 +9,7 @@ use ratatui::widgets::{Block, Cell, Paragraph, Row, Table};
 use super::app::App;
 use super::model::Model;
 use super::registers::sparkline;
-use super::render::clock;
+use super::style::clock;
 use mbtap_core::profile::Table as RegTable;
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {

@@ -8,7 +8,7 @@ use ratatui::widgets::{Block, Cell, Row, Table};
 
 use super::app::App;
 use super::model::{Model, RowKind};
-use super::render::{clock, duration, short_function, status_style};
+use super::style::{clock, duration, short_function, status_style};
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
     let height = usize::from(area.height.saturating_sub(3)).max(1);
