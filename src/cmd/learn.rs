@@ -32,6 +32,10 @@ pub struct Args {
     /// What to print.
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
+    /// A value read off the device's display when the capture ended, `UNIT:TABLE:ADDRESS=VALUE`
+    /// (e.g. `1:input:430=230.4`): fixes that register's scale in the draft (repeatable).
+    #[arg(long, value_name = "UNIT:TABLE:ADDRESS=VALUE", value_parser = mbtap_core::learn::hint::parse_hint)]
+    pub hint: Vec<mbtap_core::learn::hint::Hint>,
 }
 
 /// Output of `learn`.
@@ -74,7 +78,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             } else {
                 path.clone()
             };
-            std::fs::write(&file, mbtap_core::learn::draft::profile_toml(*unit, u, &source))
+            std::fs::write(&file, mbtap_core::learn::draft::profile_toml(*unit, u, &source, &args.hint))
                 .with_context(|| format!("writing {}", file.display()))?;
             eprintln!(
                 "mbtap: draft profile of unit {unit} written to {} (check it: mbtap profiles check)",

@@ -366,7 +366,13 @@ pub fn learn(data: &[u8]) {
     }
     let _ = (crate::learn::draft::text(&l), crate::learn::draft::json(&l));
     for (unit, u) in &l.units {
-        let toml = crate::learn::draft::profile_toml(*unit, u, "fuzz");
+        let hint = crate::learn::hint::Hint {
+            unit: *unit,
+            table: crate::profile::Table::HoldingRegisters,
+            address: 0,
+            value: 12.5,
+        };
+        let toml = crate::learn::draft::profile_toml(*unit, u, "fuzz", &[hint]);
         let loaded = crate::profile::load("draft.toml", &toml);
         assert!(loaded.is_ok(), "a draft that does not load: {loaded:?}\n{toml}");
     }

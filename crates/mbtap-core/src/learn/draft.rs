@@ -40,9 +40,10 @@ fn one_line(s: &str) -> String {
     s.chars().map(|c| if c.is_control() { ' ' } else { c }).collect()
 }
 
-/// The draft profile of `unit`, learned from `source` (a capture or port, for the comments).
+/// The draft profile of `unit`, learned from `source` (a capture or port, for the comments);
+/// `hints` (values read off the device's display) fix scales.
 #[must_use]
-pub fn profile_toml(unit: u8, u: &Unit, source: &str) -> String {
+pub fn profile_toml(unit: u8, u: &Unit, source: &str, hints: &[super::hint::Hint]) -> String {
     let mut s = String::new();
     let _ =
         writeln!(s, "# Drafted by `mbtap learn` from {} — check every entry before relying on it:", one_line(source));
@@ -55,7 +56,8 @@ pub fn profile_toml(unit: u8, u: &Unit, source: &str) -> String {
     for table in TABLES {
         let guesses = if u.tables().contains(&table) { u.guesses(table) } else { Vec::new() };
         for g in &guesses {
-            entry(&mut s, table, g, u);
+            let hint = hints.iter().find(|h| h.unit == unit && h.table == table && h.address == g.address);
+            entry(&mut s, table, g, u, hint);
         }
         // Written but never read: a setpoint or command register.
         for (&(t, a), values) in u.writes.range((table, 0)..=(table, u16::MAX)) {
@@ -75,9 +77,27 @@ pub fn profile_toml(unit: u8, u: &Unit, source: &str) -> String {
     s
 }
 
-fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit) {
+fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit, hint: Option<&super::hint::Hint>) {
     let a = g.address;
     let _ = writeln!(s, "\n# {} — {} (confidence {:.2})", g.kind.name(), one_line(&g.evidence), g.confidence);
+    // A hint fixes the scale of a number (not of text, labels or bits).
+    let numeric = matches!(
+        g.kind,
+        Kind::Constant | Kind::Counter | Kind::U16 | Kind::I16 | Kind::U32 { .. } | Kind::I32 { .. } | Kind::F32 { .. }
+    ) && matches!(table, Table::HoldingRegisters | Table::InputRegisters);
+    let scale = match (hint, numeric) {
+        (Some(h), true) => u.last_raw(table, g).map(|raw| {
+            let (scale, said) = super::hint::scale_from(h.value, raw, matches!(g.kind, Kind::F32 { .. }));
+            let _ = writeln!(s, "# hint: {}", one_line(&said));
+            scale
+        }),
+        (Some(h), false) => {
+            let _ = writeln!(s, "# hint: the device showed {} (no scale for a {})", h.value, g.kind.name());
+            None
+        }
+        (None, _) => None,
+    }
+    .flatten();
     if let Some(values) = u.writes.get(&(table, a)) {
         let shown: Vec<String> = values.iter().map(u16::to_string).collect();
         let _ = writeln!(s, "# the master wrote: {}", shown.join(", "));
@@ -89,6 +109,9 @@ fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit) {
     }
     if matches!(table, Table::Coils | Table::DiscreteInputs) {
         return;
+    }
+    if let Some(scale) = scale {
+        let _ = writeln!(s, "scale = {scale}");
     }
     let order = |h: bool| if h { "high_first" } else { "low_first" };
     match &g.kind {

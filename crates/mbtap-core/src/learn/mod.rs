@@ -7,6 +7,7 @@
 
 pub mod diff;
 pub mod draft;
+pub mod hint;
 pub mod infer;
 pub mod stats;
 pub mod truth;
@@ -55,6 +56,29 @@ impl Unit {
         let regs: Vec<(u16, &RegStat)> =
             self.regs.range((table, 0)..=(table, u16::MAX)).map(|(&(_, a), r)| (a, r)).collect();
         infer::guess_table(&regs, &|a| self.pairs.get(&(table, a)))
+    }
+
+    /// The last value of what `g` covers, as its type reads it (a 32-bit pair combined in its
+    /// word order, a float as a float), for a hint to be compared with.
+    #[must_use]
+    #[allow(clippy::cast_possible_wrap)]
+    pub fn last_raw(&self, table: Table, g: &Guess) -> Option<f64> {
+        use infer::Kind;
+        let one = self.regs.get(&(table, g.address))?.last?;
+        let pair = || self.pairs.get(&(table, g.address))?.recent.back().copied();
+        let join = |h: bool| {
+            pair().map(|(a, b)| {
+                let (hi, lo) = if h { (a, b) } else { (b, a) };
+                (u32::from(hi) << 16) | u32::from(lo)
+            })
+        };
+        Some(match g.kind {
+            Kind::I16 => f64::from(one as i16),
+            Kind::U32 { high_first, .. } => f64::from(join(high_first)?),
+            Kind::I32 { high_first } => f64::from(join(high_first)?.cast_signed()),
+            Kind::F32 { high_first } => f64::from(f32::from_bits(join(high_first)?)),
+            _ => f64::from(one),
+        })
     }
 
     /// The tables with registers or bits heard.

@@ -298,10 +298,30 @@ mod tests {
     #[test]
     fn the_draft_is_a_profile_that_loads() {
         let (_, _, _, l) = learn(7, 40, 200);
-        let toml = super::super::draft::profile_toml(1, &l.units[&1], "a test");
+        let toml = super::super::draft::profile_toml(1, &l.units[&1], "a test", &[]);
         let p = crate::profile::load("draft.toml", &toml).unwrap_or_else(|e| panic!("{e}\n{toml}"));
         assert!(p.addresses(Table::HoldingRegisters).count() > 20, "{toml}");
         assert!(toml.contains("type = \"f32\"") && toml.contains("word_order = \"low_first\""), "{toml}");
+    }
+
+    /// `--hint`: the display showed a tenth of the raw value: scale 0.1 in the draft, which
+    /// still loads and shows the hinted value.
+    #[test]
+    fn a_hint_fixes_the_scale() {
+        let (_, _, _, l) = learn(7, 40, 200);
+        let u = &l.units[&1];
+        let guesses = u.guesses(Table::HoldingRegisters);
+        let g = guesses.iter().find(|g| matches!(g.kind, Kind::U16)).unwrap();
+        let raw = u.last_raw(Table::HoldingRegisters, g).unwrap();
+        let hint =
+            super::super::hint::Hint { unit: 1, table: Table::HoldingRegisters, address: g.address, value: raw / 10.0 };
+        let toml = super::super::draft::profile_toml(1, u, "a test", &[hint]);
+        assert!(
+            toml.contains(&format!("address = {}\nname = \"reg_holding_{}\"\nscale = 0.1", g.address, g.address)),
+            "{toml}"
+        );
+        let p = crate::profile::load("draft.toml", &toml).unwrap();
+        assert!(p.slot(Table::HoldingRegisters, g.address).is_some());
     }
 
     /// Memory follows the registers, not the transactions.
