@@ -88,6 +88,18 @@ impl Sub {
     }
 }
 
+/// Five seconds of the demo line published to the broker on `port` under `mbtap/site1/line1`,
+/// with Home Assistant discovery.
+fn demo_publishing(port: u16) {
+    let out = Command::new(BIN)
+        .args(["demo", "--format", "summary", "--speed", "0", "--duration", "5"])
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/site1/line1"])
+        .args(["--mqtt-discovery", "homeassistant"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
 fn last<'a>(got: &'a [(String, String)], topic: &str) -> Option<&'a str> {
     got.iter().rev().find(|(t, _)| t == topic).map(|(_, p)| p.as_str())
 }
@@ -99,13 +111,7 @@ fn a_subscriber_sees_the_mk4_voltages_of_the_demo_line() {
     let port = free_port();
     let _broker = broker(&d, port);
     let sub = Sub::start(port, "#");
-    let out = Command::new(BIN)
-        .args(["demo", "--format", "summary", "--speed", "0", "--duration", "5"])
-        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/site1/line1"])
-        .args(["--mqtt-discovery", "homeassistant"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    demo_publishing(port);
     sub.wait_for("offline", |g| last(g, "mbtap/site1/line1/status") == Some("offline"));
     let got = sub.got();
     for (a, name) in [(430, "Phase A (L1) voltage"), (431, "Phase B (L2) voltage"), (432, "Phase C (L3) voltage")] {
@@ -407,13 +413,7 @@ fn every_discovery_message_passes_home_assistants_schema() {
     let port = free_port();
     let _broker = broker(&d, port);
     let sub = Sub::start(port, "homeassistant/#");
-    let out = Command::new(BIN)
-        .args(["demo", "--format", "summary", "--speed", "0", "--duration", "5"])
-        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/site1/line1"])
-        .args(["--mqtt-discovery", "homeassistant"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    demo_publishing(port);
     sub.wait_for("the MKZP's discovery", |g| g.iter().any(|(t, _)| t.contains("/u17_")));
     std::thread::sleep(Duration::from_millis(300));
     let lines = sub.got().iter().fold(String::new(), |mut all, (t, p)| {

@@ -116,6 +116,28 @@ fn tap_relays_untouched_and_knows_directions() {
     assert_eq!(directions, ["request", "response", "request", "response"]);
 }
 
+/// `tap` on `bus` offering `app`, recording to `rec`, quietly; once the link exists.
+fn recording_tap(bus: &std::path::Path, app: &std::path::Path, rec: &std::path::Path) -> Kill {
+    let tap = Kill(
+        Command::new(BIN)
+            .args(["tap", bus.to_str().unwrap(), "--link", app.to_str().unwrap(), "--format", "summary"])
+            .args(["--record", rec.to_str().unwrap()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_for(app);
+    tap
+}
+
+/// Frames in the replay of recording `rec`.
+fn replayed_frames(rec: &std::path::Path) -> (usize, String) {
+    let o = Command::new(BIN).args(["replay", rec.to_str().unwrap(), "--format", "jsonl"]).output().unwrap();
+    let replayed = String::from_utf8_lossy(&o.stdout).into_owned();
+    (replayed.lines().filter(|l| l.contains("\"event\":\"frame\"")).count(), replayed)
+}
+
 fn socat_pair(a: &std::path::Path, b: &std::path::Path) -> Kill {
     let k = Kill(
         Command::new("socat")
@@ -140,16 +162,7 @@ fn tap_outlives_its_port_and_flushes_in_the_quiet() {
     std::fs::create_dir_all(&dir).unwrap();
     let (bus, dev, app, rec) = (dir.join("bus"), dir.join("dev"), dir.join("app"), dir.join("rec.pcapng"));
     let socat = socat_pair(&bus, &dev);
-    let mut tap = Kill(
-        Command::new(BIN)
-            .args(["tap", bus.to_str().unwrap(), "--link", app.to_str().unwrap(), "--format", "summary"])
-            .args(["--record", rec.to_str().unwrap()])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(&app);
+    let mut tap = recording_tap(&bus, &app, &rec);
     let mut a = open(&app);
     let mut d = open(&dev);
     a.write_all(READ_REQ).unwrap();
@@ -169,9 +182,7 @@ fn tap_outlives_its_port_and_flushes_in_the_quiet() {
     let pid = tap.0.id().to_string();
     assert!(Command::new("kill").args(["-KILL", &pid]).status().unwrap().success());
     let _ = tap.0.wait();
-    let o = Command::new(BIN).args(["replay", rec.to_str().unwrap(), "--format", "jsonl"]).output().unwrap();
-    let replayed = String::from_utf8_lossy(&o.stdout);
-    let frames = replayed.lines().filter(|l| l.contains("\"event\":\"frame\"")).count();
+    let (frames, replayed) = replayed_frames(&rec);
     assert!(frames >= 2, "the request and its answer were flushed before the kill:\n{replayed}");
 }
 
@@ -195,16 +206,7 @@ fn tap_idles_without_burning_a_core_and_flushes_when_the_application_leaves() {
     std::fs::create_dir_all(&dir).unwrap();
     let (bus, dev, app, rec) = (dir.join("bus"), dir.join("dev"), dir.join("app"), dir.join("rec.pcapng"));
     let _socat = socat_pair(&bus, &dev);
-    let mut tap = Kill(
-        Command::new(BIN)
-            .args(["tap", bus.to_str().unwrap(), "--link", app.to_str().unwrap(), "--format", "summary"])
-            .args(["--record", rec.to_str().unwrap()])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    wait_for(&app);
+    let mut tap = recording_tap(&bus, &app, &rec);
     let pid = tap.0.id();
     // The application opens its side, closes it once (as a program restarting does), opens it
     // again and then holds it open without a word.
@@ -226,8 +228,6 @@ fn tap_idles_without_burning_a_core_and_flushes_when_the_application_leaves() {
     std::thread::sleep(Duration::from_millis(1500));
     assert!(Command::new("kill").args(["-KILL", &pid.to_string()]).status().unwrap().success());
     let _ = tap.0.wait();
-    let o = Command::new(BIN).args(["replay", rec.to_str().unwrap(), "--format", "jsonl"]).output().unwrap();
-    let replayed = String::from_utf8_lossy(&o.stdout);
-    let frames = replayed.lines().filter(|l| l.contains("\"event\":\"frame\"")).count();
+    let (frames, replayed) = replayed_frames(&rec);
     assert!(frames >= 2, "the transaction was flushed after the application left:\n{replayed}");
 }

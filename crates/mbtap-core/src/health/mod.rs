@@ -268,32 +268,37 @@ impl Health {
         }
     }
 
-    /// `len` bytes of garbage from `t`: noise — unless they come before the first good frame,
-    /// within one frame's length in all, where they are the frame the listener joined halfway.
-    fn garbage(&mut self, t: u64, len: usize) {
-        let len = len as u64;
+    /// Bytes that belong to no valid frame, `len` of them from `t`: whether they count (false
+    /// when they come before the first good frame, within one frame's length in all — the frame
+    /// the listener joined halfway, which says nothing about the bus); counted ones are put on
+    /// the errors-over-time plot.
+    fn counts_as_garbage(&mut self, t: u64, len: u64) -> bool {
         if !self.in_step && self.cut_at_start + len <= JOINED_MID_FRAME {
             self.cut_at_start += len;
-            return;
+            return false;
         }
         thin(&mut self.noise_times);
         self.noise_times.push(t);
-        self.noise.add(t);
-        self.noise_bytes += len;
+        true
     }
 
-    /// A failed frame nothing awaited, `len` bytes from `t`: a stray — or, before the first
-    /// good frame, part of the frame the listener joined halfway.
+    /// `len` bytes of noise from `t` (see [`Self::counts_as_garbage`]).
+    fn garbage(&mut self, t: u64, len: usize) {
+        let len = len as u64;
+        if self.counts_as_garbage(t, len) {
+            self.noise.add(t);
+            self.noise_bytes += len;
+        }
+    }
+
+    /// A failed frame nothing awaited, `len` bytes from `t`: a stray (see
+    /// [`Self::counts_as_garbage`]).
     fn stray_frame(&mut self, t: u64, len: usize) {
         let len = len as u64;
-        if !self.in_step && self.cut_at_start + len <= JOINED_MID_FRAME {
-            self.cut_at_start += len;
-            return;
+        if self.counts_as_garbage(t, len) {
+            self.stray.add(t);
+            self.stray_bytes += len;
         }
-        thin(&mut self.noise_times);
-        self.noise_times.push(t);
-        self.stray.add(t);
-        self.stray_bytes += len;
     }
 
     fn frame(&mut self, frame: &crate::framer::Frame<'_>, role: Role, unit: Option<u8>) {

@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 
 use crate::profile::Table;
+use crate::query::table_word;
 
 /// One unit's register (or bit) and its raw value.
 pub type Image = BTreeMap<(u8, Table, u16), u16>;
@@ -38,12 +39,6 @@ pub fn diff(a: &Image, b: &Image) -> (Vec<Change>, usize) {
     (out, same)
 }
 
-fn table_named(name: &str) -> Option<Table> {
-    [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters]
-        .into_iter()
-        .find(|t| t.name() == name)
-}
-
 /// A register image as `replay --image FILE.json` writes it: an array of rows with `unit`,
 /// `table`, `address`, `raw`.
 ///
@@ -56,7 +51,7 @@ pub fn parse_image_json(text: &str) -> Result<Image, String> {
     for (i, r) in rows.iter().enumerate() {
         let field = |k: &str| r.get(k).ok_or_else(|| format!("row {}: no {k:?}", i + 1));
         let unit = field("unit")?.as_u64().and_then(|u| u8::try_from(u).ok());
-        let table = field("table")?.as_str().and_then(table_named);
+        let table = field("table")?.as_str().and_then(table_word);
         let address = field("address")?.as_u64().and_then(|a| u16::try_from(a).ok());
         let raw = field("raw")?.as_u64().and_then(|a| u16::try_from(a).ok());
         match (unit, table, address, raw) {
@@ -107,12 +102,8 @@ pub fn parse_image_csv(text: &str) -> Result<Image, String> {
         }
         let f = csv_fields(line);
         let get = |c: usize| f.get(c).map(|s| s.trim()).unwrap_or_default();
-        let parsed = (
-            get(cu).parse::<u8>().ok(),
-            table_named(get(ct)),
-            get(ca).parse::<u16>().ok(),
-            get(cr).parse::<u16>().ok(),
-        );
+        let parsed =
+            (get(cu).parse::<u8>().ok(), table_word(get(ct)), get(ca).parse::<u16>().ok(), get(cr).parse::<u16>().ok());
         match parsed {
             (Some(u), Some(t), Some(a), Some(v)) => {
                 out.insert((u, t, a), v);

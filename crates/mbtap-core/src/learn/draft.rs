@@ -7,17 +7,9 @@ use std::fmt::Write as _;
 use super::infer::{Guess, Kind};
 use super::{Learner, Unit};
 use crate::profile::Table;
+use crate::query::rows::short_table;
 
 const TABLES: [Table; 4] = [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters];
-
-fn short(t: Table) -> &'static str {
-    match t {
-        Table::Coils => "coil",
-        Table::DiscreteInputs => "discrete",
-        Table::HoldingRegisters => "holding",
-        Table::InputRegisters => "input",
-    }
-}
 
 fn toml_str(s: &str) -> String {
     // A TOML basic string: quotes, backslashes and control characters escaped.
@@ -70,7 +62,7 @@ pub fn profile_toml(unit: u8, u: &Unit, source: &str, hints: &[super::hint::Hint
                 "\n# written, never read back: values {}\n[[{}]]\naddress = {a}\nname = \"reg_{}_{a}\"\naccess = \"w\"",
                 shown.join(", "),
                 t.name(),
-                short(t)
+                short_table(t)
             );
         }
     }
@@ -102,7 +94,7 @@ fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit, hint: Option<&super:
         let shown: Vec<String> = values.iter().map(u16::to_string).collect();
         let _ = writeln!(s, "# the master wrote: {}", shown.join(", "));
     }
-    let _ = writeln!(s, "[[{}]]\naddress = {a}\nname = \"reg_{}_{a}\"", table.name(), short(table));
+    let _ = writeln!(s, "[[{}]]\naddress = {a}\nname = \"reg_{}_{a}\"", table.name(), short_table(table));
     let writable = matches!(table, Table::Coils | Table::HoldingRegisters) && u.writes.contains_key(&(table, a));
     if writable {
         let _ = writeln!(s, "access = \"rw\"");
@@ -156,7 +148,7 @@ pub fn text(l: &Learner) -> String {
             let _ = writeln!(
                 s,
                 "  polls {} {first}..{} ({q}), {} times, {period}",
-                short(t),
+                short_table(t),
                 (u32::from(first) + u32::from(q)).saturating_sub(1),
                 b.polls
             );
@@ -165,20 +157,20 @@ pub fn text(l: &Learner) -> String {
             let _ = writeln!(
                 s,
                 "  {} {first} ({q}): exception {code:02X}{}",
-                short(t),
+                short_table(t),
                 if *code == 2 { " — no such address" } else { "" }
             );
         }
         for (&(t, a), values) in &u.writes {
             let shown: Vec<String> = values.iter().map(u16::to_string).collect();
-            let _ = writeln!(s, "  wrote {} {a}: {}", short(t), shown.join(", "));
+            let _ = writeln!(s, "  wrote {} {a}: {}", short_table(t), shown.join(", "));
         }
         for t in u.tables() {
             for g in u.guesses(t) {
                 let _ = writeln!(
                     s,
                     "  {} {}: {} — {} (confidence {:.2})",
-                    short(t),
+                    short_table(t),
                     g.address,
                     g.kind.name(),
                     one_line(&g.evidence),
