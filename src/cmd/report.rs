@@ -94,6 +94,7 @@ impl mbtap_core::analyzer::Sink for HealthSink<'_> {
     }
 
     fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
+        self.health.observer(port, estimate);
         if estimate.split_frames > 0 || estimate.reads > 0 {
             self.observers.push(mbtap_core::report::events::observer_text(port.0, estimate).trim().to_owned());
         }

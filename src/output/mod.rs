@@ -159,6 +159,9 @@ impl<W: Write> EventWriter<W> {
     /// Keeps what a port's framer learned about its reads, for the summary.
     pub fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
         self.stats.observe(port.0, estimate);
+        if let Some(h) = &mut self.health {
+            h.observer(port, estimate);
+        }
     }
 
     /// Writes the summary (text and summary formats) and flushes.

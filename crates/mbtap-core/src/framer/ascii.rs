@@ -86,6 +86,10 @@ impl AsciiFramer {
             check_ok,
             gap_violation_ns: (self.max_gap > ASCII_CHAR_TIMEOUT_NS).then_some(self.max_gap),
             short_gap_before_ns: None,
+            // A 1 s timeout dwarfs any observer's delay: the pause is taken as it was seen.
+            gap_tolerance_ns: self.max_gap.checked_sub(ASCII_CHAR_TIMEOUT_NS).filter(|&g| g > 0),
+            short_gap_tolerance_ns: None,
+            resolution_ns: 0,
             // ASCII frames are cut at their ':' and CR LF; the read time of the ':' bounds the start.
             gap_before_known: true,
             bad_chars,

@@ -24,6 +24,18 @@ pub struct Frame<'a> {
     /// read after an earlier one. False when it came in the same read as the bytes before it —
     /// then nobody can say when it started, and a latency measured to it would be invented.
     pub gap_before_known: bool,
+    /// How far the longest apparent silence inside the frame (between two reads, taken at face
+    /// value) exceeds t1.5, in ns; `None` when none reached t1.5. Through delayed reads an
+    /// apparent silence may be the observer's delay: a report counts the pause as proven only
+    /// where this is at least the observer's resolution (`resolution_ns`, or what the port
+    /// finally learned).
+    pub gap_tolerance_ns: Option<u64>,
+    /// How far the apparent silence before the frame (taken at face value) fell short of t3.5
+    /// after the previous frame, in ns; `None` when it did not, or is unknown. Judged likewise.
+    pub short_gap_tolerance_ns: Option<u64>,
+    /// The shortest timing fault the framer's reads could prove when it emitted this frame
+    /// (ns; 0 with per-byte timestamps): its observer latency plus one character.
+    pub resolution_ns: u64,
     /// ASCII only: characters that are not hex digits where digits belong.
     pub bad_chars: bool,
     /// RTU only: another length of these bytes that checks too and that neither structure,

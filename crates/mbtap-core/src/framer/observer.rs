@@ -6,20 +6,35 @@
 //! is unknown (a capture from another tool, `--latency-ms` not given), a delayed read looks like
 //! a silence before its bytes — and a silence longer than t3.5 ends a frame.
 //!
-//! Valid frames are ground truth here: their bytes were sent back to back (a slave that pauses
-//! inside its frames aside), so any apparent silence between two reads *inside* a valid frame is
-//! the observer's delay. Each valid frame that came in more than one read gives one sample, the
-//! longest such silence; a batch of [`BATCH`] samples gives its 90th percentile (so the few slow
-//! slaves' pauses do not count), and the learned latency is the median of the last
-//! [`KEPT_BATCHES`] batches — a lower bound on the observer's true latency, so trusting timing
-//! less by it never invents a silence.
+//! Valid frames are ground truth here: their bytes were sent back to back — unless their sender
+//! pauses inside its frames, the very fault a health report must find. So the observer's delay
+//! is learned **per sender** and the port's figure taken across senders: the delay is a property
+//! of the port (the master's requests are split by the same timer as the slaves' answers), a
+//! pause is a property of one sender. Each valid frame that came in more than one read gives its
+//! sender one sample, the longest apparent silence between two of its reads; a batch of
+//! [`BATCH`] samples of one sender gives that sender's figure (its largest); a sender's figure is
+//! the median of its last [`KEPT_BATCHES`] (so a pause now and then does not count). The
+//! port's latency is the lower median of the senders' figures, so one slow unit — or a few,
+//! while most senders are healthy — cannot raise it and hide its own pauses, and a healthy
+//! sender's longest delays, not a 90th percentile below the timer, set it.
+//!
+//! (The first version took one 90th percentile over all senders: behind a 16 ms USB timer it
+//! learned 14 ms and the timer's own 15–16 ms delays became "gaps inside frames" against every
+//! unit; a slow unit's pauses, a fifth of the samples, raised it and hid themselves.)
 
-/// Samples per batch.
-pub(crate) const BATCH: usize = 64;
-/// Batches whose 90th percentiles the learned figure is the median of.
+/// Samples per batch of one sender.
+pub(crate) const BATCH: usize = 16;
+/// Batches whose figures a sender's figure is the median of.
 const KEPT_BATCHES: usize = 5;
-/// The sample of a batch taken as its 90th percentile (0-based, ascending).
-const P90_INDEX: usize = BATCH * 9 / 10;
+/// The sample of a batch taken as its figure (0-based, ascending): the largest. A read's
+/// apparent delay depends on how many bytes it holds (its timestamp is its last byte's), so
+/// only the longest delays reach the timer; one pause in a batch is outvoted by the median
+/// over batches.
+const FIGURE_INDEX: usize = BATCH - 1;
+/// Batches a sender needs before its figure counts alone (while any sender has as many).
+const SETTLED: usize = 3;
+/// Senders: the master, then units 0–255 by the frame's address byte.
+const SENDERS: usize = 257;
 
 /// What the framer learned about the reads of one port.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -33,12 +48,22 @@ pub struct ObserverEstimate {
     pub learning: bool,
     /// Valid frames that came in more than one read (the samples).
     pub split_frames: u64,
+    /// Valid frames seen.
+    pub frames: u64,
     /// Reads (chunks) and their bytes; the longest read.
     pub reads: u64,
     pub read_bytes: u64,
     pub longest_read: usize,
     /// What the session that recorded this capture learned (its statistics comment).
     pub recorded_latency_ns: Option<u64>,
+    /// Senders (the master, units) whose frames gave a figure; the learned latency is the lower
+    /// median of theirs.
+    pub senders_learned: usize,
+    /// The median number of bytes per read.
+    pub typical_read: usize,
+    /// One character time on this port (ns): a read's timestamp cannot place a byte closer
+    /// than that.
+    pub char_ns: u64,
 }
 
 impl ObserverEstimate {
@@ -49,6 +74,33 @@ impl ObserverEstimate {
         match self.learned_latency_ns {
             Some(l) if self.learning => l.max(self.configured_latency_ns),
             _ => self.configured_latency_ns,
+        }
+    }
+
+    /// The shortest timing fault these reads can prove (ns): where reads are delayed, an
+    /// apparent silence is uncertain by the latency (and a sixteenth for what learning may have
+    /// missed) plus one character; per-byte timestamps (no latency) resolve everything.
+    #[must_use]
+    ///
+    /// Reads that hold several bytes each while no delay shows between them were delayed
+    /// alike — a USB timer shorter than its batch (1 ms at 19200 holds two characters per
+    /// read), with every frame's last read shared with its glitch — and the delay nobody could
+    /// see is at least the time the bytes of a typical read took: the resolution is never
+    /// finer than that plus a character.
+    pub fn resolution_ns(&self) -> u64 {
+        // Only where most frames come in several reads: one read per frame (a gap-cutting
+        // sniffer's packets) places every frame's end exactly.
+        let mostly_split = self.split_frames.saturating_mul(2) > self.frames;
+        let batched =
+            if mostly_split { self.char_ns.saturating_mul(self.typical_read.saturating_sub(1) as u64) } else { 0 };
+        // A learned figure is the longest delay seen, which may fall short of the adapter's
+        // true one by a little: a sixteenth more (behind a 16 ms timer at 115200, a character is
+        // 87 µs, less than the learned figure's shortfall).
+        let margin = |l: u64| l.saturating_add(l / 16).saturating_add(self.char_ns);
+        match self.effective_latency_ns() {
+            0 if batched == 0 => 0,
+            l if l < self.char_ns => margin(l.max(batched)),
+            l => margin(l),
         }
     }
 
@@ -67,24 +119,80 @@ impl ObserverEstimate {
     }
 }
 
+/// Who sent a frame, as the learner keys its samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum SampleSender {
+    Master,
+    Unit(u8),
+}
+
+impl SampleSender {
+    const fn slot(self) -> usize {
+        match self {
+            Self::Master => 0,
+            Self::Unit(u) => 1 + u as usize,
+        }
+    }
+}
+
+/// One sender's samples.
+#[derive(Debug, Clone, Copy, Default)]
+struct SenderSamples {
+    batch: [u64; BATCH],
+    in_batch: usize,
+    figures: [u64; KEPT_BATCHES],
+    batches: usize,
+}
+
+impl SenderSamples {
+    /// Adds a sample; the sender's new figure when a batch completed.
+    fn add(&mut self, delay_ns: u64) -> Option<u64> {
+        self.batch[self.in_batch] = delay_ns;
+        self.in_batch += 1;
+        if self.in_batch < BATCH {
+            return None;
+        }
+        self.in_batch = 0;
+        self.batch.sort_unstable();
+        self.figures[self.batches % KEPT_BATCHES] = self.batch[FIGURE_INDEX];
+        self.batches = self.batches.saturating_add(1);
+        self.figure()
+    }
+
+    /// The median of the kept batch figures; `None` before a first batch.
+    fn figure(&self) -> Option<u64> {
+        let kept = self.batches.min(KEPT_BATCHES);
+        if kept == 0 {
+            return None;
+        }
+        let mut last = self.figures;
+        let last = &mut last[..kept];
+        last.sort_unstable();
+        Some(last[kept / 2])
+    }
+}
+
 /// The learner inside a framer.
 #[derive(Debug, Clone)]
 pub(crate) struct ObserverLearner {
     pub(crate) estimate: ObserverEstimate,
-    batch: [u64; BATCH],
-    in_batch: usize,
-    p90s: [u64; KEPT_BATCHES],
-    batches: usize,
+    senders: Box<[SenderSamples]>,
+    /// Each sender's figure, where it has one (kept apart so the port's figure is cheap).
+    figures: Box<[Option<u64>]>,
+    /// Reads by size (the last slot: that many bytes or more), for the typical read.
+    read_sizes: [u64; READ_SIZES],
 }
 
+/// Read sizes counted one by one; longer reads share the last slot.
+const READ_SIZES: usize = 64;
+
 impl ObserverLearner {
-    pub(crate) fn new(configured_latency_ns: u64, learning: bool) -> Self {
+    pub(crate) fn new(configured_latency_ns: u64, learning: bool, char_ns: u64) -> Self {
         Self {
-            estimate: ObserverEstimate { configured_latency_ns, learning, ..ObserverEstimate::default() },
-            batch: [0; BATCH],
-            in_batch: 0,
-            p90s: [0; KEPT_BATCHES],
-            batches: 0,
+            estimate: ObserverEstimate { configured_latency_ns, learning, char_ns, ..ObserverEstimate::default() },
+            senders: vec![SenderSamples::default(); SENDERS].into_boxed_slice(),
+            figures: vec![None; SENDERS].into_boxed_slice(),
+            read_sizes: [0; READ_SIZES],
         }
     }
 
@@ -94,27 +202,51 @@ impl ObserverLearner {
         e.reads = e.reads.saturating_add(1);
         e.read_bytes = e.read_bytes.saturating_add(n as u64);
         e.longest_read = e.longest_read.max(n);
+        self.read_sizes[n.min(READ_SIZES - 1)] += 1;
+        // The median read size, brought up to date now and then (64 slots to walk).
+        if e.reads > 64 && !e.reads.is_multiple_of(64) {
+            return;
+        }
+        let half = e.reads.div_ceil(2);
+        let mut seen = 0;
+        e.typical_read = self
+            .read_sizes
+            .iter()
+            .position(|&k| {
+                seen += k;
+                seen >= half
+            })
+            .unwrap_or(0);
     }
 
-    /// A valid frame came in several reads, the longest apparent silence between two of them
-    /// `delay_ns`. Returns the new learned latency when a batch completed.
-    pub(crate) fn sample(&mut self, delay_ns: u64) -> Option<u64> {
+    /// A valid frame was emitted (split across reads or not).
+    pub(crate) fn frame(&mut self) {
+        self.estimate.frames = self.estimate.frames.saturating_add(1);
+    }
+
+    /// A valid frame from `sender` came in several reads, the longest apparent silence between
+    /// two of them `delay_ns`. Returns the port's new learned latency when it was recomputed.
+    pub(crate) fn sample(&mut self, sender: SampleSender, delay_ns: u64) -> Option<u64> {
         self.estimate.split_frames = self.estimate.split_frames.saturating_add(1);
-        self.batch[self.in_batch] = delay_ns;
-        self.in_batch += 1;
-        if self.in_batch < BATCH {
-            return None;
-        }
-        self.in_batch = 0;
-        self.batch.sort_unstable();
-        self.p90s[self.batches % KEPT_BATCHES] = self.batch[P90_INDEX];
-        self.batches = self.batches.saturating_add(1);
-        let kept = self.batches.min(KEPT_BATCHES);
-        let mut last = self.p90s;
-        let last = &mut last[..kept];
-        last.sort_unstable();
-        let learned = last[kept / 2];
+        let slot = sender.slot();
+        let figure = self.senders[slot].add(delay_ns)?;
+        self.figures[slot] = Some(figure);
+        // The lower median across the senders that have a figure — from those with a median of
+        // at least [`SETTLED`] batches where any has one: a sender's first batch may hold its
+        // one pause of the day (issue 25: on a short capture, two units' single batches with a
+        // slow answer each made the port's figure 6.5 ms behind per-byte timestamps).
+        let settled = self.senders.iter().any(|s| s.batches >= SETTLED);
+        let mut all: Vec<u64> = self
+            .figures
+            .iter()
+            .zip(self.senders.iter())
+            .filter(|(_, s)| !settled || s.batches >= SETTLED)
+            .filter_map(|(f, _)| *f)
+            .collect();
+        all.sort_unstable();
+        let learned = all[(all.len() - 1) / 2];
         self.estimate.learned_latency_ns = Some(learned);
+        self.estimate.senders_learned = all.len();
         Some(learned)
     }
 }
@@ -123,26 +255,49 @@ impl ObserverLearner {
 mod tests {
     use super::*;
 
-    #[test]
-    fn delays_of_a_16_ms_timer_are_learned_and_slow_slaves_pauses_are_not() {
-        let mut l = ObserverLearner::new(0, true);
-        let mut learned = None;
-        for i in 0..(BATCH as u64 * 5) {
-            // Delays spread over 0–16 ms, and one frame in 32 a slave pausing 40 ms inside it.
-            let d = if i % 32 == 0 { 40_000_000 } else { (i * 7919 % 64) * 250_000 };
-            learned = l.sample(d).or(learned);
+    /// Feeds `n` batches of samples from `sender`, delays from `delay(i)`.
+    fn feed(l: &mut ObserverLearner, sender: SampleSender, n: usize, delay: impl Fn(u64) -> u64) {
+        for i in 0..(BATCH * n) as u64 {
+            l.sample(sender, delay(i));
         }
-        let learned = learned.expect("five batches");
-        assert!((13_000_000..16_000_000).contains(&learned), "{learned}");
+    }
+
+    #[test]
+    fn delays_of_a_16_ms_timer_are_learned_up_to_the_timer() {
+        let mut l = ObserverLearner::new(0, true, 1_146_000);
+        // Delays spread over 14.9–16 ms, and one frame in 64 a slave pausing 40 ms inside it.
+        for sender in [SampleSender::Master, SampleSender::Unit(1), SampleSender::Unit(5)] {
+            feed(&mut l, sender, 5, |i| if i % 64 == 0 { 40_000_000 } else { 14_900_000 + (i * 7919 % 64) * 17_000 });
+        }
+        let learned = l.estimate.learned_latency_ns.expect("three senders");
+        assert!((15_800_000..16_000_000).contains(&learned), "{learned}");
         assert_eq!(l.estimate.effective_latency_ns(), learned);
+    }
+
+    /// Issue 25: a unit pausing 30 characters inside every answer made a fifth of the samples,
+    /// raised the one 90th percentile and hid its own pauses.
+    #[test]
+    fn regression_issue_25_a_slow_units_pauses_do_not_raise_the_ports_latency() {
+        let mut l = ObserverLearner::new(0, true, 1_146_000);
+        feed(&mut l, SampleSender::Unit(17), 10, |_| 34_000_000);
+        for sender in [SampleSender::Master, SampleSender::Unit(1), SampleSender::Unit(5), SampleSender::Unit(33)] {
+            feed(&mut l, sender, 2, |i| 15_000_000 + i % 7 * 100_000);
+        }
+        let learned = l.estimate.learned_latency_ns.expect("five senders");
+        assert!(learned < 16_000_000, "{learned}");
+        assert_eq!(l.estimate.senders_learned, 5);
+        // With only the master and the slow unit, the lower of the two.
+        let mut two = ObserverLearner::new(0, true, 1_146_000);
+        feed(&mut two, SampleSender::Unit(17), 3, |_| 34_000_000);
+        feed(&mut two, SampleSender::Master, 1, |_| 15_000_000);
+        assert_eq!(two.estimate.learned_latency_ns, Some(15_000_000));
     }
 
     #[test]
     fn per_byte_reads_learn_no_latency_and_a_given_latency_is_kept() {
-        let mut l = ObserverLearner::new(2_000_000, false);
-        for i in 0..BATCH as u64 {
-            l.sample(if i == 3 { 9_000_000 } else { 0 });
-        }
+        let mut l = ObserverLearner::new(2_000_000, false, 1_146_000);
+        // One pause in three batches: outvoted.
+        feed(&mut l, SampleSender::Master, 3, |i| if i == 3 { 9_000_000 } else { 0 });
         assert_eq!(l.estimate.learned_latency_ns, Some(0));
         assert_eq!(l.estimate.effective_latency_ns(), 2_000_000);
     }

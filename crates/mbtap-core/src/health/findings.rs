@@ -111,10 +111,11 @@ impl Health {
             &self.second_master,
             "requests went out while another request's answer was still due, and that answer then came: a second master shares the line (their requests will collide sooner or later)".into(),
         );
+        let resolution = self.resolution_ns();
         push(
             "fast_master",
             None,
-            &self.fast_master,
+            &self.fast_master.proven(resolution),
             "requests sent less than t3.5 after the previous frame (Serial Line v1.02 §2.5.1.1): slaves may merge or drop them".into(),
         );
         let glitch_summary = |who: &str, n: u64, sent: u64| {
@@ -186,7 +187,7 @@ impl Health {
             push(
                 "fast_answer",
                 Some(unit),
-                &u.fast_answers,
+                &u.fast_answers.proven(resolution),
                 format!(
                     "unit {unit} answers less than t3.5 after the request (Serial Line v1.02 §2.5.1.1): other devices may take its answer for part of the request"
                 ),
@@ -194,7 +195,7 @@ impl Health {
             push(
                 "gap_inside_frame",
                 Some(unit),
-                &u.gaps,
+                &u.gaps.proven(resolution),
                 format!(
                     "unit {unit} pauses inside its frames longer than t1.5: a slow device or a gateway that splits frames"
                 ),
@@ -279,7 +280,31 @@ impl Health {
             latencies,
             line: None,
             observers: Vec::new(),
+            limits: self.limits(resolution),
         }
+    }
+
+    /// What these reads could not resolve, said once instead of as findings (issue 25).
+    fn limits(&self, resolution: u64) -> Vec<String> {
+        let unproven = |m: &super::margins::Margins| m.total() - m.proven(resolution).count;
+        let gaps: u64 = self.units.values().map(|u| unproven(&u.gaps)).sum();
+        let fast: u64 =
+            unproven(&self.fast_master) + self.units.values().map(|u| unproven(&u.fast_answers)).sum::<u64>();
+        if gaps + fast == 0 {
+            return Vec::new();
+        }
+        let ms = ratio(resolution, 1_000_000);
+        let mut what = Vec::new();
+        if gaps > 0 {
+            what.push(format!("{gaps} apparent pause(s) inside frames"));
+        }
+        if fast > 0 {
+            what.push(format!("{fast} apparent silence(s) shorter than t3.5 between frames"));
+        }
+        vec![format!(
+            "timing: {} are within what these reads cannot resolve: timing faults shorter than {ms:.1} ms (the observer's latency, a sixteenth more and a character) cannot be seen through them; use an adapter that timestamps each byte, or give the adapter's latency with --latency-ms",
+            what.join(" and ")
+        )]
     }
 
     fn plots(&self) -> (Vec<Bin>, Vec<LatencyPoint>) {

@@ -18,6 +18,7 @@
 
 mod findings;
 pub mod html;
+mod margins;
 mod report;
 
 use std::collections::BTreeMap;
@@ -96,7 +97,7 @@ struct UnitState {
     exception_tally: Tally,
     no_response: Tally,
     bad_response: Tally,
-    gaps: Tally,
+    gaps: margins::Margins,
     out_of_range: Tally,
     /// The first few registers and values outside their range, for the finding's sentence.
     out_of_range_examples: Vec<String>,
@@ -115,7 +116,7 @@ struct UnitState {
     sent: u64,
     glitches: Tally,
     /// Answers that began less than t3.5 after the request (Serial Line v1.02 §2.5.1.1).
-    fast_answers: Tally,
+    fast_answers: margins::Margins,
     /// Requests answered only by a damaged frame whose address is not this unit's.
     unclear: u64,
     /// The last raw reading of each documented value with a range.
@@ -167,7 +168,7 @@ pub struct Health {
     frame_bytes: u64,
     frames: u64,
     bad_frames: u64,
-    fast_master: Tally,
+    fast_master: margins::Margins,
     second_master: Tally,
     /// Failed frames taking a request's place whose address is not the asked unit's: damage
     /// the bus suffered, not evidence against a unit.
@@ -193,6 +194,10 @@ pub struct Health {
     /// The last transaction, when it was answered (unit, function, time) and nothing failed
     /// its check since: an orphan answer matching it is the same request answered twice.
     last_ok: Option<(u8, u8, u64)>,
+    /// Per port: the resolution of its reads (ns) as its frames said, and as its framer finally
+    /// learned it (told by [`Health::observer`]; that one wins).
+    resolution_streamed: BTreeMap<u8, u64>,
+    resolution_final: BTreeMap<u8, u64>,
     /// A frame has passed its check: the listener is in step with the line.
     in_step: bool,
     /// Garbage before that, up to one longest frame: the listener started in the middle of a
@@ -333,20 +338,33 @@ impl Health {
             self.overtaken = self.pending.take().map(|p| Asked { overtaken_at: Some(frame.t_start.0), ..p });
             self.pending = Some(Asked { unit: u, t_start: frame.t_start.0, t_end: frame.t_end.0, overtaken_at: None });
         }
-        if frame.gap_violation_ns.is_some()
-            && let Some(u) = unit
-        {
-            self.units.entry(u).or_default().gaps.add(frame.t_start.0);
+        self.resolution_streamed.insert(frame.port.0, frame.resolution_ns);
+        // Timing evidence is kept with its margin and judged at report time against the
+        // observer's resolution (issue 25: a 16 ms USB timer's delays were blamed on every unit).
+        if let (Some(m), Some(u)) = (frame.gap_tolerance_ns, unit) {
+            self.units.entry(u).or_default().gaps.add(m, frame.t_start.0);
         }
-        if frame.short_gap_before_ns.is_some() {
+        if let Some(m) = frame.short_gap_tolerance_ns {
             match (role, unit) {
-                (Role::Request, _) => self.fast_master.add(frame.t_start.0),
+                (Role::Request, _) => self.fast_master.add(m, frame.t_start.0),
                 (Role::Response, Some(u)) if frame.check_ok => {
-                    self.units.entry(u).or_default().fast_answers.add(frame.t_start.0);
+                    self.units.entry(u).or_default().fast_answers.add(m, frame.t_start.0);
                 }
                 _ => {}
             }
         }
+    }
+
+    /// What a port's framer finally learned about its reads (at the end of the input): timing
+    /// findings are judged with its resolution.
+    pub fn observer(&mut self, port: crate::chunk::PortId, estimate: &crate::framer::ObserverEstimate) {
+        self.resolution_final.insert(port.0, estimate.resolution_ns());
+    }
+
+    /// The resolution timing findings are judged with: the coarsest port's (ns).
+    fn resolution_ns(&self) -> u64 {
+        let streamed = self.resolution_streamed.iter().filter(|(p, _)| !self.resolution_final.contains_key(p));
+        self.resolution_final.iter().chain(streamed).map(|(_, &r)| r).max().unwrap_or(0)
     }
 
     fn transaction(&mut self, t: &crate::pairing::Transaction<'_>, annotations: Option<&[Annotation]>) {

@@ -112,6 +112,10 @@ pub struct Report {
     /// where it came from), one sentence each.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub observers: Vec<String>,
+    /// What the observer's reads could not resolve (timing faults too short to prove through
+    /// them), said once rather than as findings against units.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub limits: Vec<String>,
 }
 
 /// How much a finding should worry the reader, for the HTML page's colours: `alarm` (the bus
@@ -154,7 +158,7 @@ impl Report {
         if let Some(line) = &self.line {
             let _ = writeln!(s, "line: {line}");
         }
-        for o in &self.observers {
+        for o in self.observers.iter().chain(&self.limits) {
             let _ = writeln!(s, "{o}");
         }
         if self.cut_at_start_bytes > 0 && self.frames > self.bad_frames {

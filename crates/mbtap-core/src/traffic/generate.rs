@@ -63,6 +63,15 @@ pub struct TrafficConfig {
     pub lookalike: f64,
     /// Start time, ns since the epoch.
     pub start_ns: u64,
+    /// A unit that pauses inside every answer it sends, [`Self::slow_unit_chars`] character
+    /// times after its third byte: the slow device a health report must name, and the one
+    /// whose pauses must not be taken for the observer's delay.
+    pub slow_unit: Option<u8>,
+    /// The pause of [`Self::slow_unit`], in character times.
+    pub slow_unit_chars: u64,
+    /// The shortest silence kept between frames (ns); `None`: the spec's recommended 4.5
+    /// characters. A master that waits 1.05 × t3.5 is within the spec, barely.
+    pub min_idle_ns: Option<u64>,
 }
 
 impl Default for TrafficConfig {
@@ -77,6 +86,9 @@ impl Default for TrafficConfig {
             glitch: 0.0,
             lookalike: 0.0,
             start_ns: 1_700_000_000_000_000_000,
+            slow_unit: None,
+            slow_unit_chars: 30,
+            min_idle_ns: None,
         }
     }
 }
@@ -128,7 +140,9 @@ impl Builder {
             wire[at] ^= flip;
             kind = TruthKind::Corrupted;
         }
-        let gap = if slow && wire.len() > 3 {
+        let gap = if !is_request && self.cfg.slow_unit == Some(unit) && wire.len() > 4 {
+            Some((3, self.cfg.slow_unit_chars.saturating_mul(self.char_ns)))
+        } else if slow && wire.len() > 3 {
             // A gap between t1.5 and 10 ms somewhere inside.
             let at = usize::try_from(self.rng.range(1, wire.len() as u64 - 1)).unwrap_or(1);
             let lo = self.cfg.line.t15_ns() + self.char_ns;
@@ -321,7 +335,7 @@ pub fn generate(cfg: &TrafficConfig) -> Wire {
     let mut b =
         Builder { rng: Rng::new(cfg.seed), cfg: *cfg, char_ns: line.char_ns(), t: cfg.start_ns, wire: Wire::default() };
     // Turnaround and inter-poll idle: never below 4.5 characters (the spec's recommendation).
-    let min_gap = line.t35_ns() + line.char_ns();
+    let min_gap = cfg.min_idle_ns.unwrap_or(line.t35_ns() + line.char_ns());
     for _ in 0..cfg.transactions {
         if b.rng.chance(cfg.noise) {
             let n = usize::try_from(b.rng.range(1, 12)).unwrap_or(1);

@@ -1,0 +1,95 @@
+//! Issue 25: the health report through the adapters people have, with no `--latency-ms` — a
+//! healthy bus gets no timing finding, a slow unit is named alone where the observer can see
+//! its pauses, and what the reads cannot resolve is said once. The traffic's physics (observer
+//! delays, 1.05 × t3.5 pauses, a unit pausing 30 characters) come from the generator's models.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_core::chunk::{Chunk, PortId, Timestamp};
+use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_core::health::{Health, Report};
+use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe};
+
+const L9600: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
+const L19200: LineSettings = LineSettings { baud: 19_200, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
+const TIMING: [&str; 3] = ["gap_inside_frame", "fast_answer", "fast_master"];
+
+/// A bus with no fault but unit 33's absence, masters and slaves keeping 1.05 × t3.5.
+fn tight_bus(line: LineSettings, glitch: f64, slow_unit: Option<u8>) -> TrafficConfig {
+    let t35 = line.t35_ns();
+    TrafficConfig {
+        seed: 2501,
+        line,
+        transactions: 1500,
+        noise: 0.0,
+        corrupt: 0.0,
+        slow: 0.0,
+        glitch,
+        slow_unit,
+        min_idle_ns: Some(t35 + t35 / 20),
+        ..TrafficConfig::default()
+    }
+}
+
+/// The report as `mbtap report` makes it from a capture with no latency recorded.
+fn report(cfg: &TrafficConfig, model: Observation) -> Report {
+    let wire = generate(cfg);
+    let chunks = observe(&wire, model, cfg.line.char_ns());
+    let mut a = Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(cfg.line, 0), ..AnalyzerConfig::default() });
+    let mut health = Health::new(mbtap_core::profile::Profiles::new());
+    for (t, r) in &chunks {
+        a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes: &wire.bytes[r.clone()] }, &mut |e: &Event<'_>| {
+            health.event(e);
+        });
+    }
+    a.finish(&mut |e: &Event<'_>| health.event(e));
+    for (port, estimate) in a.observers() {
+        health.observer(port, &estimate);
+    }
+    health.report()
+}
+
+fn timing_findings(r: &Report) -> Vec<(&'static str, Option<u8>)> {
+    r.findings.iter().filter(|f| TIMING.contains(&f.kind)).map(|f| (f.kind, f.unit)).collect()
+}
+
+#[test]
+fn regression_issue_25_a_healthy_bus_through_a_16_ms_usb_timer_gives_no_timing_finding() {
+    for glitch in [0.0, 1.0] {
+        let r = report(&tight_bus(L9600, glitch, None), Observation::USB_16MS);
+        assert_eq!(timing_findings(&r), [], "glitch {glitch}: {}", r.text());
+    }
+}
+
+#[test]
+fn regression_issue_25_a_healthy_bus_through_a_16550_fifo_gives_no_timing_finding() {
+    for line in [L9600, L19200] {
+        let r = report(&tight_bus(line, 0.3, None), Observation::FIFO_16550);
+        assert_eq!(timing_findings(&r), [], "{line}: {}", r.text());
+    }
+}
+
+#[test]
+fn regression_issue_25_a_master_waiting_just_past_t35_is_not_fast_through_a_1_ms_usb_timer() {
+    let r = report(&tight_bus(L19200, 1.0, None), Observation::USB_1MS);
+    assert_eq!(timing_findings(&r), [], "{}", r.text());
+}
+
+#[test]
+fn regression_issue_25_the_slow_unit_is_named_alone_through_a_fifo_and_a_16_ms_timer() {
+    for model in [Observation::FIFO_16550, Observation::USB_16MS] {
+        let r = report(&tight_bus(L9600, 0.0, Some(17)), model);
+        assert_eq!(timing_findings(&r), [("gap_inside_frame", Some(17))], "{}: {}", model.name(), r.text());
+    }
+}
+
+#[test]
+fn regression_issue_25_pauses_the_reads_cannot_resolve_are_said_once_not_blamed() {
+    // 30 characters at 115200 are 2.6 ms: nothing a 16 ms timer can show.
+    let line = LineSettings { baud: 115_200, data_bits: 8, parity: Parity::None, stop_bits: 1 };
+    let r = report(&tight_bus(line, 0.0, Some(17)), Observation::USB_16MS);
+    assert_eq!(timing_findings(&r), [], "{}", r.text());
+    assert_eq!(r.limits.len(), 1, "{}", r.text());
+    assert!(r.limits[0].contains("cannot be seen") && r.limits[0].contains("--latency-ms"), "{}", r.text());
+    assert!(r.text().contains(&r.limits[0]));
+}
