@@ -1,12 +1,16 @@
-//! `mbtap profiles list|check|show`: the device profiles — built in, the user's, a file.
+//! `mbtap profiles list|check|show|import|export`: the device profiles — built in, the user's, a
+//! file; imported from register sheets and Home Assistant YAML, exported to the site's tools.
 
 use mbtap_core::report::format::printable;
 use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::Subcommand;
+use anyhow::Context as _;
+use clap::{Subcommand, ValueEnum};
 use mbtap_core::profile::Table;
+use mbtap_core::profile::export::Target;
+use mbtap_core::profile::import::sheet::{SheetOptions, parse_columns};
 
 use crate::config::devices::{load_profile_file, resolve_profile, user_profile_dir};
 
@@ -19,6 +23,97 @@ pub enum Command {
     Check { file: PathBuf },
     /// Print every address a profile (a built-in name or a file) defines, per table.
     Show { profile: String },
+    /// Make a profile from a vendor register sheet (CSV, XLSX) or Home Assistant `modbus:` YAML.
+    ///
+    /// Columns are found by their header names (address, name, type, scale, unit, access, word
+    /// order, table, length, description — English, German, Chinese), below any title rows.
+    /// Addresses as decimal, 0x2000, 2000H or Modicon numbers (40001). Every row that cannot be
+    /// read is listed with its row, column and why, and skipped. Without -o, the profile goes to
+    /// the user profile directory as NAME.toml and is usable by name at once.
+    Import(ImportArgs),
+    /// Write a profile as the configuration Home Assistant, ESPHome or Telegraf reads.
+    Export(ExportArgs),
+}
+
+/// `profiles import`.
+#[derive(Debug, clap::Args)]
+pub struct ImportArgs {
+    /// The sheets or YAML files (several: one device's tables in separate files).
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Where to write the profile (default: the user profile directory, NAME.toml).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// The source's format (default: from the file's extension or content).
+    #[arg(long, value_enum)]
+    pub format: Option<ImportFormat>,
+    /// Columns by field: `address=B,name=A,type=D` (a letter, a number from 1, or a header text).
+    #[arg(long)]
+    pub columns: Option<String>,
+    /// The table where the sheet does not say (no table column, no Modicon numbers).
+    #[arg(long, value_enum)]
+    pub table: Option<TableArg>,
+    /// The word order of 32-bit values where the sheet does not say.
+    #[arg(long, value_enum)]
+    pub word_order: Option<WordOrderArg>,
+    /// The profile's name (default: the first file's name).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// The device's description in the profile (default: the name).
+    #[arg(long)]
+    pub device: Option<String>,
+    /// Home Assistant YAML with several devices: the one to import (`slave`/`device_address`).
+    #[arg(long)]
+    pub unit: Option<u8>,
+    /// The workbook sheet to read (default: the first).
+    #[arg(long)]
+    pub sheet: Option<String>,
+}
+
+/// `profiles export`.
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    /// A built-in profile name, a user profile name or a file.
+    pub profile: String,
+    #[arg(long, value_enum)]
+    pub format: ExportFormat,
+    /// The device's address in the exported configuration.
+    #[arg(long, default_value_t = 1)]
+    pub unit: u8,
+    /// Where to write it (default: standard output).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ImportFormat {
+    Csv,
+    /// XLSX (also XLS and ODS).
+    Xlsx,
+    HomeAssistant,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    HomeAssistant,
+    Esphome,
+    Telegraf,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum TableArg {
+    Holding,
+    Input,
+    Coils,
+    Discrete,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WordOrderArg {
+    /// ABCD: the high word first.
+    HighFirst,
+    /// CDAB: the low word first ("word swapped").
+    LowFirst,
 }
 
 pub fn run(command: Command) -> anyhow::Result<ExitCode> {
@@ -26,6 +121,8 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::List => list(),
         Command::Check { file } => check(&file),
         Command::Show { profile } => show(&profile),
+        Command::Import(args) => import(&args),
+        Command::Export(args) => export(&args),
     }
 }
 
@@ -47,7 +144,12 @@ fn list() -> anyhow::Result<ExitCode> {
         for f in files {
             let name = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             let line = match load_profile_file(&f) {
-                Ok(p) => format!("{name:<8} user      {} — {}", p.meta.device, f.display()),
+                Ok(p) => {
+                    // Where it came from: an import says so in its document.
+                    let origin = p.meta.document.as_deref().filter(|d| d.starts_with("imported from"));
+                    let origin = origin.map(|d| format!(" ({d})")).unwrap_or_default();
+                    format!("{name:<8} user      {} — {}{origin}", p.meta.device, f.display())
+                }
                 Err(e) => format!("{name:<8} user      does not load: {e:#}"),
             };
             writeln!(out, "{}", printable(&line))?;
@@ -94,5 +196,149 @@ fn show(profile: &str) -> anyhow::Result<ExitCode> {
             }
         }
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The format of `path`: by extension, else by content.
+fn detect(path: &std::path::Path) -> anyhow::Result<ImportFormat> {
+    let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+    Ok(match ext.as_str() {
+        "xlsx" | "xlsm" | "xls" | "ods" => ImportFormat::Xlsx,
+        "yaml" | "yml" => ImportFormat::HomeAssistant,
+        "csv" | "tsv" | "txt" => ImportFormat::Csv,
+        _ => {
+            let head = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+            let head = &head[..head.len().min(4096)];
+            if head.starts_with(b"PK\x03\x04") || head.starts_with(&[0xD0, 0xCF, 0x11, 0xE0]) {
+                ImportFormat::Xlsx
+            } else if String::from_utf8_lossy(head).contains("input_type:")
+                || String::from_utf8_lossy(head).contains("modbus:")
+            {
+                ImportFormat::HomeAssistant
+            } else {
+                ImportFormat::Csv
+            }
+        }
+    })
+}
+
+/// `profiles import`: the sheets read, the profile written and loaded back, what was skipped said.
+fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
+    let columns = match &args.columns {
+        Some(c) => parse_columns(c).map_err(|e| anyhow::anyhow!("--columns {c:?}: {e}"))?,
+        None => Vec::new(),
+    };
+    let opts = SheetOptions {
+        columns,
+        table: args.table.map(|t| match t {
+            TableArg::Holding => Table::HoldingRegisters,
+            TableArg::Input => Table::InputRegisters,
+            TableArg::Coils => Table::Coils,
+            TableArg::Discrete => Table::DiscreteInputs,
+        }),
+        word_order: args.word_order.map(|w| match w {
+            WordOrderArg::HighFirst => mbtap_core::profile::format::WordOrder::HighFirst,
+            WordOrderArg::LowFirst => mbtap_core::profile::format::WordOrder::LowFirst,
+        }),
+    };
+    let mut all = mbtap_core::profile::import::Imported::default();
+    let mut err = std::io::stderr().lock();
+    for file in &args.files {
+        let format = match args.format {
+            Some(f) => f,
+            None => detect(file)?,
+        };
+        let one = match format {
+            ImportFormat::Csv => {
+                mbtap_core::profile::import::sheet::parse_sheet(&crate::config::sheets::read_csv(file)?, &opts)
+            }
+            ImportFormat::Xlsx => mbtap_core::profile::import::sheet::parse_sheet(
+                &crate::config::sheets::read_workbook(file, args.sheet.as_deref())?,
+                &opts,
+            ),
+            ImportFormat::HomeAssistant => {
+                let yaml = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+                let (imported, unit) =
+                    mbtap_core::profile::import::home_assistant::parse_home_assistant(&yaml, args.unit)
+                        .with_context(|| format!("reading {}", file.display()))?;
+                writeln!(err, "mbtap: {}: device {unit}", file.display())?;
+                imported
+            }
+        };
+        for n in &one.notes {
+            writeln!(err, "mbtap: {}: {}", file.display(), printable(n))?;
+        }
+        for p in one.problems {
+            writeln!(err, "mbtap: {}: skipped {}", file.display(), printable(&p.to_string()))?;
+            all.problems.push(p);
+        }
+        for mut p in one.points {
+            if args.files.len() > 1 {
+                p.origin = format!("{}, {}", file.display(), p.origin);
+            }
+            all.add(p);
+        }
+        all.notes.extend(one.notes.into_iter().map(|n| format!("{}: {n}", file.display())));
+    }
+    let stem = args.files[0].file_stem().map_or_else(|| "imported".into(), |s| s.to_string_lossy().into_owned());
+    let name = args.name.clone().unwrap_or(stem);
+    anyhow::ensure!(
+        !name.is_empty() && !name.contains(['/', '\\']) && name != "." && name != "..",
+        "--name {name:?}: a profile name is used as a file name (no slashes)"
+    );
+    let device = args.device.clone().unwrap_or_else(|| name.clone());
+    let sources: Vec<String> = args.files.iter().map(|f| f.display().to_string()).collect();
+    let toml = all.to_toml(&name, &device, &sources.join(", "));
+    let counts = all.counts();
+    let count = |t| counts.get(&t).copied().unwrap_or(0);
+    if all.points.is_empty() {
+        anyhow::bail!(
+            "nothing imported: {} row(s) or entries skipped (listed above); check the header row or give --columns",
+            all.problems.len()
+        );
+    }
+    // What is written must load like a hand-written profile: checked before it is kept.
+    mbtap_core::profile::load(&name, &toml)
+        .context("the imported profile does not load (a bug: please report it with the sheet)")?;
+    let out = if let Some(o) = &args.output {
+        o.clone()
+    } else {
+        let dir = user_profile_dir().context("no user profile directory (set MBTAP_PROFILE_DIR or HOME), give -o")?;
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        dir.join(format!("{name}.toml"))
+    };
+    std::fs::write(&out, &toml).with_context(|| format!("writing {}", out.display()))?;
+    writeln!(
+        err,
+        "mbtap: wrote {} ({}): {} holding registers, {} input registers, {} coils, {} discrete inputs; {} skipped",
+        out.display(),
+        printable(&name),
+        count(Table::HoldingRegisters),
+        count(Table::InputRegisters),
+        count(Table::Coils),
+        count(Table::DiscreteInputs),
+        all.problems.len()
+    )?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `profiles export`.
+fn export(args: &ExportArgs) -> anyhow::Result<ExitCode> {
+    let p = resolve_profile(&args.profile)?;
+    let target = match args.format {
+        ExportFormat::HomeAssistant => Target::HomeAssistant,
+        ExportFormat::Esphome => Target::Esphome,
+        ExportFormat::Telegraf => Target::Telegraf,
+    };
+    let e = mbtap_core::profile::export::export(&p, args.unit, target)?;
+    match &args.output {
+        Some(o) => std::fs::write(o, &e.text).with_context(|| format!("writing {}", o.display()))?,
+        None => std::io::stdout().lock().write_all(e.text.as_bytes())?,
+    }
+    let mut err = std::io::stderr().lock();
+    for s in &e.skipped {
+        writeln!(err, "mbtap: left out {}", printable(s))?;
+    }
+    writeln!(err, "mbtap: {} entries written, {} left out", e.written, e.skipped.len())?;
     Ok(ExitCode::SUCCESS)
 }

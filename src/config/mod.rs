@@ -12,6 +12,7 @@
 //! file's unit 1).
 
 pub mod devices;
+pub mod sheets;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

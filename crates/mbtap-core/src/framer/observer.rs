@@ -278,10 +278,12 @@ mod tests {
     /// raised the one 90th percentile and hid its own pauses.
     #[test]
     fn regression_issue_25_a_slow_units_pauses_do_not_raise_the_ports_latency() {
+        // As on a bus: the master sends every request, each unit answers its share.
         let mut l = ObserverLearner::new(0, true, 1_146_000);
-        feed(&mut l, SampleSender::Unit(17), 10, |_| 34_000_000);
-        for sender in [SampleSender::Master, SampleSender::Unit(1), SampleSender::Unit(5), SampleSender::Unit(33)] {
-            feed(&mut l, sender, 2, |i| 15_000_000 + i % 7 * 100_000);
+        feed(&mut l, SampleSender::Master, 12, |i| 15_000_000 + i % 5 * 100_000);
+        feed(&mut l, SampleSender::Unit(17), 3, |_| 34_000_000);
+        for sender in [SampleSender::Unit(1), SampleSender::Unit(5), SampleSender::Unit(33)] {
+            feed(&mut l, sender, 3, |i| 15_000_000 + i % 7 * 100_000);
         }
         let learned = l.estimate.learned_latency_ns.expect("five senders");
         assert!(learned < 16_000_000, "{learned}");
@@ -289,8 +291,15 @@ mod tests {
         // With only the master and the slow unit, the lower of the two.
         let mut two = ObserverLearner::new(0, true, 1_146_000);
         feed(&mut two, SampleSender::Unit(17), 3, |_| 34_000_000);
-        feed(&mut two, SampleSender::Master, 1, |_| 15_000_000);
+        feed(&mut two, SampleSender::Master, 3, |_| 15_000_000);
         assert_eq!(two.estimate.learned_latency_ns, Some(15_000_000));
+        // Units answering in single batches, most with a pause: the settled master's figure.
+        let mut noisy = ObserverLearner::new(0, true, 1_146_000);
+        feed(&mut noisy, SampleSender::Master, 6, |_| 573_000);
+        for u in [1, 5, 17] {
+            feed(&mut noisy, SampleSender::Unit(u), 1, |i| if i == 7 { 8_000_000 } else { 573_000 });
+        }
+        assert_eq!(noisy.estimate.learned_latency_ns, Some(573_000));
     }
 
     #[test]

@@ -7,30 +7,10 @@ use std::fmt::Write as _;
 use super::infer::{Guess, Kind};
 use super::{Learner, Unit};
 use crate::profile::Table;
+use crate::profile::import::{one_line, toml_str};
 use crate::query::rows::short_table;
 
 const TABLES: [Table; 4] = [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters];
-
-fn toml_str(s: &str) -> String {
-    // A TOML basic string: quotes, backslashes and control characters escaped.
-    let mut out = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if c.is_control() => {
-                let _ = write!(out, "\\u{:04X}", u32::from(c));
-            }
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
-}
-
-fn one_line(s: &str) -> String {
-    s.chars().map(|c| if c.is_control() { ' ' } else { c }).collect()
-}
 
 /// The draft profile of `unit`, learned from `source` (a capture or port, for the comments);
 /// `hints` (values read off the device's display) fix scales.

@@ -270,11 +270,18 @@ fn shown(def: &Def, raw: i64, bits32: Option<u32>) -> (Shown, Vec<Note>) {
                 .collect(),
         ),
         ValueType::Bool => Shown::Bool { on: raw != 0, label: None },
-        ValueType::F32 => Shown::Number {
-            value: f64::from(f32::from_bits(bits32.unwrap_or(0))),
-            unit: def.unit.clone(),
-            decimals: None,
-        },
+        ValueType::F32 => {
+            let f = f32::from_bits(bits32.unwrap_or(0));
+            // The float's shortest decimal form, so 229.9 shows as 229.9 and not as its f64
+            // expansion 229.899994; a scale applies to floats too (imported sheets and Home
+            // Assistant configurations scale them).
+            let value = f.to_string().parse::<f64>().unwrap_or_else(|_| f64::from(f));
+            Shown::Number {
+                value: value * def.scale.unwrap_or(1.0),
+                unit: def.unit.clone(),
+                decimals: def.scale.map(|k| decimals_of(Some(k))),
+            }
+        }
         _ => {
             #[allow(clippy::cast_precision_loss)]
             let value = raw as f64 * def.scale.unwrap_or(1.0);

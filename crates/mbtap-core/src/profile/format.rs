@@ -216,6 +216,17 @@ impl Table {
             Self::InputRegisters => "input_registers",
         }
     }
+
+    /// The table word users type (`holding`, `input`, `coil`, `discrete`).
+    #[must_use]
+    pub const fn word(self) -> &'static str {
+        match self {
+            Self::Coils => "coil",
+            Self::DiscreteInputs => "discrete",
+            Self::HoldingRegisters => "holding",
+            Self::InputRegisters => "input",
+        }
+    }
 }
 
 /// A repeated group: `count` copies, `stride` registers apart, from `start`.

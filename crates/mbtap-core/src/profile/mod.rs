@@ -4,8 +4,10 @@
 
 pub mod annotate;
 pub mod builtin;
+pub mod export;
 pub mod format;
 pub mod image;
+pub mod import;
 pub mod loader;
 pub mod model;
 pub mod transaction;

@@ -64,12 +64,7 @@ impl Row {
 /// The table word users type for `t`.
 #[must_use]
 pub const fn short_table(t: Table) -> &'static str {
-    match t {
-        Table::Coils => "coil",
-        Table::DiscreteInputs => "discrete",
-        Table::HoldingRegisters => "holding",
-        Table::InputRegisters => "input",
-    }
+    t.word()
 }
 
 fn value_of(a: &Annotation) -> serde_json::Value {

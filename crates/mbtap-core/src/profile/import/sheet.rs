@@ -1,0 +1,520 @@
+//! Vendor register sheets: rows of cells (from CSV or XLSX, read at the edge) with a header row
+//! somewhere near the top — below title rows, above blank and section rows — whose columns are
+//! found by their names (English, German, Chinese), or given with `--columns`.
+
+use super::notation::{
+    modicon, norm, parse_access, parse_address, parse_scale, parse_table, parse_type, parse_word_order, unit_from_name,
+};
+use super::{Imported, Point, Problem};
+use crate::profile::Table;
+use crate::profile::format::{Access, ValueType, WordOrder};
+
+/// A column a sheet may have.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Field {
+    Address,
+    Name,
+    Type,
+    Scale,
+    Unit,
+    Access,
+    WordOrder,
+    Table,
+    Length,
+    Description,
+}
+
+impl Field {
+    const ALL: [Self; 10] = [
+        Self::Address,
+        Self::Name,
+        Self::Type,
+        Self::Scale,
+        Self::Unit,
+        Self::Access,
+        Self::WordOrder,
+        Self::Table,
+        Self::Length,
+        Self::Description,
+    ];
+
+    /// The key in `--columns`.
+    #[must_use]
+    pub const fn key(self) -> &'static str {
+        match self {
+            Self::Address => "address",
+            Self::Name => "name",
+            Self::Type => "type",
+            Self::Scale => "scale",
+            Self::Unit => "unit",
+            Self::Access => "access",
+            Self::WordOrder => "word_order",
+            Self::Table => "table",
+            Self::Length => "length",
+            Self::Description => "description",
+        }
+    }
+
+    /// Header texts (normalised) that name this column.
+    const fn headers(self) -> &'static [&'static str] {
+        match self {
+            Self::Address => &[
+                "address",
+                "addr",
+                "register",
+                "register address",
+                "reg",
+                "reg addr",
+                "modbus address",
+                "start address",
+                "starting address",
+                "register number",
+                "reg no",
+                "adresse",
+                "registeradresse",
+                "register adresse",
+                "寄存器地址",
+                "地址",
+                "寄存器",
+            ],
+            Self::Name => &[
+                "name",
+                "parameter",
+                "parameter name",
+                "register name",
+                "signal",
+                "signal name",
+                "variable",
+                "tag",
+                "point",
+                "point name",
+                "item",
+                "bezeichnung",
+                "名称",
+                "参数",
+                "参数名称",
+            ],
+            Self::Type => &[
+                "type",
+                "data type",
+                "datatype",
+                "format",
+                "data format",
+                "value type",
+                "datentyp",
+                "typ",
+                "数据类型",
+                "类型",
+            ],
+            Self::Scale => &[
+                "scale",
+                "scaling",
+                "factor",
+                "scale factor",
+                "multiplier",
+                "gain",
+                "resolution",
+                "faktor",
+                "skalierung",
+                "倍率",
+                "系数",
+            ],
+            Self::Unit => &["unit", "units", "uom", "unit of measure", "einheit", "单位"],
+            Self::Access => &[
+                "access",
+                "r/w",
+                "rw",
+                "read/write",
+                "mode",
+                "permission",
+                "access type",
+                "zugriff",
+                "读写",
+                "读写属性",
+            ],
+            Self::WordOrder => &["word order", "byte order", "endianness", "endian", "swap", "reihenfolge"],
+            Self::Table => &[
+                "table",
+                "function",
+                "function code",
+                "fc",
+                "register type",
+                "area",
+                "object type",
+                "功能码",
+                "funktion",
+            ],
+            Self::Length => &[
+                "length",
+                "size",
+                "registers",
+                "count",
+                "quantity",
+                "number of registers",
+                "words",
+                "no of registers",
+                "länge",
+                "长度",
+                "数量",
+            ],
+            Self::Description => {
+                &["description", "comment", "comments", "notes", "remark", "beschreibung", "说明", "备注", "描述"]
+            }
+        }
+    }
+
+    fn parse_key(k: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|f| f.key() == norm(k).replace(' ', "_"))
+    }
+}
+
+/// How to read a sheet beyond what its header says.
+#[derive(Debug, Clone, Default)]
+pub struct SheetOptions {
+    /// Columns given by the user: field → a letter (`B`), a 1-based number or a header text.
+    pub columns: Vec<(Field, String)>,
+    /// The table where the sheet does not say (no table column, no Modicon numbers).
+    pub table: Option<Table>,
+    /// The word order of 32-bit values where the sheet does not say.
+    pub word_order: Option<WordOrder>,
+}
+
+/// Parses `address=B,name=A,type=D` (`--columns`).
+///
+/// # Errors
+/// An unknown field or a pair without `=`, named.
+pub fn parse_columns(s: &str) -> Result<Vec<(Field, String)>, String> {
+    s.split(',')
+        .filter(|p| !p.trim().is_empty())
+        .map(|p| {
+            let (k, v) = p.split_once('=').ok_or_else(|| format!("{p:?}: expected FIELD=COLUMN"))?;
+            let f = Field::parse_key(k).ok_or_else(|| {
+                let keys: Vec<&str> = Field::ALL.iter().map(|f| f.key()).collect();
+                format!("{k:?} is not a column field (one of {})", keys.join(", "))
+            })?;
+            Ok((f, v.trim().to_owned()))
+        })
+        .collect()
+}
+
+/// The spreadsheet letter of 0-based column `i` (`A`, …, `Z`, `AA`).
+#[must_use]
+pub fn letter(i: usize) -> String {
+    let mut n = i + 1;
+    let mut out = Vec::new();
+    while n > 0 {
+        let r = u8::try_from((n - 1) % 26).unwrap_or(0);
+        out.push(char::from(b'A' + r));
+        n = (n - 1) / 26;
+    }
+    out.iter().rev().collect()
+}
+
+/// Column `spec` (a letter, a 1-based number, or a header text found in `header`).
+fn column_of(spec: &str, header: Option<&[String]>) -> Option<usize> {
+    let t = spec.trim();
+    if let Ok(n) = t.parse::<usize>() {
+        return n.checked_sub(1);
+    }
+    if !t.is_empty() && t.len() <= 3 && t.chars().all(|c| c.is_ascii_alphabetic()) {
+        return Some(t.to_ascii_uppercase().bytes().fold(0usize, |acc, b| acc * 26 + usize::from(b - b'A' + 1)) - 1);
+    }
+    header?.iter().position(|h| norm(h) == norm(t))
+}
+
+/// The field a header cell names, if any. A unit in the header (`Scale [x]`) is ignored.
+fn field_of(cell: &str) -> Option<Field> {
+    let (text, _) = unit_from_name(cell);
+    let n = norm(&text);
+    let n = n.trim_end_matches([':', '.']);
+    if n.is_empty() {
+        return None;
+    }
+    let exact = |n: &str| Field::ALL.into_iter().find(|f| f.headers().contains(&n));
+    // `Address (Register)`, `Scale [x]`: the words before a bracket.
+    exact(n).or_else(|| exact(n.split(['(', '[']).next().unwrap_or("").trim()))
+}
+
+/// The trimmed, non-empty text of cell `i` of `r`.
+fn cell_at(r: &[String], i: Option<usize>) -> Option<&str> {
+    i.and_then(|i| r.get(i)).map(|s| s.trim()).filter(|s| !s.is_empty())
+}
+
+/// Rows searched for the header.
+const HEADER_SEARCH: usize = 50;
+
+/// Reads `rows` (cells as text; row numbers in problems are 1-based, as a spreadsheet shows).
+#[must_use]
+pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
+    let mut out = Imported::default();
+    // The header: the first row naming an address column and at least one other.
+    let header = rows
+        .iter()
+        .take(HEADER_SEARCH)
+        .position(|r| {
+            let fields: Vec<Field> = r.iter().filter_map(|c| field_of(c)).collect();
+            fields.contains(&Field::Address) && fields.len() >= 2
+        })
+        .or_else(|| {
+            // Columns given by header texts the usual names missed: the row holding them.
+            let texts: Vec<String> = opts
+                .columns
+                .iter()
+                .map(|(_, spec)| norm(spec))
+                .filter(|t| t.parse::<usize>().is_err() && (t.len() > 3 || !t.chars().all(|c| c.is_ascii_alphabetic())))
+                .collect();
+            (!texts.is_empty()).then_some(())?;
+            rows.iter().take(HEADER_SEARCH).position(|r| texts.iter().all(|t| r.iter().any(|c| norm(c) == *t)))
+        });
+    let mut columns: Vec<(Field, usize)> = Vec::new();
+    if let Some(h) = header {
+        for (i, c) in rows[h].iter().enumerate() {
+            if let Some(f) = field_of(c)
+                && !columns.iter().any(|(g, _)| *g == f)
+            {
+                columns.push((f, i));
+            }
+        }
+    }
+    for (f, spec) in &opts.columns {
+        match column_of(spec, header.map(|h| rows[h].as_slice())) {
+            Some(i) => {
+                columns.retain(|(g, _)| g != f);
+                columns.push((*f, i));
+            }
+            None => out.problems.push(Problem {
+                at: "--columns".into(),
+                column: Some(f.key().into()),
+                why: format!("{spec:?} is not a column (a letter, a number from 1, or a header text)"),
+            }),
+        }
+    }
+    // Without a name column, a description names the register.
+    if !columns.iter().any(|(f, _)| *f == Field::Name)
+        && let Some(&(_, i)) = columns.iter().find(|(f, _)| *f == Field::Description)
+    {
+        columns.retain(|(f, _)| *f != Field::Description);
+        columns.push((Field::Name, i));
+    }
+    columns.sort();
+    let col = |f: Field| columns.iter().find(|(g, _)| *g == f).map(|&(_, i)| i);
+    let Some(address_col) = col(Field::Address) else {
+        out.problems.push(Problem {
+            at: format!("rows 1–{}", rows.len().min(HEADER_SEARCH)),
+            column: None,
+            why: "no header row naming an address column and another (name, type, …): give the columns with --columns address=B,name=A,…".into(),
+        });
+        return out;
+    };
+    let described: Vec<String> = columns.iter().map(|(f, i)| format!("{}={}", f.key(), letter(*i))).collect();
+    out.notes.push(match header {
+        Some(h) => format!("header on row {}: {}", h + 1, described.join(", ")),
+        None => format!("no header row; columns given: {}", described.join(", ")),
+    });
+    let first_data = header.map_or(0, |h| h + 1);
+
+    // Modicon numbers are a property of the sheet: every address reads as one (5 or 6 digits,
+    // the table's digit first, counted from 1) and the sheet names no table of its own.
+    let addresses: Vec<_> =
+        rows[first_data..].iter().filter_map(|r| r.get(address_col).and_then(|a| parse_address(a).ok())).collect();
+    let use_modicon =
+        col(Field::Table).is_none() && !addresses.is_empty() && addresses.iter().all(|&a| modicon(a).is_some());
+    if use_modicon {
+        out.notes.push(
+            "addresses are Modicon register numbers (30001 = input register 0, 40001 = holding register 0)".into(),
+        );
+    }
+    for (i, r) in rows.iter().enumerate().skip(first_data) {
+        let at = format!("row {}", i + 1);
+        if r.iter().all(|c| c.trim().is_empty()) {
+            continue;
+        }
+        let problem = |column: Option<Field>, why: String| Problem {
+            at: at.clone(),
+            column: column.and_then(|f| col(f).map(|c| format!("column {} ({})", letter(c), f.key()))),
+            why,
+        };
+        let Some(addr_text) = cell_at(r, col(Field::Address)) else {
+            let text: Vec<&str> = r.iter().map(|c| c.trim()).filter(|c| !c.is_empty()).collect();
+            out.problems.push(problem(
+                Some(Field::Address),
+                format!("no address (a section title or a note?): {:?}", text.join(" | ")),
+            ));
+            continue;
+        };
+        // `40001-40002` or `100~101`: a range, its first address.
+        let addr_text = addr_text.split(['-', '~', '–']).next().unwrap_or(addr_text).trim();
+        let raw = match parse_address(addr_text) {
+            Ok(a) => a,
+            Err(e) => {
+                // Text alone in the row: a section heading (merged across the row).
+                let alone = r.iter().enumerate().all(|(j, c)| j == address_col || c.trim().is_empty());
+                let why = if alone { format!("no address (a section title or a note?): {addr_text:?}") } else { e };
+                out.problems.push(problem(Some(Field::Address), why));
+                continue;
+            }
+        };
+        let row_table = match cell_at(r, col(Field::Table)).map(parse_table) {
+            Some(Err(e)) => {
+                out.problems.push(problem(Some(Field::Table), e));
+                continue;
+            }
+            Some(Ok(t)) => Some(t),
+            None => None,
+        };
+        let (table, address) = match (use_modicon.then(|| modicon(raw)).flatten(), row_table.or(opts.table)) {
+            (Some((t, a)), _) => (t, a),
+            (None, Some(t)) => {
+                let Ok(a) = u16::try_from(raw.value) else {
+                    out.problems.push(problem(Some(Field::Address), format!("{addr_text:?} is past 65535")));
+                    continue;
+                };
+                (t, a)
+            }
+            (None, None) => {
+                out.problems.push(problem(
+                    Some(Field::Address),
+                    format!(
+                        "{addr_text:?}: the sheet does not say which table; give --table holding|input|coils|discrete"
+                    ),
+                ));
+                continue;
+            }
+        };
+        let (value_type, type_len) = match cell_at(r, col(Field::Type)).map(parse_type) {
+            Some(Err(e)) => {
+                out.problems.push(problem(Some(Field::Type), e));
+                continue;
+            }
+            Some(Ok(t)) => t,
+            None if matches!(table, Table::Coils | Table::DiscreteInputs) => (ValueType::Bool, None),
+            None => (ValueType::U16, None),
+        };
+        let length = match cell_at(r, col(Field::Length)).map(|l| l.trim_end_matches(".0").parse::<u16>()) {
+            Some(Ok(n)) if n > 0 => Some(n),
+            Some(_) => {
+                out.problems.push(problem(Some(Field::Length), "not a number of registers".into()));
+                continue;
+            }
+            None => type_len,
+        };
+        if value_type == ValueType::String && length.is_none() {
+            out.problems.push(problem(
+                Some(Field::Type),
+                "a string needs its length in registers (a length column, or string(N))".into(),
+            ));
+            continue;
+        }
+        let word_order = match cell_at(r, col(Field::WordOrder)).map(parse_word_order) {
+            Some(Err(e)) => {
+                out.problems.push(problem(Some(Field::WordOrder), e));
+                continue;
+            }
+            Some(Ok(w)) => w,
+            None => opts.word_order.unwrap_or_default(),
+        };
+        let scale = match cell_at(r, col(Field::Scale)).map(parse_scale) {
+            Some(Err(e)) => {
+                out.problems.push(problem(Some(Field::Scale), e));
+                continue;
+            }
+            Some(Ok(s)) => s,
+            None => None,
+        };
+        let access = match cell_at(r, col(Field::Access)).map(parse_access) {
+            Some(Err(e)) => {
+                out.problems.push(problem(Some(Field::Access), e));
+                continue;
+            }
+            Some(Ok(a)) => a,
+            None => Access::Read,
+        };
+        let (name, unit_in_name) = unit_from_name(cell_at(r, col(Field::Name)).unwrap_or(""));
+        let name = if name.is_empty() { format!("reg_{}_{address}", table.word()) } else { name };
+        let unit = cell_at(r, col(Field::Unit)).map(str::to_owned).or(unit_in_name);
+        let description = cell_at(r, col(Field::Description)).map(str::to_owned).filter(|d| *d != name);
+        out.add(Point {
+            table,
+            address,
+            name,
+            value_type,
+            word_order,
+            scale,
+            unit,
+            access,
+            length: if value_type == ValueType::String { length } else { None },
+            description,
+            origin: at,
+        });
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rows(text: &str) -> Vec<Vec<String>> {
+        text.lines().map(|l| l.split('|').map(|c| c.trim().to_owned()).collect()).collect()
+    }
+
+    #[test]
+    fn the_header_is_found_below_title_rows_and_bad_rows_are_named() {
+        let sheet = rows(
+            "ACME EM-24 Modbus map|||\n\
+             Firmware 1.2|||\n\
+             |||\n\
+             Register|Parameter|Data Type|Scale\n\
+             30001|Voltage L1 [V]|FLOAT|\n\
+             30003|Current L1 (A)|float32|\n\
+             Energy|||\n\
+             30005|Energy|UINT32|/100\n\
+             30007|Serial|STRING[4]|\n\
+             30011|Broken|float64|",
+        );
+        let r = parse_sheet(&sheet, &SheetOptions::default());
+        assert_eq!(r.points.len(), 4, "{:?}", r.problems);
+        assert_eq!(r.points[0].table, Table::InputRegisters);
+        assert_eq!(r.points[0].address, 0);
+        assert_eq!(r.points[0].unit.as_deref(), Some("V"));
+        assert_eq!(r.points[2].scale, Some(0.01));
+        assert_eq!(r.points[3].length, Some(4));
+        assert_eq!(r.problems.len(), 2, "{:?}", r.problems);
+        assert_eq!(r.problems[0].at, "row 7");
+        assert_eq!(
+            r.problems[1].to_string(),
+            "row 10, column C (type): \"float64\": 64-bit values are not in the profile format yet"
+        );
+        assert!(r.notes[0].starts_with("header on row 4"), "{:?}", r.notes);
+    }
+
+    #[test]
+    fn plain_addresses_need_a_table_and_overlaps_are_refused() {
+        let sheet = rows("addr|name|type\n0x0010|A|int32\n0x0011|B|uint16\n12H|C|");
+        let r = parse_sheet(&sheet, &SheetOptions::default());
+        assert_eq!(r.points.len(), 0);
+        assert!(r.problems[0].why.contains("--table"), "{:?}", r.problems);
+        let opts = SheetOptions { table: Some(Table::HoldingRegisters), ..SheetOptions::default() };
+        let r = parse_sheet(&sheet, &opts);
+        assert_eq!(r.points.iter().map(|p| p.address).collect::<Vec<_>>(), [0x10, 0x12]);
+        assert!(r.problems[0].why.contains("overlaps"), "{:?}", r.problems);
+    }
+
+    #[test]
+    fn columns_can_be_given_by_letter_number_or_header() {
+        assert_eq!(letter(0), "A");
+        assert_eq!(letter(27), "AB");
+        let cols = parse_columns("address=B,name=1,type=Kind").unwrap();
+        let sheet = rows("Label|Where|Kind\nFlow|100|float\n");
+        let r = parse_sheet(
+            &sheet,
+            &SheetOptions { columns: cols, table: Some(Table::InputRegisters), ..SheetOptions::default() },
+        );
+        assert_eq!(r.points.len(), 1, "{:?}", r.problems);
+        assert_eq!(
+            (r.points[0].name.as_str(), r.points[0].address, r.points[0].value_type),
+            ("Flow", 100, ValueType::F32)
+        );
+        assert!(parse_columns("adress=B").unwrap_err().contains("not a column field"));
+    }
+}

@@ -1,0 +1,211 @@
+//! Issue 27: `mbtap profiles import` on register sheets in the shapes vendors publish (Modicon
+//! numbers, `0000H`, `0x`, title rows, merged and section rows in XLSX, German and Chinese
+//! headers, a function-code column, tabs, units in names, scales as `/10`, `÷100`, `x10^-2`)
+//! and Home Assistant YAML — each profile then annotates traffic of that device, read by
+//! `mbtap decode`. Unreadable rows are named with row, column and why.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const MBTAP: &str = env!("CARGO_BIN_EXE_mbtap");
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sheets").join(name)
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(MBTAP).args(args).env("MBTAP_PROFILE_DIR", std::env::temp_dir()).output().unwrap()
+}
+
+/// Imports `sheet` with `extra` options into a temporary profile; its path and the import's
+/// stderr.
+fn import(sheet: &str, extra: &[&str]) -> (tempfile_path::TempProfile, String) {
+    let out_path = tempfile_path::TempProfile::new(sheet);
+    let f = fixture(sheet);
+    let mut args = vec!["profiles", "import", f.to_str().unwrap(), "-o", out_path.path.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let out = run(&args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{sheet}: {err}");
+    let check = run(&["profiles", "check", out_path.path.to_str().unwrap()]);
+    assert!(check.status.success(), "{sheet}: {}", String::from_utf8_lossy(&check.stderr));
+    (out_path, err)
+}
+
+/// A temporary profile file, removed when dropped.
+mod tempfile_path {
+    pub struct TempProfile {
+        pub path: std::path::PathBuf,
+    }
+    impl TempProfile {
+        pub fn new(tag: &str) -> Self {
+            let path = std::env::temp_dir().join(format!("mbtap-import-{}-{tag}.toml", std::process::id()));
+            Self { path }
+        }
+    }
+    impl Drop for TempProfile {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+fn hex(b: &[u8]) -> String {
+    use std::fmt::Write as _;
+    b.iter().fold(String::new(), |mut s, x| {
+        let _ = write!(s, "{x:02X}");
+        s
+    })
+}
+
+/// An RTU read of `quantity` registers at `address` (function `fc`) from unit 1, answered with
+/// `words`: the two frames as hex.
+fn read(fc: u8, address: u16, words: &[u16]) -> [String; 2] {
+    let q = u16::try_from(words.len()).unwrap();
+    let mut req = vec![fc];
+    req.extend_from_slice(&address.to_be_bytes());
+    req.extend_from_slice(&q.to_be_bytes());
+    let mut resp = vec![fc, u8::try_from(words.len() * 2).unwrap()];
+    for w in words {
+        resp.extend_from_slice(&w.to_be_bytes());
+    }
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    mbtap_core::proto::encode_rtu(1, &req, &mut a);
+    mbtap_core::proto::encode_rtu(1, &resp, &mut b);
+    [hex(&a), hex(&b)]
+}
+
+/// What `decode` says of `frames` with `profile` on unit 1.
+fn annotate(profile: &Path, frames: &[String; 2]) -> String {
+    let device = format!("1={}", profile.display());
+    let out = run(&["decode", "--device", &device, &frames[0], &frames[1]]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn f32_words(v: f32) -> [u16; 2] {
+    let b = v.to_bits();
+    [u16::try_from(b >> 16).unwrap(), u16::try_from(b & 0xFFFF).unwrap()]
+}
+
+#[test]
+fn an_energy_meter_sheet_with_modicon_numbers_and_floats() {
+    let (p, err) = import("energy-meter-modicon.csv", &[]);
+    assert!(err.contains("Modicon"), "{err}");
+    let text = annotate(&p.path, &read(0x04, 0, &f32_words(230.5)));
+    assert!(text.contains("Phase 1 line to neutral volts = 230.5 V"), "{text}");
+}
+
+#[test]
+fn a_german_sheet_with_semicolons_hex_h_addresses_and_divisor_scales() {
+    let (p, _) = import("inverter-german-hex-h.csv", &["--table", "holding"]);
+    let text = annotate(&p.path, &read(0x03, 0, &[2305, 0xFF38]));
+    assert!(text.contains("Netzspannung = 230.5 V"), "{text}");
+    assert!(text.contains("Netzstrom = -2"), "{text}");
+}
+
+#[test]
+fn a_sheet_with_title_rows_hex_addresses_and_word_swapped_floats() {
+    let (p, err) = import("heatpump-title-rows.csv", &["--table", "holding"]);
+    assert!(err.contains("header on row 4"), "{err}");
+    let [hi, lo] = f32_words(45.5);
+    let text = annotate(&p.path, &read(0x03, 0x100, &[lo, hi]));
+    assert!(text.contains("Flow temperature = 45.5 °C"), "{text}");
+}
+
+#[test]
+fn an_xlsx_with_merged_title_section_rows_and_chinese_headers() {
+    let (p, err) = import("merged-chinese.xlsx", &[]);
+    assert!(err.contains("header on row 4"), "{err}");
+    assert!(err.contains("row 5, column A (address): no address (a section title or a note?)"), "{err}");
+    let text = annotate(&p.path, &read(0x04, 0, &[5230]));
+    assert!(text.contains("电池电压 = 52.30 V"), "{text}");
+}
+
+#[test]
+fn six_digit_modicon_numbers_units_in_names_and_powers_of_ten() {
+    let (p, _) = import("pump-modicon6.csv", &[]);
+    let text = annotate(&p.path, &read(0x03, 0, &[125]));
+    assert!(text.contains("Flow = 12.5 m3/h"), "{text}");
+    let text = annotate(&p.path, &read(0x04, 0, &[0xFFF6]));
+    assert!(text.contains("Motor temperature = -1.0 °C"), "{text}");
+}
+
+#[test]
+fn a_function_code_column_low_word_first_and_strings() {
+    let (p, _) = import("meter-function-column.csv", &[]);
+    // 230 500 = 0x0003_8464, low word first.
+    let text = annotate(&p.path, &read(0x04, 0, &[0x8464, 0x0003]));
+    assert!(text.contains("Voltage = 230.5"), "{text}");
+    let text = annotate(&p.path, &read(0x03, 100, &[0x4142, 0x4344, 0x3132, 0x3334, 0, 0, 0, 0]));
+    assert!(text.contains("Serial number = \"ABCD1234\""), "{text}");
+}
+
+#[test]
+fn a_tab_separated_sheet_with_plc_type_names() {
+    let (p, _) = import("drive-tab.tsv", &["--table", "input"]);
+    let text = annotate(&p.path, &read(0x04, 200, &[1450, 0xFF9C]));
+    assert!(text.contains("Motor speed = 1450 rpm"), "{text}");
+    assert!(text.contains("Motor current = -1.00 A"), "{text}");
+}
+
+#[test]
+fn rows_that_cannot_be_read_are_named_with_row_column_and_why() {
+    let (p, err) = import("bad-rows.csv", &[]);
+    for expected in [
+        "row 3, column C (type): \"float64\": 64-bit values are not in the profile format yet",
+        "row 4, column D (scale): \"ten\" is not a scale",
+        "row 5, column A (address): \"banana\" is not an address",
+        "row 6: input_registers 1 overlaps \"Voltage\" (row 2, address 0)",
+        "row 7, column C (type): a string needs its length",
+        "1 input registers, 0 coils, 0 discrete inputs; 5 skipped",
+    ] {
+        assert!(err.contains(expected), "missing {expected:?} in:\n{err}");
+    }
+    let text = annotate(&p.path, &read(0x04, 0, &f32_words(229.9)));
+    assert!(text.contains("Voltage = 229.9"), "{text}");
+}
+
+#[test]
+fn home_assistant_yaml_becomes_a_profile() {
+    let (p, err) = import("ha-modbus.yaml", &[]);
+    assert!(err.contains("device 1"), "{err}");
+    let text = annotate(&p.path, &read(0x04, 0, &f32_words(231.25)));
+    assert!(text.contains("Grid voltage = 231.2"), "{text}");
+    // 12 345.67 kWh = 1 234 567 hundredths = 0x0012_D687, low word first.
+    let text = annotate(&p.path, &read(0x04, 2, &[0xD687, 0x0012]));
+    assert!(text.contains("Imported energy = 12345.67 kWh"), "{text}");
+}
+
+#[test]
+fn a_sheet_that_says_nothing_usable_fails_and_says_why() {
+    let dir = std::env::temp_dir().join(format!("mbtap-import-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let sheet = dir.join("notes.csv");
+    std::fs::write(&sheet, "just,some,notes\n1,2,3\n").unwrap();
+    let out = run(&["profiles", "import", sheet.to_str().unwrap(), "-o", dir.join("x.toml").to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no header row") && err.contains("--columns"), "{err}");
+    assert!(!dir.join("x.toml").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn imported_profiles_are_listed_with_where_they_came_from() {
+    let dir = std::env::temp_dir().join(format!("mbtap-import-list-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = fixture("pump-modicon6.csv");
+    let out = Command::new(MBTAP)
+        .args(["profiles", "import", f.to_str().unwrap(), "--name", "pump"])
+        .env("MBTAP_PROFILE_DIR", &dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(dir.join("pump.toml").exists());
+    let list = Command::new(MBTAP).args(["profiles", "list"]).env("MBTAP_PROFILE_DIR", &dir).output().unwrap();
+    let list = String::from_utf8_lossy(&list.stdout);
+    assert!(list.contains("pump") && list.contains("imported from") && list.contains("pump-modicon6.csv"), "{list}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
