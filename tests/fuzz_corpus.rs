@@ -29,6 +29,7 @@ fn run_dir(dir: &Path) -> usize {
             "health" => mbtap_core::fuzzing::health,
             "query" => mbtap_core::fuzzing::query,
             "learn" => mbtap_core::fuzzing::learn,
+            "profile_import" => mbtap_core::fuzzing::profile_import,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

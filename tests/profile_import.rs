@@ -209,3 +209,38 @@ fn imported_profiles_are_listed_with_where_they_came_from() {
     assert!(list.contains("pump") && list.contains("imported from") && list.contains("pump-modicon6.csv"), "{list}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 27: what `profiles export` writes is accepted by the tools that read it — Home
+/// Assistant's own `modbus` schema, `esphome config`, and Telegraf's plugin keys — for a
+/// built-in profile and for one imported from Home Assistant YAML (a round trip). Needs the
+/// homeassistant and esphome Python packages (CI installs them): run with `--ignored`.
+#[test]
+#[ignore = "needs homeassistant and esphome (CI installs them)"]
+fn exports_are_accepted_by_home_assistant_esphome_and_telegraf() {
+    let (imported, _) = import("ha-modbus.yaml", &[]);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/export_check.py");
+    for profile in ["mk4", "mkzp", "display", imported.path.to_str().unwrap()] {
+        for (format, ext) in [("home-assistant", "yaml"), ("esphome", "yaml"), ("telegraf", "conf")] {
+            let out = std::env::temp_dir().join(format!("mbtap-export-{}-{format}.{ext}", std::process::id()));
+            let o =
+                run(&["profiles", "export", profile, "--format", format, "--unit", "3", "-o", out.to_str().unwrap()]);
+            assert!(o.status.success(), "{profile} {format}: {}", String::from_utf8_lossy(&o.stderr));
+            let check = if format == "esphome" {
+                // `esphome config` validates only; it builds nothing and fetches no toolchain.
+                Command::new("esphome").args(["config", out.to_str().unwrap()]).output().unwrap()
+            } else {
+                Command::new("python3")
+                    .args([script.to_str().unwrap(), format, out.to_str().unwrap()])
+                    .output()
+                    .unwrap()
+            };
+            assert!(
+                check.status.success(),
+                "{profile} {format} refused:\n{}\n{}",
+                String::from_utf8_lossy(&check.stdout),
+                String::from_utf8_lossy(&check.stderr)
+            );
+            std::fs::remove_file(&out).unwrap();
+        }
+    }
+}

@@ -377,3 +377,46 @@ pub fn learn(data: &[u8]) {
         assert!(loaded.is_ok(), "a draft that does not load: {loaded:?}\n{toml}");
     }
 }
+
+/// Any bytes as a register sheet (lines of `,`-separated cells; the first byte chooses the
+/// default table and whether columns are given) and as Home Assistant YAML (issue 27): read,
+/// imported, exported — never a panic, and every imported profile loads and exports.
+///
+/// # Panics
+/// When an imported profile does not load: the fuzzer's finding.
+pub fn profile_import(data: &[u8]) {
+    use crate::profile::import::{home_assistant, sheet};
+    let Some((&mode, rest)) = data.split_first() else { return };
+    let text = String::from_utf8_lossy(rest);
+    let rows: Vec<Vec<String>> = text.lines().map(|l| l.split(',').map(str::to_owned).collect()).collect();
+    let table = [
+        None,
+        Some(crate::profile::Table::HoldingRegisters),
+        Some(crate::profile::Table::InputRegisters),
+        Some(crate::profile::Table::Coils),
+    ][usize::from(mode & 3)];
+    let columns = if mode & 4 != 0 {
+        sheet::parse_columns("address=A,name=B,type=C,scale=D").unwrap_or_default()
+    } else {
+        Vec::new()
+    };
+    let mut imported = vec![sheet::parse_sheet(&rows, &sheet::SheetOptions { columns, table, word_order: None })];
+    if let Ok((i, _)) = home_assistant::parse_home_assistant(&text, Some(mode)) {
+        imported.push(i);
+    }
+    for i in imported {
+        let _ = i.problems.iter().map(ToString::to_string).count();
+        let toml = i.to_toml("fuzz", "fuzz \"device\"", "fuzz\ninput");
+        let loaded = crate::profile::load("imported.toml", &toml);
+        assert!(loaded.is_ok(), "an import that does not load: {loaded:?}\n{toml}");
+        if let Ok(p) = loaded {
+            for target in [
+                crate::profile::export::Target::HomeAssistant,
+                crate::profile::export::Target::Esphome,
+                crate::profile::export::Target::Telegraf,
+            ] {
+                let _ = crate::profile::export::export(&p, mode, target);
+            }
+        }
+    }
+}

@@ -1,7 +1,8 @@
 //! A profile out to the tools the rest of a site runs (issue 27): Home Assistant's `modbus:`
 //! YAML, an ESPHome `modbus_controller` configuration, Telegraf's `inputs.modbus` — the same
-//! registers with their names, types, word order, scale and units. What a tool cannot hold is
-//! left out and said (a `datetime` group, a string for Telegraf's register style).
+//! registers with their names, types, word order, scale and units. A date/time group goes out as
+//! one register per part; what a tool cannot hold is left out and said (a string for Telegraf's
+//! register style).
 //!
 //! The YAML is built as data and serialised (names with `:` or `#` stay names); the site's
 //! connection (host, serial port) is a placeholder the user edits, said in the file's head.
@@ -14,7 +15,7 @@ use serde_json::{Value, json};
 use super::Table;
 use super::format::{ValueType, WordOrder};
 use super::import::toml_str;
-use super::model::{Def, Profile};
+use super::model::Profile;
 
 /// The tools a profile exports to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,38 +41,72 @@ pub enum ExportError {
     Yaml(String),
 }
 
-/// One thing a profile defines, at its first address.
-struct Item<'a> {
+/// One thing a profile defines, at its first address (a date/time group as one entry per part:
+/// the tools have no type for it, but each part is a plain register).
+struct Item {
     table: Table,
     address: u16,
     name: String,
-    def: &'a Def,
+    value_type: ValueType,
+    width: u16,
+    word_order: WordOrder,
+    scale: Option<f64>,
+    unit: Option<String>,
 }
 
 /// Every definition once, in table and address order, names made unique (the tools refuse two
 /// entities of one name).
-fn items(p: &Profile) -> Vec<Item<'_>> {
+fn items(p: &Profile) -> Vec<Item> {
     let mut seen = BTreeSet::new();
     let mut out = Vec::new();
+    let mut unique = |name: String, table: Table, address: u16| {
+        if seen.insert(name.clone()) {
+            return name;
+        }
+        let name = format!("{name} ({} {address})", table.name());
+        seen.insert(name.clone());
+        name
+    };
     for (&table, slots) in &p.tables {
         for (&address, slot) in slots {
             if slot.part != 0 {
                 continue;
             }
             let Some(def) = p.defs.get(slot.def) else { continue };
-            let mut name = slot.name.clone();
-            if !seen.insert(name.clone()) {
-                name = format!("{name} ({} {address})", table.name());
-                seen.insert(name.clone());
+            if def.value_type == ValueType::Datetime {
+                for (i, part) in def.parts.iter().enumerate() {
+                    let Some(a) = u16::try_from(i).ok().and_then(|i| address.checked_add(i)) else { continue };
+                    let name = unique(format!("{} {}", slot.name, format!("{part:?}").to_lowercase()), table, a);
+                    out.push(Item {
+                        table,
+                        address: a,
+                        name,
+                        value_type: ValueType::U16,
+                        width: 1,
+                        word_order: WordOrder::HighFirst,
+                        scale: None,
+                        unit: None,
+                    });
+                }
+                continue;
             }
-            out.push(Item { table, address, name, def });
+            out.push(Item {
+                table,
+                address,
+                name: unique(slot.name.clone(), table, address),
+                value_type: def.value_type,
+                width: def.width,
+                word_order: def.word_order,
+                scale: def.scale,
+                unit: def.unit.clone(),
+            });
         }
     }
     out
 }
 
 /// Decimals worth showing for a scale (0.1 → 1, 0.025 → 3), floats 2.
-fn decimals(def: &Def) -> u32 {
+fn decimals(def: &Item) -> u32 {
     if def.value_type == ValueType::F32 {
         return 2;
     }
@@ -121,7 +156,7 @@ fn home_assistant(p: &Profile, unit: u8) -> Result<Exported, ExportError> {
     let mut out = Exported::default();
     let (mut sensors, mut binary) = (Vec::new(), Vec::new());
     for it in items(p) {
-        let d = it.def;
+        let d = &it;
         let mut e = serde_json::Map::new();
         e.insert("name".into(), json!(it.name));
         e.insert("slave".into(), json!(unit));
@@ -201,7 +236,7 @@ fn esphome(p: &Profile, unit: u8) -> Result<Exported, ExportError> {
     let mut out = Exported::default();
     let (mut sensors, mut binary, mut text) = (Vec::new(), Vec::new(), Vec::new());
     for it in items(p) {
-        let d = it.def;
+        let d = &it;
         let mut e = serde_json::Map::new();
         e.insert("platform".into(), json!("modbus_controller"));
         e.insert("modbus_controller_id".into(), json!("device"));
@@ -303,7 +338,7 @@ fn telegraf(p: &Profile, unit: u8) -> Exported {
     for table in [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters] {
         let mut lines = Vec::new();
         for it in items(p).into_iter().filter(|i| i.table == table) {
-            let d = it.def;
+            let d = &it;
             if !is_register(table) {
                 lines.push(format!("{{ name = {}, address = [{}] }}", toml_str(&it.name), it.address));
                 out.written += 1;
@@ -315,7 +350,7 @@ fn telegraf(p: &Profile, unit: u8) -> Exported {
                 (ValueType::U32, l) => ("UINT32", if l { "CDAB" } else { "ABCD" }),
                 (ValueType::I32, l) => ("INT32", if l { "CDAB" } else { "ABCD" }),
                 (ValueType::F32, l) => ("FLOAT32-IEEE", if l { "CDAB" } else { "ABCD" }),
-                (ValueType::String | ValueType::Datetime, _) => {
+                (ValueType::String, _) => {
                     out.skipped.push(format!(
                         "{} {}: Telegraf's register configuration has no {}",
                         table.name(),
