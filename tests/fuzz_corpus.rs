@@ -30,6 +30,7 @@ fn run_dir(dir: &Path) -> usize {
             "query" => mbtap_core::fuzzing::query,
             "learn" => mbtap_core::fuzzing::learn,
             "profile_import" => mbtap_core::fuzzing::profile_import,
+            "sunspec" => mbtap_core::fuzzing::sunspec,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

@@ -40,7 +40,10 @@ mod tempfile_path {
     }
     impl TempProfile {
         pub fn new(tag: &str) -> Self {
-            let path = std::env::temp_dir().join(format!("mbtap-import-{}-{tag}.toml", std::process::id()));
+            // Tests run in parallel and may import the same sheet: one file each.
+            static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+            let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let path = std::env::temp_dir().join(format!("mbtap-import-{}-{n}-{tag}.toml", std::process::id()));
             Self { path }
         }
     }

@@ -39,8 +39,14 @@ pub enum Command {
 #[derive(Debug, clap::Args)]
 pub struct ImportArgs {
     /// The sheets or YAML files (several: one device's tables in separate files).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "from")]
     pub files: Vec<PathBuf>,
+    /// A SunSpec device to describe itself (`HOST:PORT`, `/dev/ttyX` with the line options):
+    /// its model chain is discovered and written as a profile (`--format sunspec`).
+    #[arg(long, value_name = "TARGET")]
+    pub from: Option<String>,
+    #[command(flatten)]
+    pub line: crate::args::SerialLineArgs,
     /// Where to write the profile (default: the user profile directory, NAME.toml).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
@@ -91,6 +97,8 @@ pub enum ImportFormat {
     /// XLSX (also XLS and ODS).
     Xlsx,
     HomeAssistant,
+    /// A SunSpec device's own description, read with --from.
+    Sunspec,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -243,6 +251,27 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
     };
     let mut all = mbtap_core::profile::import::Imported::default();
     let mut err = std::io::stderr().lock();
+    if let Some(target) = &args.from {
+        anyhow::ensure!(
+            args.format.is_none_or(|f| f == ImportFormat::Sunspec) && args.files.is_empty(),
+            "--from reads a SunSpec device: give no files (and --format sunspec or none)"
+        );
+        let unit = args.unit.unwrap_or(1);
+        let timeout = std::time::Duration::from_secs(1);
+        let mut link = crate::master::link::Link::new(target, &args.line, timeout)?;
+        let imported = crate::cmd::runtime()?.block_on(crate::master::sunspec::import(&mut link, unit, timeout, 2))?;
+        for n in &imported.notes {
+            writeln!(err, "mbtap: {target}: {}", printable(n))?;
+        }
+        for p in &imported.problems {
+            writeln!(err, "mbtap: {target}: skipped {}", printable(&p.to_string()))?;
+        }
+        return write_imported(args, &imported, std::slice::from_ref(target), &mut err);
+    }
+    anyhow::ensure!(
+        args.format != Some(ImportFormat::Sunspec),
+        "--format sunspec reads a device: give --from HOST:PORT or a serial port"
+    );
     for file in &args.files {
         let format = match args.format {
             Some(f) => f,
@@ -256,6 +285,7 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
                 &crate::config::sheets::read_workbook(file, args.sheet.as_deref())?,
                 &opts,
             ),
+            ImportFormat::Sunspec => anyhow::bail!("--format sunspec reads a device: give --from"),
             ImportFormat::HomeAssistant => {
                 let yaml = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
                 let (imported, unit) =
@@ -280,14 +310,28 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
         }
         all.notes.extend(one.notes.into_iter().map(|n| format!("{}: {n}", file.display())));
     }
-    let stem = args.files[0].file_stem().map_or_else(|| "imported".into(), |s| s.to_string_lossy().into_owned());
+    let sources: Vec<String> = args.files.iter().map(|f| f.display().to_string()).collect();
+    write_imported(args, &all, &sources, &mut err)
+}
+
+/// The profile from `all` (made from `sources`) written, loaded back and summarised.
+fn write_imported(
+    args: &ImportArgs,
+    all: &mbtap_core::profile::import::Imported,
+    sources: &[String],
+    err: &mut impl std::io::Write,
+) -> anyhow::Result<ExitCode> {
+    let stem = args
+        .files
+        .first()
+        .and_then(|f| f.file_stem())
+        .map_or_else(|| "sunspec".into(), |s| s.to_string_lossy().into_owned());
     let name = args.name.clone().unwrap_or(stem);
     anyhow::ensure!(
         !name.is_empty() && !name.contains(['/', '\\']) && name != "." && name != "..",
         "--name {name:?}: a profile name is used as a file name (no slashes)"
     );
     let device = args.device.clone().unwrap_or_else(|| name.clone());
-    let sources: Vec<String> = args.files.iter().map(|f| f.display().to_string()).collect();
     let toml = all.to_toml(&name, &device, &sources.join(", "));
     let counts = all.counts();
     let count = |t| counts.get(&t).copied().unwrap_or(0);

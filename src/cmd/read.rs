@@ -43,6 +43,9 @@ pub fn prepare(
 
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let m = &args.master;
+    if m.sunspec() {
+        return run_sunspec(args);
+    }
     let profile = m.profile()?;
     let unit = m.unit(profile.as_ref());
     let (targets, plan) = prepare(&args.items, profile.as_ref())?;
@@ -67,6 +70,23 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             }
         }
     }
+    show::print(m.format(), &rows, &failures, &[], &mut std::io::stdout().lock()).context("writing the values")?;
+    Ok(if failures.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
+/// `read --device sunspec`: the chain discovered, the points read by `MODEL.POINT`.
+fn run_sunspec(args: &Args) -> anyhow::Result<ExitCode> {
+    let m = &args.master;
+    let unit = m.unit.unwrap_or(1);
+    let timeout = Duration::from_millis(m.timeout_ms);
+    let mut link = Link::new(&m.target, &m.line, timeout)?;
+    let (rows, failures) = crate::cmd::runtime()?.block_on(crate::master::sunspec::read_items(
+        &mut link,
+        unit,
+        &args.items,
+        timeout,
+        m.retries,
+    ))?;
     show::print(m.format(), &rows, &failures, &[], &mut std::io::stdout().lock()).context("writing the values")?;
     Ok(if failures.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }

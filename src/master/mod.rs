@@ -5,6 +5,7 @@
 pub mod exec;
 pub mod link;
 pub mod show;
+pub mod sunspec;
 
 use clap::Args;
 
@@ -21,7 +22,8 @@ pub struct MasterArgs {
     #[arg(long, value_parser = clap::value_parser!(u8).range(0..=247))]
     pub unit: Option<u8>,
     /// The device's profile, for names, scaling and checks: a built-in name (mk4, mkzp,
-    /// display), a user profile or a file.
+    /// display), a user profile or a file; `sunspec` (read): the device's SunSpec models,
+    /// discovered, points named MODEL.POINT (common.Mn, inverter_three_phase.W, 103.W).
     #[arg(long, value_name = "PROFILE")]
     pub device: Option<String>,
     /// How long to wait for each answer, in ms.
@@ -54,8 +56,18 @@ impl MasterArgs {
         self.format.unwrap_or(if std::io::stdout().is_terminal() { MasterFormat::Text } else { MasterFormat::Jsonl })
     }
 
+    /// Whether `--device sunspec` asks for the device's own SunSpec description.
+    #[must_use]
+    pub fn sunspec(&self) -> bool {
+        self.device.as_deref().is_some_and(|d| d.eq_ignore_ascii_case("sunspec"))
+    }
+
     /// The profile named by `--device`, if any.
     pub fn profile(&self) -> anyhow::Result<Option<mbtap_core::profile::Profile>> {
+        anyhow::ensure!(
+            !self.sunspec(),
+            "--device sunspec is for `read` (the chain is discovered per read); watch, write and the bridge's --poll take a profile: write one with `mbtap profiles import` from a register sheet"
+        );
         self.device.as_deref().map(crate::config::devices::resolve_profile).transpose()
     }
 

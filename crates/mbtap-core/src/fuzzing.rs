@@ -420,3 +420,31 @@ pub fn profile_import(data: &[u8]) {
         }
     }
 }
+
+/// Any bytes as a SunSpec device's registers (issue 27): the chain walked from register 0 the
+/// way `read --device sunspec` walks it, every model decoded whatever its ID and length, and
+/// the bytes as a point name — never a panic.
+pub fn sunspec(data: &[u8]) {
+    let regs: Vec<u16> = data.chunks_exact(2).map(|c| u16::from_be_bytes([c[0], c[1]])).collect();
+    let _ = crate::sunspec::parse_point_ref(&String::from_utf8_lossy(data));
+    let mut at = Some(0u16);
+    let mut found = 0;
+    while let Some(a) = at {
+        let i = usize::from(a);
+        let (Some(&id), Some(&len)) = (regs.get(i), regs.get(i + 1)) else { break };
+        let f = crate::sunspec::Found { id, address: a, len };
+        let end = (i + 2 + usize::from(len)).min(regs.len());
+        let values = crate::sunspec::decode_model(crate::sunspec::model(id), f, &regs[i..end]);
+        for v in &values {
+            let _ = v.shown.as_ref().map(ToString::to_string);
+        }
+        // Any model's layout over the same registers, too.
+        let _ = crate::sunspec::decode_model(
+            crate::sunspec::model(u16::from(data.first().copied().unwrap_or(1))),
+            f,
+            &regs[i..end],
+        );
+        found += 1;
+        at = crate::sunspec::next_header(a, id, len, found);
+    }
+}

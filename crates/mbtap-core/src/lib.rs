@@ -48,4 +48,5 @@ pub mod replay;
 pub mod report;
 pub mod scan;
 pub mod sim;
+pub mod sunspec;
 pub mod traffic;
