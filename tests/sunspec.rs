@@ -90,6 +90,15 @@ fn sunspec_over_tcp_reads_as_pysunspec2_reads() {
         text.lines().map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["value"].clone()).collect();
     assert_eq!(values, [serde_json::json!(4500.0), serde_json::json!(230.1), serde_json::json!(2000.0)], "{text}");
     std::fs::remove_file(&profile).unwrap();
+    // `watch` and `write` take `--device sunspec` too: the chain becomes a profile at start.
+    let out = Command::new(BIN)
+        .args(["watch", &target, "--device", "sunspec", "--count", "2", "--interval", "100ms", "--format", "jsonl"])
+        .arg("inverter_three_phase.W")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(text.lines().filter(|l| l.contains("\"value\":4500")).count(), 2, "{text}");
 }
 
 #[test]

@@ -22,8 +22,8 @@ pub struct MasterArgs {
     #[arg(long, value_parser = clap::value_parser!(u8).range(0..=247))]
     pub unit: Option<u8>,
     /// The device's profile, for names, scaling and checks: a built-in name (mk4, mkzp,
-    /// display), a user profile or a file; `sunspec` (read): the device's SunSpec models,
-    /// discovered, points named MODEL.POINT (common.Mn, inverter_three_phase.W, 103.W).
+    /// display), a user profile or a file; `sunspec`: the device's SunSpec models, discovered,
+    /// points named MODEL.POINT (common.Mn, inverter_three_phase.W, 103.W).
     #[arg(long, value_name = "PROFILE")]
     pub device: Option<String>,
     /// How long to wait for each answer, in ms.
@@ -62,12 +62,18 @@ impl MasterArgs {
         self.device.as_deref().is_some_and(|d| d.eq_ignore_ascii_case("sunspec"))
     }
 
-    /// The profile named by `--device`, if any.
+    /// The profile named by `--device`, if any. `--device sunspec` (for `watch` and `write`;
+    /// `read` decodes SunSpec itself): the device's model chain discovered now and made a
+    /// profile, its scale factors as read now.
     pub fn profile(&self) -> anyhow::Result<Option<mbtap_core::profile::Profile>> {
-        anyhow::ensure!(
-            !self.sunspec(),
-            "--device sunspec is for `read` (the chain is discovered per read); watch, write and the bridge's --poll take a profile: write one with `mbtap profiles import` from a register sheet"
-        );
+        if self.sunspec() {
+            let unit = self.unit.unwrap_or(1);
+            let timeout = std::time::Duration::from_millis(self.timeout_ms);
+            let mut link = link::Link::new(&self.target, &self.line, timeout)?;
+            let imported = crate::cmd::runtime()?.block_on(sunspec::import(&mut link, unit, timeout, self.retries))?;
+            let toml = imported.to_toml("sunspec", &format!("SunSpec device at {}", self.target), &self.target);
+            return Ok(Some(mbtap_core::profile::load("sunspec", &toml)?));
+        }
         self.device.as_deref().map(crate::config::devices::resolve_profile).transpose()
     }
 
