@@ -19,6 +19,7 @@ pub mod generate_config;
 pub mod learn;
 pub mod man;
 pub mod play;
+pub mod probe;
 pub mod profiles;
 pub mod read;
 pub mod replay;
@@ -60,6 +61,7 @@ pub enum Command {
     Write(write::Args),
     Watch(watch::Args),
     Learn(learn::Args),
+    Probe(probe::Args),
     Diff(diff::Args),
     Completions(completions::Args),
     Man(man::Args),
@@ -97,6 +99,7 @@ pub fn run(command: Command, matches: &ArgMatches) -> anyhow::Result<ExitCode> {
         Command::Write(args) => write::run(&args),
         Command::Watch(args) => watch::run(&args),
         Command::Learn(args) => learn::run(&args),
+        Command::Probe(args) => probe::run(&args),
         Command::Diff(args) => diff::run(&args),
         Command::Completions(args) => completions::run(&args),
         Command::Man(args) => man::run(&args),

@@ -9,6 +9,7 @@ pub mod diff;
 pub mod draft;
 pub mod hint;
 pub mod infer;
+pub mod probe;
 pub mod stats;
 pub mod truth;
 
