@@ -170,6 +170,11 @@ pub struct OutputArgs {
     /// Also give the report so far every SECONDS of bus time, while it runs (implies --report).
     #[arg(long, value_name = "SECONDS")]
     pub report_every: Option<f64>,
+    /// Draft a register map from what is heard, as `mbtap learn` does, and keep it up to date
+    /// in this file (rewritten every 10 s of line time and at the end; `NAME-unit-N.toml` per
+    /// unit when several are heard).
+    #[arg(long, value_name = "DRAFT.toml")]
+    pub learn: Option<std::path::PathBuf>,
     #[command(flatten)]
     pub publish: crate::publish::PublishArgs,
 }
@@ -268,6 +273,10 @@ pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result
     }
     if o.report || o.report_every.is_some() {
         writer.health = Some(mbtap_core::health::Health::new(writer.profiles.clone()));
+    }
+    if let Some(path) = &o.learn {
+        writer.learn =
+            Some(crate::output::learn_draft::LiveDraft::new(path.clone(), "the line mbtap listened to".into()));
     }
     Ok(writer)
 }

@@ -70,16 +70,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     }
     if let Some(path) = &args.output {
         let source = args.capture.display().to_string();
-        let many = learner.units.len() > 1;
-        for (unit, u) in &learner.units {
-            let file = if many {
-                let stem = path.file_stem().map_or_else(|| "draft".into(), |s| s.to_string_lossy().into_owned());
-                path.with_file_name(format!("{stem}-unit-{unit}.toml"))
-            } else {
-                path.clone()
-            };
-            std::fs::write(&file, mbtap_core::learn::draft::profile_toml(*unit, u, &source, &args.hint))
-                .with_context(|| format!("writing {}", file.display()))?;
+        for (unit, file) in crate::output::learn_draft::write_drafts(&learner, path, &source, &args.hint)? {
             eprintln!(
                 "mbtap: draft profile of unit {unit} written to {} (check it: mbtap profiles check)",
                 file.display()

@@ -2,6 +2,7 @@
 //! counted (the terminal UI takes them instead when it runs), the register image, the health
 //! report at the end or every so often; and a capture replayed into it.
 
+pub mod learn_draft;
 pub mod progress;
 
 use std::io::{self, Read, Write};
@@ -45,6 +46,8 @@ pub struct EventWriter<W: Write> {
     /// Also write the report so far each time this much bus time has passed.
     pub report_every_ns: Option<u64>,
     next_report_ns: Option<u64>,
+    /// Draft profiles learned from what is heard, kept up to date (`--learn DRAFT.toml`).
+    pub learn: Option<learn_draft::LiveDraft>,
 }
 
 impl<W: Write> EventWriter<W> {
@@ -63,6 +66,7 @@ impl<W: Write> EventWriter<W> {
             health: None,
             report_every_ns: None,
             next_report_ns: None,
+            learn: None,
         }
     }
 
@@ -98,6 +102,12 @@ impl<W: Write> EventWriter<W> {
         }
         if let Some(image) = self.image.as_mut() {
             update_image(image, e);
+        }
+        if let Some(l) = self.learn.as_mut()
+            && let Err(err) = l.event(e, event_time(e))
+            && self.error.is_none()
+        {
+            self.error = Some(io::Error::other(format!("{err:#}")));
         }
         for tap in &self.taps {
             tap.event(e);
@@ -175,6 +185,16 @@ impl<W: Write> EventWriter<W> {
         };
         if self.health.is_some() {
             r = r.and_then(|()| self.write_report(true));
+        }
+        if let Some(l) = self.learn.as_mut() {
+            match l.finish() {
+                Ok(files) => {
+                    for (unit, file) in files {
+                        eprintln!("mbtap: draft profile of unit {unit} written to {}", file.display());
+                    }
+                }
+                Err(err) => r = r.and(Err(io::Error::other(format!("{err:#}")))),
+            }
         }
         if let Some(e) = self.error.take() {
             return Err(e);
