@@ -5,7 +5,9 @@
 //! (glitch: share of frames followed by a turnaround glitch byte; lookalike: share of register
 //! answers made CRC look-alikes; both 0 by default; then `unknown` to give the framer no
 //! latency, so it has only what it learns from valid frames, or `fixed` to give it 0 and no
-//! learning — what it did before it learned).
+//! learning — what it did before it learned); then `vendor` for vendor functions with the
+//! same lengths per unit all day and a quarter of their CRCs ending in `00` (add `nolengths`
+//! to keep the framer from learning those lengths — what it did before issue 25).
 
 use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
 use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
@@ -18,6 +20,8 @@ fn main() {
     // "unknown": the framer is not told the observer's latency (a capture from another tool,
     // `--latency-ms` not given) and has only what it learns; "fixed": told 0 and not learning.
     let latency = arg(4).unwrap_or_default();
+    let vendor = arg(5).as_deref() == Some("vendor");
+    let learn_lengths = arg(6).as_deref() != Some("nolengths");
     println!("{transactions} transactions per line setting, glitch {glitch}, look-alikes {lookalike}\n");
     println!(
         "| line | observation | mbtap good | mbtap false valid | mbtap corrupted exact | mbtap glitches | gap-cut good | gap-cut false valid | gap-cut corrupted exact |"
@@ -33,12 +37,21 @@ fn main() {
     // corrupted, reported with two lengths, of those the wrong one first).
     let mut per_model = [(0usize, 0usize, 0usize, 0usize, 0usize, 0usize, 0usize); 4];
     for (i, line) in lines.into_iter().enumerate() {
-        let cfg =
-            TrafficConfig { seed: 42 + i as u64, line, transactions, glitch, lookalike, ..TrafficConfig::default() };
+        let cfg = TrafficConfig {
+            seed: 42 + i as u64,
+            line,
+            transactions,
+            glitch,
+            lookalike,
+            vendor_fixed: vendor,
+            vendor_lookalike: if vendor { 0.25 } else { 0.0 },
+            ..TrafficConfig::default()
+        };
         let wire = generate(&cfg);
         for (mi, model) in models.into_iter().enumerate() {
             let chunks = observe(&wire, model, line.char_ns());
             let mut fc = FramerConfig::new(line, model.latency_ns(line.char_ns()));
+            fc.learn_lengths = learn_lengths;
             match latency.as_str() {
                 "unknown" => fc.latency_ns = 0,
                 "fixed" => (fc.latency_ns, fc.learn_latency) = (0, false),

@@ -83,3 +83,30 @@ fn events_cover_every_byte_once() {
         assert_eq!(at, wire.bytes.len());
     }
 }
+
+/// Issue 25: vendor-function frames whose CRC ends in `00`, on a line with `00` turnaround
+/// glitches: each unit sends its vendor function with the same lengths all day, and the frames
+/// that are unambiguous about their length decide the twins — far fewer shown with two lengths,
+/// and far fewer with the wrong one first, than a framer that does not learn them.
+#[test]
+fn regression_issue_25_vendor_lengths_learned_per_unit_decide_crc_00_twins() {
+    let cfg = TrafficConfig {
+        seed: 2525,
+        line: L19200,
+        transactions: 20_000,
+        glitch: 0.3,
+        vendor_fixed: true,
+        vendor_lookalike: 0.25,
+        ..TrafficConfig::default()
+    };
+    let wire = generate(&cfg);
+    let chunks = observe(&wire, Observation::PerByte, L19200.char_ns());
+    let mut fc = FramerConfig::new(L19200, 0);
+    let learned = score(&wire, &run_framer(&wire, &chunks, fc));
+    fc.learn_lengths = false;
+    let blind = score(&wire, &run_framer(&wire, &chunks, fc));
+    assert!(learned.ambiguous_wrong * 10 < blind.ambiguous_wrong, "learned {learned:?}\nblind {blind:?}");
+    assert!(learned.ambiguous * 10 < blind.ambiguous, "learned {learned:?}\nblind {blind:?}");
+    assert!(learned.good_ratio() > blind.good_ratio(), "learned {learned:?}\nblind {blind:?}");
+    assert!(learned.false_valid <= blind.false_valid, "learned {learned:?}\nblind {blind:?}");
+}

@@ -4,6 +4,7 @@
 pub mod ascii;
 pub mod event;
 mod glitch;
+mod lengths;
 pub mod observer;
 pub mod rtu;
 pub mod timing;

@@ -31,6 +31,7 @@
 
 use super::event::{Frame, FrameEvent, Noise};
 use super::glitch::{Sender, TurnaroundStats};
+use super::lengths::LearnedLengths;
 use super::observer::{ObserverEstimate, ObserverLearner, SampleSender};
 use super::timing::LineSettings;
 use crate::chunk::{Chunk, PortId, Timestamp};
@@ -60,6 +61,9 @@ pub struct FramerConfig {
     /// and an exception may carry function 0 (`80`, shown with a finding). On a line both are
     /// far likelier a glitch or garbage, so it is off there.
     pub pasted: bool,
+    /// Whether the lengths each unit's vendor functions were seen with decide CRC-`00` twins
+    /// (see [`super::lengths`]); off only to measure what it does.
+    pub learn_lengths: bool,
 }
 
 /// Default for [`FramerConfig::incomplete_timeout_ns`]: 50 ms.
@@ -73,6 +77,7 @@ impl Default for FramerConfig {
             incomplete_timeout_ns: DEFAULT_INCOMPLETE_TIMEOUT_NS,
             learn_latency: true,
             pasted: false,
+            learn_lengths: true,
         }
     }
 }
@@ -209,6 +214,8 @@ pub struct RtuFramer {
     next_alt: Option<usize>,
     /// What the valid frames show of this observer's reads.
     learner: ObserverLearner,
+    /// Lengths each unit's vendor functions were seen with (issue 25).
+    lengths: LearnedLengths,
     /// The last thing emitted (glitches aside) was a failed frame or noise: nothing is
     /// expected, and a CRC match right after damage must be confirmed by what follows.
     after_damage: bool,
@@ -247,6 +254,7 @@ impl RtuFramer {
             next_alt: None,
             after_damage: false,
             learner: ObserverLearner::new(config.latency_ns, config.learn_latency, config.line.char_ns()),
+            lengths: LearnedLengths::new(config.learn_lengths),
             max_address: if config.pasted { u8::MAX } else { MAX_ADDRESS },
             pasted: config.pasted,
         }
@@ -802,6 +810,10 @@ impl RtuFramer {
                         if let Some(even) = diagnostics_even_len(s, l) {
                             return Try::Found(even, Reading::Unknown, None);
                         }
+                        // The lengths this unit's function was seen with unambiguously decide.
+                        if let Some(len) = self.lengths.choose(s[0], s[1], self.sender_at(g), l) {
+                            return Try::Found(len, Reading::Unknown, None);
+                        }
                         // What follows the longer frame decides below: wait until its start
                         // (two bytes) has arrived, unless nothing more can come.
                         if !flushing && s.len() < l + 3 && !self.boundary_at(g + l + 1) {
@@ -1075,6 +1087,10 @@ impl RtuFramer {
             self.next_alt = None;
             return even;
         }
+        if let Some(len) = self.lengths.choose(self.buf[at], self.buf[at + 1], sender, n - 1) {
+            self.next_alt = None;
+            return len;
+        }
         let odds = self.turn.zero_tail(sender);
         let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
         self.next_alt = odds.ambiguous.then_some(other);
@@ -1228,6 +1244,7 @@ impl RtuFramer {
         self.last_sender = sender_of(self.expect, &self.buf[a..b], reading);
         self.after_damage = !check_ok;
         if check_ok {
+            self.lengths.record(&self.buf[a..b], self.buf.get(b).copied(), self.last_sender);
             self.known_units[usize::from(self.buf[a])] = true;
             self.turn.frame(self.last_sender);
             self.learn_from(a, b);

@@ -72,6 +72,12 @@ pub struct TrafficConfig {
     /// The shortest silence kept between frames (ns); `None`: the spec's recommended 4.5
     /// characters. A master that waits 1.05 × t3.5 is within the spec, barely.
     pub min_idle_ns: Option<u64>,
+    /// Each unit sends its vendor function (`VENDOR_FC`) with the same request and answer
+    /// lengths all day, as devices do (off: random lengths per transaction, as before).
+    pub vendor_fixed: bool,
+    /// Share of vendor frames (requests and answers) whose CRC ends in `00`: made so by their
+    /// last data byte (by chance, 1 in 256 do).
+    pub vendor_lookalike: f64,
 }
 
 impl Default for TrafficConfig {
@@ -89,6 +95,8 @@ impl Default for TrafficConfig {
             slow_unit: None,
             slow_unit_chars: 30,
             min_idle_ns: None,
+            vendor_fixed: false,
+            vendor_lookalike: 0.0,
         }
     }
 }
@@ -101,6 +109,9 @@ pub const VENDOR_FC: u8 = 0x41;
 
 struct Builder {
     rng: Rng,
+    /// Draws of the options added later (vendor lengths, vendor look-alikes), apart from `rng`
+    /// so that traffic without them stays what it was for every seed.
+    rng2: Rng,
     cfg: TrafficConfig,
     char_ns: u64,
     t: u64,
@@ -132,6 +143,12 @@ impl Builder {
         // traffic it always gave (the regression captures were made from it).
         if !is_request && self.cfg.lookalike > 0.0 && self.rng.chance(self.cfg.lookalike) {
             make_lookalike(&mut wire);
+        }
+        if pdu.first() == Some(&VENDOR_FC)
+            && self.cfg.vendor_lookalike > 0.0
+            && self.rng2.chance(self.cfg.vendor_lookalike)
+        {
+            crc_tail_zero(&mut wire);
         }
         let mut kind = TruthKind::Good;
         if self.rng.chance(self.cfg.corrupt) {
@@ -189,6 +206,34 @@ fn make_lookalike(wire: &mut [u8]) {
     }
     let crc = crate::proto::crc16(&wire[..n - 2]).to_le_bytes();
     wire[n - 2..].copy_from_slice(&crc);
+}
+
+/// Makes a frame's CRC end in `00` by choosing its last data byte (frames of at least five
+/// bytes; CRC-16/MODBUS over one more byte is a bijection of that byte, so one value does).
+fn crc_tail_zero(wire: &mut [u8]) {
+    let n = wire.len();
+    if n < 5 {
+        return;
+    }
+    for v in 0..=255u8 {
+        wire[n - 3] = v;
+        let crc = crate::proto::crc16(&wire[..n - 2]).to_le_bytes();
+        if crc[1] == 0 {
+            wire[n - 2..].copy_from_slice(&crc);
+            return;
+        }
+    }
+}
+
+/// The vendor request and answer PDUs unit `unit` sends all day: lengths fixed by the unit,
+/// contents drawn from `rng`.
+fn vendor_pdus(unit: u8, rng: &mut Rng) -> (Vec<u8>, Vec<u8>) {
+    let (nq, na) = (2 + usize::from(unit % 5), 3 + usize::from(unit.wrapping_mul(7) % 10));
+    let mut req = vec![VENDOR_FC];
+    req.extend(rng.bytes(nq));
+    let mut resp = vec![VENDOR_FC];
+    resp.extend(rng.bytes(na));
+    (req, resp)
 }
 
 /// One transaction of the poll mix: the request PDU and the response PDU (`None`: no answer).
@@ -332,8 +377,14 @@ fn transaction(rng: &mut Rng) -> (Vec<u8>, Option<Vec<u8>>) {
 #[must_use]
 pub fn generate(cfg: &TrafficConfig) -> Wire {
     let line = cfg.line;
-    let mut b =
-        Builder { rng: Rng::new(cfg.seed), cfg: *cfg, char_ns: line.char_ns(), t: cfg.start_ns, wire: Wire::default() };
+    let mut b = Builder {
+        rng: Rng::new(cfg.seed),
+        rng2: Rng::new(cfg.seed ^ 0x5EED_0F_2025),
+        cfg: *cfg,
+        char_ns: line.char_ns(),
+        t: cfg.start_ns,
+        wire: Wire::default(),
+    };
     // Turnaround and inter-poll idle: never below 4.5 characters (the spec's recommendation).
     let min_gap = cfg.min_idle_ns.unwrap_or(line.t35_ns() + line.char_ns());
     for _ in 0..cfg.transactions {
@@ -349,6 +400,12 @@ pub fn generate(cfg: &TrafficConfig) -> Wire {
             0..=2 => (0, false),      // broadcast: nobody answers
             3..=5 => (ABSENT, false), // absent slave: timeout
             _ => (*b.rng.pick(&SLAVES).unwrap_or(&1), true),
+        };
+        let (req, resp) = if cfg.vendor_fixed && req.first() == Some(&VENDOR_FC) {
+            let (q, a) = vendor_pdus(unit, &mut b.rng2);
+            (q, Some(a))
+        } else {
+            (req, resp)
         };
         // Broadcasts are writes only (Modbus over Serial Line v1.02 §2.1).
         let req = if unit == 0 {

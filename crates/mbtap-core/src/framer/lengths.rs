@@ -1,0 +1,158 @@
+//! Frame lengths learned per unit, function and direction, where the function's structure
+//! does not fix them (vendor codes, Diagnostics sub-functions, Report Server ID): a device
+//! sends the same vendor function with the same lengths all day, so the frames that are
+//! unambiguous tell which length a CRC-`00` twin has (issue 25).
+//!
+//! A frame is unambiguous about its length when neither twin of CRC-16/MODBUS's shift property
+//! exists: its last byte is not `00` (else it validates one byte shorter) and the byte after it
+//! has arrived and is not `00` (else it validates one byte longer). Only those are learned
+//! from, which keeps a wrong guess from teaching itself (a first version learned from the last
+//! byte alone, and a 7-byte twin of an 8-byte frame ending in `00` — whose last byte is the
+//! CRC's low byte — taught it the wrong length).
+
+use std::collections::BTreeMap;
+
+use super::glitch::Sender;
+use crate::proto::length::{PduLength, request_len, response_len};
+
+/// Lengths kept per key (the most frequent win; a device uses one or two).
+const PER_KEY: usize = 4;
+/// Keys kept (units × vendor functions × directions on one line: a handful; bounded anyway).
+const MAX_KEYS: usize = 4096;
+/// Sightings before a length decides.
+const SURE: u32 = 2;
+/// A length decides only when it is at least this share (in tenths) of its key's sightings: a
+/// function whose length varies (sub-functions, variable data) decides nothing.
+const SHARE_TENTHS: u64 = 9;
+
+/// Direction of a frame, for the key.
+fn dir(sender: Sender) -> Option<u8> {
+    match sender {
+        Sender::Master => Some(0),
+        Sender::Slave => Some(1),
+        Sender::Unknown => None,
+    }
+}
+
+/// The learned lengths of one port.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct LearnedLengths {
+    seen: BTreeMap<(u8, u8, u8), [(u16, u32); PER_KEY]>,
+    /// Off: nothing is learned (to measure what learning does).
+    on: bool,
+}
+
+impl LearnedLengths {
+    pub(crate) fn new(on: bool) -> Self {
+        Self { seen: BTreeMap::new(), on }
+    }
+
+    /// A valid frame `f` from `sender` was emitted; `next` is the byte after it, if it came.
+    pub(crate) fn record(&mut self, f: &[u8], next: Option<u8>, sender: Sender) {
+        if !self.on || next.is_none_or(|n| n == 0) {
+            return;
+        }
+        let (Some(d), [unit, fc, ..], Some(&last)) = (dir(sender), f, f.last()) else { return };
+        if last == 0 {
+            return;
+        }
+        let pdu = &f[1..f.len().saturating_sub(2).max(1)];
+        let fixed = match d {
+            0 => request_len(pdu),
+            _ => response_len(pdu),
+        };
+        if matches!(fixed, PduLength::Exact(_)) {
+            return;
+        }
+        let Ok(len) = u16::try_from(f.len()) else { return };
+        let key = (*unit, *fc, d);
+        if !self.seen.contains_key(&key) && self.seen.len() >= MAX_KEYS {
+            return;
+        }
+        let slots = self.seen.entry(key).or_default();
+        if let Some(s) = slots.iter_mut().find(|(l, n)| *l == len && *n > 0) {
+            s.1 = s.1.saturating_add(1);
+        } else if let Some(s) = slots.iter_mut().min_by_key(|(_, n)| *n) {
+            // A new length takes the place of the rarest (a frame taken wrong in damage now
+            // and then must not end learning for good).
+            *s = (len, 1);
+        }
+    }
+
+    /// Of `short` and `short + 1` bytes, the one this unit's function from `sender` was always
+    /// seen with (at least [`SURE`] times, and never another length). A function seen with
+    /// several lengths (sub-functions, variable data) decides nothing.
+    pub(crate) fn choose(&self, unit: u8, fc: u8, sender: Sender, short: usize) -> Option<usize> {
+        // The length each direction was (nearly) always seen with (nobody can say who sent a
+        // frame after damage: then either direction's).
+        let dirs: Vec<u8> = dir(sender).map_or_else(|| vec![0, 1], |d| vec![d]);
+        let mut fits = Vec::new();
+        for slots in dirs.iter().filter_map(|d| self.seen.get(&(unit, fc, *d))) {
+            let total: u64 = slots.iter().map(|&(_, n)| u64::from(n)).sum();
+            let Some(&(len, n)) = slots.iter().max_by_key(|&&(_, n)| n) else { continue };
+            let len = usize::from(len);
+            if n >= SURE && u64::from(n) * 10 >= total * SHARE_TENTHS && (len == short || len == short + 1) {
+                fits.push(len);
+            }
+        }
+        fits.dedup();
+        match fits.as_slice() {
+            [one] => Some(*one),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vendor request (function 0x41) from the master, CRC not ending in 00.
+    fn vendor(unit: u8, data: &[u8]) -> Vec<u8> {
+        let mut pdu = vec![0x41];
+        pdu.extend_from_slice(data);
+        let mut f = Vec::new();
+        crate::proto::encode_rtu(unit, &pdu, &mut f);
+        f
+    }
+
+    #[test]
+    fn lengths_seen_unambiguously_decide_a_twin() {
+        let mut l = LearnedLengths::new(true);
+        let mut n = 0;
+        for k in 0u8..=255 {
+            let f = vendor(5, &[k, 1, 2]);
+            if f.last() != Some(&0) {
+                l.record(&f, Some(0x11), Sender::Master);
+                n += 1;
+            }
+            if n == 3 {
+                break;
+            }
+        }
+        // Frames of 7 bytes: between 7 and 8, 7.
+        assert_eq!(l.choose(5, 0x41, Sender::Master, 7), Some(7));
+        assert_eq!(l.choose(5, 0x41, Sender::Unknown, 6), Some(7));
+        // Not learned for answers, nor for another unit.
+        assert_eq!(l.choose(5, 0x41, Sender::Slave, 7), None);
+        assert_eq!(l.choose(6, 0x41, Sender::Master, 7), None);
+        // As often another length for the same key: it varies, nothing decides.
+        let mut n = 0;
+        for k in 0u8..=255 {
+            let f = vendor(5, &[k, 1, 2, 3]);
+            if f.last() != Some(&0) {
+                l.record(&f, Some(0x11), Sender::Master);
+                n += 1;
+            }
+            if n == 3 {
+                break;
+            }
+        }
+        assert_eq!(l.choose(5, 0x41, Sender::Master, 7), None);
+        // Standard functions have their structure: not learned.
+        let mut f = Vec::new();
+        crate::proto::encode_rtu(5, &[0x03, 0, 1, 0, 2], &mut f);
+        l.record(&f, Some(0x11), Sender::Master);
+        assert_eq!(l.choose(5, 0x03, Sender::Master, 8), None);
+    }
+}
