@@ -379,7 +379,7 @@ pub fn generate(cfg: &TrafficConfig) -> Wire {
     let line = cfg.line;
     let mut b = Builder {
         rng: Rng::new(cfg.seed),
-        rng2: Rng::new(cfg.seed ^ 0x5EED_0F_2025),
+        rng2: Rng::new(cfg.seed ^ 0x005E_ED0F_2025),
         cfg: *cfg,
         char_ns: line.char_ns(),
         t: cfg.start_ns,
