@@ -28,3 +28,13 @@ pub mod publish;
 pub mod signals;
 pub mod source;
 pub mod tui;
+
+/// A single-threaded runtime for one command's I/O (at the root: the commands and the master,
+/// which discovers SunSpec devices before a command runs, both need one).
+///
+/// # Errors
+/// The runtime cannot be started.
+pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    use anyhow::Context as _;
+    tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")
+}

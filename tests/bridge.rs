@@ -45,13 +45,18 @@ fn bridge_spawned(serial: &Path, extra: &[&str], stdout: Stdio) -> (Kill, String
     let mut lines = BufReader::new(stderr).lines();
     let mut tcp = None;
     let mut others = Vec::new();
-    let expected = 1 + extra.iter().filter(|a| a.starts_with("--listen-rtu") || a.starts_with("--metrics")).count();
+    let expected = 1 + extra
+        .iter()
+        .filter(|a| a.starts_with("--listen-rtu") || a.starts_with("--listen-udp") || a.starts_with("--metrics"))
+        .count();
     while tcp.is_none() || others.len() + 1 < expected {
         let line = lines.next().expect("the bridge ended before listening").unwrap();
         if let Some(rest) = line.strip_prefix("mbtap: bridge listening on ") {
             let addr = rest.split_whitespace().next().unwrap().to_owned();
             if rest.contains("(Modbus TCP)") {
                 tcp = Some(addr);
+            } else if rest.contains("(Modbus UDP)") {
+                others.push(format!("udp:{addr}"));
             } else {
                 others.push(addr);
             }
@@ -146,6 +151,40 @@ fn pymodbus_reads_and_writes_through_the_bridge() {
     let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{text}");
     assert!(text.contains("ALL OK"), "{text}");
+}
+
+/// Issue 29: a pymodbus Modbus UDP client through `--listen-udp` — the same reads, writes,
+/// device exception and gateway exception as over TCP; a read-only bridge refuses its write
+/// with exception 01, counted, as it would a TCP client's.
+#[test]
+#[ignore = "needs socat and pymodbus; .ci/run installs them and runs this with --ignored"]
+fn pymodbus_over_udp_reads_and_writes_through_the_bridge() {
+    // MBAP: transaction 7, protocol 0, length 6, unit 1; write single register 105 = 1.
+    const WRITE: [u8; 12] = [0, 7, 0, 0, 0, 6, 1, 0x06, 0, 105, 0, 1];
+    let d = dir("udp");
+    let _sim = simulator(&d.join("bus"), &[]);
+    let (_bridge, _, others) = bridge(&d.join("bus"), &["--listen-udp", "127.0.0.1:0"]);
+    let udp = others.iter().find_map(|a| a.strip_prefix("udp:")).expect("the UDP address");
+    let (host, port) = udp.rsplit_once(':').unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/pymodbus_tcp_client.py");
+    let out =
+        Command::new("python3").arg(&script).args([host, port, "udp"]).output().expect("python3 must be installed");
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && text.contains("ALL OK"), "{text}");
+    // Read-only: the same checks as TCP clients get.
+    let (_ro, _, others) =
+        bridge(&d.join("bus"), &["--listen-udp", "127.0.0.1:0", "--read-only", "--metrics", "127.0.0.1:0"]);
+    let udp = others.iter().find_map(|a| a.strip_prefix("udp:")).expect("the UDP address").to_owned();
+    let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.set_read_timeout(Some(std::time::Duration::from_secs(5))).unwrap();
+    sock.send_to(&WRITE, &udp).unwrap();
+    let mut buf = [0u8; 260];
+    let n = sock.recv(&mut buf).unwrap();
+    assert_eq!(&buf[..n], &[0, 7, 0, 0, 0, 3, 1, 0x86, 0x01], "exception 01 for a write under --read-only");
+    // A datagram that is not one whole ADU: dropped, nothing answered.
+    sock.send_to(&WRITE[..9], &udp).unwrap();
+    sock.set_read_timeout(Some(std::time::Duration::from_millis(300))).unwrap();
+    assert!(sock.recv(&mut buf).is_err(), "no answer to a torn datagram");
 }
 
 #[test]

@@ -3,7 +3,7 @@
 //! Pure parts: [`queue`] (fair per-client queues), [`timing`] (per-unit timeouts, fixed or
 //! learnt) and `mbtap_core::proto::answer_end` (where a slave's answer ends). At the edge: [`line`] (the serial master, one transaction at a time, reopening a
 //! lost port), [`server`] (the TCP side, each connection on its own), [`metrics`] (Prometheus
-//! text); [`reverse`] (an RTU slave on the serial side, a Modbus TCP client behind).
+//! text); [`udp`] (Modbus UDP clients, through the same checks as TCP's); [`reverse`] (an RTU slave on the serial side, a Modbus TCP client behind).
 
 pub mod cache;
 pub mod config;
@@ -17,3 +17,4 @@ pub mod run;
 pub mod server;
 pub mod timing;
 pub mod tls;
+pub mod udp;

@@ -29,6 +29,8 @@ pub struct BridgeOptions {
     pub lines: Vec<(RangeInclusive<u8>, LineOptions)>,
     pub listen: Option<String>,
     pub listen_rtu: Option<String>,
+    /// Modbus UDP (MBAP in datagrams), when asked for.
+    pub listen_udp: Option<String>,
     pub server: ServerOptions,
     pub queue_per_client: usize,
     pub metrics: Option<String>,
@@ -149,6 +151,14 @@ pub async fn bridge<W: Write>(
             let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
             tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, None, Arc::clone(&connections)));
+        }
+        if let Some(addr) = &opts.listen_udp {
+            let socket =
+                tokio::net::UdpSocket::bind(addr).await.with_context(|| format!("--listen-udp: binding {addr}"))?;
+            let local = socket.local_addr().with_context(|| format!("--listen-udp: binding {addr}"))?;
+            let _ = writeln!(err, "mbtap: bridge listening on {local} (Modbus UDP)");
+            let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, ..opts.server.clone() });
+            tokio::spawn(super::udp::serve_udp(socket, Arc::clone(&routes), server_opts));
         }
         if let Some(addr) = &opts.tls.listen_tls {
             // Files are read (and checked) before listening: a bad certificate stops the start.

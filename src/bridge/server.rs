@@ -322,14 +322,14 @@ pub async fn serve(
 }
 
 /// An answer on its way back to the client, in request order.
-struct Pending {
-    transaction_id: u16,
-    unit: u8,
-    function: u8,
-    answer: Answer,
+pub(super) struct Pending {
+    pub(super) transaction_id: u16,
+    pub(super) unit: u8,
+    pub(super) function: u8,
+    pub(super) answer: Answer,
 }
 
-enum Answer {
+pub(super) enum Answer {
     Now(Reply),
     Later(oneshot::Receiver<Reply>),
 }
@@ -474,14 +474,14 @@ async fn connection<S>(
 /// Who the client is, for authorisation: anyone on a plain listener; on the TLS listener the
 /// policy of its certificate's role, or none (no role, or one no rule names: nothing allowed).
 #[derive(Debug, Clone, Copy)]
-enum Role<'a> {
+pub(super) enum Role<'a> {
     Plain,
     Tls(Option<&'a super::tls::Policy>),
 }
 
 /// Checks one request and queues it on its line; what to answer.
 #[allow(clippy::too_many_arguments)] // the request's fields and the connection's context
-fn request(
+pub(super) fn request(
     client: ClientId,
     transaction_id: u16,
     unit: u8,

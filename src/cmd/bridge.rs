@@ -37,6 +37,10 @@ pub struct Args {
     /// Raw RTU frames over TCP on this address too (or instead).
     #[arg(long, value_name = "ADDR:PORT")]
     pub listen_rtu: Option<String>,
+    /// Modbus UDP clients (one MBAP request per datagram) on this address too (or instead),
+    /// under the same allow-lists, read-only rules, rate limit, queue and cache as TCP clients.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen_udp: Option<String>,
     /// Units FIRST-LAST on another serial port (repeatable): --route 11-20=/dev/ttyUSB1.
     #[arg(long = "route", value_name = "UNITS=PORT")]
     pub routes: Vec<String>,
@@ -157,6 +161,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         line,
         listen,
         listen_rtu,
+        listen_udp,
         routes,
         timeout_ms,
         timeout,
@@ -241,8 +246,12 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         None
     };
     anyhow::ensure!(
-        reverse.is_some() || listen.is_some() || listen_rtu.is_some() || tls.listen_tls.is_some(),
-        "nothing to listen on: give --listen ADDR:PORT (Modbus TCP), --listen-rtu ADDR:PORT and/or --listen-tls ADDR:PORT"
+        reverse.is_some()
+            || listen.is_some()
+            || listen_rtu.is_some()
+            || listen_udp.is_some()
+            || tls.listen_tls.is_some(),
+        "nothing to listen on: give --listen ADDR:PORT (Modbus TCP), --listen-rtu ADDR:PORT, --listen-udp ADDR:PORT and/or --listen-tls ADDR:PORT"
     );
     anyhow::ensure!(
         turnaround_ms.is_finite() && turnaround_ms >= 0.0,
@@ -302,6 +311,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         lines,
         listen,
         listen_rtu,
+        listen_udp,
         server: crate::bridge::server::ServerOptions {
             rtu_over_tcp: false,
             read_only,
@@ -450,6 +460,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "latency_ms" => line.latency_ms,
         "listen" => listen,
         "listen_rtu" => listen_rtu,
+        "listen_udp" => listen_udp,
         "routes" => routes,
         "timeout_ms" => timeout_ms,
         "timeout" => timeout,

@@ -5,7 +5,6 @@
 
 use std::process::ExitCode;
 
-use anyhow::Context;
 use clap::{ArgMatches, Parser, Subcommand};
 
 pub mod bridge;
@@ -106,7 +105,4 @@ pub fn run(command: Command, matches: &ArgMatches) -> anyhow::Result<ExitCode> {
     }
 }
 
-/// A single-threaded runtime for one command's I/O.
-pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")
-}
+pub(crate) use crate::runtime;

@@ -70,7 +70,7 @@ impl MasterArgs {
             let unit = self.unit.unwrap_or(1);
             let timeout = std::time::Duration::from_millis(self.timeout_ms);
             let mut link = link::Link::new(&self.target, &self.line, timeout)?;
-            let imported = crate::cmd::runtime()?.block_on(sunspec::import(&mut link, unit, timeout, self.retries))?;
+            let imported = crate::runtime()?.block_on(sunspec::import(&mut link, unit, timeout, self.retries))?;
             let toml = imported.to_toml("sunspec", &format!("SunSpec device at {}", self.target), &self.target);
             return Ok(Some(mbtap_core::profile::load("sunspec", &toml)?));
         }

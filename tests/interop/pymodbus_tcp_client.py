@@ -1,13 +1,15 @@
 """pymodbus as a Modbus TCP client through `mbtap bridge` to the simulated devices: reads,
 writes, a device exception and the gateway's own 0x0B, checked against the profiles' documents.
-Usage: pymodbus_tcp_client.py HOST PORT. Prints ALL OK or exits non-zero saying what failed."""
+Usage: pymodbus_tcp_client.py HOST PORT [udp]: Modbus TCP, or Modbus UDP (the bridge's
+--listen-udp). Prints ALL OK or exits non-zero saying what failed."""
 import inspect
 import sys
 
-from pymodbus.client import ModbusTcpClient
+from pymodbus.client import ModbusTcpClient, ModbusUdpClient
 
 host, port = sys.argv[1], int(sys.argv[2])
-client = ModbusTcpClient(host, port=port, timeout=3, retries=0)
+Client = ModbusUdpClient if sys.argv[3:] == ["udp"] else ModbusTcpClient
+client = Client(host, port=port, timeout=3, retries=0)
 if not client.connect():
     sys.exit(f"cannot connect to {host}:{port}")
 

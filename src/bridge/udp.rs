@@ -1,0 +1,93 @@
+//! Modbus UDP clients (`--listen-udp`): one MBAP ADU per datagram (Messaging on TCP/IP v1.0b
+//! §4.1 framing, carried in UDP as Modbus UDP gateways do), checked and queued exactly as a TCP
+//! client's requests are — the allow-lists, read-only rules, rate limit, routes, queue and cache
+//! of the TCP listener — and each answer sent back to the datagram's sender. A datagram that is
+//! not exactly one well-formed ADU is dropped and counted; a sender is a client of its own for
+//! the fair queue (its address, up to [`MAX_PEERS`] remembered).
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use tokio::time::Instant;
+
+use mbtap_core::proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
+use tokio::net::UdpSocket;
+
+use super::line::{GATEWAY_TARGET_FAILED, Reply};
+use super::server::{Answer, Pending, Priority, Role, Route, ServerOptions, request};
+
+/// Senders remembered (their client id and rate-limit bucket); the oldest is forgotten beyond.
+const MAX_PEERS: usize = 1024;
+/// The largest datagram read: an MBAP ADU is at most 260 bytes (MAP v1.1b3 §4.1 + 7).
+const DATAGRAM: usize = 2048;
+
+struct Peer {
+    client: u64,
+    bucket: Option<(f64, Instant)>,
+    last: Instant,
+}
+
+/// Serves Modbus UDP on `socket` until the process ends.
+pub async fn serve_udp(socket: UdpSocket, routes: Arc<Vec<Route>>, opts: Arc<ServerOptions>) {
+    // Client ids apart from the TCP listener's (which count up from 1).
+    static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1 << 48);
+    let socket = Arc::new(socket);
+    let mut peers: HashMap<SocketAddr, Peer> = HashMap::new();
+    let mut buf = vec![0u8; DATAGRAM];
+    loop {
+        let Ok((n, peer)) = socket.recv_from(&mut buf).await else { continue };
+        let metrics = routes.first().map(|r| &r.line.metrics);
+        if !opts.allow_ips.is_empty() && !opts.allow_ips.iter().any(|net| net.contains(peer.ip())) {
+            if let Some(m) = metrics {
+                m.refused("ip_not_allowed");
+            }
+            continue;
+        }
+        let datagram = buf.get(..n).unwrap_or_default();
+        let (transaction_id, unit, pdu) = match parse_tcp_frame(datagram) {
+            Ok(Streaming::Complete(f, used)) if used == n => (f.header.transaction_id, f.header.unit, f.pdu.to_vec()),
+            // Short, long, two ADUs in one datagram, protocol id ≠ 0: dropped, counted.
+            _ => {
+                if let Some(m) = metrics {
+                    m.refused("malformed_mbap");
+                }
+                continue;
+            }
+        };
+        if !peers.contains_key(&peer)
+            && peers.len() >= MAX_PEERS
+            && let Some(oldest) = peers.iter().min_by_key(|(_, p)| p.last).map(|(a, _)| *a)
+        {
+            peers.remove(&oldest);
+        }
+        let p = peers.entry(peer).or_insert_with(|| Peer {
+            client: NEXT_CLIENT.fetch_add(1, Ordering::Relaxed),
+            bucket: opts.rate_limit.map(|r| (r.max(1.0), Instant::now())),
+            last: Instant::now(),
+        });
+        p.last = Instant::now();
+        let high = opts.priority.iter().any(|pr| matches!(pr, Priority::Net(net) if net.contains(peer.ip())));
+        let pending = request(p.client, transaction_id, unit, pdu, &routes, &opts, &mut p.bucket, Role::Plain, high);
+        let socket = Arc::clone(&socket);
+        // The answer goes back when it comes; the next datagram is read meanwhile.
+        tokio::spawn(async move { answer(&socket, peer, pending).await });
+    }
+}
+
+/// Sends the answer to `pending` to `peer` (nothing for a broadcast).
+async fn answer(socket: &UdpSocket, peer: SocketAddr, p: Pending) {
+    let reply = match p.answer {
+        Answer::Now(r) => r,
+        Answer::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
+    };
+    let pdu = match reply {
+        Reply::Pdu(pdu) => pdu,
+        Reply::Gateway(code) => vec![p.function | 0x80, code],
+        Reply::Silence => return,
+    };
+    let mut out = Vec::with_capacity(pdu.len() + 7);
+    encode_tcp(p.transaction_id, p.unit, &pdu, &mut out);
+    // A sender that is gone is not an error of the bridge's.
+    let _ = socket.send_to(&out, peer).await;
+}
