@@ -15,7 +15,8 @@ use crate::cmd::runtime;
 /// every read is written to a pcapng line capture (flushed each second) that `replay`
 /// shows exactly as this session did.
 pub struct Args {
-    /// The serial port (e.g. /dev/ttyUSB0).
+    /// The serial port (e.g. /dev/ttyUSB0), or `rtu-over-tcp://HOST:PORT`: a serial server in
+    /// transparent mode (ser2net raw, USR, Elfin, NPort), its line framed by structure and CRC.
     pub port: String,
     #[command(flatten)]
     pub line: LineArgs,

@@ -4,6 +4,12 @@
 //! line is quiet the analyzer gets ticks, so frames and timeouts come out without waiting for
 //! the next byte. A port that disappears (USB adapter pulled) is reported and reopened every
 //! second until it is back; the recording goes on.
+//!
+//! `rtu-over-tcp://HOST:PORT` (or `rtu+tcp://`) listens to a serial server in transparent mode
+//! (ser2net raw, USR, Elfin, NPort): the remote line's bytes as TCP delivers them. TCP keeps no
+//! timing — a segment may hold parts of several frames, or be held back — so the framer is told
+//! not to trust silences shorter than [`SERIAL_SERVER_LATENCY`] and finds frame ends by their
+//! structure and CRC; a connection that drops is made again every second.
 
 use std::io::Write;
 use std::time::Duration;
@@ -30,6 +36,52 @@ pub struct SniffOptions {
     pub record: Option<std::path::PathBuf>,
     /// Stop after this long (for tests and timed captures); `None` runs until Ctrl-C.
     pub duration: Option<Duration>,
+}
+
+/// What a serial server's TCP stream is trusted to in timing (unless `--latency-ms` says):
+/// its buffering and the network's, far beyond t3.5 at any baud rate.
+const SERIAL_SERVER_LATENCY: u64 = 100_000_000;
+
+/// Where the bytes come from: a serial port, or a serial server's TCP stream.
+enum Source {
+    Serial(tokio_serial::SerialStream),
+    Tcp(tokio::net::TcpStream),
+}
+
+impl Source {
+    async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            Self::Serial(s) => s.read(buf).await,
+            Self::Tcp(t) => t.read(buf).await,
+        }
+    }
+}
+
+/// The serial server's `HOST:PORT` when `port` names one.
+fn serial_server(port: &str) -> Option<&str> {
+    port.strip_prefix("rtu-over-tcp://").or_else(|| port.strip_prefix("rtu+tcp://"))
+}
+
+/// Opens `opts.port`: the serial port (by name, by-id link or usb:VID:PID), or a connection to
+/// the serial server it names.
+async fn open_source(
+    opts: &SniffOptions,
+    watch: &mut crate::source::serial::DeviceWatch,
+    err: &mut dyn Write,
+) -> anyhow::Result<Source> {
+    match serial_server(&opts.port) {
+        Some(addr) => {
+            let stream = tokio::time::timeout(Duration::from_secs(5), tokio::net::TcpStream::connect(addr))
+                .await
+                .with_context(|| format!("connecting to the serial server {addr}: no answer within 5 s"))?
+                .with_context(|| format!("connecting to the serial server {addr}"))?;
+            Ok(Source::Tcp(stream))
+        }
+        None => Ok(Source::Serial(
+            crate::source::serial::open_named(&opts.port, opts.line, watch, err)
+                .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?,
+        )),
+    }
 }
 
 /// How often the analyzer hears the time while the line is quiet.
@@ -60,7 +112,12 @@ pub async fn sniff<W: Write>(
     writer: &mut EventWriter<W>,
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
-    let latency_ns = crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err);
+    let remote = serial_server(&opts.port).is_some();
+    let latency_ns = if remote {
+        opts.latency_ns.unwrap_or(SERIAL_SERVER_LATENCY)
+    } else {
+        crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err)
+    };
     let description = LineOverrides::describe(opts.mode, opts.line, latency_ns);
     let mut recorder = match &opts.record {
         Some(path) => Some(Recorder::create(path, &[(&opts.port, &description)])?),
@@ -74,16 +131,16 @@ pub async fn sniff<W: Write>(
     };
     let mut analyzer = Analyzer::new(config);
     let mut watch = crate::source::serial::DeviceWatch::default();
-    let mut stream = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err)
-        .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))
-        .map_err(|e| anyhow::Error::new(NeverOpened(format!("{e:#}"))))?;
+    let mut stream =
+        open_source(&opts, &mut watch, err).await.map_err(|e| anyhow::Error::new(NeverOpened(format!("{e:#}"))))?;
     let _ = writeln!(
         err,
-        "mbtap: sniffing {} at {} {} (reads trusted to {} µs: --latency-ms)",
+        "mbtap: sniffing {} at {} {} (reads trusted to {} µs: --latency-ms{})",
         opts.port,
         opts.line,
         opts.mode.name(),
-        latency_ns / 1000
+        latency_ns / 1000,
+        if remote { "; a serial server's TCP stream keeps no timing: frames found by structure and CRC" } else { "" }
     );
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     let mut last_flush = tokio::time::Instant::now();
@@ -117,8 +174,9 @@ pub async fn sniff<W: Write>(
                         if let Some(r) = recorder.as_mut() {
                             r.flush(err);
                         }
-                        // A by-id link or usb:VID:PID finds the adapter under its new name.
-                        if let Ok(s) = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err) {
+                        // A by-id link or usb:VID:PID finds the adapter under its new name; a
+                        // serial server is connected to again.
+                        if let Ok(s) = open_source(&opts, &mut watch, err).await {
                             let _ = writeln!(err, "mbtap: {} is back", opts.port);
                             break s;
                         }
