@@ -329,6 +329,23 @@ pub(super) struct Pending {
     pub(super) answer: Answer,
 }
 
+impl Pending {
+    /// The answer's PDU once it is there (a gateway exception as its exception PDU); `None`
+    /// for a broadcast, which nobody answers.
+    pub(super) async fn answer_pdu(self) -> Option<Vec<u8>> {
+        let reply = match self.answer {
+            Answer::Now(r) => r,
+            // The line dropped the job (it never will, but a closed channel must not hang).
+            Answer::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
+        };
+        match reply {
+            Reply::Pdu(pdu) => Some(pdu),
+            Reply::Gateway(code) => Some(vec![self.function | 0x80, code]),
+            Reply::Silence => None,
+        }
+    }
+}
+
 pub(super) enum Answer {
     Now(Reply),
     Later(oneshot::Receiver<Reply>),
@@ -355,21 +372,13 @@ async fn connection<S>(
     let writer = tokio::spawn(async move {
         let mut out = Vec::with_capacity(300);
         while let Some(p) = rx.recv().await {
-            let reply = match p.answer {
-                Answer::Now(r) => r,
-                // The line dropped the job (it never will, but a closed channel must not hang).
-                Answer::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
-            };
-            let pdu = match reply {
-                Reply::Pdu(pdu) => pdu,
-                Reply::Gateway(code) => vec![p.function | 0x80, code],
-                Reply::Silence => continue,
-            };
+            let (transaction_id, unit) = (p.transaction_id, p.unit);
+            let Some(pdu) = p.answer_pdu().await else { continue };
             out.clear();
             if rtu {
-                encode_rtu(p.unit, &pdu, &mut out);
+                encode_rtu(unit, &pdu, &mut out);
             } else {
-                encode_tcp(p.transaction_id, p.unit, &pdu, &mut out);
+                encode_tcp(transaction_id, unit, &pdu, &mut out);
             }
             if wr.write_all(&out).await.is_err() {
                 break;

@@ -14,8 +14,7 @@ use tokio::time::Instant;
 use mbtap_core::proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
 use tokio::net::UdpSocket;
 
-use super::line::{GATEWAY_TARGET_FAILED, Reply};
-use super::server::{Answer, Pending, Priority, Role, Route, ServerOptions, request};
+use super::server::{Pending, Priority, Role, Route, ServerOptions, request};
 
 /// Senders remembered (their client id and rate-limit bucket); the oldest is forgotten beyond.
 const MAX_PEERS: usize = 1024;
@@ -77,17 +76,10 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Vec<Route>>, opts: Arc<Ser
 
 /// Sends the answer to `pending` to `peer` (nothing for a broadcast).
 async fn answer(socket: &UdpSocket, peer: SocketAddr, p: Pending) {
-    let reply = match p.answer {
-        Answer::Now(r) => r,
-        Answer::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
-    };
-    let pdu = match reply {
-        Reply::Pdu(pdu) => pdu,
-        Reply::Gateway(code) => vec![p.function | 0x80, code],
-        Reply::Silence => return,
-    };
+    let (transaction_id, unit) = (p.transaction_id, p.unit);
+    let Some(pdu) = p.answer_pdu().await else { return };
     let mut out = Vec::with_capacity(pdu.len() + 7);
-    encode_tcp(p.transaction_id, p.unit, &pdu, &mut out);
+    encode_tcp(transaction_id, unit, &pdu, &mut out);
     // A sender that is gone is not an error of the bridge's.
     let _ = socket.send_to(&out, peer).await;
 }

@@ -8,8 +8,8 @@ import json
 import os
 import sys
 
-import pymodbus.datastore as ds
 import sunspec2
+from pymodbus_context import server_context
 from pymodbus.server import StartTcpServer
 
 MODELS = os.path.join(os.path.dirname(sunspec2.__file__), "models", "json")
@@ -53,17 +53,7 @@ inverter = {"A": 123, "A_SF": -1, "AphA": 41, "PhVphA": 2301, "PhVphB": 2299, "V
             "Hz": 5001, "Hz_SF": -2, "WH": 1234567, "WH_SF": 0, "TmpCab": 412, "Tmp_SF": -1, "St": 4}
 second = dict(inverter, W=2000, A=87)
 image = [0x5375, 0x6E53] + common + model(103, inverter) + model(103, second) + [64999, 4, 1, 2, 3, 4] + [0xFFFF, 0]
-# Block address 1 holds protocol address 0 (the device context adds 1, as Modbus numbering does).
-block = ds.ModbusSequentialDataBlock(40001, image)
-Device = getattr(ds, "ModbusDeviceContext", None) or getattr(ds, "ModbusSlaveContext")
-try:
-    device = Device(hr=block)
-except TypeError:
-    device = Device(di=None, co=None, hr=block, ir=None)
-try:
-    context = ds.ModbusServerContext(devices={1: device}, single=False)
-except TypeError:
-    context = ds.ModbusServerContext(slaves={1: device}, single=False)
+context = server_context(40000, image)
 if sys.argv[1] == "tcp":
     StartTcpServer(context=context, address=("127.0.0.1", int(sys.argv[2])))
 else:

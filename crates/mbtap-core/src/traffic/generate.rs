@@ -192,20 +192,9 @@ impl Builder {
 /// too (CRC-16/MODBUS: for a valid F ending in `00`, F without it checks). Other frames are left
 /// as they are.
 fn make_lookalike(wire: &mut [u8]) {
-    let n = wire.len();
-    if n < 7 || !matches!(wire[1], 0x03 | 0x04) {
-        return;
+    if wire.len() >= 7 && matches!(wire[1], 0x03 | 0x04) {
+        crc_tail_zero(wire);
     }
-    for v in 0..=255u8 {
-        wire[n - 3] = v;
-        let crc = crate::proto::crc16(&wire[..n - 2]).to_le_bytes();
-        if crc[1] == 0 {
-            wire[n - 2..].copy_from_slice(&crc);
-            return;
-        }
-    }
-    let crc = crate::proto::crc16(&wire[..n - 2]).to_le_bytes();
-    wire[n - 2..].copy_from_slice(&crc);
 }
 
 /// Makes a frame's CRC end in `00` by choosing its last data byte (frames of at least five
@@ -223,6 +212,9 @@ fn crc_tail_zero(wire: &mut [u8]) {
             return;
         }
     }
+    // Not reached (one value always does); the frame stays valid whatever happens.
+    let crc = crate::proto::crc16(&wire[..n - 2]).to_le_bytes();
+    wire[n - 2..].copy_from_slice(&crc);
 }
 
 /// The vendor request and answer PDUs unit `unit` sends all day: lengths fixed by the unit,
