@@ -1225,7 +1225,8 @@ impl RtuFramer {
         let ub = self.gap_ub[a];
         let short_gap_before_ns = (self.after_frame && ub < self.t35).then_some(ub);
         let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
-        let gap_tolerance_ns = self.apparent_inner_silence(a, b, false).and_then(|s| s.checked_sub(self.t15));
+        let (every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
+        let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.t15));
         emit(FrameEvent::Frame(Frame {
             port: self.port,
             bytes: &self.buf[a..b],
@@ -1247,7 +1248,7 @@ impl RtuFramer {
             self.lengths.record(&self.buf[a..b], self.buf.get(b).copied(), self.last_sender);
             self.known_units[usize::from(self.buf[a])] = true;
             self.turn.frame(self.last_sender);
-            self.learn_from(a, b);
+            self.learn_from(a, every_silence);
         }
         self.expect = next_expect(self.expect, &self.buf[a..b], reading);
         self.since_glitch = self.since_glitch.saturating_add(1);
@@ -1257,10 +1258,10 @@ impl RtuFramer {
         self.after_frame = true;
     }
 
-    /// A valid frame at absolute `a..b` that came in several reads: its bytes were sent back to
-    /// back, so the longest apparent silence between two of its reads is the observer's delay.
-    fn learn_from(&mut self, a: usize, b: usize) {
-        let delay = self.apparent_inner_silence(a, b, true);
+    /// A valid frame at absolute `a`, `delay` the longest apparent silence between two of its
+    /// reads (`None`: it came in one): its bytes were sent back to back, so that silence is the
+    /// observer's delay.
+    fn learn_from(&mut self, a: usize, delay: Option<u64>) {
         self.learner.frame();
         let sender = match self.last_sender {
             Sender::Master => SampleSender::Master,
@@ -1281,20 +1282,23 @@ impl RtuFramer {
     /// that read and its first bytes look later than they were — by up to that silence. That
     /// read's boundary says nothing about the observer or the sender and is left out (issue 25:
     /// through a 16550 FIFO, which holds the tail of one frame with the head of the next, it
-    /// made healthy frames look paused). With `all`, it is kept: learning the observer's
-    /// delay from it errs high, towards fewer findings, and a glitchy line's frames always
-    /// share their last read with their glitch.
-    fn apparent_inner_silence(&self, a: usize, b: usize, all: bool) -> Option<u64> {
+    /// made healthy frames look paused). For learning the observer's delay it is kept (the
+    /// first of the pair returned): that errs high, towards fewer findings, and a glitchy
+    /// line's frames always share their last read with their glitch. One pass over the frame
+    /// gives both: `(every boundary, the boundaries the gap evidence may use)`.
+    fn apparent_inner_silence(&self, a: usize, b: usize) -> (Option<u64>, Option<u64>) {
         let c = self.char_ns;
         // A read began at `i` where the gap before it is bounded (inside a read it is unknown
         // and set to `u64::MAX`).
         let starts_read = |i: usize| self.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
-        let last_read_spills = !all && b < self.buf.len() && !starts_read(b);
-        let last_start = (a + 1..b).rev().find(|&i| starts_read(i));
-        (a + 1..b)
-            .filter(|&i| starts_read(i) && !(last_read_spills && Some(i) == last_start))
-            .map(|i| self.end[i].saturating_sub(c).saturating_sub(self.end[i - 1]))
-            .max()
+        let (mut before_last, mut last) = (None::<u64>, None::<u64>);
+        for i in (a + 1..b).filter(|&i| starts_read(i)) {
+            before_last = before_last.max(last);
+            last = Some(self.end[i].saturating_sub(c).saturating_sub(self.end[i - 1]));
+        }
+        let every = before_last.max(last);
+        let last_read_spills = b < self.buf.len() && !starts_read(b);
+        (every, if last_read_spills { before_last } else { every })
     }
 
     /// How far an apparent silence before a frame fell short of t3.5 after the previous frame.

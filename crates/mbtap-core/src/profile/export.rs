@@ -335,10 +335,11 @@ fn telegraf(p: &Profile, unit: u8) -> Exported {
     let _ =
         writeln!(s, "[[inputs.modbus]]\n  name = {}\n  slave_id = {unit}\n  timeout = \"1s\"", toml_str(&p.meta.name));
     s.push_str("  controller = \"tcp://192.0.2.10:502\"\n  configuration_type = \"register\"\n");
+    let all = items(p);
     for table in [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters] {
         let mut lines = Vec::new();
-        for it in items(p).into_iter().filter(|i| i.table == table) {
-            let d = &it;
+        for it in all.iter().filter(|i| i.table == table) {
+            let d = it;
             if !is_register(table) {
                 lines.push(format!("{{ name = {}, address = [{}] }}", toml_str(&it.name), it.address));
                 out.written += 1;

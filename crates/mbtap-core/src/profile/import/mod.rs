@@ -4,6 +4,7 @@
 //! skipped, never guessed. [`Imported::to_toml`] writes the profile (`docs/profiles.md`), which
 //! the loader then checks like any hand-written one.
 
+mod fields;
 pub mod home_assistant;
 pub mod notation;
 pub mod sheet;
