@@ -74,7 +74,12 @@ fn cycle(g: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
 #[test]
 fn no_import_cycles_between_top_level_modules() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for src in [root.join("src"), root.join("crates/mbtap-core/src"), root.join("crates/mbtap-proto/src")] {
+    for src in [
+        root.join("src"),
+        root.join("crates/mbtap-core/src"),
+        root.join("crates/mbtap-proto/src"),
+        root.join("crates/mbtap-gateway/src"),
+    ] {
         let g = graph(&src);
         assert!(g.len() > 3, "{}: modules not found", src.display());
         assert_eq!(cycle(&g), None, "an import cycle in {}", src.display());
@@ -90,7 +95,7 @@ fn src_shows_the_design_in_at_most_a_dozen_entries() {
 #[test]
 fn the_pure_crates_name_no_edge_crate() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for krate in ["crates/mbtap-proto", "crates/mbtap-core"] {
+    for krate in ["crates/mbtap-proto", "crates/mbtap-core", "crates/mbtap-gateway"] {
         let mut files = Vec::new();
         rust_files(&root.join(krate).join("src"), &mut files);
         for f in files {
@@ -163,7 +168,12 @@ fn file_graphs(src: &Path) -> Vec<(PathBuf, BTreeMap<String, BTreeSet<String>>)>
 fn no_import_circles_between_the_files_of_a_module() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut circles = Vec::new();
-    for src in [root.join("src"), root.join("crates/mbtap-core/src"), root.join("crates/mbtap-proto/src")] {
+    for src in [
+        root.join("src"),
+        root.join("crates/mbtap-core/src"),
+        root.join("crates/mbtap-proto/src"),
+        root.join("crates/mbtap-gateway/src"),
+    ] {
         for (dir, g) in file_graphs(&src) {
             if let Some(c) = cycle(&g) {
                 circles.push(format!("{}: {}", dir.display(), c.join(" → ")));
@@ -171,4 +181,27 @@ fn no_import_circles_between_the_files_of_a_module() {
         }
     }
     assert!(circles.is_empty(), "import circles between files:\n{}", circles.join("\n"));
+}
+
+/// Issue 26: the gateway core is pure by what it links, not only by what it names — no async
+/// runtime, serial or socket crate anywhere under it.
+#[test]
+fn the_gateway_core_links_no_runtime_port_or_socket_crate() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = std::process::Command::new(env!("CARGO"))
+        .args(["tree", "--offline", "-p", "mbtap-gateway", "-e", "normal", "--prefix", "none"])
+        .current_dir(root)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "cargo tree: {}", String::from_utf8_lossy(&out.stderr));
+    let tree = String::from_utf8_lossy(&out.stdout);
+    assert!(tree.contains("mbtap-gateway"), "{tree}");
+    for line in tree.lines() {
+        let name = line.split_whitespace().next().unwrap_or_default();
+        for edge in
+            ["tokio", "mio", "serialport", "serial2", "nix", "socket2", "rustls", "clap", "ratatui", "crossterm"]
+        {
+            assert!(!name.starts_with(edge), "mbtap-gateway links {name}");
+        }
+    }
 }

@@ -78,8 +78,8 @@ impl Metrics {
         });
     }
 
-    pub fn gateway_exception(&self, unit: u8, code: u8) {
-        self.with(|m| *m.units.entry(unit).or_default().gateway_exceptions.entry(code).or_default() += 1);
+    pub fn gateway_exception(&self, unit: u8, code: mbtap_proto::ExceptionCode) {
+        self.with(|m| *m.units.entry(unit).or_default().gateway_exceptions.entry(code.value()).or_default() += 1);
     }
 
     pub fn timeout(&self, unit: u8) {
@@ -334,7 +334,7 @@ mod tests {
         let m = Metrics::default();
         m.request(1);
         m.response(1, &[0x83, 0x02]);
-        m.gateway_exception(5, 0x0B);
+        m.gateway_exception(5, mbtap_gateway::rules::GATEWAY_TARGET_FAILED);
         m.timeout(5);
         m.crc_error(5);
         m.latency(1, Duration::from_millis(3));

@@ -1,20 +1,21 @@
-//! The bridge: Modbus TCP clients (or raw RTU over TCP) reaching devices on serial lines.
+//! The bridge's I/O shells: Modbus TCP clients (or raw RTU over TCP, or UDP) reaching devices
+//! on serial lines. Every decision — admission, queueing, caching, breakers, timeouts, the
+//! serial transaction — is the gateway core's (`mbtap_gateway`); these files touch the world.
 //!
-//! Pure parts: [`queue`] (fair per-client queues), [`timing`] (per-unit timeouts, fixed or
-//! learnt) and `mbtap_core::proto::answer_end` (where a slave's answer ends). At the edge: [`line`] (the serial master, one transaction at a time, reopening a
-//! lost port), [`server`] (the TCP side, each connection on its own), [`metrics`] (Prometheus
-//! text); [`udp`] (Modbus UDP clients, through the same checks as TCP's); [`reverse`] (an RTU slave on the serial side, a Modbus TCP client behind).
+//! [`line`] (the serial port: drives the core's transaction machine, reopens a lost port),
+//! [`shared`] (what the line and the connections share: queue, cache, pending writes),
+//! [`server`] (the TCP side, each connection on its own), [`udp`] (Modbus UDP clients),
+//! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`reverse`] (an RTU slave on
+//! the serial side, a Modbus TCP client behind), [`run`] (starts them all), [`config`] (the
+//! configuration file), [`modes`] (the command line's enums).
 
-pub mod cache;
 pub mod config;
 pub mod line;
 pub mod metrics;
-pub mod parse;
-pub mod queue;
+pub mod modes;
 pub mod reverse;
-pub mod rules;
 pub mod run;
 pub mod server;
-pub mod timing;
+pub mod shared;
 pub mod tls;
 pub mod udp;

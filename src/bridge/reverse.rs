@@ -18,7 +18,7 @@ use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 use tokio_serial::{SerialPortBuilderExt, SerialStream};
 
-use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, MonitorChunk};
+use super::line::MonitorChunk;
 use super::metrics::Metrics;
 use mbtap_core::analyzer::SerialMode;
 use mbtap_core::chunk::PortId;
@@ -27,6 +27,9 @@ use mbtap_core::proto::answer_end::Verdict;
 use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
 use mbtap_core::proto::{encode_ascii, encode_rtu, encode_tcp};
 use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
+use mbtap_gateway::admit::{Asked, Policy, Role};
+use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, exception_pdu};
+use mbtap_proto::ExceptionCode;
 
 /// Reverse-mode settings.
 #[derive(Debug, Clone)]
@@ -108,6 +111,12 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
     let mut rtu = RequestAssembler::default();
     let mut ascii = AsciiRequestAssembler::default();
     let silence = Duration::from_nanos(opts.line.t35_ns()) + Duration::from_millis(1);
+    let policy = Policy {
+        read_only: opts.read_only,
+        allow_functions: opts.allow_functions.clone(),
+        routes: vec![0..=255],
+        ..Policy::default()
+    };
     let mut buf = [0u8; 512];
     let mut out = Vec::with_capacity(300);
     loop {
@@ -144,27 +153,15 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
             }
             metrics.request(r.unit);
             let fc = r.pdu.first().copied().unwrap_or(0);
-            let listed = opts.allow_functions.as_ref().map(|a| a.contains(&fc));
-            let illegal = super::rules::ILLEGAL_FUNCTION;
-            let refused = if mbtap_core::proto::request_len_problem(&r.pdu).is_some() {
-                // An ASCII frame may carry any length: one longer than its function allows is
-                // not forwarded (its extra bytes are no part of the request; issue 24).
-                Some(("malformed_request", super::rules::ILLEGAL_DATA_VALUE))
-            } else if opts.read_only {
-                (!super::rules::read_only_safe(&r.pdu) && listed != Some(true)).then_some(("read_only", illegal))
-            } else if listed == Some(false) {
-                Some(("function_not_allowed", illegal))
-            } else if broadcast && !matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16) {
-                // Broadcasts carry writes only (Serial Line v1.02 §2.1).
-                Some(("broadcast_not_write", illegal))
-            } else {
-                None
-            };
-            let pdu = if let Some((reason, code)) = refused {
+            // The gateway core's admission: length, read-only and function rules, broadcasts
+            // carry writes only (Serial Line v1.02 §2.1); every unit of ours has a route.
+            let asked = Asked { unit: r.unit, pdu: &r.pdu, role: Role::Plain, peer_high: false };
+            let refused = policy.admit(asked, None, Duration::ZERO).err();
+            let pdu = if let Some(why) = refused {
                 // Refused here: never forwarded, answered 01 (MAP v1.1b3 §7: Illegal Function)
                 // or 03 for a request of the wrong length.
-                metrics.refused(reason);
-                vec![fc | 0x80, code]
+                metrics.refused(why.reason());
+                exception_pdu(fc, why.exception())
             } else {
                 match forward(opts, side.tcp, side.tid, r.unit, &r.pdu).await {
                     Ok(pdu) => {
@@ -173,7 +170,7 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
                     }
                     Err(code) => {
                         metrics.gateway_exception(r.unit, code);
-                        vec![fc | 0x80, code]
+                        exception_pdu(fc, code)
                     }
                 }
             };
@@ -200,7 +197,7 @@ async fn forward(
     tid: &mut u16,
     unit: u8,
     pdu: &[u8],
-) -> Result<Vec<u8>, u8> {
+) -> Result<Vec<u8>, ExceptionCode> {
     // One reconnect per request: a server that restarted is found again at once.
     for _ in 0..2 {
         if tcp.is_none() {

@@ -12,10 +12,11 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 use tokio::sync::mpsc;
 
-use crate::bridge::line::{self, LineOptions, LineShared, MonitorChunk};
+use crate::bridge::line::{self, LineOptions, MonitorChunk};
 use crate::bridge::metrics::Metrics;
 use crate::bridge::reverse::ReverseOptions;
 use crate::bridge::server::{self, Route, ServerOptions};
+use crate::bridge::shared::LineShared;
 use crate::output::EventWriter;
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
 use mbtap_core::chunk::{Chunk, PortId};
@@ -94,7 +95,7 @@ impl Served {
 /// When a listening address cannot be bound (the serial side never fails the bridge: a port
 /// that is missing is retried, and clients get exception 0x0A meanwhile).
 pub async fn bridge<W: Write>(
-    opts: BridgeOptions,
+    mut opts: BridgeOptions,
     writer: Option<&mut EventWriter<W>>,
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
@@ -128,7 +129,7 @@ pub async fn bridge<W: Write>(
             let shared = LineShared::new(opts.queue_per_client, line_opts.cache.clone());
             let monitor = monitoring.then(|| monitor_tx.clone());
             tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
-            tokio::spawn(line::poll(line_opts.polls.clone(), Arc::clone(&shared)));
+            tokio::spawn(super::shared::poll(line_opts.polls.clone(), Arc::clone(&shared)));
             routes.push(Route { units: units.clone(), line: shared });
             let _ = writeln!(
                 err,
@@ -141,6 +142,8 @@ pub async fn bridge<W: Write>(
             );
         }
         let routes = Arc::new(routes);
+        // The admission policy routes by the lines' units, in the order they were given.
+        opts.server.policy.routes = routes.iter().map(|r| r.units.clone()).collect();
         // One table of connections for every listener: one limit, eviction across them.
         let connections: Arc<server::Table> = Arc::default();
         for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
@@ -175,7 +178,7 @@ pub async fn bridge<W: Write>(
                 opts.tls
                     .tls_allow_ip
                     .iter()
-                    .map(|s| s.parse().map_err(|e: String| anyhow::anyhow!("--tls-allow-ip: {e}")))
+                    .map(|s| s.parse().map_err(|e: mbtap_gateway::BadValue| anyhow::anyhow!("--tls-allow-ip: {e}")))
                     .collect::<anyhow::Result<Vec<_>>>()?
             };
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, allow_ips, ..opts.server.clone() });

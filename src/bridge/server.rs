@@ -4,8 +4,7 @@
 //! ([`Route`]); answers come back in the order the client asked, with its transaction id and
 //! unit id unchanged.
 
-use std::collections::BTreeMap;
-use std::net::{IpAddr, SocketAddr};
+use std::net::SocketAddr;
 use std::ops::RangeInclusive;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -16,11 +15,13 @@ use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot};
 use tokio::time::Instant;
 
-use super::line::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, Job, LineShared, Reply, SERVER_DEVICE_BUSY};
-use super::queue::ClientId;
-pub use super::rules::{ILLEGAL_DATA_VALUE, ILLEGAL_FUNCTION, read_only_safe};
+use super::shared::{Job, LineShared};
 use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
-use mbtap_core::proto::{encode_rtu, encode_tcp, request_len_problem};
+use mbtap_core::proto::{encode_rtu, encode_tcp};
+use mbtap_gateway::admit::{Asked, IpNet, Policy, RateLimit, Refusal, Role, ip_allowed};
+use mbtap_gateway::queue::ClientId;
+use mbtap_gateway::rules::{GATEWAY_TARGET_FAILED, exception_pdu};
+use mbtap_gateway::transaction::Reply;
 
 /// A pause that ends an RTU-over-TCP frame of unknown length.
 const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
@@ -110,12 +111,8 @@ pub struct Route {
 pub struct ServerOptions {
     /// Raw RTU frames (address, PDU, CRC) over TCP instead of MBAP.
     pub rtu_over_tcp: bool,
-    /// Only requests that cannot change a device pass ([`read_only_safe`]); everything else is
-    /// answered with exception 01 and never reaches the line.
-    pub read_only: bool,
-    /// Without `read_only`: only these function codes pass (None: all). With it: these pass
-    /// too, on top of the read-only set — how a vendor read such as 0x46 is let through.
-    pub allow_functions: Option<Vec<u8>>,
+    /// What a request may do and where it goes (the gateway core's admission policy).
+    pub policy: Policy,
     /// Only these client addresses may connect (empty: all).
     pub allow_ips: Vec<IpNet>,
     pub max_connections: usize,
@@ -123,96 +120,6 @@ pub struct ServerOptions {
     pub idle_timeout: Duration,
     /// Requests per second per connection (None: no limit); above it: exception 06.
     pub rate_limit: Option<f64>,
-    /// TCP unit id → serial address.
-    pub unit_map: BTreeMap<u8, u8>,
-    /// `--priority high=…`: requests that go before the round-robin.
-    pub priority: Vec<Priority>,
-}
-
-/// One `--priority high=…` rule: a client network, units or function codes.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Priority {
-    Net(IpNet),
-    Units(std::collections::BTreeSet<u8>),
-    Functions(std::collections::BTreeSet<u8>),
-}
-
-/// `high=ip:10.0.0.0/24`, `high=unit:1-5`, `high=fc:5,6,15,16`.
-///
-/// # Errors
-/// What is wrong with the value.
-pub fn parse_priority(spec: &str) -> Result<Priority, String> {
-    let bad =
-        |why: String| format!("--priority {spec:?}: {why}; expected high=ip:NET, high=unit:UNITS or high=fc:CODES");
-    let rule = spec.strip_prefix("high=").ok_or_else(|| bad("only the class \"high\" exists".into()))?;
-    match rule.split_once(':') {
-        Some(("ip", net)) => net.parse().map(Priority::Net).map_err(bad),
-        Some(("unit", units)) => {
-            super::parse::parse_units(units).map(Priority::Units).map_err(|e| bad(format!("{e:#}")))
-        }
-        Some(("fc", codes)) => super::parse::parse_function_codes(codes)
-            .map(Priority::Functions)
-            .ok_or_else(|| bad(format!("{codes:?} is not a list of function codes"))),
-        _ => Err(bad(format!("{rule:?}"))),
-    }
-}
-
-/// An address or a network (`192.168.1.0/24`, `::1`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct IpNet {
-    pub addr: IpAddr,
-    pub prefix: u8,
-}
-
-impl std::str::FromStr for IpNet {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let bad = || format!("{s:?} is not an IP address or network like 192.168.1.0/24");
-        let (a, p) = s.split_once('/').map_or((s, None), |(a, p)| (a, Some(p)));
-        let addr: IpAddr = a.trim().parse().map_err(|_| bad())?;
-        let max = if addr.is_ipv4() { 32 } else { 128 };
-        let prefix = match p {
-            Some(p) => p.trim().parse::<u8>().ok().filter(|&p| p <= max).ok_or_else(bad)?,
-            None => max,
-        };
-        // An IPv4-mapped IPv6 address (::ffff:10.0.0.5) is that IPv4 address: peers are compared
-        // in their IPv4 form, so the net must be too, or it would match no one.
-        if let IpAddr::V6(v6) = addr
-            && let Some(v4) = v6.to_ipv4_mapped()
-            && prefix >= 96
-        {
-            return Ok(Self { addr: IpAddr::V4(v4), prefix: prefix - 96 });
-        }
-        Ok(Self { addr, prefix })
-    }
-}
-
-impl IpNet {
-    #[must_use]
-    pub fn contains(&self, ip: IpAddr) -> bool {
-        let ip = match ip {
-            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
-            v4 @ IpAddr::V4(_) => v4,
-        };
-        match (self.addr, ip) {
-            (IpAddr::V4(net), IpAddr::V4(ip)) => {
-                let mask = u32::MAX.checked_shl(32 - u32::from(self.prefix)).unwrap_or(0);
-                u32::from(net) & mask == u32::from(ip) & mask
-            }
-            (IpAddr::V6(net), IpAddr::V6(ip)) => {
-                let mask = u128::MAX.checked_shl(128 - u32::from(self.prefix)).unwrap_or(0);
-                u128::from(net) & mask == u128::from(ip) & mask
-            }
-            _ => false,
-        }
-    }
-}
-
-/// Function codes a broadcast may carry (Serial Line v1.02 §2.1: broadcasts are writes only,
-/// MAP v1.1b3 §6.5, 6.6, 6.11, 6.12, 6.15, 6.16).
-fn broadcastable(fc: u8) -> bool {
-    matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16)
 }
 
 /// How long a TLS client has to complete its handshake.
@@ -237,7 +144,7 @@ pub async fn serve(
             continue;
         };
         let metrics = metrics_line.as_ref().map(|l| &l.metrics);
-        if !opts.allow_ips.is_empty() && !opts.allow_ips.iter().any(|n| n.contains(peer.ip())) {
+        if !ip_allowed(&opts.allow_ips, peer.ip()) {
             if let Some(m) = metrics {
                 m.refused("ip_not_allowed");
             }
@@ -340,7 +247,7 @@ impl Pending {
         };
         match reply {
             Reply::Pdu(pdu) => Some(pdu),
-            Reply::Gateway(code) => Some(vec![self.function | 0x80, code]),
+            Reply::Gateway(code) => Some(exception_pdu(self.function, code)),
             Reply::Silence => None,
         }
     }
@@ -365,7 +272,7 @@ async fn connection<S>(
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Send + 'static,
 {
     // `--priority high=ip:…`: the whole connection's requests.
-    let peer_high = opts.priority.iter().any(|p| matches!(p, Priority::Net(n) if n.contains(peer.ip())));
+    let mut client = Client::new(client, role, peer, routes, opts);
     let (mut rd, mut wr) = tokio::io::split(stream);
     let (tx, mut rx) = mpsc::channel::<Pending>(64);
     let rtu = opts.rtu_over_tcp;
@@ -387,7 +294,6 @@ async fn connection<S>(
     });
     let mut buf = Vec::with_capacity(600);
     let mut chunk = [0u8; 1024];
-    let mut bucket = opts.rate_limit.map(|r| (r.max(1.0), Instant::now()));
     let mut rtu_frames = mbtap_core::sim::RequestAssembler::default();
     // The idle timer counts from the last whole request, not the last byte: bytes that never
     // make a request do not keep a connection alive. A request begun must end within
@@ -409,8 +315,8 @@ async fn connection<S>(
             Err(_) if rtu_waiting && partial_since.is_none_or(|t| t.elapsed() < REQUEST_DEADLINE) => {
                 if let Some(f) = rtu_frames.silence() {
                     last_request = Instant::now();
-                    seen(client);
-                    let pending = request(client, 0, f.unit, f.pdu, routes, opts, &mut bucket, role, peer_high);
+                    seen(client.id);
+                    let pending = request(&mut client, 0, f.unit, f.pdu, routes, opts);
                     if tx.send(pending).await.is_err() {
                         break;
                     }
@@ -464,8 +370,8 @@ async fn connection<S>(
                 }
             };
             last_request = Instant::now();
-            seen(client);
-            let pending = request(client, transaction_id, unit, pdu, routes, opts, &mut bucket, role, peer_high);
+            seen(client.id);
+            let pending = request(&mut client, transaction_id, unit, pdu, routes, opts);
             if tx.send(pending).await.is_err() {
                 break 'read;
             }
@@ -480,164 +386,63 @@ async fn connection<S>(
     let _ = writer.await;
 }
 
-/// Who the client is, for authorisation: anyone on a plain listener; on the TLS listener the
-/// policy of its certificate's role, or none (no role, or one no rule names: nothing allowed).
-#[derive(Debug, Clone, Copy)]
-pub(super) enum Role<'a> {
-    Plain,
-    Tls(Option<&'a super::tls::Policy>),
+/// One client as the listeners know it: its queue id, its role, whether all its requests are
+/// in the priority class, and its rate limiter.
+#[derive(Debug)]
+pub(super) struct Client<'a> {
+    pub(super) id: ClientId,
+    pub(super) role: Role<'a>,
+    pub(super) peer_high: bool,
+    pub(super) bucket: Option<RateLimit>,
 }
 
-/// Checks one request and queues it on its line; what to answer.
-#[allow(clippy::too_many_arguments)] // the request's fields and the connection's context
+impl<'a> Client<'a> {
+    pub(super) fn new(id: ClientId, role: Role<'a>, peer: SocketAddr, routes: &[Route], opts: &ServerOptions) -> Self {
+        let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
+        Self {
+            id,
+            role,
+            peer_high: opts.policy.peer_high(peer.ip()),
+            bucket: opts.rate_limit.map(|rate| RateLimit::new(rate, now)),
+        }
+    }
+}
+
+/// Puts one request through the gateway core's admission policy, then the cache, then queues it
+/// on its line; what to answer.
 pub(super) fn request(
-    client: ClientId,
+    client: &mut Client<'_>,
     transaction_id: u16,
     unit: u8,
     pdu: Vec<u8>,
     routes: &[Route],
     opts: &ServerOptions,
-    bucket: &mut Option<(f64, Instant)>,
-    role: Role<'_>,
-    peer_high: bool,
 ) -> Pending {
     let function = pdu.first().copied().unwrap_or(0);
     let reply = |answer| Pending { transaction_id, unit, function, answer };
-    let metrics = routes.first().map(|r| &r.line.metrics);
-    let refuse = |reason, code| {
-        if let Some(m) = metrics {
-            m.refused(reason);
+    let refuse = |why: Refusal| {
+        // Server-wide refusals are counted with the first line's metrics (the one exported).
+        if let Some(r) = routes.first() {
+            r.line.metrics.refused(why.reason());
         }
-        reply(Answer::Now(Reply::Gateway(code)))
+        reply(Answer::Now(Reply::Gateway(why.exception())))
     };
-    // A PDU longer (or shorter) than its function allows is never forwarded: on the line its
-    // extra bytes would follow the request as a frame of their own (issue 24: a write smuggled
-    // behind a read, past --read-only). Nothing is sent; the client gets 03.
-    if request_len_problem(&pdu).is_some() {
-        return refuse("malformed_request", ILLEGAL_DATA_VALUE);
-    }
-    // The serial address the request will reach: roles and routes judge that, not the TCP
-    // unit id (a role limited to units 2–20 must not reach unit 1 through --map-unit 10=1).
-    let target = opts.unit_map.get(&unit).copied().unwrap_or(unit);
-    // MODBUS/TCP Security: a request the client's role does not authorise is answered 01.
-    match role {
-        Role::Tls(None) => return refuse("no_role", ILLEGAL_FUNCTION),
-        Role::Tls(Some(p)) if !p.allows(target, &pdu) => return refuse("role", ILLEGAL_FUNCTION),
-        Role::Plain | Role::Tls(Some(_)) => {}
-    }
-    let listed = opts.allow_functions.as_ref().map(|a| a.contains(&function));
-    if opts.read_only {
-        // An allow-list: what is not known to be harmless is refused, unless explicitly allowed.
-        if !read_only_safe(&pdu) && listed != Some(true) {
-            return refuse("read_only", ILLEGAL_FUNCTION);
-        }
-    } else if listed == Some(false) {
-        return refuse("function_not_allowed", ILLEGAL_FUNCTION);
-    }
-    if let (Some(rate), Some((tokens, at))) = (opts.rate_limit, bucket.as_mut()) {
-        // Token bucket: `rate` per second, bursts up to one second's worth.
-        let now = Instant::now();
-        *tokens = (*tokens + now.duration_since(*at).as_secs_f64() * rate).min(rate.max(1.0));
-        *at = now;
-        if *tokens < 1.0 {
-            return refuse("rate_limit", SERVER_DEVICE_BUSY);
-        }
-        *tokens -= 1.0;
-    }
-    if target == 0 && !broadcastable(function) {
-        // A broadcast read would make every device on the line answer at once (or none): the
-        // serial-line spec allows broadcast for writes only. Nothing goes on the line.
-        return refuse("broadcast_not_write", ILLEGAL_FUNCTION);
-    }
-    let Some(route) = routes.iter().find(|r| r.units.contains(&target) || target == 0) else {
-        return refuse("no_route", GATEWAY_PATH_UNAVAILABLE);
+    let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
+    let asked = Asked { unit, pdu: &pdu, role: client.role, peer_high: client.peer_high };
+    let admitted = match opts.policy.admit(asked, client.bucket.as_mut(), now) {
+        Ok(a) => a,
+        Err(why) => return refuse(why),
     };
+    let Some(route) = routes.get(admitted.route) else { return refuse(Refusal::NoRoute) };
+    let target = admitted.target;
     if let Some(answer) = route.line.cached(target, &pdu) {
         return reply(Answer::Now(Reply::Pdu(answer)));
     }
-    let high = peer_high
-        || opts.priority.iter().any(|p| match p {
-            Priority::Units(u) => u.contains(&target),
-            Priority::Functions(f) => f.contains(&function),
-            Priority::Net(_) => false,
-        });
     let (tx, rx) = oneshot::channel();
     let write = route.line.write_pending(target, &pdu);
-    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high, write };
-    match route.line.submit(client, job) {
+    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high: admitted.high, write };
+    match route.line.submit(client.id, job) {
         Ok(()) => reply(Answer::Later(rx)),
-        Err(_) => refuse("queue_full", SERVER_DEVICE_BUSY),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn ip_networks_match_their_addresses() {
-        let net: IpNet = "192.168.1.0/24".parse().unwrap();
-        assert!(net.contains("192.168.1.77".parse().unwrap()));
-        assert!(!net.contains("192.168.2.1".parse().unwrap()));
-        assert!(net.contains("::ffff:192.168.1.5".parse().unwrap()), "IPv4-mapped IPv6 peers");
-        let one: IpNet = "127.0.0.1".parse().unwrap();
-        assert!(one.contains("127.0.0.1".parse().unwrap()));
-        assert!(!one.contains("127.0.0.2".parse().unwrap()));
-        let all: IpNet = "0.0.0.0/0".parse().unwrap();
-        assert!(all.contains("10.1.2.3".parse().unwrap()));
-        assert!("10.0.0.0/33".parse::<IpNet>().is_err());
-        // Issue 15: a mapped address on the allow-list matched no client.
-        let mapped: IpNet = "::ffff:127.0.0.1".parse().unwrap();
-        assert!(mapped.contains("127.0.0.1".parse().unwrap()));
-        assert!(mapped.contains("::ffff:127.0.0.1".parse().unwrap()));
-        let mapped_net: IpNet = "::ffff:10.0.0.0/120".parse().unwrap();
-        assert!(mapped_net.contains("10.0.0.77".parse().unwrap()));
-        assert!(!mapped_net.contains("10.0.1.1".parse().unwrap()));
-        assert!("nonsense".parse::<IpNet>().is_err());
-    }
-
-    #[test]
-    fn read_only_is_an_allow_list_of_what_cannot_change_a_device() {
-        // Reads and reports pass.
-        for pdu in [
-            &[0x01, 0, 0, 0, 8][..],
-            &[0x03, 0, 0, 0, 1],
-            &[0x04, 0, 0, 0, 1],
-            &[0x07],
-            &[0x0B],
-            &[0x0C],
-            &[0x11],
-            &[0x14, 7, 6, 0, 4, 0, 1, 0, 2],
-            &[0x18, 0, 4],
-            &[0x2B, 0x0E, 1, 0],
-            &[0x08, 0x00, 0x00, 0xA5, 0x37], // Return Query Data: an echo
-        ] {
-            assert!(read_only_safe(pdu), "{pdu:02X?} should pass");
-        }
-        // Everything else is refused: writes, the diagnostics that restart or silence a device,
-        // CANopen (2B/0D), vendor and unknown codes, 0x00, 0x7F and exception-shaped codes.
-        for pdu in [
-            &[0x05, 0, 1, 0xFF, 0][..],
-            &[0x06, 0, 1, 0, 3],
-            &[0x0F, 0, 1, 0, 1, 1, 1],
-            &[0x10, 0, 1, 0, 1, 2, 0, 1],
-            &[0x15, 6, 6, 0, 4, 0, 1, 0, 1, 0, 0],
-            &[0x16, 0, 4, 0, 0xF2, 0, 0x25],
-            &[0x17, 0, 0, 0, 1, 0, 0, 0, 1, 2, 0, 1],
-            &[0x08, 0x00, 0x01, 0x00, 0x00], // restart communications
-            &[0x08, 0x00, 0x04, 0x00, 0x00], // force listen-only mode
-            &[0x08, 0x00, 0x0A, 0x00, 0x00], // clear counters
-            &[0x2B, 0x0D, 0, 0],
-            &[0x41, 1, 2],
-            &[0x46, 0, 0],
-            &[0x64],
-            &[0x00],
-            &[0x7F],
-            &[0x80],
-            &[0x83, 0x02],
-            &[],
-        ] {
-            assert!(!read_only_safe(pdu), "{pdu:02X?} should be refused");
-        }
+        Err(_) => refuse(Refusal::QueueFull),
     }
 }

@@ -7,7 +7,6 @@
 //! (Illegal Function) for every request, as the specification says for unauthorised requests;
 //! each refusal is counted. Certificates, key, CA and CRL are read again on SIGHUP.
 
-use std::collections::BTreeSet;
 use std::sync::{Arc, RwLock};
 
 use anyhow::Context as _;
@@ -52,70 +51,18 @@ pub struct TlsArgs {
     pub tls_allow_ip: Vec<String>,
 }
 
-/// What one role may do.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct Policy {
-    pub functions: Option<BTreeSet<u8>>,
-    pub units: Option<BTreeSet<u8>>,
-    pub read_only: bool,
-}
-
-impl Policy {
-    /// Whether the role may send `pdu` to `unit`.
-    #[must_use]
-    pub fn allows(&self, unit: u8, pdu: &[u8]) -> bool {
-        let function = pdu.first().copied().unwrap_or(0);
-        self.functions.as_ref().is_none_or(|f| f.contains(&function))
-            && self.units.as_ref().is_none_or(|u| u.contains(&unit))
-            && (!self.read_only || super::rules::read_only_safe(pdu))
-    }
-}
+/// What one role may do: the gateway core's rules (`mbtap_gateway::admit::RoleRules`).
+pub type Policy = mbtap_gateway::admit::RoleRules;
 
 /// Roles by name.
-pub type Roles = std::collections::BTreeMap<String, Policy>;
+pub use mbtap_gateway::admit::Roles;
 
 /// `--role NAME=RULES` values.
 ///
 /// # Errors
 /// Which value is wrong and why.
 pub fn parse_roles(values: &[String]) -> anyhow::Result<Roles> {
-    let mut out = Roles::new();
-    for v in values {
-        let (name, rules) =
-            v.split_once('=').with_context(|| format!("--role {v:?}: expected NAME=RULES, e.g. viewer=read-only"))?;
-        let name = name.trim();
-        anyhow::ensure!(!name.is_empty(), "--role {v:?}: the role has no name");
-        let mut p = Policy::default();
-        let mut any = false;
-        for rule in rules.split(';').map(str::trim).filter(|r| !r.is_empty()) {
-            any = true;
-            match rule.split_once(':') {
-                None if rule == "read-only" => p.read_only = true,
-                // Everything, said on purpose: an empty rule set is never taken for it.
-                None if rule == "all" => {}
-                Some(("functions", list)) => {
-                    let codes = super::parse::parse_function_codes(list)
-                        .with_context(|| format!("--role {v:?}: {list:?} is not a list of function codes"))?;
-                    p.functions = Some(codes);
-                }
-                Some(("units", list)) => {
-                    p.units = Some(super::parse::parse_units(list).with_context(|| format!("--role {v:?}"))?);
-                }
-                _ => anyhow::bail!("--role {v:?}: {rule:?} is not functions:…, units:…, read-only or all"),
-            }
-        }
-        // Fail closed (issue 24): `admin=` or an empty [roles.admin] let a client do everything.
-        anyhow::ensure!(
-            any,
-            "--role {v:?}: role {name:?} has no rules; an empty rule set would allow everything — give functions:…, units:…, read-only, or `all` to allow everything on purpose"
-        );
-        anyhow::ensure!(
-            !out.contains_key(name),
-            "--role {v:?}: role {name:?} is given twice; a second rule set would silently replace the first — merge them into one"
-        );
-        out.insert(name.to_owned(), p);
-    }
-    Ok(out)
+    Ok(mbtap_gateway::admit::parse_roles(values)?)
 }
 
 /// The role a client certificate carries, if any.

@@ -14,7 +14,8 @@ use tokio::time::Instant;
 use mbtap_core::proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
 use tokio::net::UdpSocket;
 
-use super::server::{Pending, Priority, Role, Route, ServerOptions, request};
+use super::server::{Client, Pending, Route, ServerOptions, request};
+use mbtap_gateway::admit::{Role, ip_allowed};
 
 /// Senders remembered (their client id and rate-limit bucket); the oldest is forgotten beyond.
 const MAX_PEERS: usize = 1024;
@@ -22,8 +23,7 @@ const MAX_PEERS: usize = 1024;
 const DATAGRAM: usize = 2048;
 
 struct Peer {
-    client: u64,
-    bucket: Option<(f64, Instant)>,
+    client: Client<'static>,
     last: Instant,
 }
 
@@ -37,7 +37,7 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Vec<Route>>, opts: Arc<Ser
     loop {
         let Ok((n, peer)) = socket.recv_from(&mut buf).await else { continue };
         let metrics = routes.first().map(|r| &r.line.metrics);
-        if !opts.allow_ips.is_empty() && !opts.allow_ips.iter().any(|net| net.contains(peer.ip())) {
+        if !ip_allowed(&opts.allow_ips, peer.ip()) {
             if let Some(m) = metrics {
                 m.refused("ip_not_allowed");
             }
@@ -61,13 +61,11 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Vec<Route>>, opts: Arc<Ser
             peers.remove(&oldest);
         }
         let p = peers.entry(peer).or_insert_with(|| Peer {
-            client: NEXT_CLIENT.fetch_add(1, Ordering::Relaxed),
-            bucket: opts.rate_limit.map(|r| (r.max(1.0), Instant::now())),
+            client: Client::new(NEXT_CLIENT.fetch_add(1, Ordering::Relaxed), Role::Plain, peer, &routes, &opts),
             last: Instant::now(),
         });
         p.last = Instant::now();
-        let high = opts.priority.iter().any(|pr| matches!(pr, Priority::Net(net) if net.contains(peer.ip())));
-        let pending = request(p.client, transaction_id, unit, pdu, &routes, &opts, &mut p.bucket, Role::Plain, high);
+        let pending = request(&mut p.client, transaction_id, unit, pdu, &routes, &opts);
         let socket = Arc::clone(&socket);
         // The answer goes back when it comes; the next datagram is read meanwhile.
         tokio::spawn(async move { answer(&socket, peer, pending).await });

@@ -51,13 +51,13 @@ pub struct Args {
     /// answers (3 × its slowest of the last 32 + 10 ms, at least 20 ms, at most --timeout-ms,
     /// doubled after each timeout), so a dead unit costs little line time and a slow one is not
     /// cut off.
-    #[arg(long, value_enum, default_value_t = crate::bridge::timing::TimeoutMode::Fixed, value_name = "MODE")]
-    pub timeout: crate::bridge::timing::TimeoutMode,
+    #[arg(long, value_enum, default_value_t = crate::bridge::modes::TimeoutArg::Fixed, value_name = "MODE")]
+    pub timeout: crate::bridge::modes::TimeoutArg,
     /// Whether the adapter hears its own transmission: `auto` finds out from the first request,
     /// `on` consumes each request's echo before the answer (a difference is a collision,
     /// counted), `off` expects none.
-    #[arg(long, value_enum, default_value_t = crate::bridge::line::EchoMode::Auto)]
-    pub echo: crate::bridge::line::EchoMode,
+    #[arg(long, value_enum, default_value_t = crate::bridge::modes::EchoArg::Auto)]
+    pub echo: crate::bridge::modes::EchoArg,
     /// Answer reads of these registers from memory while younger than MAX_AGE (repeatable):
     /// `UNITS:TABLE:FIRST-LAST=MAX_AGE`, e.g. `1:holding:0-9=1s`, `1,5:input:430-433=500ms`.
     /// Writes invalidate what they overlap; exceptions are never cached.
@@ -214,7 +214,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             allow_functions
                 .iter()
                 .map(|f| {
-                    crate::bridge::parse::parse_function_code(f)
+                    mbtap_gateway::parse::parse_function_code(f)
                         .with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
                 })
                 .collect::<anyhow::Result<Vec<u8>>>()?,
@@ -233,7 +233,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             port,
             line: settings,
             mode,
-            units: crate::bridge::parse::parse_units(answer_as.as_deref().unwrap_or(""))?,
+            units: mbtap_gateway::parse::parse_units(answer_as.as_deref().unwrap_or(""))?,
             target,
             target_rtu,
             timeout: std::time::Duration::from_millis(timeout_ms),
@@ -258,17 +258,9 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         "--turnaround-ms {turnaround_ms}: expected 0 or more"
     );
     anyhow::ensure!(!idle_timeout.is_zero(), "--idle-timeout {idle_timeout:?}: expected a duration above 0, e.g. 300s");
-    let unit_timeouts = crate::bridge::timing::parse_unit_timeouts(&unit_timeout).map_err(anyhow::Error::msg)?;
-    let polls = poll
-        .iter()
-        .map(|r| crate::bridge::cache::parse_poll(r))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(anyhow::Error::msg)?;
-    let mut cache = cache
-        .iter()
-        .map(|r| crate::bridge::cache::parse_rule(r))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(anyhow::Error::msg)?;
+    let unit_timeouts = mbtap_gateway::timeouts::parse_unit_timeouts(&unit_timeout)?;
+    let polls = poll.iter().map(|r| mbtap_gateway::cache::parse_poll(r)).collect::<Result<Vec<_>, _>>()?;
+    let mut cache = cache.iter().map(|r| mbtap_gateway::cache::parse_rule(r)).collect::<Result<Vec<_>, _>>()?;
     // What the bridge polls is what it answers from memory.
     cache.extend(polls.iter().map(|p| p.rule.clone()));
     let line_for = |port: String| crate::bridge::line::LineOptions {
@@ -276,9 +268,9 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         line: settings,
         mode,
         timeout: std::time::Duration::from_millis(timeout_ms),
-        timeout_mode: timeout,
+        timeout_mode: timeout.into(),
         unit_timeouts: unit_timeouts.clone(),
-        echo,
+        echo: echo.into(),
         rs485,
         cache: cache.clone(),
         polls: polls.clone(),
@@ -289,7 +281,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     };
     let mut lines = Vec::new();
     for r in &routes {
-        let (units, port) = crate::bridge::parse::parse_route(r)?;
+        let (units, port) = mbtap_gateway::parse::parse_route(r)?;
         lines.push((units, line_for(port)));
     }
     if let (Some(port), None) = (serial, &reverse) {
@@ -305,7 +297,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     }
     let allow_ips = allow_ips
         .iter()
-        .map(|s| s.parse().map_err(|e: String| anyhow::anyhow!("--allow-ip: {e}")))
+        .map(|s| s.parse().map_err(|e: mbtap_gateway::BadValue| anyhow::anyhow!("--allow-ip: {e}")))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let opts = crate::bridge::run::BridgeOptions {
         lines,
@@ -314,18 +306,18 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         listen_udp,
         server: crate::bridge::server::ServerOptions {
             rtu_over_tcp: false,
-            read_only,
-            allow_functions,
+            policy: mbtap_gateway::admit::Policy {
+                read_only,
+                allow_functions,
+                unit_map: mbtap_gateway::parse::parse_unit_map(&unit_map)?,
+                priority: priority.iter().map(|p| mbtap_gateway::admit::parse_priority(p)).collect::<Result<_, _>>()?,
+                // Filled from the lines when they start.
+                routes: Vec::new(),
+            },
             allow_ips,
             max_connections,
             idle_timeout,
             rate_limit,
-            unit_map: crate::bridge::parse::parse_unit_map(&unit_map)?,
-            priority: priority
-                .iter()
-                .map(|p| crate::bridge::server::parse_priority(p))
-                .collect::<Result<_, _>>()
-                .map_err(anyhow::Error::msg)?,
         },
         queue_per_client,
         metrics,

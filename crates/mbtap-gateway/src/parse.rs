@@ -1,31 +1,37 @@
 //! The bridge's option values as written on the command line and in its file: routes, unit
 //! lists, function codes, unit maps. A leaf: the modules that read options (cache, timing,
 //! roles, priorities) take their parsers from here, not from the orchestrator that imports them
-//! all (issue 26: that made the files of `src/bridge/` one import circle).
+//! all (issue 26: that made the files of `src/bridge/` one import circle). Each error names the
+//! option's value and what is expected.
 
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
 
-use anyhow::Context as _;
+use crate::BadValue;
 
 /// Parses `FIRST-LAST=PORT` or `UNIT=PORT` (`--route 1-10=/dev/ttyUSB0`).
 ///
 /// # Errors
 /// When the form or the unit range (1–247) is wrong, saying which.
-pub fn parse_route(spec: &str) -> anyhow::Result<(RangeInclusive<u8>, String)> {
-    let (units, port) =
-        spec.split_once('=').with_context(|| format!("route {spec:?}: expected UNITS=PORT, e.g. 1-10=/dev/ttyUSB0"))?;
+pub fn parse_route(spec: &str) -> Result<(RangeInclusive<u8>, String), BadValue> {
+    let (units, port) = spec
+        .split_once('=')
+        .ok_or_else(|| BadValue(format!("route {spec:?}: expected UNITS=PORT, e.g. 1-10=/dev/ttyUSB0")))?;
     let (a, b) = units.split_once('-').unwrap_or((units, units));
     let unit = |s: &str| {
         s.trim()
             .parse::<u8>()
             .ok()
             .filter(|u| (1..=247).contains(u))
-            .with_context(|| format!("route {spec:?}: units must be 1–247 (Serial Line v1.02 §2.2)"))
+            .ok_or_else(|| BadValue(format!("route {spec:?}: units must be 1–247 (Serial Line v1.02 §2.2)")))
     };
     let (a, b) = (unit(a)?, unit(b)?);
-    anyhow::ensure!(a <= b, "route {spec:?}: the range runs backwards");
-    anyhow::ensure!(!port.trim().is_empty(), "route {spec:?}: no port after '='");
+    if a > b {
+        return Err(BadValue(format!("route {spec:?}: the range runs backwards")));
+    }
+    if port.trim().is_empty() {
+        return Err(BadValue(format!("route {spec:?}: no port after '='")));
+    }
     Ok((a..=b, port.trim().to_owned()))
 }
 
@@ -33,19 +39,20 @@ pub fn parse_route(spec: &str) -> anyhow::Result<(RangeInclusive<u8>, String)> {
 ///
 /// # Errors
 /// When an item is not a unit 1–247 or a range of them.
-pub fn parse_units(spec: &str) -> anyhow::Result<std::collections::BTreeSet<u8>> {
+pub fn parse_units(spec: &str) -> Result<std::collections::BTreeSet<u8>, BadValue> {
     let mut out = std::collections::BTreeSet::new();
     for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
         let (a, b) = item.split_once('-').unwrap_or((item, item));
-        let unit = |s: &str| {
-            s.trim()
-                .parse::<u8>()
-                .ok()
-                .filter(|u| (1..=247).contains(u))
-                .with_context(|| format!("units {spec:?}: {item:?} is not a unit 1–247 or a range like 10-20"))
-        };
+        let unit =
+            |s: &str| {
+                s.trim().parse::<u8>().ok().filter(|u| (1..=247).contains(u)).ok_or_else(|| {
+                    BadValue(format!("units {spec:?}: {item:?} is not a unit 1–247 or a range like 10-20"))
+                })
+            };
         let (a, b) = (unit(a)?, unit(b)?);
-        anyhow::ensure!(a <= b, "units {spec:?}: {item:?} runs backwards");
+        if a > b {
+            return Err(BadValue(format!("units {spec:?}: {item:?} runs backwards")));
+        }
         out.extend(a..=b);
     }
     Ok(out)
@@ -71,19 +78,23 @@ pub fn parse_function_codes(list: &str) -> Option<std::collections::BTreeSet<u8>
 ///
 /// # Errors
 /// When a side is not a unit id.
-pub fn parse_unit_map(specs: &[String]) -> anyhow::Result<BTreeMap<u8, u8>> {
+pub fn parse_unit_map(specs: &[String]) -> Result<BTreeMap<u8, u8>, BadValue> {
     specs
         .iter()
         .map(|s| {
-            let (a, b) = s.split_once('=').with_context(|| format!("unit map {s:?}: expected TCP_UNIT=SERIAL_UNIT"))?;
-            let a = a.trim().parse::<u8>().with_context(|| format!("unit map {s:?}: {a:?} is not a unit id 0–255"))?;
-            let b = b.trim().parse::<u8>().with_context(|| format!("unit map {s:?}: {b:?} is not a unit id 0–255"))?;
+            let (a, b) =
+                s.split_once('=').ok_or_else(|| BadValue(format!("unit map {s:?}: expected TCP_UNIT=SERIAL_UNIT")))?;
+            let unit = |v: &str| {
+                v.trim().parse::<u8>().map_err(|_| BadValue(format!("unit map {s:?}: {v:?} is not a unit id 0–255")))
+            };
+            let (a, b) = (unit(a)?, unit(b)?);
             Ok((a, b))
         })
         .collect()
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -2,12 +2,14 @@
 //! registers are answered from memory while every register asked for is younger than its
 //! rule's maximum age, otherwise they go to the line and the answer fills the cache. Writes
 //! that reach the line invalidate what they overlap (whatever their outcome: a write that timed
-//! out may have been done). Exceptions are never cached. Time is an input: no clock here.
+//! out may have been done). Exceptions are never cached. Time is an input (a `Duration` since the caller's origin): no clock here.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use mbtap_core::profile::Table;
+
+use crate::BadValue;
 use mbtap_core::query::{is_bits, read_function, table_read_by, table_word};
 
 /// One `--cache` rule.
@@ -24,14 +26,14 @@ pub struct Rule {
 ///
 /// # Errors
 /// What part is wrong, with the value.
-pub fn parse_rule(spec: &str) -> Result<Rule, String> {
+pub fn parse_rule(spec: &str) -> Result<Rule, BadValue> {
     let bad = |what: &str| {
-        format!("--cache {spec:?}: {what}; expected UNITS:TABLE:FIRST-LAST=MAX_AGE, e.g. 1:holding:0-9=1s")
+        BadValue(format!("--cache {spec:?}: {what}; expected UNITS:TABLE:FIRST-LAST=MAX_AGE, e.g. 1:holding:0-9=1s"))
     };
     let (head, age) = spec.split_once('=').ok_or_else(|| bad("no =MAX_AGE"))?;
     let mut parts = head.splitn(3, ':');
     let (units, table, range) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""), parts.next().unwrap_or(""));
-    let units = super::parse::parse_units(units).map_err(|e| bad(&format!("{e:#}")))?;
+    let units = crate::parse::parse_units(units).map_err(|e| bad(&e.0))?;
     if units.is_empty() {
         return Err(bad("no unit"));
     }
@@ -62,11 +64,11 @@ pub struct Poll {
 ///
 /// # Errors
 /// What part is wrong, with the value.
-pub fn parse_poll(spec: &str) -> Result<Poll, String> {
+pub fn parse_poll(spec: &str) -> Result<Poll, BadValue> {
     let (head, interval) = spec.rsplit_once('@').ok_or_else(|| {
-        format!("--poll {spec:?}: expected UNITS:TABLE:FIRST-LAST@INTERVAL, e.g. 1:holding:100-109@1s")
+        BadValue(format!("--poll {spec:?}: expected UNITS:TABLE:FIRST-LAST@INTERVAL, e.g. 1:holding:100-109@1s"))
     })?;
-    let rule = parse_rule(&format!("{head}={interval}")).map_err(|e| e.replacen("--cache", "--poll", 1))?;
+    let rule = parse_rule(&format!("{head}={interval}")).map_err(|e| BadValue(e.0.replacen("--cache", "--poll", 1)))?;
     let interval = rule.max_age;
     Ok(Poll { rule: Rule { max_age: interval.saturating_mul(2), ..rule }, interval })
 }
@@ -96,7 +98,7 @@ impl Poll {
 #[derive(Debug, Default)]
 pub struct Cache {
     rules: Vec<Rule>,
-    values: BTreeMap<(u8, Table, u16), (u16, Instant)>,
+    values: BTreeMap<(u8, Table, u16), (u16, Duration)>,
 }
 
 /// A read request's table, address and quantity, when it is one.
@@ -130,14 +132,14 @@ impl Cache {
     /// The answer from memory to `pdu` for `unit` at `now`, when every register it reads is
     /// covered and fresh.
     #[must_use]
-    pub fn lookup(&self, unit: u8, pdu: &[u8], now: Instant) -> Option<Vec<u8>> {
+    pub fn lookup(&self, unit: u8, pdu: &[u8], now: Duration) -> Option<Vec<u8>> {
         let (table, address, quantity) = read_of(pdu)?;
         let mut values = Vec::with_capacity(usize::from(quantity));
         for i in 0..quantity {
             let a = address.checked_add(i)?;
             let max_age = self.max_age(unit, table, a)?;
             let &(v, at) = self.values.get(&(unit, table, a))?;
-            if now.saturating_duration_since(at) > max_age {
+            if now.saturating_sub(at) > max_age {
                 return None;
             }
             values.push(v);
@@ -162,7 +164,7 @@ impl Cache {
 
     /// A normal answer `response` to `request` for `unit`, received at `now`: the covered
     /// registers are kept. Exceptions and malformed answers are not.
-    pub fn fill(&mut self, unit: u8, request: &[u8], response: &[u8], now: Instant) {
+    pub fn fill(&mut self, unit: u8, request: &[u8], response: &[u8], now: Duration) {
         let Some((table, address, quantity)) = read_of(request) else { return };
         if response.first() != Some(&read_function(table)) {
             return;
@@ -233,7 +235,7 @@ mod tests {
 
     #[test]
     fn answered_from_memory_while_fresh_and_forgotten_on_write() {
-        let t0 = Instant::now();
+        let t0 = Duration::from_secs(10);
         let mut c = Cache::new(vec![parse_rule("1:holding:0-9=1s").unwrap()]);
         assert_eq!(c.lookup(1, &READ, t0), None, "empty");
         c.fill(1, &READ, &ANSWER, t0);
@@ -267,7 +269,7 @@ mod tests {
 
     #[test]
     fn exceptions_are_never_cached_and_bits_pack() {
-        let t0 = Instant::now();
+        let t0 = Duration::from_secs(10);
         let mut c = Cache::new(vec![parse_rule("1:holding:0-9=1s").unwrap(), parse_rule("1:coils:0-7=1s").unwrap()]);
         c.fill(1, &READ, &[0x83, 0x02], t0);
         assert_eq!(c.lookup(1, &READ, t0), None);
@@ -282,14 +284,14 @@ mod tests {
         assert_eq!((p.interval, p.rule.max_age), (Duration::from_secs(1), Duration::from_secs(2)));
         let r = p.requests();
         assert_eq!(r, [vec![3, 0, 0, 0, 125], vec![3, 0, 125, 0, 125], vec![3, 0, 250, 0, 50]]);
-        assert!(parse_poll("1:holding:0-9").unwrap_err().contains("--poll"));
+        assert!(parse_poll("1:holding:0-9").unwrap_err().0.contains("--poll"));
     }
 
     #[test]
     fn rules_say_what_is_wrong() {
-        assert!(parse_rule("1:holding:0-9").unwrap_err().contains("=MAX_AGE"));
-        assert!(parse_rule("1:register:0-9=1s").unwrap_err().contains("\"register\""));
-        assert!(parse_rule("1:holding:9-0=1s").unwrap_err().contains("backwards"));
+        assert!(parse_rule("1:holding:0-9").unwrap_err().0.contains("=MAX_AGE"));
+        assert!(parse_rule("1:register:0-9=1s").unwrap_err().0.contains("\"register\""));
+        assert!(parse_rule("1:holding:9-0=1s").unwrap_err().0.contains("backwards"));
         assert!(parse_rule("1:holding:0-9=0s").is_err());
         let r = parse_rule("1,5-6:input:430-433=500ms").unwrap();
         assert_eq!((r.units.len(), r.first, r.last, r.max_age), (3, 430, 433, Duration::from_millis(500)));

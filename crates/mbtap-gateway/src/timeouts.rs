@@ -18,7 +18,7 @@ const MARGIN: Duration = Duration::from_millis(10);
 const FLOOR: Duration = Duration::from_millis(20);
 
 /// How timeouts are chosen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TimeoutMode {
     /// `--timeout-ms` for every unit (and `--unit-timeout` where given).
     #[default]
@@ -86,19 +86,18 @@ impl Timeouts {
 ///
 /// # Errors
 /// Which value is malformed and why.
-pub fn parse_unit_timeouts(values: &[String]) -> Result<BTreeMap<u8, Duration>, String> {
+pub fn parse_unit_timeouts(values: &[String]) -> Result<BTreeMap<u8, Duration>, crate::BadValue> {
     let mut out = BTreeMap::new();
     for v in values {
-        let (units, ms) = v
-            .split_once('=')
-            .ok_or_else(|| format!("--unit-timeout {v:?}: expected UNITS=MS, e.g. 5=2000 or 10-12=50"))?;
-        let ms: u64 = ms
-            .trim()
-            .parse()
-            .ok()
-            .filter(|&m| (1..=60_000).contains(&m))
-            .ok_or_else(|| format!("--unit-timeout {v:?}: {ms:?} is not a number of ms from 1 to 60000"))?;
-        for unit in super::parse::parse_units(units).map_err(|e| format!("--unit-timeout {v:?}: {e:#}"))? {
+        let (units, ms) = v.split_once('=').ok_or_else(|| {
+            crate::BadValue(format!("--unit-timeout {v:?}: expected UNITS=MS, e.g. 5=2000 or 10-12=50"))
+        })?;
+        let ms: u64 = ms.trim().parse().ok().filter(|&m| (1..=60_000).contains(&m)).ok_or_else(|| {
+            crate::BadValue(format!("--unit-timeout {v:?}: {ms:?} is not a number of ms from 1 to 60000"))
+        })?;
+        for unit in
+            crate::parse::parse_units(units).map_err(|e| crate::BadValue(format!("--unit-timeout {v:?}: {e}")))?
+        {
             out.insert(unit, Duration::from_millis(ms));
         }
     }

@@ -1,0 +1,218 @@
+//! What the line task and the client connections share for one serial line: the fair queue
+//! (`mbtap_gateway::queue`), the cache (`mbtap_gateway::cache`), the writes not yet done and
+//! the metrics, behind locks; and the bridge's own polls (agent mode). The decisions are the
+//! gateway core's; this holds them for tasks that run at once.
+
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use tokio::sync::{Notify, oneshot};
+use tokio::time::Instant;
+
+use super::metrics::Metrics;
+use mbtap_gateway::cache::{Cache, Poll, Rule, read_overlaps_write, written_range};
+use mbtap_gateway::queue::{ClientId, FairQueue, Full};
+use mbtap_gateway::transaction::Reply;
+
+/// One request waiting for the line.
+#[derive(Debug)]
+pub struct Job {
+    pub unit: u8,
+    pub pdu: Vec<u8>,
+    pub reply: oneshot::Sender<Reply>,
+    pub queued: Instant,
+    /// `--priority high=…` matched: goes before the round-robin (see `FairQueue::pop_prefer`).
+    pub high: bool,
+    /// A write's place among the writes not yet done: while it is held, the cache answers no
+    /// read it may change (issue 24: a client pipelining "write h101, read h101" read the old
+    /// value from the cache). Dropped with the job, however it ends.
+    pub write: Option<WriteGuard>,
+}
+
+/// Writes queued or on the line, not yet done: (id, unit, request PDU).
+type PendingWrites = Arc<Mutex<Vec<(u64, u8, Vec<u8>)>>>;
+
+/// One write among [`PendingWrites`]; removed when dropped.
+#[derive(Debug)]
+pub struct WriteGuard {
+    set: PendingWrites,
+    id: u64,
+}
+
+impl Drop for WriteGuard {
+    fn drop(&mut self) {
+        self.set.lock().unwrap_or_else(PoisonError::into_inner).retain(|(id, ..)| *id != self.id);
+    }
+}
+
+/// What the line task and the connections share.
+#[derive(Debug)]
+pub struct LineShared {
+    queue: Mutex<FairQueue<Job>>,
+    pub(super) wake: Notify,
+    pub metrics: Metrics,
+    /// Answers from memory (`--cache`), filled and invalidated by the line, read by the
+    /// connections before they queue.
+    cache: Mutex<Cache>,
+    /// Writes not yet done: reads they may change are not answered from the cache.
+    pending_writes: PendingWrites,
+    next_write: std::sync::atomic::AtomicU64,
+    /// The gateway core's time zero: its clock is the time since.
+    origin: Instant,
+}
+
+impl LineShared {
+    #[must_use]
+    pub fn new(per_client: usize, cache: Vec<Rule>) -> Arc<Self> {
+        Arc::new(Self {
+            queue: Mutex::new(FairQueue::new(per_client)),
+            wake: Notify::new(),
+            metrics: Metrics::default(),
+            cache: Mutex::new(Cache::new(cache)),
+            pending_writes: PendingWrites::default(),
+            next_write: std::sync::atomic::AtomicU64::new(0),
+            origin: Instant::now(),
+        })
+    }
+
+    /// The gateway core's clock: time since this line was set up.
+    pub fn now(&self) -> Duration {
+        self.origin.elapsed()
+    }
+
+    /// The instant of a time on the gateway core's clock.
+    pub fn instant(&self, at: Duration) -> Instant {
+        self.origin + at
+    }
+
+    /// Registers a write to `unit` before it is queued (none for a request that writes
+    /// nothing the cache holds); the job carries the guard.
+    pub fn write_pending(&self, unit: u8, pdu: &[u8]) -> Option<WriteGuard> {
+        written_range(pdu)?;
+        let id = self.next_write.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.pending_writes.lock().unwrap_or_else(PoisonError::into_inner).push((id, unit, pdu.to_vec()));
+        Some(WriteGuard { set: Arc::clone(&self.pending_writes), id })
+    }
+
+    /// Whether a write not yet done may change what `pdu` reads from `unit`.
+    fn read_behind_write(&self, unit: u8, pdu: &[u8]) -> bool {
+        self.pending_writes
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .any(|(_, u, w)| read_overlaps_write(unit, pdu, *u, w))
+    }
+
+    pub(super) fn cache(&self) -> std::sync::MutexGuard<'_, Cache> {
+        self.cache.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The answer from the cache, when `--cache` covers the read and it is fresh (counted as a
+    /// hit; a covered read that must go to the line as a miss).
+    pub fn cached(&self, unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
+        let cache = self.cache();
+        if !cache.is_on() {
+            return None;
+        }
+        // A read queued behind a write it overlaps waits for the write (read your own write).
+        let answer = if self.read_behind_write(unit, pdu) { None } else { cache.lookup(unit, pdu, self.now()) };
+        drop(cache);
+        self.metrics.cache(answer.is_some());
+        answer
+    }
+
+    /// Identical reads other clients have waiting at the head of their queues: they share this
+    /// one's answer (coalescing; reads only — a write twice is two writes).
+    pub(super) fn twins(&self, client: ClientId, job: &Job) -> Vec<Job> {
+        if job.unit == 0 || !matches!(job.pdu.first(), Some(0x01..=0x04)) {
+            return Vec::new();
+        }
+        let twins: Vec<Job> = self
+            .queue()
+            .take_heads(client, |j| j.unit == job.unit && j.pdu == job.pdu)
+            .into_iter()
+            .map(|(_, j)| j)
+            .collect();
+        if !twins.is_empty() {
+            self.metrics.coalesced(twins.len());
+        }
+        twins
+    }
+
+    fn queue(&self) -> std::sync::MutexGuard<'_, FairQueue<Job>> {
+        self.queue.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Queues a request for the line.
+    ///
+    /// # Errors
+    /// [`Full`] when the client has too many requests waiting.
+    pub fn submit(&self, client: ClientId, job: Job) -> Result<(), Full> {
+        let depth = {
+            let mut q = self.queue();
+            q.push(client, job)?;
+            q.len()
+        };
+        self.metrics.queue_depth(depth);
+        self.wake.notify_one();
+        Ok(())
+    }
+
+    /// The client left: its requests that have not started are dropped.
+    pub fn forget(&self, client: ClientId) -> usize {
+        self.queue().remove_client(client)
+    }
+
+    pub(super) fn next(&self) -> Option<(ClientId, Job)> {
+        let mut q = self.queue();
+        // The priority class first, unless the others were passed over three times in a row.
+        let job = q.pop_prefer(|j| j.high, 4);
+        self.metrics.queue_depth(q.len());
+        job
+    }
+}
+
+/// The queue's client id of the bridge's own polls (`--poll`): it takes its turn like any
+/// client, so polling never starves the clients' requests.
+pub const POLL_CLIENT: ClientId = ClientId::MAX;
+
+/// Agent mode: reads every `--poll` range once per its interval, the requests spread evenly over
+/// the interval so they leave line time between them; the answers fill the cache (the line
+/// does that for every answer). Runs as long as the bridge.
+pub async fn poll(polls: Vec<Poll>, shared: Arc<LineShared>) {
+    let mut jobs: Vec<(Duration, u8, Vec<u8>)> = Vec::new();
+    for p in &polls {
+        for &unit in &p.rule.units {
+            for pdu in p.requests() {
+                jobs.push((p.interval, unit, pdu));
+            }
+        }
+    }
+    if jobs.is_empty() {
+        return;
+    }
+    let start = Instant::now();
+    let n = u32::try_from(jobs.len()).unwrap_or(u32::MAX);
+    let mut tasks = Vec::new();
+    for (i, (interval, unit, pdu)) in jobs.into_iter().enumerate() {
+        let shared = Arc::clone(&shared);
+        // Job i of n starts i/n of its interval in.
+        let offset = interval / n * u32::try_from(i).unwrap_or(0);
+        tasks.push(tokio::spawn(async move {
+            let mut tick = tokio::time::interval_at(start + offset, interval);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            loop {
+                tick.tick().await;
+                let (tx, rx) = oneshot::channel();
+                let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now(), high: false, write: None };
+                if shared.submit(POLL_CLIENT, job).is_ok() {
+                    // Waiting keeps one poll of this range in the queue at a time.
+                    let _ = rx.await;
+                }
+            }
+        }));
+    }
+    for t in tasks {
+        let _ = t.await;
+    }
+}
