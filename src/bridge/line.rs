@@ -314,7 +314,7 @@ impl Port<'_> {
                 Note::Request => m.request(unit),
                 Note::UnitTimeout(d) => m.unit_timeout(unit, d),
                 Note::EchoFound => {
-                    m.note(&format!("{}: the adapter echoes what is sent (--echo auto)", self.opts.port))
+                    m.note(&format!("{}: the adapter echoes what is sent (--echo auto)", self.opts.port));
                 }
                 Note::EchoMissing => m.echo_missing(unit),
                 Note::Collision => m.collision(unit),
