@@ -13,84 +13,16 @@ use std::time::Duration;
 use tokio::io::AsyncReadExt;
 use tokio::sync::mpsc;
 use tokio::time::Instant;
-use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+use tokio_serial::SerialPort;
 
 use super::metrics::Metrics;
+use super::port::Port;
+pub use super::port::{LineOptions, MonitorChunk};
 use super::shared::{Job, LineShared, POLL_CLIENT};
-use mbtap_core::analyzer::SerialMode;
 use mbtap_core::chunk::{PortId, Timestamp};
-use mbtap_core::framer::LineSettings;
 use mbtap_gateway::breaker::Breaker;
-use mbtap_gateway::cache::{Poll, Rule};
 use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED};
-use mbtap_gateway::timeouts::{TimeoutMode, Timeouts};
-use mbtap_gateway::transaction::{
-    EchoMode, LateListener, MasterConfig, Note, Outcome, Reply, SerialMaster, Step, Transaction,
-};
-
-/// Line settings of the bridge.
-#[derive(Debug, Clone)]
-pub struct LineOptions {
-    pub port: String,
-    pub line: LineSettings,
-    pub mode: SerialMode,
-    /// Per-request response timeout (with `--timeout auto`, the ceiling).
-    pub timeout: Duration,
-    /// `--timeout fixed|auto`.
-    pub timeout_mode: TimeoutMode,
-    /// `--unit-timeout`: units with a timeout of their own.
-    pub unit_timeouts: std::collections::BTreeMap<u8, Duration>,
-    /// `--echo`: whether the adapter hears its own transmission.
-    pub echo: EchoMode,
-    /// `--rs485`: transmitter direction control.
-    pub rs485: crate::source::rs485::Rs485Args,
-    /// `--cache` rules for this line's units.
-    pub cache: Vec<Rule>,
-    /// `--poll`: ranges the bridge keeps fresh itself.
-    pub polls: Vec<Poll>,
-    /// Retries after a timeout or a failed check.
-    pub retries: u32,
-    /// Extra quiet time after t3.5 before the next request (slow slaves need it).
-    pub turnaround: Duration,
-    /// Answer broadcast writes at once (for SCADA that insists on a reply).
-    pub broadcast_reply: bool,
-    /// How late the adapter may deliver a byte (a USB adapter's latency timer): added to the
-    /// silence that ends an answer of unknown length.
-    pub latency: Duration,
-}
-
-impl LineOptions {
-    fn master(&self) -> SerialMaster {
-        let config = MasterConfig {
-            line: self.line,
-            mode: self.mode,
-            echo: self.echo,
-            retries: self.retries,
-            turnaround: self.turnaround,
-            broadcast_reply: self.broadcast_reply,
-            latency: self.latency,
-        };
-        SerialMaster::new(config, Timeouts::new(self.timeout, self.timeout_mode, self.unit_timeouts.clone()))
-    }
-}
-
-/// Bytes seen on the line, for `--monitor`: port 0 carries requests, port 1 responses; the
-/// flag says the bytes are exactly one frame this program wrote (stamped when its last
-/// character left), not a read that may hold part of one.
-pub type MonitorChunk = (PortId, Timestamp, Vec<u8>, bool);
-
-/// The port and what is known of it between requests.
-struct Port<'a> {
-    opts: &'a LineOptions,
-    shared: &'a LineShared,
-    monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
-    stream: Option<SerialStream>,
-    backoff: Duration,
-    next_open: Instant,
-    watch: crate::source::serial::DeviceWatch,
-    /// Since when the port has been said missing (None: open, or not tried yet).
-    missing: Option<Instant>,
-}
+use mbtap_gateway::transaction::{LateListener, MasterConfig, Note, Outcome, Reply, SerialMaster, Step, Transaction};
 
 /// Runs the line forever.
 pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mpsc::UnboundedSender<MonitorChunk>>) {
@@ -198,63 +130,6 @@ fn answer(shared: &LineShared, job: Job, reply: Reply) {
 }
 
 impl Port<'_> {
-    /// Opens the port when due; backoff doubles while it stays away.
-    fn reopen(&mut self) {
-        self.open();
-        if self.stream.is_some() {
-            self.backoff = Duration::from_millis(100);
-            self.shared.metrics.reopened();
-        } else {
-            self.next_open = Instant::now() + self.backoff;
-            self.backoff = (self.backoff * 2).min(Duration::from_secs(5));
-        }
-    }
-
-    /// The port failed under us: reopened later, with backoff.
-    fn lost(&mut self, e: &std::io::Error) {
-        self.shared.metrics.note(&format!("serial port lost: {e}; reopening"));
-        self.stream = None;
-        self.next_open = Instant::now() + self.backoff;
-    }
-
-    /// Opens the line's port (a by-id link or `usb:VID:PID[:SERIAL]` found again wherever the
-    /// adapter came back), telling when the device behind the name changed.
-    fn open(&mut self) {
-        let opts = self.opts;
-        let opened = (|| -> Result<SerialStream, String> {
-            let path = crate::source::serial::resolve_port(&opts.port).map_err(|e| format!("{e:#}"))?;
-            // Checked at start-up; a port that comes back must take the mode again.
-            opts.rs485.prepare(&path).map_err(|e| format!("{e:#}"))?;
-            let port =
-                crate::source::serial::builder(&path, opts.line).open_native_async().map_err(|e| e.to_string())?;
-            let _ = port.clear(tokio_serial::ClearBuffer::All);
-            if let Some(said) = self.watch.opened(&opts.port, &path) {
-                self.shared.metrics.note(&said);
-            }
-            Ok(port)
-        })();
-        match opened {
-            Ok(port) => {
-                if self.missing.take().is_some() {
-                    self.shared.metrics.note(&format!("serial port {}: open; forwarding requests again", opts.port));
-                }
-                self.stream = Some(port);
-            }
-            Err(why) => {
-                // Said at once and then once a minute while it lasts (issue 31: the bridge said
-                // only "listening" and every client got 0x0A with no word why).
-                if self.missing.is_none_or(|said| said.elapsed() >= MISSING_PORT_REMINDER) {
-                    self.missing = Some(Instant::now());
-                    self.shared.metrics.note(&format!(
-                        "serial port {}: cannot open it ({why}); clients get exception 0x0A (gateway path unavailable) until it opens; trying again every few seconds",
-                        opts.port
-                    ));
-                }
-                self.stream = None;
-            }
-        }
-    }
-
     /// Drives one request through the gateway core's transaction machine.
     async fn transact(&mut self, master: &mut SerialMaster, job: &Job) -> std::io::Result<Outcome> {
         let (mut t, mut step) = master.transaction(job.unit, &job.pdu);
@@ -376,9 +251,6 @@ impl Port<'_> {
         }
     }
 }
-
-/// How often a port that stays missing is said again.
-const MISSING_PORT_REMINDER: Duration = Duration::from_mins(1);
 
 /// Sleeps until `at`: the timer for all but the last millisecond (its granularity), then
 /// yields until the moment, so the line's quiet time is t3.5, not t3.5 rounded up to a tick.

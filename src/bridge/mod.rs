@@ -2,17 +2,23 @@
 //! on serial lines. Every decision — admission, queueing, caching, breakers, timeouts, the
 //! serial transaction — is the gateway core's (`mbtap_gateway`); these files touch the world.
 //!
-//! [`line`] (the serial port: drives the core's transaction machine, reopens a lost port),
+//! [`line`] (the serial master: drives the core's transaction machine), [`port`] (the serial
+//! port and its settings, reopened when lost),
 //! [`shared`] (what the line and the connections share: queue, cache, pending writes),
-//! [`server`] (the TCP side, each connection on its own), [`udp`] (Modbus UDP clients),
+//! [`server`] (the TCP listeners: accepting, limits, eviction), [`connection`] (one TCP client,
+//! on its own), [`request`] (each request through admission, cache and queue), [`udp`] (Modbus
+//! UDP clients),
 //! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`reverse`] (an RTU slave on
 //! the serial side, a Modbus TCP client behind), [`run`] (starts them all), [`config`] (the
 //! configuration file), [`modes`] (the command line's enums).
 
 pub mod config;
+pub mod connection;
 pub mod line;
 pub mod metrics;
 pub mod modes;
+pub mod port;
+pub mod request;
 pub mod reverse;
 pub mod run;
 pub mod server;

@@ -14,8 +14,9 @@ use tokio::sync::mpsc;
 
 use crate::bridge::line::{self, LineOptions, MonitorChunk};
 use crate::bridge::metrics::Metrics;
+use crate::bridge::request::{Route, ServerOptions};
 use crate::bridge::reverse::ReverseOptions;
-use crate::bridge::server::{self, Route, ServerOptions};
+use crate::bridge::server;
 use crate::bridge::shared::LineShared;
 use crate::output::EventWriter;
 use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};

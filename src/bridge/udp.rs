@@ -14,7 +14,7 @@ use tokio::time::Instant;
 use mbtap_core::proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
 use tokio::net::UdpSocket;
 
-use super::server::{Client, Pending, Route, ServerOptions, request};
+use super::request::{Client, Pending, Route, ServerOptions, request};
 use mbtap_gateway::admit::{Role, ip_allowed};
 
 /// Senders remembered (their client id and rate-limit bucket); the oldest is forgotten beyond.

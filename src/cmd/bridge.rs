@@ -304,7 +304,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         listen,
         listen_rtu,
         listen_udp,
-        server: crate::bridge::server::ServerOptions {
+        server: crate::bridge::request::ServerOptions {
             rtu_over_tcp: false,
             policy: mbtap_gateway::admit::Policy {
                 read_only,

@@ -1,0 +1,143 @@
+//! The line's serial port and its settings: opened by name (a by-id link or
+//! `usb:VID:PID[:SERIAL]` found again wherever the adapter came back), reopened with backoff
+//! when it goes away, its absence said once a minute.
+
+use std::time::Duration;
+
+use tokio::sync::mpsc;
+use tokio::time::Instant;
+use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+
+use super::shared::LineShared;
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::chunk::{PortId, Timestamp};
+use mbtap_core::framer::LineSettings;
+use mbtap_gateway::cache::{Poll, Rule};
+use mbtap_gateway::timeouts::{TimeoutMode, Timeouts};
+use mbtap_gateway::transaction::{EchoMode, MasterConfig, SerialMaster};
+
+/// Line settings of the bridge.
+#[derive(Debug, Clone)]
+pub struct LineOptions {
+    pub port: String,
+    pub line: LineSettings,
+    pub mode: SerialMode,
+    /// Per-request response timeout (with `--timeout auto`, the ceiling).
+    pub timeout: Duration,
+    /// `--timeout fixed|auto`.
+    pub timeout_mode: TimeoutMode,
+    /// `--unit-timeout`: units with a timeout of their own.
+    pub unit_timeouts: std::collections::BTreeMap<u8, Duration>,
+    /// `--echo`: whether the adapter hears its own transmission.
+    pub echo: EchoMode,
+    /// `--rs485`: transmitter direction control.
+    pub rs485: crate::source::rs485::Rs485Args,
+    /// `--cache` rules for this line's units.
+    pub cache: Vec<Rule>,
+    /// `--poll`: ranges the bridge keeps fresh itself.
+    pub polls: Vec<Poll>,
+    /// Retries after a timeout or a failed check.
+    pub retries: u32,
+    /// Extra quiet time after t3.5 before the next request (slow slaves need it).
+    pub turnaround: Duration,
+    /// Answer broadcast writes at once (for SCADA that insists on a reply).
+    pub broadcast_reply: bool,
+    /// How late the adapter may deliver a byte (a USB adapter's latency timer): added to the
+    /// silence that ends an answer of unknown length.
+    pub latency: Duration,
+}
+
+impl LineOptions {
+    pub(super) fn master(&self) -> SerialMaster {
+        let config = MasterConfig {
+            line: self.line,
+            mode: self.mode,
+            echo: self.echo,
+            retries: self.retries,
+            turnaround: self.turnaround,
+            broadcast_reply: self.broadcast_reply,
+            latency: self.latency,
+        };
+        SerialMaster::new(config, Timeouts::new(self.timeout, self.timeout_mode, self.unit_timeouts.clone()))
+    }
+}
+
+/// Bytes seen on the line, for `--monitor`: port 0 carries requests, port 1 responses; the
+/// flag says the bytes are exactly one frame this program wrote (stamped when its last
+/// character left), not a read that may hold part of one.
+pub type MonitorChunk = (PortId, Timestamp, Vec<u8>, bool);
+
+/// The port and what is known of it between requests.
+pub(super) struct Port<'a> {
+    pub(super) opts: &'a LineOptions,
+    pub(super) shared: &'a LineShared,
+    pub(super) monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
+    pub(super) stream: Option<SerialStream>,
+    pub(super) backoff: Duration,
+    pub(super) next_open: Instant,
+    pub(super) watch: crate::source::serial::DeviceWatch,
+    /// Since when the port has been said missing (None: open, or not tried yet).
+    pub(super) missing: Option<Instant>,
+}
+
+impl Port<'_> {
+    /// Opens the port when due; backoff doubles while it stays away.
+    pub(super) fn reopen(&mut self) {
+        self.open();
+        if self.stream.is_some() {
+            self.backoff = Duration::from_millis(100);
+            self.shared.metrics.reopened();
+        } else {
+            self.next_open = Instant::now() + self.backoff;
+            self.backoff = (self.backoff * 2).min(Duration::from_secs(5));
+        }
+    }
+
+    /// The port failed under us: reopened later, with backoff.
+    pub(super) fn lost(&mut self, e: &std::io::Error) {
+        self.shared.metrics.note(&format!("serial port lost: {e}; reopening"));
+        self.stream = None;
+        self.next_open = Instant::now() + self.backoff;
+    }
+
+    /// Opens the line's port (a by-id link or `usb:VID:PID[:SERIAL]` found again wherever the
+    /// adapter came back), telling when the device behind the name changed.
+    pub(super) fn open(&mut self) {
+        let opts = self.opts;
+        let opened = (|| -> Result<SerialStream, String> {
+            let path = crate::source::serial::resolve_port(&opts.port).map_err(|e| format!("{e:#}"))?;
+            // Checked at start-up; a port that comes back must take the mode again.
+            opts.rs485.prepare(&path).map_err(|e| format!("{e:#}"))?;
+            let port =
+                crate::source::serial::builder(&path, opts.line).open_native_async().map_err(|e| e.to_string())?;
+            let _ = port.clear(tokio_serial::ClearBuffer::All);
+            if let Some(said) = self.watch.opened(&opts.port, &path) {
+                self.shared.metrics.note(&said);
+            }
+            Ok(port)
+        })();
+        match opened {
+            Ok(port) => {
+                if self.missing.take().is_some() {
+                    self.shared.metrics.note(&format!("serial port {}: open; forwarding requests again", opts.port));
+                }
+                self.stream = Some(port);
+            }
+            Err(why) => {
+                // Said at once and then once a minute while it lasts (issue 31: the bridge said
+                // only "listening" and every client got 0x0A with no word why).
+                if self.missing.is_none_or(|said| said.elapsed() >= MISSING_PORT_REMINDER) {
+                    self.missing = Some(Instant::now());
+                    self.shared.metrics.note(&format!(
+                        "serial port {}: cannot open it ({why}); clients get exception 0x0A (gateway path unavailable) until it opens; trying again every few seconds",
+                        opts.port
+                    ));
+                }
+                self.stream = None;
+            }
+        }
+    }
+}
+
+/// How often a port that stays missing is said again.
+const MISSING_PORT_REMINDER: Duration = Duration::from_mins(1);

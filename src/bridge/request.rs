@@ -1,0 +1,131 @@
+//! What a listener does with each request it reads, whatever the transport (TCP, TLS, UDP,
+//! RTU over TCP): the gateway core's admission policy, then the line's cache, then the line's
+//! queue; the answer comes back as a [`Pending`] in the order the client asked.
+
+use std::net::SocketAddr;
+use std::ops::RangeInclusive;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::sync::oneshot;
+use tokio::time::Instant;
+
+use super::shared::{Job, LineShared};
+use mbtap_gateway::admit::{Asked, IpNet, Policy, RateLimit, Refusal, Role};
+use mbtap_gateway::queue::ClientId;
+use mbtap_gateway::rules::{GATEWAY_TARGET_FAILED, exception_pdu};
+use mbtap_gateway::transaction::Reply;
+
+/// Units served by one serial line.
+#[derive(Debug, Clone)]
+pub struct Route {
+    pub units: RangeInclusive<u8>,
+    pub line: Arc<LineShared>,
+}
+
+/// What the TCP side allows and how it frames.
+#[derive(Debug, Clone)]
+pub struct ServerOptions {
+    /// Raw RTU frames (address, PDU, CRC) over TCP instead of MBAP.
+    pub rtu_over_tcp: bool,
+    /// What a request may do and where it goes (the gateway core's admission policy).
+    pub policy: Policy,
+    /// Only these client addresses may connect (empty: all).
+    pub allow_ips: Vec<IpNet>,
+    pub max_connections: usize,
+    /// A connection silent this long is closed.
+    pub idle_timeout: Duration,
+    /// Requests per second per connection (None: no limit); above it: exception 06.
+    pub rate_limit: Option<f64>,
+}
+
+/// An answer on its way back to the client, in request order.
+pub(super) struct Pending {
+    pub(super) transaction_id: u16,
+    pub(super) unit: u8,
+    pub(super) function: u8,
+    pub(super) answer: Answer,
+}
+
+impl Pending {
+    /// The answer's PDU once it is there (a gateway exception as its exception PDU); `None`
+    /// for a broadcast, which nobody answers.
+    pub(super) async fn answer_pdu(self) -> Option<Vec<u8>> {
+        let reply = match self.answer {
+            Answer::Now(r) => r,
+            // The line dropped the job (it never will, but a closed channel must not hang).
+            Answer::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
+        };
+        match reply {
+            Reply::Pdu(pdu) => Some(pdu),
+            Reply::Gateway(code) => Some(exception_pdu(self.function, code)),
+            Reply::Silence => None,
+        }
+    }
+}
+
+pub(super) enum Answer {
+    Now(Reply),
+    Later(oneshot::Receiver<Reply>),
+}
+
+/// One client as the listeners know it: its queue id, its role, whether all its requests are
+/// in the priority class, and its rate limiter.
+#[derive(Debug)]
+pub(super) struct Client<'a> {
+    pub(super) id: ClientId,
+    pub(super) role: Role<'a>,
+    pub(super) peer_high: bool,
+    pub(super) bucket: Option<RateLimit>,
+}
+
+impl<'a> Client<'a> {
+    pub(super) fn new(id: ClientId, role: Role<'a>, peer: SocketAddr, routes: &[Route], opts: &ServerOptions) -> Self {
+        let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
+        Self {
+            id,
+            role,
+            peer_high: opts.policy.peer_high(peer.ip()),
+            bucket: opts.rate_limit.map(|rate| RateLimit::new(rate, now)),
+        }
+    }
+}
+
+/// Puts one request through the gateway core's admission policy, then the cache, then queues it
+/// on its line; what to answer.
+pub(super) fn request(
+    client: &mut Client<'_>,
+    transaction_id: u16,
+    unit: u8,
+    pdu: Vec<u8>,
+    routes: &[Route],
+    opts: &ServerOptions,
+) -> Pending {
+    let function = pdu.first().copied().unwrap_or(0);
+    let reply = |answer| Pending { transaction_id, unit, function, answer };
+    let refuse = |why: Refusal| {
+        // Server-wide refusals are counted with the first line's metrics (the one exported).
+        if let Some(r) = routes.first() {
+            r.line.metrics.refused(why.reason());
+        }
+        reply(Answer::Now(Reply::Gateway(why.exception())))
+    };
+    let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
+    let asked = Asked { unit, pdu: &pdu, role: client.role, peer_high: client.peer_high };
+    let admitted = match opts.policy.admit(asked, client.bucket.as_mut(), now) {
+        Ok(a) => a,
+        Err(why) => return refuse(why),
+    };
+    let Some(route) = routes.get(admitted.route) else { return refuse(Refusal::NoRoute) };
+    let target = admitted.target;
+    if let Some(answer) = route.line.cached(target, &pdu) {
+        return reply(Answer::Now(Reply::Pdu(answer)));
+    }
+    let (tx, rx) = oneshot::channel();
+    let write = route.line.write_pending(target, &pdu);
+    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high: admitted.high, write };
+    match route.line.submit(client.id, job) {
+        Ok(()) => reply(Answer::Later(rx)),
+        Err(_) => refuse(Refusal::QueueFull),
+    }
+}
