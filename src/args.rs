@@ -200,6 +200,8 @@ pub enum FaultArg {
     PumpTrip,
     /// All of the above, taking turns.
     All,
+    /// The last unit loses power from the 20th to the 40th second of every minute (not in `all`).
+    UnitOutage,
 }
 
 impl From<EventFormatArg> for EventFormat {
@@ -237,6 +239,7 @@ pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_core::sim::bus::Fault> {
             FaultArg::SecondMaster => vec![Fault::SecondMaster],
             FaultArg::PumpTrip => vec![Fault::PumpTrip],
             FaultArg::All => Fault::ALL.to_vec(),
+            FaultArg::UnitOutage => vec![Fault::Outage],
         })
         .collect()
 }

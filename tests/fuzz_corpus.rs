@@ -31,6 +31,9 @@ fn run_dir(dir: &Path) -> usize {
             "learn" => mbtap_core::fuzzing::learn,
             "profile_import" => mbtap_core::fuzzing::profile_import,
             "sunspec" => mbtap_core::fuzzing::sunspec,
+            "spool" => mbtap_core::fuzzing::spool,
+            "sparkplug" => mbtap_core::fuzzing::sparkplug,
+            "gateway" => mbtap_gateway::fuzzing::transaction,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

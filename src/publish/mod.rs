@@ -4,6 +4,8 @@
 //! line, and neither can slow the analysis down.
 
 pub mod mqtt;
+pub mod outbox;
+pub mod spool;
 pub mod spy;
 pub mod watched;
 

@@ -10,7 +10,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -21,7 +21,7 @@ use mbtap_core::health::Health;
 use mbtap_core::profile::image::RegisterImage;
 use mbtap_core::profile::{Profiles, Table};
 use mbtap_core::query::rows::{Row, rows};
-use rumqttc::{AsyncClient, LastWill, MqttOptions, QoS, Transport};
+use rumqttc::{AsyncClient, MqttOptions, QoS, Transport};
 
 /// `--mqtt` options (on `sniff`, `tap`, `replay`, `watch` and `bridge --monitor`).
 #[derive(Debug, Clone, Args, Default)]
@@ -55,6 +55,35 @@ pub struct MqttArgs {
     /// Messages waiting for the broker at most; more are dropped and counted.
     #[arg(long, default_value_t = 10_000, value_name = "MESSAGES")]
     pub mqtt_queue: usize,
+    /// Publish as a Sparkplug B 3.0 edge node GROUP/NODE instead of plain topics: NBIRTH and
+    /// NDEATH (the will, with bdSeq), a device per unit with DBIRTH, DDATA on change and
+    /// DDEATH when it falls silent, rebirth on the `Node Control/Rebirth` command.
+    #[arg(long, value_name = "GROUP/NODE")]
+    pub sparkplug: Option<String>,
+    /// Store and forward: while the broker is away, hold messages on disk here and forward them
+    /// when it is back (Sparkplug: as historical data with their timestamps). Without DIR:
+    /// $XDG_STATE_HOME/mbtap/mqtt-buffer/PREFIX (~/.local/state/…). Without the option,
+    /// messages wait in memory (--mqtt-queue) and are dropped when it is full.
+    #[arg(long, value_name = "DIR", num_args = 0..=1, default_missing_value = "")]
+    pub mqtt_buffer: Option<PathBuf>,
+    /// The most the buffer holds on disk (`500MB`, `2GB`, bytes); beyond it the oldest held
+    /// messages are dropped, counted and said.
+    #[arg(long, default_value = "256MB", value_parser = parse_size, value_name = "SIZE")]
+    pub mqtt_buffer_max: u64,
+}
+
+/// `256MB`, `2GB`, `64KB` or bytes.
+fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let (num, mult) = [("GB", 1u64 << 30), ("MB", 1 << 20), ("KB", 1 << 10), ("B", 1)]
+        .iter()
+        .find_map(|(suffix, m)| t.strip_suffix(suffix).map(|n| (n.trim(), *m)))
+        .unwrap_or((t, 1));
+    num.parse::<u64>()
+        .ok()
+        .and_then(|n| n.checked_mul(mult))
+        .filter(|&n| n >= 1 << 20)
+        .ok_or_else(|| format!("{s:?}: expected a size of at least 1MB, like 256MB or 2GB"))
 }
 
 /// Discovery conventions.
@@ -253,6 +282,9 @@ struct State {
 /// The publisher.
 pub struct Mqtt {
     client: AsyncClient,
+    outbox: Arc<Mutex<super::outbox::Outbox>>,
+    /// Sparkplug B instead of plain topics.
+    sparkplug: bool,
     prefix: String,
     qos: QoS,
     retain: bool,
@@ -260,8 +292,6 @@ pub struct Mqtt {
     discovery: bool,
     profiles: Profiles,
     state: Mutex<State>,
-    published: AtomicU64,
-    dropped: AtomicU64,
     connected: Arc<AtomicBool>,
     done: Mutex<Option<std::sync::mpsc::Receiver<()>>>,
 }
@@ -277,20 +307,25 @@ impl std::fmt::Debug for Mqtt {
             .field("discovery", &self.discovery)
             .field("profiles", &self.profiles.len())
             .field("state", &self.state)
-            .field("published", &self.published)
-            .field("dropped", &self.dropped)
+            .field("outbox", &self.outbox)
             .field("connected", &self.connected)
             .field("done", &"…")
             .finish_non_exhaustive()
     }
 }
 
-fn qos(n: u8) -> QoS {
-    match n {
-        0 => QoS::AtMostOnce,
-        1 => QoS::AtLeastOnce,
-        _ => QoS::ExactlyOnce,
-    }
+use super::outbox::{lock, qos};
+
+/// The buffer directory when `--mqtt-buffer` is given without one.
+fn default_buffer_dir(prefix: &str) -> PathBuf {
+    let state = std::env::var_os("XDG_STATE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local").join("state")));
+    state
+        .unwrap_or_else(std::env::temp_dir)
+        .join("mbtap")
+        .join("mqtt-buffer")
+        .join(topic_level(&prefix.replace('/', "_")))
 }
 
 impl Mqtt {
@@ -308,9 +343,42 @@ impl Mqtt {
         });
         check_prefix(&prefix).map_err(|why| anyhow::anyhow!("--mqtt-prefix {prefix:?}: {why}"))?;
         let status = format!("{prefix}/status");
+        let node = match &args.sparkplug {
+            None => None,
+            Some(spec) => {
+                let (group, node) = spec
+                    .split_once('/')
+                    .filter(|(g, n)| !g.is_empty() && !n.is_empty() && !n.contains('/'))
+                    .with_context(|| format!("--sparkplug {spec:?}: expected GROUP/NODE, e.g. plant1/pumpstation3"))?;
+                // Silence shorter than this never kills a device (a slow poll cycle is no death).
+                Some(mbtap_core::sparkplug::EdgeNode::new(group, node, 5_000_000_000))
+            }
+        };
+        let spool = match &args.mqtt_buffer {
+            None => None,
+            Some(dir) => {
+                let dir = if dir.as_os_str().is_empty() {
+                    default_buffer_dir(args.sparkplug.as_deref().unwrap_or(&prefix))
+                } else {
+                    dir.clone()
+                };
+                let spool = super::spool::Spool::open(&dir, args.mqtt_buffer_max)?;
+                eprintln!(
+                    "mbtap: mqtt: holding messages in {} while the broker is away (at most {} MB{})",
+                    dir.display(),
+                    args.mqtt_buffer_max >> 20,
+                    if spool.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; {} bytes held from before", spool.bytes())
+                    }
+                );
+                Some(spool)
+            }
+        };
+        let sparkplug = node.is_some();
         let mut options = MqttOptions::new(format!("mbtap-{}-{}", hostname(), std::process::id()), host.clone(), port);
         options.set_keep_alive(Duration::from_secs(10));
-        options.set_last_will(LastWill::new(&status, "offline", QoS::AtLeastOnce, true));
         options.set_request_channel_capacity(args.mqtt_queue.max(1));
         if let Some((u, p)) = credentials(args)? {
             options.set_credentials(u, p);
@@ -326,54 +394,41 @@ impl Mqtt {
             let _ = rustls::crypto::ring::default_provider().install_default();
             options.set_transport(Transport::tls(ca, None, None));
         }
-        let (client, mut eventloop) = AsyncClient::new(options, args.mqtt_queue.max(1));
+        let (client, eventloop) = {
+            // The will needs the outbox (Sparkplug: the NDEATH with its bdSeq), the outbox the client.
+            let probe = super::outbox::Outbox::will_of(node.as_ref(), (!sparkplug).then_some(status.as_str()));
+            if let Some(w) = probe {
+                options.set_last_will(w);
+            }
+            AsyncClient::new(options, args.mqtt_queue.max(1))
+        };
+        let outbox = Arc::new(Mutex::new(super::outbox::Outbox::new(
+            client.clone(),
+            spool,
+            node,
+            (!sparkplug).then(|| status.clone()),
+        )));
         let connected = Arc::new(AtomicBool::new(false));
         let (done_tx, done_rx) = std::sync::mpsc::channel();
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("--mqtt: a runtime")?;
-        let (loop_client, loop_connected, loop_status) = (client.clone(), Arc::clone(&connected), status.clone());
+        let (loop_outbox, loop_connected) = (Arc::clone(&outbox), Arc::clone(&connected));
         let broker = format!("{host}:{port}");
         std::thread::Builder::new()
             .name("mqtt".into())
             .spawn(move || {
-                rt.block_on(async move {
-                    let mut said_down = false;
-                    loop {
-                        match eventloop.poll().await {
-                            Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
-                                loop_connected.store(true, Ordering::SeqCst);
-                                eprintln!("mbtap: mqtt: connected to {broker}");
-                                said_down = false;
-                                // Retained, so a late subscriber sees it; replaces the will.
-                                let _ = loop_client.try_publish(&loop_status, QoS::AtLeastOnce, true, "online");
-                            }
-                            Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
-                                // The DISCONNECT may still sit in the write buffer behind the
-                                // last publications: poll on until the broker closes (bounded).
-                                let drain = async { while eventloop.poll().await.is_ok() {} };
-                                let _ = tokio::time::timeout(Duration::from_secs(1), drain).await;
-                                break;
-                            }
-                            Ok(_) => {}
-                            Err(e) => {
-                                if loop_connected.swap(false, Ordering::SeqCst) || !said_down {
-                                    eprintln!("mbtap: mqtt: {broker}: {e}; analysis goes on, retrying every second");
-                                    said_down = true;
-                                }
-                                if matches!(e, rumqttc::ConnectionError::RequestsDone) {
-                                    break;
-                                }
-                                tokio::time::sleep(Duration::from_secs(1)).await;
-                            }
-                        }
-                    }
-                    let _ = done_tx.send(());
-                });
+                rt.block_on(super::outbox::run(eventloop, loop_outbox, loop_connected, broker));
+                let _ = done_tx.send(());
             })
             .context("--mqtt: starting the publisher thread")?;
-        eprintln!("mbtap: mqtt: publishing to {url} under {prefix}/");
-        let health = health.then(|| Health::new(profiles.clone()));
+        match &args.sparkplug {
+            Some(spec) => eprintln!("mbtap: mqtt: publishing to {url} as Sparkplug B edge node {spec}"),
+            None => eprintln!("mbtap: mqtt: publishing to {url} under {prefix}/"),
+        }
+        let health = (health && !sparkplug).then(|| Health::new(profiles.clone()));
         Ok(Some(Arc::new(Self {
             client,
+            outbox,
+            sparkplug,
             prefix,
             qos: qos(args.mqtt_qos),
             retain: args.mqtt_retain,
@@ -381,19 +436,14 @@ impl Mqtt {
             discovery: args.mqtt_discovery.is_some(),
             profiles,
             state: Mutex::new(State { health, ..State::default() }),
-            published: AtomicU64::new(0),
-            dropped: AtomicU64::new(0),
             connected,
             done: Mutex::new(Some(done_rx)),
         })))
     }
 
-    /// Queues one message; a full queue drops it (counted).
+    /// One message to the outbox: out now, held on disk, or dropped (counted).
     fn send(&self, topic: &str, qos: QoS, retain: bool, payload: String) {
-        match self.client.try_publish(topic, qos, retain, payload) {
-            Ok(()) => self.published.fetch_add(1, Ordering::Relaxed),
-            Err(_) => self.dropped.fetch_add(1, Ordering::Relaxed),
-        };
+        lock(&self.outbox).send(topic, qos, retain, payload.into_bytes());
     }
 
     fn value_topic(&self, r: &Row) -> String {
@@ -429,6 +479,10 @@ impl Mqtt {
     /// Takes rows read at bus time `t_ns`: each one published if it changed and its last
     /// publication is an interval old, else held for the next tick.
     fn take_rows(&self, st: &mut State, rows: Vec<Row>, t_ns: u64) {
+        if self.sparkplug {
+            self.sparkplug_rows(rows, t_ns);
+            return;
+        }
         for r in rows {
             let key = (r.unit, r.table, r.address);
             match st.last.get(&key) {
@@ -449,6 +503,12 @@ impl Mqtt {
     /// counts. The figures cost a health report each, so they never follow a short interval (at
     /// `--mqtt-interval 0` they were computed per event: quadratic over a long capture).
     fn tick(&self, st: &mut State, t_ns: u64) {
+        if self.sparkplug {
+            let mut ob = lock(&self.outbox);
+            let outs = ob.node.as_mut().map(|n| n.tick(t_ns, super::outbox::now_ms())).unwrap_or_default();
+            ob.send_outs(outs);
+            return;
+        }
         if !st.pending.is_empty() {
             let due = *st.next_tick_ns.get_or_insert(t_ns.saturating_add(self.interval_ns));
             if t_ns >= due {
@@ -500,7 +560,10 @@ impl Mqtt {
                 st.findings = Some(kinds);
             }
         }
-        let counts = (self.published.load(Ordering::Relaxed), self.dropped.load(Ordering::Relaxed));
+        let counts = {
+            let ob = lock(&self.outbox);
+            (ob.published, ob.dropped)
+        };
         if counts.1 != st.counts_sent.1 || last {
             // The count of drops itself may be dropped; the next change or the end says it again.
             let j = serde_json::json!({"published": counts.0, "dropped": counts.1});
@@ -522,17 +585,64 @@ impl Mqtt {
         if let Ok(mut st) = self.state.lock() {
             self.flush(&mut st, true);
         }
-        let status = format!("{}/status", self.prefix);
-        self.send(&status, QoS::AtLeastOnce, true, "offline".to_owned());
+        {
+            let mut ob = lock(&self.outbox);
+            // The end said at once, never held: a held `offline` forwarded after the next run's
+            // `online` would say the wrong thing. Sparkplug: the NDEATH a clean end publishes
+            // itself (§7.2), with the session's bdSeq.
+            if self.connected.load(Ordering::SeqCst) {
+                let end = match ob.node.as_ref().map(mbtap_core::sparkplug::EdgeNode::will) {
+                    Some(w) => (w.topic, w.payload, false),
+                    None => (format!("{}/status", self.prefix), b"offline".to_vec(), true),
+                };
+                ob.publish_now(&end.0, QoS::AtLeastOnce, end.2, end.1);
+            }
+            if let Some(s) = ob.spool.as_mut() {
+                s.sync();
+            }
+        }
         let _ = self.client.try_disconnect();
         if let Some(done) = self.done.lock().ok().and_then(|mut d| d.take()) {
             let _ = done.recv_timeout(Duration::from_secs(2));
         }
+        let ob = lock(&self.outbox);
+        let held = match &ob.spool {
+            Some(s) if !s.is_empty() => format!("; {} held on disk for the next run ({} bytes)", ob.held, s.bytes()),
+            Some(s) if s.dropped > 0 => format!("; {} held messages dropped (the buffer was full)", s.dropped),
+            _ => String::new(),
+        };
         eprintln!(
-            "mbtap: mqtt: {} messages queued for the broker, {} dropped (queue full or broker away)",
-            self.published.load(Ordering::Relaxed),
-            self.dropped.load(Ordering::Relaxed)
+            "mbtap: mqtt: {} messages queued for the broker, {} dropped (queue full or broker away){held}",
+            ob.published, ob.dropped
         );
+    }
+
+    /// Sparkplug: the rows of one event as samples of their units' devices.
+    fn sparkplug_rows(&self, rows: Vec<Row>, t_ns: u64) {
+        let mut by_unit: BTreeMap<u8, Vec<mbtap_core::sparkplug::Sample>> = BTreeMap::new();
+        let t_ms = t_ns / 1_000_000;
+        for r in rows {
+            let name = r.name.clone().unwrap_or_else(|| format!("{} {}", r.table.name(), r.address));
+            by_unit.entry(r.unit).or_default().push(mbtap_core::sparkplug::Sample {
+                name: mbtap_core::sparkplug::node::metric_name(&name),
+                value: r.value.clone(),
+                bits: mbtap_core::query::is_bits(r.table),
+                unit: r.unit_of_measure.clone(),
+                t_ms,
+            });
+        }
+        let now = super::outbox::now_ms();
+        let mut ob = lock(&self.outbox);
+        for (unit, samples) in by_unit {
+            let device = match self.profiles.get(&unit) {
+                Some(p) => format!("{}-{unit}", p.meta.name),
+                None => format!("unit-{unit}"),
+            };
+            let Some(emit) = ob.node.as_mut().map(|n| n.update(&device, samples, t_ns, now)) else { continue };
+            ob.emit(emit);
+        }
+        let outs = ob.node.as_mut().map(|n| n.tick(t_ns, now)).unwrap_or_default();
+        ob.send_outs(outs);
     }
 }
 

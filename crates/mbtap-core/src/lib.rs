@@ -48,5 +48,7 @@ pub mod replay;
 pub mod report;
 pub mod scan;
 pub mod sim;
+pub mod sparkplug;
+pub mod spool;
 pub mod sunspec;
 pub mod traffic;

@@ -23,6 +23,7 @@
 pub mod admit;
 pub mod breaker;
 pub mod cache;
+pub mod fuzzing;
 pub mod parse;
 pub mod queue;
 pub mod rules;

@@ -79,7 +79,15 @@ pub enum Fault {
     /// Not a line fault: the MK4's running pump trips on overcurrent, and the alarm log
     /// records it ([`world::mk4_pump_trip`]).
     PumpTrip,
+    /// A unit that loses power for a while: the line's last unit stops answering from the 20th
+    /// to the 40th second of every minute of bus time (its master times out each poll), then is
+    /// back. Not one of the faults that take turns: it holds for its whole window, and `all`
+    /// leaves it out.
+    Outage,
 }
+
+/// Bus time within each minute when [`Fault::Outage`] silences its unit.
+const OUTAGE_WINDOW_S: std::ops::Range<u64> = 20..40;
 
 impl Fault {
     /// Every fault, for `--fault all`.
@@ -167,7 +175,8 @@ impl VirtualBus {
             }
         }
         let mut end;
-        let answer = answers.first().filter(|_| fault != Some(Fault::SilentSlave));
+        let powered = !self.out(unit, request_end);
+        let answer = answers.first().filter(|_| fault != Some(Fault::SilentSlave) && powered);
         // The second master's request and its answer, sent while the first one's is due.
         let second =
             if fault == Some(Fault::SecondMaster) && answer.is_some() { self.second_master(unit) } else { None };
@@ -228,11 +237,19 @@ impl VirtualBus {
 
     /// The fault of this transaction: faults take turns, one every `fault_every` transactions.
     fn due_fault(&self) -> Option<Fault> {
-        if self.faults.is_empty() || self.fault_every == 0 || !self.count.is_multiple_of(self.fault_every) {
+        let turns: Vec<Fault> = self.faults.iter().copied().filter(|f| *f != Fault::Outage).collect();
+        if turns.is_empty() || self.fault_every == 0 || !self.count.is_multiple_of(self.fault_every) {
             return None;
         }
         let turn = usize::try_from(self.count.checked_div(self.fault_every)?).unwrap_or(0);
-        self.faults.get(turn % self.faults.len()).copied()
+        turns.get(turn % turns.len()).copied()
+    }
+
+    /// Whether `unit` is in its [`Fault::Outage`] window at bus time `t_ns`.
+    fn out(&self, unit: u8, t_ns: u64) -> bool {
+        self.faults.contains(&Fault::Outage)
+            && self.slaves.last().map(Slave::address) == Some(unit)
+            && OUTAGE_WINDOW_S.contains(&(t_ns / 1_000_000_000 % 60))
     }
 
     fn apply_response_fault(&mut self, fault: Option<Fault>, response: &mut [u8]) {
@@ -333,5 +350,31 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Issue 30: a unit that loses power, for DDEATH and DBIRTH — silent through its window of
+    /// every minute, answering before and after; the other units never miss a turn.
+    #[test]
+    fn an_outage_silences_the_last_unit_for_its_window_only() {
+        let mut b = bus();
+        b.faults = vec![Fault::Outage];
+        let last = b.slaves.last().map(Slave::address).unwrap();
+        let (mut silent_in, mut answered_in, mut answered_out, mut others_missed) = (0, 0, 0, 0);
+        while b.now_ns < 70 * 1_000_000_000 {
+            let frames = b.next_transaction();
+            let unit = frames[0].bytes[0];
+            let in_window = OUTAGE_WINDOW_S.contains(&(frames[0].end_ns / 1_000_000_000 % 60));
+            match (unit == last, in_window, frames.len() == 2) {
+                (true, true, false) => silent_in += 1,
+                (true, true, true) => answered_in += 1,
+                (true, false, true) => answered_out += 1,
+                (false, _, false) | (true, false, false) => others_missed += 1,
+                (false, _, true) => {}
+            }
+        }
+        assert!(silent_in > 5, "{silent_in}");
+        assert_eq!(answered_in, 0);
+        assert!(answered_out > 5, "{answered_out}");
+        assert_eq!(others_missed, 0);
     }
 }

@@ -1,0 +1,531 @@
+//! A Sparkplug B edge node as a state machine (Sparkplug 3.0 §7–§8, §11): births, data by
+//! exception, deaths, sequence numbers, rebirth on command, and what to hold while no host can
+//! hear. The shell tells it when the session starts and ends, the values heard (with bus time)
+//! and the commands received; it answers with the messages to publish or the updates to store.
+//! No clock, no broker here.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use serde::{Deserialize, Serialize};
+
+use super::payload::{DataType, Metric, Payload, PropertyKind, PropertySet, PropertyValue, Value, value_of};
+
+/// The topic namespace of Sparkplug B (§6.1.1).
+pub const NAMESPACE: &str = "spBv1.0";
+/// The node metric a host sets to ask for a rebirth (§6.4.20, §8.3.1 `Node Control/Rebirth`).
+pub const REBIRTH: &str = "Node Control/Rebirth";
+/// The birth/death sequence metric (§6.4.19).
+pub const BD_SEQ: &str = "bdSeq";
+/// A unit not heard for this many of its usual poll periods is said dead (DDEATH)…
+const SILENT_PERIODS: u64 = 3;
+/// …once at least this many inter-arrival gaps are known; the shortest silence said dead.
+const MIN_GAPS: usize = 3;
+
+/// One message to publish.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Out {
+    pub topic: String,
+    pub payload: Vec<u8>,
+    /// NDEATH is QoS 1; births, data and deaths of devices QoS 0 (§7.1, §7.3, §7.5, §7.7).
+    pub qos: u8,
+    pub retain: bool,
+}
+
+/// One value of a device, as mbtap knows it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    /// The metric's name, already escaped ([`metric_name`]).
+    pub name: String,
+    /// The value as mbtap shows it (number, label, text).
+    pub value: serde_json::Value,
+    /// A coil or discrete input: Boolean.
+    pub bits: bool,
+    /// Engineering unit (`V`, `°C`), carried as the `engUnit` property.
+    pub unit: Option<String>,
+    /// Milliseconds since the epoch when it was heard.
+    pub t_ms: u64,
+}
+
+/// Updates of one device held while no host could hear: forwarded later as historical
+/// (`is_historical`, their own timestamps).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Held {
+    pub device: String,
+    pub samples: Vec<Sample>,
+}
+
+/// What an update leads to.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Emit {
+    Send(Vec<Out>),
+    /// Offline: store this (serialised [`Held`]) and forward it when a session begins.
+    Hold(Vec<u8>),
+}
+
+#[derive(Debug, Clone, Default)]
+struct Device {
+    metrics: BTreeMap<String, Sample>,
+    alive: bool,
+    /// DBIRTH sent in this session.
+    born: bool,
+    last_ns: Option<u64>,
+    gaps: VecDeque<u64>,
+}
+
+/// The edge node.
+#[derive(Debug, Clone)]
+pub struct EdgeNode {
+    group: String,
+    node: String,
+    /// The birth/death sequence of the MQTT session (§6.4.19): in NBIRTH and in the will.
+    bd_seq: u64,
+    /// The next message's sequence number, 0–255 (§6.4.1).
+    seq: u64,
+    online: bool,
+    devices: BTreeMap<String, Device>,
+    /// The shortest silence said dead (bus time, ns), whatever the poll period.
+    min_silence_ns: u64,
+}
+
+impl EdgeNode {
+    /// A node `group`/`node` (each escaped to one topic level). `min_silence_ns`: no unit is
+    /// said dead before this much silence.
+    #[must_use]
+    pub fn new(group: &str, node: &str, min_silence_ns: u64) -> Self {
+        Self {
+            group: level(group),
+            node: level(node),
+            bd_seq: 0,
+            seq: 0,
+            online: false,
+            devices: BTreeMap::new(),
+            min_silence_ns,
+        }
+    }
+
+    fn topic(&self, kind: &str, device: Option<&str>) -> String {
+        match device {
+            Some(d) => format!("{NAMESPACE}/{}/{kind}/{}/{d}", self.group, self.node),
+            None => format!("{NAMESPACE}/{}/{kind}/{}", self.group, self.node),
+        }
+    }
+
+    /// The topic commands to this node arrive on (NCMD), and its devices' (DCMD, `+`).
+    #[must_use]
+    pub fn command_topics(&self) -> [String; 2] {
+        [self.topic("NCMD", None), self.topic("DCMD", Some("+"))]
+    }
+
+    fn next_seq(&mut self) -> u64 {
+        let s = self.seq;
+        self.seq = (self.seq + 1) % 256;
+        s
+    }
+
+    /// The NDEATH to register as the MQTT will of the next session (§7.2: bdSeq as in the
+    /// NBIRTH that follows; no seq).
+    #[must_use]
+    pub fn will(&self) -> Out {
+        let payload = Payload {
+            timestamp: None,
+            metrics: vec![Metric {
+                name: Some(BD_SEQ.into()),
+                datatype: Some(DataType::UInt64.code()),
+                value: Some(Value::Long(self.bd_seq)),
+                ..Metric::default()
+            }],
+            ..Payload::default()
+        };
+        Out { topic: self.topic("NDEATH", None), payload: payload.to_bytes(), qos: 1, retain: false }
+    }
+
+    /// A session began and a host can hear (`now_ms`: the clock, ms since the epoch): NBIRTH
+    /// with seq 0, then a DBIRTH for every device alive. Also the answer to a rebirth command.
+    pub fn online(&mut self, now_ms: u64) -> Vec<Out> {
+        self.online = true;
+        self.seq = 0;
+        let seq = self.next_seq();
+        let node_metrics = vec![
+            Metric {
+                name: Some(BD_SEQ.into()),
+                timestamp: Some(now_ms),
+                datatype: Some(DataType::UInt64.code()),
+                value: Some(Value::Long(self.bd_seq)),
+                ..Metric::default()
+            },
+            Metric {
+                name: Some(REBIRTH.into()),
+                timestamp: Some(now_ms),
+                datatype: Some(DataType::Boolean.code()),
+                value: Some(Value::Boolean(false)),
+                ..Metric::default()
+            },
+        ];
+        let nbirth = Payload { timestamp: Some(now_ms), metrics: node_metrics, seq: Some(seq), ..Payload::default() };
+        let mut out =
+            vec![Out { topic: self.topic("NBIRTH", None), payload: nbirth.to_bytes(), qos: 0, retain: false }];
+        let alive: Vec<String> = self.devices.iter().filter(|(_, d)| d.alive).map(|(n, _)| n.clone()).collect();
+        for d in alive {
+            out.push(self.dbirth(&d, now_ms));
+        }
+        out
+    }
+
+    /// The session ended (the broker went away, or the host did): the next session has the
+    /// next bdSeq; until it begins, updates are held.
+    pub fn offline(&mut self) {
+        if self.online {
+            self.bd_seq = (self.bd_seq + 1) % 256;
+        }
+        self.online = false;
+        for d in self.devices.values_mut() {
+            d.born = false;
+        }
+    }
+
+    /// Whether a session is on.
+    #[must_use]
+    pub fn is_online(&self) -> bool {
+        self.online
+    }
+
+    fn dbirth(&mut self, device: &str, now_ms: u64) -> Out {
+        let metrics = self
+            .devices
+            .get(device)
+            .map(|d| d.metrics.values().map(|s| metric(s, true, false)).collect())
+            .unwrap_or_default();
+        if let Some(d) = self.devices.get_mut(device) {
+            d.born = true;
+        }
+        let seq = self.next_seq();
+        let p = Payload { timestamp: Some(now_ms), metrics, seq: Some(seq), ..Payload::default() };
+        Out { topic: self.topic("DBIRTH", Some(device)), payload: p.to_bytes(), qos: 0, retain: false }
+    }
+
+    /// Values of `device` heard at bus time `t_ns`: those that changed go out (DDATA, report
+    /// by exception), after a DBIRTH when the device is new, back, or has a metric its birth
+    /// did not declare; held while offline.
+    pub fn update(&mut self, device: &str, samples: Vec<Sample>, t_ns: u64, now_ms: u64) -> Emit {
+        let dev = self.devices.entry(level(device)).or_default();
+        if let Some(last) = dev.last_ns
+            && t_ns > last
+        {
+            dev.gaps.push_back(t_ns - last);
+            if dev.gaps.len() > 8 {
+                dev.gaps.pop_front();
+            }
+        }
+        dev.last_ns = Some(dev.last_ns.map_or(t_ns, |l| l.max(t_ns)));
+        let came_back = !dev.alive;
+        dev.alive = true;
+        let mut changed = Vec::new();
+        let mut new_metric = false;
+        for s in samples {
+            match dev.metrics.get(&s.name) {
+                Some(k) if k.value == s.value && k.unit == s.unit => {}
+                known => {
+                    new_metric |= known.is_none();
+                    changed.push(s.clone());
+                    dev.metrics.insert(s.name.clone(), s);
+                }
+            }
+        }
+        let device = level(device);
+        if !self.online {
+            if changed.is_empty() {
+                return Emit::Send(Vec::new());
+            }
+            let held = Held { device, samples: changed };
+            return Emit::Hold(serde_json::to_vec(&held).unwrap_or_default());
+        }
+        let born = self.devices.get(&device).is_some_and(|d| d.born);
+        if !born || came_back || new_metric {
+            return Emit::Send(vec![self.dbirth(&device, now_ms)]);
+        }
+        if changed.is_empty() {
+            return Emit::Send(Vec::new());
+        }
+        Emit::Send(vec![self.ddata(&device, &changed, false, now_ms)])
+    }
+
+    fn ddata(&mut self, device: &str, samples: &[Sample], historical: bool, now_ms: u64) -> Out {
+        let seq = self.next_seq();
+        let metrics = samples.iter().map(|s| metric(s, false, historical)).collect();
+        let p = Payload { timestamp: Some(now_ms), metrics, seq: Some(seq), ..Payload::default() };
+        Out { topic: self.topic("DDATA", Some(device)), payload: p.to_bytes(), qos: 0, retain: false }
+    }
+
+    /// Bus time `t_ns` has come: a device silent for [`SILENT_PERIODS`] of its usual period
+    /// (and at least the minimum) is dead — DDEATH when a session is on.
+    pub fn tick(&mut self, t_ns: u64, now_ms: u64) -> Vec<Out> {
+        let min = self.min_silence_ns;
+        let dead: Vec<String> = self
+            .devices
+            .iter_mut()
+            .filter(|(_, d)| d.alive)
+            .filter_map(|(name, d)| {
+                let last = d.last_ns?;
+                let limit = if d.gaps.len() >= MIN_GAPS {
+                    let mut g: Vec<u64> = d.gaps.iter().copied().collect();
+                    g.sort_unstable();
+                    g[g.len() / 2].saturating_mul(SILENT_PERIODS).max(min)
+                } else {
+                    min
+                };
+                (t_ns.saturating_sub(last) > limit).then(|| {
+                    d.alive = false;
+                    name.clone()
+                })
+            })
+            .collect();
+        let mut out = Vec::new();
+        for name in dead {
+            let born = self.devices.get(&name).is_some_and(|d| d.born);
+            if let Some(d) = self.devices.get_mut(&name) {
+                d.born = false;
+                d.gaps.clear();
+            }
+            if self.online && born {
+                let seq = self.next_seq();
+                let p = Payload { timestamp: Some(now_ms), seq: Some(seq), ..Payload::default() };
+                out.push(Out {
+                    topic: self.topic("DDEATH", Some(&name)),
+                    payload: p.to_bytes(),
+                    qos: 0,
+                    retain: false,
+                });
+            }
+        }
+        out
+    }
+
+    /// Held updates forwarded in a new session: DDATA whose metrics are `is_historical` with
+    /// their own timestamps. A device not born in this session (it died meanwhile) is born for
+    /// them and said dead again after.
+    pub fn historical(&mut self, held: &[u8], now_ms: u64) -> Vec<Out> {
+        let Ok(held) = serde_json::from_slice::<Held>(held) else { return Vec::new() };
+        if !self.online || held.samples.is_empty() {
+            return Vec::new();
+        }
+        let dev = self.devices.entry(held.device.clone()).or_default();
+        for s in &held.samples {
+            dev.metrics.entry(s.name.clone()).or_insert_with(|| s.clone());
+        }
+        let (born, alive) = (dev.born, dev.alive);
+        let mut out = Vec::new();
+        if !born {
+            out.push(self.dbirth(&held.device, now_ms));
+        }
+        out.push(self.ddata(&held.device, &held.samples, true, now_ms));
+        if !alive {
+            if let Some(d) = self.devices.get_mut(&held.device) {
+                d.born = false;
+            }
+            let seq = self.next_seq();
+            let p = Payload { timestamp: Some(now_ms), seq: Some(seq), ..Payload::default() };
+            out.push(Out {
+                topic: self.topic("DDEATH", Some(&held.device)),
+                payload: p.to_bytes(),
+                qos: 0,
+                retain: false,
+            });
+        }
+        out
+    }
+
+    /// A command received on `topic`. NCMD `Node Control/Rebirth` = true: a rebirth (NBIRTH,
+    /// DBIRTHs). Anything else is not this node's, or not a command it carries out: nothing.
+    pub fn command(&mut self, topic: &str, payload: &[u8], now_ms: u64) -> Vec<Out> {
+        if topic != self.topic("NCMD", None) || !self.online {
+            return Vec::new();
+        }
+        let Ok(p) = Payload::parse_payload(payload) else { return Vec::new() };
+        let rebirth = p
+            .metrics
+            .iter()
+            .any(|m| m.name.as_deref() == Some(REBIRTH) && matches!(m.value, Some(Value::Boolean(true))));
+        if rebirth { self.online(now_ms) } else { Vec::new() }
+    }
+}
+
+/// One metric of a sample; in births with its datatype and engineering unit.
+fn metric(s: &Sample, birth: bool, historical: bool) -> Metric {
+    let (datatype, value) = value_of(&s.value, s.bits);
+    let properties = s.unit.as_ref().filter(|_| birth).map(|u| PropertySet {
+        keys: vec!["engUnit".into()],
+        values: vec![PropertyValue {
+            r#type: Some(DataType::String.code()),
+            is_null: None,
+            value: Some(PropertyKind::String(u.clone())),
+        }],
+    });
+    Metric {
+        name: Some(s.name.clone()),
+        timestamp: Some(s.t_ms),
+        datatype: Some(datatype.code()),
+        is_historical: historical.then_some(true),
+        is_null: value.is_none().then_some(true),
+        properties,
+        value,
+        ..Metric::default()
+    }
+}
+
+/// One topic level from free text: `/`, `+`, `#` (MQTT v3.1.1 §4.7) and control characters
+/// become `_` (Sparkplug 3.0 §6.1.1: group, node and device ids are single levels).
+#[must_use]
+pub fn level(s: &str) -> String {
+    let t: String = s.chars().map(|c| if matches!(c, '/' | '+' | '#') || c.is_control() { '_' } else { c }).collect();
+    if t.is_empty() { "_".into() } else { t }
+}
+
+/// A metric name from free text: `/` (Sparkplug's folder separator: a register's name must not
+/// invent folders), `+`, `#` and control characters become `_`.
+#[must_use]
+pub fn metric_name(s: &str) -> String {
+    level(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SEC: u64 = 1_000_000_000;
+
+    fn sample(name: &str, value: serde_json::Value, t_ms: u64) -> Sample {
+        Sample { name: name.into(), value, bits: false, unit: Some("V".into()), t_ms }
+    }
+
+    fn decode(o: &Out) -> Payload {
+        Payload::parse_payload(&o.payload).unwrap()
+    }
+
+    fn sends(e: Emit) -> Vec<Out> {
+        match e {
+            Emit::Send(v) => v,
+            Emit::Hold(_) => panic!("held while online"),
+        }
+    }
+
+    #[test]
+    fn births_then_data_by_exception_with_counting_seq() {
+        let mut n = EdgeNode::new("plant", "pump/station", 5 * SEC);
+        let will = n.will();
+        assert_eq!(will.topic, "spBv1.0/plant/NDEATH/pump_station");
+        assert_eq!((will.qos, will.retain), (1, false));
+        assert_eq!(decode(&will).metrics[0].value, Some(Value::Long(0)));
+        let births = n.online(1000);
+        assert_eq!(births.len(), 1);
+        let nbirth = decode(&births[0]);
+        assert_eq!(nbirth.seq, Some(0));
+        assert_eq!(nbirth.metrics[0].name.as_deref(), Some(BD_SEQ));
+        assert_eq!(nbirth.metrics[1].name.as_deref(), Some(REBIRTH));
+        // A new device: DBIRTH with every metric, its datatype and engineering unit.
+        let out = sends(n.update("mk4-1", vec![sample("Voltage", 230.5.into(), 5)], SEC, 1001));
+        assert_eq!(out[0].topic, "spBv1.0/plant/DBIRTH/pump_station/mk4-1");
+        let dbirth = decode(&out[0]);
+        assert_eq!(dbirth.seq, Some(1));
+        assert_eq!(dbirth.metrics[0].datatype, Some(DataType::Double.code()));
+        assert_eq!(dbirth.metrics[0].properties.as_ref().unwrap().keys, ["engUnit"]);
+        // Unchanged: nothing. Changed: DDATA with that metric only.
+        assert!(sends(n.update("mk4-1", vec![sample("Voltage", 230.5.into(), 6)], 2 * SEC, 1002)).is_empty());
+        let out = sends(n.update(
+            "mk4-1",
+            vec![sample("Voltage", 231.0.into(), 7), sample("Current", 4.into(), 7)],
+            3 * SEC,
+            1003,
+        ));
+        assert_eq!(out[0].topic, "spBv1.0/plant/DBIRTH/pump_station/mk4-1", "a metric its birth did not declare");
+        let out = sends(n.update("mk4-1", vec![sample("Current", 5.into(), 8)], 4 * SEC, 1004));
+        let ddata = decode(&out[0]);
+        assert_eq!(out[0].topic, "spBv1.0/plant/DDATA/pump_station/mk4-1");
+        assert_eq!(ddata.seq, Some(3));
+        assert_eq!(ddata.metrics.len(), 1);
+        assert_eq!(ddata.metrics[0].value, Some(Value::Long(5)));
+        assert_eq!(ddata.metrics[0].timestamp, Some(8));
+    }
+
+    #[test]
+    fn seq_wraps_at_256() {
+        let mut n = EdgeNode::new("g", "n", 5 * SEC);
+        n.online(0);
+        let mut last = None;
+        for i in 0..300u64 {
+            let out = sends(n.update("d", vec![sample("v", i.into(), i)], i * SEC / 100, i));
+            last = decode(&out[0]).seq;
+            assert!(last.unwrap() < 256);
+        }
+        // NBIRTH 0, DBIRTH 1, then 299 DDATA: 300 messages after the NBIRTH → seq 300 mod 256.
+        assert_eq!(last, Some(300 % 256));
+    }
+
+    #[test]
+    fn a_silent_unit_dies_and_is_born_again_when_it_speaks() {
+        let mut n = EdgeNode::new("g", "n", 2 * SEC);
+        n.online(0);
+        for i in 0..5u64 {
+            n.update("d", vec![sample("v", i.into(), i)], i * SEC, i);
+        }
+        // Polled every second: dead after three periods of silence (the minimum is 2 s).
+        assert!(n.tick(4 * SEC + 3 * SEC, 0).is_empty(), "exactly three periods: not yet");
+        let out = n.tick(4 * SEC + 3 * SEC + 1, 0);
+        assert_eq!(out[0].topic, "spBv1.0/g/DDEATH/n/d");
+        assert!(decode(&out[0]).seq.is_some());
+        assert!(n.tick(20 * SEC, 0).is_empty(), "said once");
+        let out = sends(n.update("d", vec![sample("v", 4.into(), 30)], 30 * SEC, 30));
+        assert_eq!(out[0].topic, "spBv1.0/g/DBIRTH/n/d", "back: born again, even with its old value");
+    }
+
+    #[test]
+    fn offline_updates_are_held_and_forwarded_as_historical_after_the_births() {
+        let mut n = EdgeNode::new("g", "n", 60 * SEC);
+        n.online(0);
+        n.update("d", vec![sample("v", 1.into(), 1)], SEC, 1);
+        n.offline();
+        assert_eq!(decode(&n.will()).metrics[0].value, Some(Value::Long(1)), "the next session's bdSeq");
+        let Emit::Hold(a) = n.update("d", vec![sample("v", 2.into(), 2)], 2 * SEC, 2) else { panic!() };
+        let Emit::Hold(b) = n.update("d", vec![sample("v", 3.into(), 3)], 3 * SEC, 3) else { panic!() };
+        let births = n.online(10);
+        assert_eq!(births.len(), 2, "NBIRTH and the alive device's DBIRTH, with its newest value");
+        assert_eq!(decode(&births[1]).metrics[0].value, Some(Value::Long(3)));
+        let mut seqs = Vec::new();
+        for held in [a, b] {
+            let out = n.historical(&held, 11);
+            assert_eq!(out.len(), 1);
+            let p = decode(&out[0]);
+            assert_eq!(p.metrics[0].is_historical, Some(true));
+            seqs.push((p.seq, p.metrics[0].timestamp));
+        }
+        assert_eq!(seqs, [(Some(2), Some(2)), (Some(3), Some(3))], "in order, with their own timestamps");
+    }
+
+    #[test]
+    fn rebirth_on_ncmd_only() {
+        let mut n = EdgeNode::new("g", "n", 60 * SEC);
+        n.online(0);
+        n.update("d", vec![sample("v", 1.into(), 1)], SEC, 1);
+        let cmd = Payload {
+            metrics: vec![Metric {
+                name: Some(REBIRTH.into()),
+                datatype: Some(DataType::Boolean.code()),
+                value: Some(Value::Boolean(true)),
+                ..Metric::default()
+            }],
+            ..Payload::default()
+        };
+        let out = n.command("spBv1.0/g/NCMD/n", &cmd.to_bytes(), 5);
+        assert_eq!(out.len(), 2);
+        assert_eq!(decode(&out[0]).seq, Some(0));
+        assert!(n.command("spBv1.0/g/NCMD/other", &cmd.to_bytes(), 5).is_empty());
+        assert!(n.command("spBv1.0/g/NCMD/n", b"\xFF\xFF garbage", 5).is_empty());
+    }
+
+    #[test]
+    fn ids_and_names_never_invent_topic_levels() {
+        assert_eq!(level("a/b+c#d\u{7}"), "a_b_c_d_");
+        assert_eq!(level(""), "_");
+        let n = EdgeNode::new("g/x", "#", SEC);
+        assert_eq!(n.will().topic, "spBv1.0/g_x/NDEATH/_");
+    }
+}

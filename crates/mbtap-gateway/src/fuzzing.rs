@@ -1,0 +1,72 @@
+//! Fuzz harness body for the gateway core, kept in the library so the `fuzz/` target stays a
+//! one-liner and the same body runs over the seed corpus in `cargo test`.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::framer::LineSettings;
+
+use crate::timeouts::{TimeoutMode, Timeouts};
+use crate::transaction::{EchoMode, MasterConfig, SerialMaster, Step};
+
+/// Any bytes as a serial line's behaviour: the first byte picks the mode, the echo and the
+/// retries, the second the request; then chunks of `[length, milliseconds later, bytes…]` are
+/// what the line delivers. The machine must end (an answer, or 0x0B after its retries) and never
+/// panic, whatever arrives.
+pub fn transaction(data: &[u8]) {
+    let (&setup, rest) = data.split_first().unwrap_or((&0, &[]));
+    let (&pick, mut script) = rest.split_first().unwrap_or((&0, &[]));
+    let config = MasterConfig {
+        line: LineSettings::default(),
+        mode: if setup & 1 == 0 { SerialMode::Rtu } else { SerialMode::Ascii },
+        echo: match setup >> 1 & 3 {
+            0 => EchoMode::Auto,
+            1 => EchoMode::On,
+            _ => EchoMode::Off,
+        },
+        retries: u32::from(setup >> 3 & 3),
+        turnaround: Duration::ZERO,
+        broadcast_reply: setup & 0x20 != 0,
+        latency: Duration::from_millis(u64::from(setup >> 6)),
+    };
+    let mut master =
+        SerialMaster::new(config, Timeouts::new(Duration::from_millis(50), TimeoutMode::Auto, BTreeMap::new()));
+    // Read holding 0–1, write one register, or a vendor code; unit 1, or a broadcast.
+    let pdus: [&[u8]; 3] = [&[0x03, 0, 0, 0, 2], &[0x06, 0, 1, 0, 3], &[0x41, 1, 2]];
+    let unit = if pick & 0x80 != 0 { 0 } else { 1 };
+    for round in 0..2 {
+        let pdu = pdus[usize::from(pick) % pdus.len()];
+        let (mut t, mut step) = master.transaction(unit, pdu);
+        let mut now = Duration::from_secs(round);
+        let mut steps = 0u32;
+        loop {
+            steps += 1;
+            assert!(steps < 100_000, "the transaction never ends");
+            step = match step {
+                Step::Send(_) => t.sent(now, false),
+                Step::PauseUntil(at) => {
+                    assert!(at >= now, "time runs backwards");
+                    now = at;
+                    t.tick(now)
+                }
+                Step::WaitUntil(at) => match script {
+                    [len, ms, tail @ ..] => {
+                        let n = usize::from(*len).min(tail.len());
+                        let (bytes, next) = tail.split_at(n);
+                        script = next;
+                        now += Duration::from_millis(u64::from(*ms));
+                        if now >= at { t.tick(now.max(at)) } else { t.bytes(now, bytes) }
+                    }
+                    _ => {
+                        now = now.max(at);
+                        t.tick(now)
+                    }
+                },
+                Step::Done => break,
+            };
+        }
+        let _ = t.take_notes();
+        assert!(t.outcome().is_some(), "done without an outcome");
+    }
+}

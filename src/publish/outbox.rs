@@ -1,0 +1,295 @@
+//! Where every MQTT message goes, shared by the analysing thread and the connection thread:
+//! straight to the connection while the broker is there and nothing held waits; to the on-disk
+//! buffer ([`super::spool`], `--mqtt-buffer`) while it is away or the held messages are being
+//! forwarded (so the order holds); dropped and counted when neither can take it. The Sparkplug
+//! edge node lives here too: the connection thread starts and ends its sessions (births, the
+//! will's bdSeq) and carries out its commands.
+//!
+//! The connection thread: rumqttc's event loop on a runtime of its own, reconnecting every
+//! second; on each connection the births (or the `online` status), then the held messages,
+//! oldest first, in small batches so the connection keeps flowing.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use mbtap_core::sparkplug::{EdgeNode, Emit, Out};
+use mbtap_core::spool::{Kind, mqtt_body, parse_mqtt_body};
+use rumqttc::{AsyncClient, EventLoop, LastWill, QoS};
+
+use super::spool::{Record, Spool};
+
+/// Held records forwarded per turn before the connection gets to send them.
+const FORWARD_BATCH: usize = 64;
+
+/// Milliseconds since the epoch, for Sparkplug payload timestamps.
+pub fn now_ms() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| u64::try_from(d.as_millis()).unwrap_or(u64::MAX))
+}
+
+pub fn qos(n: u8) -> QoS {
+    match n {
+        0 => QoS::AtMostOnce,
+        1 => QoS::AtLeastOnce,
+        _ => QoS::ExactlyOnce,
+    }
+}
+
+/// The shared outbox.
+pub struct Outbox {
+    pub client: AsyncClient,
+    /// Connected, and nothing held waits: messages go straight out.
+    live: bool,
+    connected: bool,
+    pub spool: Option<Spool>,
+    pub node: Option<EdgeNode>,
+    /// The status topic of plain MQTT (`PREFIX/status`), `online` on each connection.
+    pub status: Option<String>,
+    /// A held segment being forwarded: its number and the records left.
+    forwarding: Option<(u64, std::collections::VecDeque<Record>)>,
+    pub published: u64,
+    pub dropped: u64,
+    pub held: u64,
+    pub forwarded: u64,
+}
+
+impl std::fmt::Debug for Outbox {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Outbox")
+            .field("live", &self.live)
+            .field("connected", &self.connected)
+            .field("spool", &self.spool)
+            .field("node", &self.node)
+            .field("published", &self.published)
+            .field("dropped", &self.dropped)
+            .field("held", &self.held)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Outbox {
+    pub fn new(client: AsyncClient, spool: Option<Spool>, node: Option<EdgeNode>, status: Option<String>) -> Self {
+        Self {
+            client,
+            live: false,
+            connected: false,
+            spool,
+            node,
+            status,
+            forwarding: None,
+            published: 0,
+            dropped: 0,
+            held: 0,
+            forwarded: 0,
+        }
+    }
+
+    pub fn publish_now(&mut self, topic: &str, qos: QoS, retain: bool, payload: Vec<u8>) -> bool {
+        let ok = self.client.try_publish(topic, qos, retain, payload).is_ok();
+        if ok {
+            self.published += 1;
+        } else {
+            self.dropped += 1;
+        }
+        ok
+    }
+
+    /// One plain message: out now, held, or (no buffer) queued for rumqttc as before.
+    pub fn send(&mut self, topic: &str, qos: QoS, retain: bool, payload: Vec<u8>) {
+        if self.live || self.spool.is_none() {
+            self.publish_now(topic, qos, retain, payload);
+            return;
+        }
+        let held = mqtt_body(topic, qos as u8, retain, &payload)
+            .and_then(|body| self.spool.as_mut().map(|s| s.append(Kind::Mqtt, &body)));
+        match held {
+            Some(Ok(())) => self.held += 1,
+            _ => self.dropped += 1,
+        }
+    }
+
+    /// What the edge node said: messages out at once (their seq is counted now), updates held.
+    pub fn emit(&mut self, e: Emit) {
+        match e {
+            Emit::Send(outs) => self.send_outs(outs),
+            Emit::Hold(body) => match self.spool.as_mut().map(|s| s.append(Kind::Sparkplug, &body)) {
+                Some(Ok(())) => self.held += 1,
+                _ => self.dropped += 1,
+            },
+        }
+    }
+
+    pub fn send_outs(&mut self, outs: Vec<Out>) {
+        for o in outs {
+            self.publish_now(&o.topic, qos(o.qos), o.retain, o.payload);
+        }
+    }
+
+    /// Whether held messages wait (forwarding or on disk).
+    fn holding(&self) -> bool {
+        self.forwarding.is_some() || self.spool.as_ref().is_some_and(|s| !s.is_empty())
+    }
+
+    /// The connection is up: births or status first, then forwarding if anything is held.
+    fn connected(&mut self) {
+        self.connected = true;
+        self.forwarding = None;
+        if let Some(node) = self.node.as_mut() {
+            let births = node.online(now_ms());
+            for t in node.command_topics() {
+                let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
+            }
+            self.send_outs(births);
+        }
+        if let Some(status) = self.status.clone() {
+            // Retained, so a late subscriber sees it; replaces the will.
+            self.publish_now(&status, QoS::AtLeastOnce, true, b"online".to_vec());
+        }
+        self.live = !self.holding();
+    }
+
+    /// The connection is gone: hold from now on; the node's next session has the next bdSeq.
+    fn disconnected(&mut self) {
+        self.connected = false;
+        self.live = false;
+        self.forwarding = None;
+        if let Some(node) = self.node.as_mut() {
+            node.offline();
+        }
+    }
+
+    /// Forwards up to [`FORWARD_BATCH`] held records; true when more wait.
+    fn forward_some(&mut self) -> bool {
+        if !self.connected {
+            return false;
+        }
+        for _ in 0..FORWARD_BATCH {
+            if self.forwarding.is_none() {
+                let Some((n, recs)) = self.spool.as_mut().and_then(Spool::oldest) else {
+                    self.live = true;
+                    return false;
+                };
+                self.forwarding = Some((n, recs.into()));
+            }
+            let Some((n, recs)) = self.forwarding.as_mut() else { return false };
+            let n = *n;
+            let Some((kind, body)) = recs.pop_front() else {
+                self.forwarding = None;
+                if let Some(s) = self.spool.as_mut() {
+                    s.forwarded(n);
+                }
+                continue;
+            };
+            self.forwarded += 1;
+            match kind {
+                Kind::Mqtt => {
+                    if let Some((topic, q, retain, payload)) = parse_mqtt_body(&body) {
+                        if self.client.try_publish(topic, qos(q), retain, payload.to_vec()).is_err() {
+                            // The connection's queue is full: this record again next turn.
+                            self.forwarded -= 1;
+                            if let Some((_, recs)) = self.forwarding.as_mut() {
+                                recs.push_front((kind, body));
+                            }
+                            return true;
+                        }
+                        self.published += 1;
+                    }
+                }
+                Kind::Sparkplug => {
+                    let outs = self.node.as_mut().map(|n| n.historical(&body, now_ms())).unwrap_or_default();
+                    self.send_outs(outs);
+                }
+                // A newer mbtap's record: not ours to send.
+                Kind::Other(_) => {}
+            }
+        }
+        true
+    }
+
+    /// A message arrived (a command to the Sparkplug node).
+    fn incoming(&mut self, topic: &str, payload: &[u8]) {
+        let outs = self.node.as_mut().map(|n| n.command(topic, payload, now_ms())).unwrap_or_default();
+        self.send_outs(outs);
+    }
+
+    /// The will of the next connection: the node's NDEATH (with the next bdSeq), or `offline`.
+    fn will(&self) -> Option<LastWill> {
+        Self::will_of(self.node.as_ref(), self.status.as_deref())
+    }
+
+    /// The will for `node` (its NDEATH, QoS 1, not retained: Sparkplug 3.0 §7.2) or for the
+    /// plain `status` topic (`offline`, retained).
+    pub fn will_of(node: Option<&EdgeNode>, status: Option<&str>) -> Option<LastWill> {
+        if let Some(node) = node {
+            let w = node.will();
+            return Some(LastWill::new(w.topic, w.payload, QoS::AtLeastOnce, false));
+        }
+        status.map(|s| LastWill::new(s, "offline", QoS::AtLeastOnce, true))
+    }
+}
+
+/// Locks the outbox (a panicked holder leaves it usable: counters and queues stay consistent).
+pub fn lock(outbox: &Mutex<Outbox>) -> std::sync::MutexGuard<'_, Outbox> {
+    outbox.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Forwards held records while connected, a batch at a time, each batch under the outbox's lock
+/// (so a Sparkplug sequence number is handed to the connection in the order it was counted).
+async fn forwarder(outbox: Arc<Mutex<Outbox>>, connected: Arc<AtomicBool>) {
+    loop {
+        let more = connected.load(Ordering::SeqCst) && lock(&outbox).forward_some();
+        tokio::time::sleep(Duration::from_millis(if more { 2 } else { 50 })).await;
+    }
+}
+
+/// Runs the connection until the client disconnects; `connected` mirrors its state.
+pub async fn run(mut eventloop: EventLoop, outbox: Arc<Mutex<Outbox>>, connected: Arc<AtomicBool>, broker: String) {
+    let forwarding = tokio::spawn(forwarder(Arc::clone(&outbox), Arc::clone(&connected)));
+    let mut said_down = false;
+    loop {
+        match eventloop.poll().await {
+            Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
+                connected.store(true, Ordering::SeqCst);
+                eprintln!("mbtap: mqtt: connected to {broker}");
+                said_down = false;
+                let mut ob = lock(&outbox);
+                ob.connected();
+                if ob.holding() {
+                    let bytes = ob.spool.as_ref().map_or(0, Spool::bytes);
+                    eprintln!(
+                        "mbtap: mqtt: forwarding what was held while the broker was away ({bytes} bytes; historical data in Sparkplug)"
+                    );
+                }
+            }
+            Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => lock(&outbox).incoming(&p.topic, &p.payload),
+            Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
+                // The DISCONNECT may still sit in the write buffer behind the last
+                // publications: poll on until the broker closes (bounded).
+                let drain = async { while eventloop.poll().await.is_ok() {} };
+                let _ = tokio::time::timeout(Duration::from_secs(1), drain).await;
+                break;
+            }
+            Ok(_) => {}
+            Err(e) => {
+                if connected.swap(false, Ordering::SeqCst) || !said_down {
+                    eprintln!("mbtap: mqtt: {broker}: {e}; analysis goes on, retrying every second");
+                    said_down = true;
+                }
+                if matches!(e, rumqttc::ConnectionError::RequestsDone) {
+                    break;
+                }
+                let will = {
+                    let mut ob = lock(&outbox);
+                    ob.disconnected();
+                    ob.will()
+                };
+                // The next session's will carries the next bdSeq (Sparkplug 3.0 §7.2).
+                if let Some(w) = will {
+                    eventloop.mqtt_options.set_last_will(w);
+                }
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        }
+    }
+    forwarding.abort();
+}
