@@ -451,6 +451,9 @@ pub fn sunspec(data: &[u8]) {
 
 /// Any bytes as a store-and-forward buffer file (torn, damaged, someone else's), every record
 /// read back as the publisher forwards it; and as one record's body, written and read again.
+///
+/// # Panics
+/// When a record written does not read back as written: the point of this harness.
 pub fn spool(data: &[u8]) {
     let parsed = crate::spool::parse_records(data);
     for (kind, body) in &parsed.records {

@@ -14,6 +14,10 @@ use crate::transaction::{EchoMode, MasterConfig, SerialMaster, Step};
 /// retries, the second the request; then chunks of `[length, milliseconds later, bytes…]` are
 /// what the line delivers. The machine must end (an answer, or 0x0B after its retries) and never
 /// panic, whatever arrives.
+///
+/// # Panics
+/// When the machine runs on without end, lets time run backwards, or ends without an outcome:
+/// the point of this harness.
 pub fn transaction(data: &[u8]) {
     let (&setup, rest) = data.split_first().unwrap_or((&0, &[]));
     let (&pick, mut script) = rest.split_first().unwrap_or((&0, &[]));
@@ -34,7 +38,7 @@ pub fn transaction(data: &[u8]) {
         SerialMaster::new(config, Timeouts::new(Duration::from_millis(50), TimeoutMode::Auto, BTreeMap::new()));
     // Read holding 0–1, write one register, or a vendor code; unit 1, or a broadcast.
     let pdus: [&[u8]; 3] = [&[0x03, 0, 0, 0, 2], &[0x06, 0, 1, 0, 3], &[0x41, 1, 2]];
-    let unit = if pick & 0x80 != 0 { 0 } else { 1 };
+    let unit = u8::from(pick & 0x80 == 0);
     for round in 0..2 {
         let pdu = pdus[usize::from(pick) % pdus.len()];
         let (mut t, mut step) = master.transaction(unit, pdu);
@@ -50,19 +54,18 @@ pub fn transaction(data: &[u8]) {
                     now = at;
                     t.tick(now)
                 }
-                Step::WaitUntil(at) => match script {
-                    [len, ms, tail @ ..] => {
+                Step::WaitUntil(at) => {
+                    if let [len, ms, tail @ ..] = script {
                         let n = usize::from(*len).min(tail.len());
                         let (bytes, next) = tail.split_at(n);
                         script = next;
                         now += Duration::from_millis(u64::from(*ms));
                         if now >= at { t.tick(now.max(at)) } else { t.bytes(now, bytes) }
-                    }
-                    _ => {
+                    } else {
                         now = now.max(at);
                         t.tick(now)
                     }
-                },
+                }
                 Step::Done => break,
             };
         }
