@@ -204,9 +204,106 @@ fn mqtt(d: &Path) {
     );
 }
 
+/// A Mosquitto broker on a free loopback port (no persistence, no queue limit).
+fn broker(d: &Path, name: &str) -> (Kill, u16) {
+    let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let conf = d.join(format!("mosquitto-{name}.conf"));
+    std::fs::write(
+        &conf,
+        format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nmax_queued_messages 0\n"),
+    )
+    .unwrap();
+    let mosquitto = if Path::new("/usr/sbin/mosquitto").exists() { "/usr/sbin/mosquitto" } else { "mosquitto" };
+    let b = Kill(Command::new(mosquitto).arg("-c").arg(&conf).stderr(Stdio::null()).spawn().expect("mosquitto"));
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (b, port)
+}
+
+/// Issue 30: Sparkplug B messages per second from a replayed capture (counted by a subscriber
+/// printing topics only: the payloads are binary), and the store-and-forward rates — holding a
+/// replay's messages on disk with no broker, then forwarding them when one is there.
+fn sparkplug(d: &Path) {
+    let capture = d.join("big.pcapng");
+    if !capture.exists() {
+        let g = Command::new(BIN)
+            .args(["generate", capture.to_str().unwrap(), "--transactions", "200000"])
+            .output()
+            .unwrap();
+        assert!(g.status.success());
+    }
+    let (_broker, port) = broker(d, "sparkplug");
+    let mut sub = Command::new("mosquitto_sub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-t", "spBv1.0/#", "-F", "%t"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("mosquitto_sub");
+    let count = Arc::new(AtomicU64::new(0));
+    let last = Arc::new(std::sync::Mutex::new(Instant::now()));
+    let (out, c, l) = (sub.stdout.take().unwrap(), Arc::clone(&count), Arc::clone(&last));
+    std::thread::spawn(move || {
+        for _ in BufReader::new(out).lines().map_while(Result::ok) {
+            c.fetch_add(1, Ordering::Relaxed);
+            *l.lock().unwrap() = Instant::now();
+        }
+    });
+    let _sub = Kill(sub);
+    std::thread::sleep(Duration::from_millis(500));
+    let url = format!("mqtt://127.0.0.1:{port}");
+    let start = Instant::now();
+    let o = Command::new(BIN)
+        .args(["replay", capture.to_str().unwrap(), "--format", "summary", "--mqtt", &url])
+        .args(["--sparkplug", "bench/node", "--mqtt-queue", "10000000"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let secs = start.elapsed().as_secs_f64();
+    loop {
+        std::thread::sleep(Duration::from_millis(200));
+        if last.lock().unwrap().elapsed() > Duration::from_secs(1) {
+            break;
+        }
+    }
+    let got = count.load(Ordering::Relaxed);
+    let end = (*last.lock().unwrap() - start).as_secs_f64();
+    println!("sparkplug: replay {secs:.2} s; {got} messages received in {end:.2} s = {:.0} msg/s", got as f64 / end);
+    // Held: the same replay with the broker's port closed, every message to the disk buffer.
+    let held = d.join("held");
+    let _ = std::fs::remove_dir_all(&held);
+    let closed = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let start = Instant::now();
+    let o = Command::new(BIN)
+        .args(["replay", capture.to_str().unwrap(), "--format", "summary"])
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{closed}"), "--sparkplug", "bench/node"])
+        .args(["--mqtt-buffer", held.to_str().unwrap(), "--mqtt-buffer-max", "4GB"])
+        .output()
+        .unwrap();
+    let secs = start.elapsed().as_secs_f64();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    let line = err.lines().find(|l| l.contains("held on disk")).unwrap_or("").to_owned();
+    println!("store: replay with the broker away {secs:.2} s: {line}");
+    // Forwarded: a quiet run (the demo for a while) sends what is held, then says its rate.
+    let o = Command::new(BIN)
+        .args(["demo", "--format", "summary", "--speed", "1", "--duration", "60"])
+        .args(["--mqtt", &url, "--sparkplug", "bench/node", "--mqtt-buffer", held.to_str().unwrap()])
+        .args(["--mqtt-queue", "10000000"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    let line = err.lines().find(|l| l.contains("forwarded")).unwrap_or("(not all forwarded within 60 s)").to_owned();
+    println!("forward: {line}");
+}
+
 fn main() {
     let d = dir();
+    // `cargo bench --bench dataout -- sparkplug`: that part alone.
+    if std::env::args().any(|a| a == "sparkplug") {
+        sparkplug(&d);
+        return;
+    }
     watch_vs_mbpoll(&d);
     spy(&d);
     mqtt(&d);
+    sparkplug(&d);
 }

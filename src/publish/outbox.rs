@@ -51,6 +51,8 @@ pub struct Outbox {
     pub dropped: u64,
     pub held: u64,
     pub forwarded: u64,
+    /// Since when held messages are being forwarded, and how many were forwarded before.
+    forward_start: Option<(std::time::Instant, u64)>,
 }
 
 impl std::fmt::Debug for Outbox {
@@ -81,6 +83,7 @@ impl Outbox {
             dropped: 0,
             held: 0,
             forwarded: 0,
+            forward_start: None,
         }
     }
 
@@ -146,6 +149,9 @@ impl Outbox {
             self.publish_now(&status, QoS::AtLeastOnce, true, b"online".to_vec());
         }
         self.live = !self.holding();
+        if !self.live {
+            self.forward_start = Some((std::time::Instant::now(), self.forwarded));
+        }
     }
 
     /// The connection is gone: hold from now on; the node's next session has the next bdSeq.
@@ -167,6 +173,14 @@ impl Outbox {
             if self.forwarding.is_none() {
                 let Some((n, recs)) = self.spool.as_mut().and_then(Spool::oldest) else {
                     self.live = true;
+                    if let Some((at, before)) = self.forward_start.take() {
+                        let n = self.forwarded - before;
+                        let secs = at.elapsed().as_secs_f64();
+                        eprintln!(
+                            "mbtap: mqtt: forwarded {n} held message(s) in {secs:.2} s ({:.0} per second); live again",
+                            f64::from(u32::try_from(n).unwrap_or(u32::MAX)) / secs.max(1e-6)
+                        );
+                    }
                     return false;
                 };
                 self.forwarding = Some((n, recs.into()));
