@@ -439,3 +439,87 @@ fn every_discovery_message_passes_home_assistants_schema() {
     assert!(verdict["by_component"]["sensor"].as_u64().unwrap() > 10, "{verdict}");
     assert!(verdict["by_component"]["binary_sensor"].as_u64().unwrap() > 0, "the MK4's coils: {verdict}");
 }
+
+/// Sends `payload` to `topic` with mosquitto_pub.
+fn publish(port: u16, topic: &str, payload: &str) {
+    let ok = Command::new("mosquitto_pub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-t", topic, "-m", payload])
+        .status()
+        .expect("mosquitto_pub must be installed for this test");
+    assert!(ok.success());
+}
+
+/// Issue 30: writes from the broker go through the profile as `mbtap write` does — a value by
+/// address and one by name reach the simulated MK4 and come back read; a value out of the
+/// profile's range and a read-only register are refused, published as refused, counted, and the
+/// device keeps what it had. A passive command refuses `--mqtt-writes` at start.
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn writes_from_the_broker_reach_the_device_through_the_profile() {
+    let d = dir("writes");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    let sub = Sub::start(port, "w/#");
+    let (_sim, bus) = simulator(&d);
+    let url = format!("mqtt://127.0.0.1:{port}");
+    let watch = Command::new(BIN)
+        .args(["watch", bus.to_str().unwrap(), "--device", "mk4", "--interval", "200ms", "--count", "100"])
+        .args(["--format", "jsonl", "--mqtt", &url, "--mqtt-prefix", "w", "--mqtt-writes"])
+        .args(["holding:101..105"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let _watch = Kill(watch);
+    sub.wait_for("the set points", |g| g.iter().any(|(t, _)| t == "w/unit/1/holding_registers/105"));
+    // By address, a scaled value: 2.5 → raw 250.
+    publish(port, "w/unit/1/holding_registers/105/set", "2.5");
+    // By name, within the profile's range [2, 3].
+    publish(port, "w/unit/1/set", "Working pumps=3");
+    // Out of range, and a read-only register.
+    publish(port, "w/unit/1/holding_registers/102/set", "7");
+    publish(port, "w/unit/1/input_registers/430/set", "1");
+    publish(port, "w/unit/1/coils/3/set", "1");
+    let results = |g: &[(String, String)]| -> Vec<serde_json::Value> {
+        g.iter().filter(|(t, _)| t == "w/unit/1/write").map(|(_, p)| serde_json::from_str(p).unwrap()).collect()
+    };
+    sub.wait_for("five outcomes", |g| results(g).len() >= 5);
+    let r = results(&sub.got());
+    let ok: Vec<&serde_json::Value> = r.iter().filter(|x| x["ok"] == true).collect();
+    assert_eq!(ok.len(), 2, "{r:#?}");
+    assert_eq!(ok[0]["read_back"]["raw"], 250, "{r:#?}");
+    assert_eq!(ok[1]["read_back"]["raw"], 3, "{r:#?}");
+    let refused: Vec<String> = r.iter().filter(|x| x["ok"] == false).map(|x| x["refused"].to_string()).collect();
+    assert_eq!(refused.len(), 3, "{r:#?}");
+    assert!(refused[0].contains("outside the documented range"), "{refused:?}");
+    assert!(refused[1].contains("cannot be written"), "{refused:?}");
+    assert!(
+        refused[2].contains("read-only") || refused[2].contains("read only"),
+        "coil 3 is documented read-only: {refused:?}"
+    );
+    // The device kept its value where the write was refused: 102 is still what watch read.
+    sub.wait_for("the refusals counted", |g| {
+        last(g, "w/publisher")
+            .is_some_and(|p| serde_json::from_str::<serde_json::Value>(p).unwrap()["refused_writes"] == 3)
+    });
+    // What watch reads from the device afterwards: the written values, and 102 as written by
+    // name (3), not the refused 7.
+    let raw = |g: &[(String, String)], topic: &str| {
+        last(g, topic).map(|p| serde_json::from_str::<serde_json::Value>(p).unwrap()["raw"].clone())
+    };
+    sub.wait_for("the values read back by watch", |g| {
+        raw(g, "w/unit/1/holding_registers/105") == Some(250.into())
+            && raw(g, "w/unit/1/holding_registers/102") == Some(3.into())
+    });
+
+    let passive = Command::new(BIN)
+        .args(["demo", "--format", "summary", "--duration", "1", "--mqtt", &url, "--mqtt-writes"])
+        .output()
+        .unwrap();
+    assert!(!passive.status.success());
+    assert!(
+        String::from_utf8_lossy(&passive.stderr).contains("never writes"),
+        "{}",
+        String::from_utf8_lossy(&passive.stderr)
+    );
+}

@@ -379,3 +379,61 @@ fn held_messages_survive_a_restart_of_mbtap() {
     assert!(held.iter().any(|&t| t >= stopped && t <= stopped + 3_000), "the start of the first run's outage");
     assert_seq_counts(&host.got()[host.got().iter().rposition(|m| is(m, "NBIRTH", None)).unwrap()..]);
 }
+
+/// Issue 30: a DCMD from the host reaches the simulated MK4 through the profile (a scaled set
+/// point by its published name) and the value comes back as DDATA; one out of the profile's
+/// range is refused and never written.
+#[test]
+#[ignore = "needs mosquitto, python3 and pysparkplug; .ci/run installs them and runs this with --ignored"]
+fn a_dcmd_write_reaches_the_device_and_comes_back_as_data() {
+    let d = dir("dcmd");
+    let port = free_port();
+    let _broker = Kill(broker(&d, port));
+    let host = Host::start(port);
+    let bus = d.join("bus");
+    let _sim = common::simulate(&bus, &["--duration", "120"]);
+    let mut watch = Command::new(BIN)
+        .args(["watch", bus.to_str().unwrap(), "--device", "mk4", "--interval", "200ms", "--count", "300"])
+        .args(["--format", "jsonl", "--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+        .args(["--sparkplug", "plant/watch", "--mqtt-writes", "holding:102..105"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let err = watch.stderr_lines();
+    let _watch = Kill(watch);
+    host.wait_for("the MK4's birth", Duration::from_secs(30), |g| g.iter().any(|m| is(m, "DBIRTH", Some("mk4-1"))));
+    let dcmd = |metric: &str, value: &str| {
+        let ok = Command::new("python3")
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/interop/sparkplug_host.py"))
+            .args(["dcmd", &port.to_string(), "plant", "watch", "mk4-1", metric, value])
+            .status()
+            .unwrap();
+        assert!(ok.success());
+    };
+    dcmd("Level 2 set point (pump 1 on)", "3.5");
+    dcmd("Working pumps", "7");
+    host.wait_for("the new set point as data", Duration::from_secs(30), |g| {
+        g.iter().any(|m| {
+            is(m, "DDATA", Some("mk4-1"))
+                && m["payload"]["metrics"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|x| x["name"] == "Level 2 set point (pump 1 on)" && x["double_value"].as_f64() == Some(3.5))
+        })
+    });
+    let start = Instant::now();
+    while !err.lock().unwrap().iter().any(|l| l.contains("write refused")) {
+        assert!(start.elapsed() < Duration::from_secs(30), "{:#?}", err.lock().unwrap());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let said = err.lock().unwrap().join("\n");
+    assert!(said.contains("outside the documented range"), "{said}");
+    // Never written: no DDATA ever carries 7 working pumps.
+    assert!(!host.got().iter().any(|m| {
+        m["payload"]["metrics"]
+            .as_array()
+            .is_some_and(|ms| ms.iter().any(|x| x["name"] == "Working pumps" && x["long_value"].as_str() == Some("7")))
+    }));
+}

@@ -46,7 +46,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let live = format == MasterFormat::Text && std::io::stdout().is_terminal();
     let profiles: mbtap_core::profile::Profiles = profile.iter().map(|p| (unit, p.clone())).collect();
     // No health figures: watch hears only its own answers, not the bus.
-    let mqtt = crate::publish::mqtt::Mqtt::start(&args.mqtt, &m.target, profiles, false)?;
+    // Writes the broker asks for (`--mqtt-writes`) arrive here and are done between rounds.
+    let (asks_tx, asks) = std::sync::mpsc::channel();
+    let mqtt = crate::publish::mqtt::Mqtt::start_with(&args.mqtt, &m.target, profiles, false, Some(asks_tx))?;
     let rt = crate::cmd::runtime()?;
     let mut any_failed = false;
     rt.block_on(async {
@@ -56,6 +58,13 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let mut next = tokio::time::Instant::now();
         while args.count.is_none_or(|c| round < c) {
             round += 1;
+            if let Some(mq) = &mqtt {
+                while let Ok(ask) = asks.try_recv() {
+                    let outcome =
+                        crate::master::remote::apply(&mut link, unit, &ask, profile.as_ref(), timeout, m.retries).await;
+                    mq.write_result(&ask, &outcome, crate::source::serial::now().0);
+                }
+            }
             let started = Instant::now();
             let t_ns = crate::source::serial::now().0;
             let (rows, failures) =

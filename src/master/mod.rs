@@ -4,6 +4,7 @@
 
 pub mod exec;
 pub mod link;
+pub mod remote;
 pub mod show;
 pub mod sunspec;
 

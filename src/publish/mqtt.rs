@@ -70,6 +70,12 @@ pub struct MqttArgs {
     /// messages are dropped, counted and said.
     #[arg(long, default_value = "256MB", value_parser = parse_size, value_name = "SIZE")]
     pub mqtt_buffer_max: u64,
+    /// Let the broker write (`watch` only): `PREFIX/unit/U/TABLE/ADDRESS/set` (the value) and
+    /// `PREFIX/unit/U/set` (`NAME=VALUE`), or Sparkplug DCMD by metric name — through the
+    /// profile's names, scale, ranges and access, as `mbtap write`; each outcome published on
+    /// `PREFIX/unit/U/write` (Sparkplug: the value read back as DDATA). Off: refused and counted.
+    #[arg(long)]
+    pub mqtt_writes: bool,
 }
 
 /// `256MB`, `2GB`, `64KB` or bytes.
@@ -277,6 +283,7 @@ struct State {
     next_figures_ns: Option<u64>,
     figures_at: Option<std::time::Instant>,
     counts_sent: (u64, u64),
+    refused_sent: u64,
 }
 
 /// The publisher.
@@ -333,7 +340,24 @@ impl Mqtt {
     /// prefix; `health` keeps a health analysis for the unit status and findings topics (not for
     /// `watch`, which hears only its own answers).
     pub fn start(args: &MqttArgs, source: &str, profiles: Profiles, health: bool) -> anyhow::Result<Option<Arc<Self>>> {
+        Self::start_with(args, source, profiles, health, None)
+    }
+
+    /// As [`Self::start`], for a command that writes what the broker asks (`watch`): the asks
+    /// go to `writes`. Without it, `--mqtt-writes` is refused at start: a passive sniffer never
+    /// writes to the line.
+    pub fn start_with(
+        args: &MqttArgs,
+        source: &str,
+        profiles: Profiles,
+        health: bool,
+        writes: Option<std::sync::mpsc::Sender<mbtap_core::query::remote::Ask>>,
+    ) -> anyhow::Result<Option<Arc<Self>>> {
         let Some(url) = &args.mqtt else { return Ok(None) };
+        anyhow::ensure!(
+            !args.mqtt_writes || writes.is_some(),
+            "--mqtt-writes: only `watch` writes what the broker asks; this command only listens, and a passive sniffer never writes to the line"
+        );
         let (tls, host, port) = parse_url(url)?;
         let prefix = args.mqtt_prefix.clone().unwrap_or_else(|| {
             let name = std::path::Path::new(source)
@@ -402,12 +426,11 @@ impl Mqtt {
             }
             AsyncClient::new(options, args.mqtt_queue.max(1))
         };
-        let outbox = Arc::new(Mutex::new(super::outbox::Outbox::new(
-            client.clone(),
-            spool,
-            node,
-            (!sparkplug).then(|| status.clone()),
-        )));
+        let mut ob = super::outbox::Outbox::new(client.clone(), spool, node, (!sparkplug).then(|| status.clone()));
+        ob.writes = writes.filter(|_| args.mqtt_writes);
+        ob.prefix.clone_from(&prefix);
+        ob.profiles = profiles.clone();
+        let outbox = Arc::new(Mutex::new(ob));
         let connected = Arc::new(AtomicBool::new(false));
         let (done_tx, done_rx) = std::sync::mpsc::channel();
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("--mqtt: a runtime")?;
@@ -562,13 +585,14 @@ impl Mqtt {
         }
         let counts = {
             let ob = lock(&self.outbox);
-            (ob.published, ob.dropped)
+            (ob.published, ob.dropped, ob.refused_writes)
         };
-        if counts.1 != st.counts_sent.1 || last {
+        if counts.1 != st.counts_sent.1 || counts.2 != st.refused_sent || last {
             // The count of drops itself may be dropped; the next change or the end says it again.
-            let j = serde_json::json!({"published": counts.0, "dropped": counts.1});
+            let j = serde_json::json!({"published": counts.0, "dropped": counts.1, "refused_writes": counts.2});
+            st.refused_sent = counts.2;
             self.send(&format!("{}/publisher", self.prefix), QoS::AtLeastOnce, true, j.to_string());
-            st.counts_sent = counts;
+            st.counts_sent = (counts.0, counts.1);
         }
     }
 
@@ -615,6 +639,37 @@ impl Mqtt {
             "mbtap: mqtt: {} messages queued for the broker, {} dropped (queue full or broker away){held}",
             ob.published, ob.dropped
         );
+    }
+
+    /// What became of a write the broker asked for: published on `PREFIX/unit/U/write` (plain;
+    /// Sparkplug hosts see the value read back as DDATA), refusals counted.
+    pub fn write_result(
+        &self,
+        ask: &mbtap_core::query::remote::Ask,
+        outcome: &crate::master::remote::Outcome,
+        t_ns: u64,
+    ) {
+        match outcome {
+            Err(why) => lock(&self.outbox).refuse(Some(ask.unit), why),
+            Ok(back) => {
+                eprintln!("mbtap: mqtt: wrote {} to unit {} as the broker asked", ask.item.text, ask.unit);
+                if !self.sparkplug {
+                    let body = serde_json::json!({
+                        "ok": true, "item": ask.item.text, "t_ns": t_ns,
+                        "read_back": back.as_ref().map(mbtap_core::query::rows::Row::to_json),
+                    });
+                    self.send(
+                        &format!("{}/unit/{}/write", self.prefix, ask.unit),
+                        QoS::AtLeastOnce,
+                        false,
+                        body.to_string(),
+                    );
+                }
+                if let Some(r) = back {
+                    self.rows(vec![r.clone()], t_ns);
+                }
+            }
+        }
     }
 
     /// Sparkplug: the rows of one event as samples of their units' devices.

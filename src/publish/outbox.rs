@@ -13,6 +13,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
+use mbtap_core::profile::Profiles;
+use mbtap_core::query::remote::{Ask, parse_dcmd, parse_set};
 use mbtap_core::sparkplug::{EdgeNode, Emit, Out};
 use mbtap_core::spool::{Kind, mqtt_body, parse_mqtt_body};
 use rumqttc::{AsyncClient, EventLoop, LastWill, QoS};
@@ -53,6 +55,14 @@ pub struct Outbox {
     pub forwarded: u64,
     /// Since when held messages are being forwarded, and how many were forwarded before.
     forward_start: Option<(std::time::Instant, u64)>,
+    /// `--mqtt-writes`: where writes asked for go (the master that carries them out).
+    pub writes: Option<std::sync::mpsc::Sender<Ask>>,
+    /// The plain topic prefix (`…/unit/U/…/set` topics are under it).
+    pub prefix: String,
+    /// Profiles by unit, to find a DCMD metric's register.
+    pub profiles: Profiles,
+    /// Writes refused (off, unreadable, refused by the profile or the device).
+    pub refused_writes: u64,
 }
 
 impl std::fmt::Debug for Outbox {
@@ -84,6 +94,10 @@ impl Outbox {
             held: 0,
             forwarded: 0,
             forward_start: None,
+            writes: None,
+            prefix: String::new(),
+            profiles: Profiles::new(),
+            refused_writes: 0,
         }
     }
 
@@ -143,6 +157,11 @@ impl Outbox {
                 let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
             }
             self.send_outs(births);
+        }
+        if self.writes.is_some() && self.node.is_none() {
+            for t in [format!("{}/unit/+/set", self.prefix), format!("{}/unit/+/+/+/set", self.prefix)] {
+                let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
+            }
         }
         if let Some(status) = self.status.clone() {
             // Retained, so a late subscriber sees it; replaces the will.
@@ -220,10 +239,53 @@ impl Outbox {
         true
     }
 
-    /// A message arrived (a command to the Sparkplug node).
+    /// A message arrived: a command to the Sparkplug node (NCMD), a write to one of its devices
+    /// (DCMD), or a plain `…/set`.
     fn incoming(&mut self, topic: &str, payload: &[u8]) {
-        let outs = self.node.as_mut().map(|n| n.command(topic, payload, now_ms())).unwrap_or_default();
-        self.send_outs(outs);
+        if let Some(node) = self.node.as_mut() {
+            if let Some(device) = node.dcmd_device(topic) {
+                for ask in parse_dcmd(device, payload, &self.profiles) {
+                    self.ask(ask);
+                }
+                return;
+            }
+            let outs = node.command(topic, payload, now_ms());
+            self.send_outs(outs);
+            return;
+        }
+        if let Some(ask) = parse_set(&self.prefix, topic, payload) {
+            self.ask(ask);
+        }
+    }
+
+    /// A write asked for: to the master, or refused.
+    fn ask(&mut self, ask: Result<Ask, String>) {
+        match (ask, &self.writes) {
+            (Ok(ask), Some(tx)) => {
+                if tx.send(ask).is_err() {
+                    self.refuse(None, "the master has stopped");
+                }
+            }
+            (Ok(ask), None) => {
+                let why = format!("{}: writes from the broker are off (start with --mqtt-writes)", ask.item.text);
+                self.refuse(Some(ask.unit), &why);
+            }
+            (Err(why), _) => self.refuse(None, &why),
+        }
+    }
+
+    /// A write refused: counted, said, and (plain MQTT) published on `PREFIX/unit/U/write`.
+    pub fn refuse(&mut self, unit: Option<u8>, why: &str) {
+        self.refused_writes += 1;
+        eprintln!("mbtap: mqtt: write refused: {why}");
+        if self.node.is_none() {
+            let topic = match unit {
+                Some(u) => format!("{}/unit/{u}/write", self.prefix),
+                None => format!("{}/write", self.prefix),
+            };
+            let body = serde_json::json!({"ok": false, "refused": why}).to_string();
+            self.send(&topic, QoS::AtLeastOnce, false, body.into_bytes());
+        }
     }
 
     /// The will of the next connection: the node's NDEATH (with the next bdSeq), or `offline`.

@@ -5,6 +5,7 @@ asking a node for a rebirth.
 
     sparkplug_host.py listen PORT
     sparkplug_host.py rebirth PORT GROUP NODE
+    sparkplug_host.py dcmd PORT GROUP NODE DEVICE METRIC VALUE   (a Double)
 """
 
 import json
@@ -47,23 +48,28 @@ def listen(port):
     c.loop_forever()
 
 
-def rebirth(port, group, node):
+def command(port, topic, name, datatype, field, value):
     p = pb.Payload()
     p.timestamp = int(time.time() * 1000)
     m = p.metrics.add()
-    m.name = "Node Control/Rebirth"
-    m.datatype = 11  # Boolean
-    m.boolean_value = True
+    m.name = name
+    m.datatype = datatype
+    setattr(m, field, value)
     c = client(f"sparkplug-cmd-{port}", False)
     c.connect("127.0.0.1", port)
     c.loop_start()
-    c.publish(f"spBv1.0/{group}/NCMD/{node}", p.SerializeToString(), qos=0).wait_for_publish()
+    c.publish(topic, p.SerializeToString(), qos=0).wait_for_publish()
     c.loop_stop()
     c.disconnect()
 
 
 if __name__ == "__main__":
+    port = int(sys.argv[2])
     if sys.argv[1] == "listen":
-        listen(int(sys.argv[2]))
+        listen(port)
+    elif sys.argv[1] == "rebirth":
+        topic = f"spBv1.0/{sys.argv[3]}/NCMD/{sys.argv[4]}"
+        command(port, topic, "Node Control/Rebirth", 11, "boolean_value", True)  # Boolean
     else:
-        rebirth(int(sys.argv[2]), sys.argv[3], sys.argv[4])
+        topic = f"spBv1.0/{sys.argv[3]}/DCMD/{sys.argv[4]}/{sys.argv[5]}"
+        command(port, topic, sys.argv[6], 10, "double_value", float(sys.argv[7]))  # Double

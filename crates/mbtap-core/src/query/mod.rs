@@ -9,6 +9,7 @@
 pub mod encode;
 pub mod items;
 pub mod plan;
+pub mod remote;
 pub mod resolve;
 pub mod rows;
 

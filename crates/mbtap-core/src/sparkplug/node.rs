@@ -116,6 +116,13 @@ impl EdgeNode {
         [self.topic("NCMD", None), self.topic("DCMD", Some("+"))]
     }
 
+    /// The device a DCMD topic is addressed to, if it is this node's.
+    #[must_use]
+    pub fn dcmd_device<'t>(&self, topic: &'t str) -> Option<&'t str> {
+        let device = topic.strip_prefix(&format!("{NAMESPACE}/{}/DCMD/{}/", self.group, self.node))?;
+        (!device.is_empty() && !device.contains('/')).then_some(device)
+    }
+
     fn next_seq(&mut self) -> u64 {
         let s = self.seq;
         self.seq = (self.seq + 1) % 256;

@@ -1,0 +1,45 @@
+//! Writes from the broker (`watch --mqtt-writes`), carried out by the master between its rounds
+//! exactly as `mbtap write` would: the item resolved by the profile, the value scaled and
+//! range-checked, refused when the register is read-only — then sent, and read back.
+
+use std::time::Duration;
+
+use mbtap_core::profile::Profile;
+use mbtap_core::query::encode::encode_write;
+use mbtap_core::query::plan::{Plan, Read};
+use mbtap_core::query::remote::Ask;
+use mbtap_core::query::resolve;
+use mbtap_core::query::rows::Row;
+
+use super::exec;
+use super::link::Link;
+
+/// What became of one ask: the value read back, or why it was not written.
+pub type Outcome = Result<Option<Row>, String>;
+
+/// Carries out `ask` on `unit` (the watched unit; another is refused).
+pub async fn apply(
+    link: &mut Link,
+    unit: u8,
+    ask: &Ask,
+    profile: Option<&Profile>,
+    timeout: Duration,
+    retries: u32,
+) -> Outcome {
+    if ask.unit != unit {
+        return Err(format!("{}: this watch reads and writes unit {unit} only, not unit {}", ask.item.text, ask.unit));
+    }
+    if unit == 0 {
+        return Err(format!("{}: unit 0 is a broadcast; the broker cannot ask for one", ask.item.text));
+    }
+    let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;
+    let w = encode_write(&target, profile, false).map_err(|e| e.to_string())?;
+    let (answer, _) = exec::send(link, unit, exec::Op::Write(&w), timeout, retries).await;
+    if let Some(problem) = answer.problem() {
+        return Err(format!("{}: the device refused or did not answer: {problem}", ask.item.text));
+    }
+    let quantity = u16::try_from(w.words.len()).unwrap_or(1);
+    let plan = Plan { reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }], skipped: vec![] };
+    let (back, _) = exec::read_all(link, unit, std::slice::from_ref(&target), &plan, profile, timeout, retries).await;
+    Ok(back.into_iter().next())
+}
