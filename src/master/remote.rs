@@ -7,15 +7,11 @@ use std::time::Duration;
 use mbtap_core::profile::Profile;
 use mbtap_core::query::encode::encode_write;
 use mbtap_core::query::plan::{Plan, Read};
-use mbtap_core::query::remote::Ask;
+use mbtap_core::query::remote::{Ask, Outcome};
 use mbtap_core::query::resolve;
-use mbtap_core::query::rows::Row;
 
 use super::exec;
 use super::link::Link;
-
-/// What became of one ask: the value read back, or why it was not written.
-pub type Outcome = Result<Option<Row>, String>;
 
 /// Carries out `ask` on `unit` (the watched unit; another is refused).
 pub async fn apply(

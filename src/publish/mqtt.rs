@@ -646,7 +646,7 @@ impl Mqtt {
     pub fn write_result(
         &self,
         ask: &mbtap_core::query::remote::Ask,
-        outcome: &crate::master::remote::Outcome,
+        outcome: &mbtap_core::query::remote::Outcome,
         t_ns: u64,
     ) {
         match outcome {

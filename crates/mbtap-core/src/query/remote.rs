@@ -10,6 +10,10 @@ use crate::profile::Profiles;
 use crate::sparkplug::node::metric_name;
 use crate::sparkplug::{Payload, Value};
 
+/// What became of one ask: the value read back (if the read back answered), or why it was not
+/// written.
+pub type Outcome = Result<Option<super::rows::Row>, String>;
+
 /// One write asked for.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Ask {
