@@ -500,6 +500,10 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "mqtt_interval" => mqtt.mqtt_interval,
         "mqtt_discovery" => mqtt.mqtt_discovery,
         "mqtt_queue" => mqtt.mqtt_queue,
+        "sparkplug" => mqtt.sparkplug,
+        "mqtt_buffer" => mqtt.mqtt_buffer,
+        "mqtt_buffer_max" => mqtt.mqtt_buffer_max,
+        "mqtt_writes" => mqtt.mqtt_writes,
     }
     merged.config = cli.config;
     Ok(merged)
