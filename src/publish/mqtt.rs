@@ -258,6 +258,13 @@ fn credentials(args: &MqttArgs) -> anyhow::Result<Option<(String, String)>> {
     }
 }
 
+/// The largest MQTT packet sent or taken: a DBIRTH of a big device fits many times over.
+const MAX_PACKET: usize = 4 << 20;
+
+/// How long a Sparkplug node waits at start for its first session before it analyses on
+/// (holding what it measures meanwhile).
+const FIRST_SESSION_WAIT: Duration = Duration::from_secs(5);
+
 /// Unit health, findings and the publisher's counts go out at most this often (bus time).
 const FIGURES_EVERY_NS: u64 = 1_000_000_000;
 
@@ -404,6 +411,9 @@ impl Mqtt {
         let mut options = MqttOptions::new(format!("mbtap-{}-{}", hostname(), std::process::id()), host.clone(), port);
         options.set_keep_alive(Duration::from_secs(10));
         options.set_request_channel_capacity(args.mqtt_queue.max(1));
+        // rumqttc refuses packets over 10 KiB by default and drops the connection over one: a
+        // DBIRTH declaring a device's hundred metrics is bigger (MQTT allows 256 MiB, v3.1.1 §2.2.3).
+        options.set_max_packet_size(MAX_PACKET, MAX_PACKET);
         if let Some((u, p)) = credentials(args)? {
             options.set_credentials(u, p);
         }
@@ -430,6 +440,7 @@ impl Mqtt {
         ob.writes = writes.filter(|_| args.mqtt_writes);
         ob.prefix.clone_from(&prefix);
         ob.profiles = profiles.clone();
+        ob.memory_cap = args.mqtt_queue.max(1);
         let outbox = Arc::new(Mutex::new(ob));
         let connected = Arc::new(AtomicBool::new(false));
         let (done_tx, done_rx) = std::sync::mpsc::channel();
@@ -444,7 +455,15 @@ impl Mqtt {
             })
             .context("--mqtt: starting the publisher thread")?;
         match &args.sparkplug {
-            Some(spec) => eprintln!("mbtap: mqtt: publishing to {url} as Sparkplug B edge node {spec}"),
+            Some(spec) => {
+                eprintln!("mbtap: mqtt: publishing to {url} as Sparkplug B edge node {spec}");
+                // An edge node is born before it speaks: the first session gets a few seconds to
+                // begin, so a fast replay's values go out live rather than all as held history.
+                let start = std::time::Instant::now();
+                while !connected.load(Ordering::SeqCst) && start.elapsed() < FIRST_SESSION_WAIT {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+            }
             None => eprintln!("mbtap: mqtt: publishing to {url} under {prefix}/"),
         }
         let health = (health && !sparkplug).then(|| Health::new(profiles.clone()));

@@ -63,6 +63,10 @@ pub struct Outbox {
     pub profiles: Profiles,
     /// Writes refused (off, unreadable, refused by the profile or the device).
     pub refused_writes: u64,
+    /// Sparkplug updates held in memory when there is no disk buffer (at most `memory_cap`,
+    /// the oldest dropped and counted): forwarded as historical data like the disk's.
+    memory: std::collections::VecDeque<Vec<u8>>,
+    pub memory_cap: usize,
 }
 
 impl std::fmt::Debug for Outbox {
@@ -98,6 +102,8 @@ impl Outbox {
             prefix: String::new(),
             profiles: Profiles::new(),
             refused_writes: 0,
+            memory: std::collections::VecDeque::new(),
+            memory_cap: 10_000,
         }
     }
 
@@ -131,7 +137,15 @@ impl Outbox {
             Emit::Send(outs) => self.send_outs(outs),
             Emit::Hold(body) => match self.spool.as_mut().map(|s| s.append(Kind::Sparkplug, &body)) {
                 Some(Ok(())) => self.held += 1,
-                _ => self.dropped += 1,
+                Some(Err(_)) => self.dropped += 1,
+                None => {
+                    if self.memory.len() >= self.memory_cap.max(1) {
+                        self.memory.pop_front();
+                        self.dropped += 1;
+                    }
+                    self.memory.push_back(body);
+                    self.held += 1;
+                }
             },
         }
     }
@@ -144,7 +158,7 @@ impl Outbox {
 
     /// Whether held messages wait (forwarding or on disk).
     fn holding(&self) -> bool {
-        self.forwarding.is_some() || self.spool.as_ref().is_some_and(|s| !s.is_empty())
+        self.forwarding.is_some() || !self.memory.is_empty() || self.spool.as_ref().is_some_and(|s| !s.is_empty())
     }
 
     /// The connection is up: births or status first, then forwarding if anything is held.
@@ -189,6 +203,14 @@ impl Outbox {
             return false;
         }
         for _ in 0..FORWARD_BATCH {
+            if self.forwarding.is_none()
+                && let Some(body) = self.memory.pop_front()
+            {
+                self.forwarded += 1;
+                let outs = self.node.as_mut().map(|n| n.historical(&body, now_ms())).unwrap_or_default();
+                self.send_outs(outs);
+                continue;
+            }
             if self.forwarding.is_none() {
                 let Some((n, recs)) = self.spool.as_mut().and_then(Spool::oldest) else {
                     self.live = true;
@@ -331,9 +353,10 @@ pub async fn run(mut eventloop: EventLoop, outbox: Arc<Mutex<Outbox>>, connected
                 let mut ob = lock(&outbox);
                 ob.connected();
                 if ob.holding() {
-                    let bytes = ob.spool.as_ref().map_or(0, Spool::bytes);
+                    let on_disk = ob.spool.as_ref().map_or(0, Spool::bytes);
+                    let in_memory = ob.memory.len();
                     eprintln!(
-                        "mbtap: mqtt: forwarding what was held while the broker was away ({bytes} bytes; historical data in Sparkplug)"
+                        "mbtap: mqtt: forwarding what was held while the broker was away ({on_disk} bytes on disk, {in_memory} updates in memory; historical data in Sparkplug)"
                     );
                 }
             }
