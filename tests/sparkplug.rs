@@ -437,3 +437,44 @@ fn a_dcmd_write_reaches_the_device_and_comes_back_as_data() {
             .is_some_and(|ms| ms.iter().any(|x| x["name"] == "Working pumps" && x["long_value"].as_str() == Some("7")))
     }));
 }
+
+/// Regression (issue 30): rumqttc refuses packets over 10 KiB by default and drops the
+/// connection over one; a DBIRTH declaring a busy device's metrics is bigger, so the node fell
+/// into a loop of reconnects and births and sent almost no data. A generated line (every read of
+/// another range: the births grow with every new register) is replayed whole into the broker.
+#[test]
+#[ignore = "needs mosquitto, python3 and pysparkplug; .ci/run installs them and runs this with --ignored"]
+fn a_dbirth_over_10_kib_goes_out_whole_on_one_connection() {
+    let d = dir("big-birth");
+    let capture = d.join("line.pcapng");
+    let g = Command::new(BIN)
+        .args(["generate", capture.to_str().unwrap(), "--transactions", "2000"])
+        .output()
+        .unwrap();
+    assert!(g.status.success());
+    let port = free_port();
+    let _broker = Kill(broker(&d, port));
+    let host = Host::start(port);
+    let out = Command::new(BIN)
+        .args(["replay", capture.to_str().unwrap(), "--format", "summary"])
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--sparkplug", "plant/replay"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(err.matches("mqtt: connected").count(), 1, "one session, no reconnects: {err}");
+    assert!(err.contains(", 0 dropped"), "{err}");
+    host.wait_for("the end", Duration::from_secs(30), |g| g.iter().any(|m| is(m, "NDEATH", None)));
+    let got = host.got();
+    let biggest = got
+        .iter()
+        .filter(|m| kind(m).0 == "DBIRTH")
+        .map(|m| m["payload"]["metrics"].as_array().unwrap().len())
+        .max()
+        .unwrap();
+    assert!(biggest > 200, "a birth of {biggest} metrics: not the big one this test is about");
+    for unit in ["unit-1", "unit-5", "unit-17", "unit-247"] {
+        assert!(got.iter().any(|m| is(m, "DDATA", Some(unit))), "no data from {unit}: {:#?}", kinds(&got));
+    }
+    assert_seq_counts(&got);
+}
