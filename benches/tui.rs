@@ -147,18 +147,22 @@ fn ingest_1000_transactions(bencher: Bencher) {
                 t.response.map(<[u8]>::to_vec),
                 t.t_start,
                 t.latency_ns,
+                t.request_pdu.map(<[u8]>::to_vec),
+                t.response_pdu.map(<[u8]>::to_vec),
             ));
         }
     });
     bencher.counter(ItemsCount::new(events.len())).bench_local(|| {
         let mut m = new_model(TRANSACTIONS);
-        for (outcome, unit, function, req, resp, t_start, latency_ns) in &events {
+        for (outcome, unit, function, req, resp, t_start, latency_ns, req_pdu, resp_pdu) in &events {
             let t = mbtap_core::pairing::Transaction {
                 outcome: *outcome,
                 unit: *unit,
                 function: *function,
                 request: req.as_deref(),
                 response: resp.as_deref(),
+                request_pdu: req_pdu.as_deref(),
+                response_pdu: resp_pdu.as_deref(),
                 t_start: *t_start,
                 latency_ns: *latency_ns,
                 input_ended: false,

@@ -447,10 +447,7 @@ fn a_dcmd_write_reaches_the_device_and_comes_back_as_data() {
 fn a_dbirth_over_10_kib_goes_out_whole_on_one_connection() {
     let d = dir("big-birth");
     let capture = d.join("line.pcapng");
-    let g = Command::new(BIN)
-        .args(["generate", capture.to_str().unwrap(), "--transactions", "2000"])
-        .output()
-        .unwrap();
+    let g = Command::new(BIN).args(["generate", capture.to_str().unwrap(), "--transactions", "2000"]).output().unwrap();
     assert!(g.status.success());
     let port = free_port();
     let _broker = Kill(broker(&d, port));

@@ -79,8 +79,10 @@ impl<W: Write> EventWriter<W> {
             Event::Transaction(t)
                 if t.outcome == mbtap_core::pairing::Outcome::Ok && (shown || self.health.is_some()) =>
             {
-                match (self.profiles.get(&t.unit), t.request) {
-                    (Some(p), Some(req)) => Some(mbtap_core::profile::transaction::annotate_wire(p, req, t.response)),
+                match (self.profiles.get(&t.unit), t.request_pdu) {
+                    (Some(p), Some(req)) => {
+                        Some(mbtap_core::profile::transaction::annotate_pdus(p, req, t.response_pdu))
+                    }
                     _ => None,
                 }
             }
@@ -248,10 +250,10 @@ pub fn event_time(e: &Event<'_>) -> u64 {
 /// Takes a completed transaction into a register image (other events change nothing).
 pub fn update_image(image: &mut mbtap_core::profile::image::RegisterImage, e: &Event<'_>) {
     if let Event::Transaction(t) = e
-        && let Some(req) = t.request
+        && let Some(req) = t.request_pdu
     {
         // A failed answer carries no values; its request alone still counts as a transaction.
-        let resp = if t.outcome == mbtap_core::pairing::Outcome::Ok { t.response } else { None };
+        let resp = if t.outcome == mbtap_core::pairing::Outcome::Ok { t.response_pdu } else { None };
         image.update(t.unit, t.t_start.0, req, resp);
     }
 }

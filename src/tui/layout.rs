@@ -31,16 +31,6 @@ pub fn binary(wire: &[u8]) -> Vec<u8> {
     }
 }
 
-/// The PDU of a frame as on the wire (RTU or ASCII), when it splits.
-#[must_use]
-pub fn wire_pdu(wire: &[u8]) -> Option<Vec<u8>> {
-    if wire.first() == Some(&b':') {
-        mbtap_core::proto::parse_ascii(wire).ok().map(|f| f.pdu().to_vec())
-    } else {
-        mbtap_core::proto::parse_rtu(wire).ok().map(|f| f.pdu.to_vec())
-    }
-}
-
 fn u16_at(b: &[u8], i: usize) -> Option<u16> {
     Some(u16::from_be_bytes([*b.get(i)?, *b.get(i.checked_add(1)?)?]))
 }

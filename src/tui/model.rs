@@ -176,17 +176,17 @@ impl Model {
                 });
             }
             Event::Transaction(t) => {
-                let annotations = match (t.outcome, t.request, self.profiles.get(&t.unit)) {
+                let annotations = match (t.outcome, t.request_pdu, self.profiles.get(&t.unit)) {
                     (Outcome::Ok, Some(req), Some(p)) => {
-                        mbtap_core::profile::transaction::annotate_wire(p, req, t.response)
+                        mbtap_core::profile::transaction::annotate_pdus(p, req, t.response_pdu)
                     }
                     _ => Vec::new(),
                 };
                 self.health.event_annotated(e, Some(&annotations));
                 if t.outcome == Outcome::Ok
-                    && let Some(req) = t.request
+                    && let Some(req) = t.request_pdu
                 {
-                    self.registers.update(t.unit, t.t_start.0, req, t.response, &annotations, self.lang);
+                    self.registers.update(t.unit, t.t_start.0, req, t.response_pdu, &annotations, self.lang);
                 }
                 self.devices.entry(t.unit).or_default().transaction(t);
                 self.bus.transaction(t.outcome);
@@ -263,7 +263,7 @@ fn summary(t: &mbtap_core::pairing::Transaction<'_>, annotations: &[Annotation],
         }
         return s;
     }
-    let brief = t.request.and_then(request_brief).unwrap_or_default();
+    let brief = t.request_pdu.and_then(request_brief).unwrap_or_default();
     if !brief.is_empty() {
         if !s.is_empty() {
             s.push_str(" · ");
@@ -274,10 +274,9 @@ fn summary(t: &mbtap_core::pairing::Transaction<'_>, annotations: &[Annotation],
 }
 
 /// What a request asks, briefly: `430 ×4`, `100 := 7`.
-fn request_brief(wire: &[u8]) -> Option<String> {
+fn request_brief(pdu: &[u8]) -> Option<String> {
     use mbtap_core::proto::Request as R;
-    let pdu = super::layout::wire_pdu(wire)?;
-    let (_, req) = mbtap_core::proto::parse_request(&pdu).ok()?;
+    let (_, req) = mbtap_core::proto::parse_request(pdu).ok()?;
     Some(match req {
         R::ReadCoils { address, quantity }
         | R::ReadDiscreteInputs { address, quantity }

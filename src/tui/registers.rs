@@ -39,14 +39,14 @@ impl Registers {
         &mut self,
         unit: u8,
         t_ns: u64,
-        request: &[u8],
-        response: Option<&[u8]>,
+        request_pdu: &[u8],
+        response_pdu: Option<&[u8]>,
         annotations: &[Annotation],
         lang: Lang,
     ) {
         if annotations.is_empty() {
             self.image.values.clear();
-            self.image.update(unit, t_ns, request, response);
+            self.image.update(unit, t_ns, request_pdu, response_pdu);
             let raw: Vec<_> = self.image.values.iter().map(|(&k, v)| (k, v.raw)).collect();
             for ((u, table, address), value) in raw {
                 self.set((u, table, address), None, value.to_string(), i64::from(value), true, t_ns);
@@ -133,21 +133,15 @@ mod tests {
 
     #[test]
     fn raw_values_without_a_profile_and_their_changes() {
+        // Unit 9 reads holding 100..101 = [1, 2], later [1, 3]: the PDUs pairing hands over.
+        // Request: function 03, address 0064, quantity 0002.
+        const READ_100_TWO: [u8; 5] = [0x03, 0x00, 0x64, 0x00, 0x02];
+        // Responses: function 03, byte count 04, values 0001 0002, then 0001 0003.
+        const VALUES_1_2: [u8; 6] = [0x03, 0x04, 0x00, 0x01, 0x00, 0x02];
+        const VALUES_1_3: [u8; 6] = [0x03, 0x04, 0x00, 0x01, 0x00, 0x03];
         let mut r = Registers::default();
-        // Unit 9 reads holding 100..101 = [1, 2], later [1, 3].
-        let req = [0x09, 0x03, 0x00, 0x64, 0x00, 0x02, 0xC4, 0x93];
-        let mut resp1 = vec![0x09, 0x03, 0x04, 0x00, 0x01, 0x00, 0x02];
-        let mut resp2 = vec![0x09, 0x03, 0x04, 0x00, 0x01, 0x00, 0x03];
-        for r in [&mut resp1, &mut resp2] {
-            let crc = mbtap_core::proto::crc16(r);
-            r.extend_from_slice(&crc.to_le_bytes());
-        }
-        let mut req = req.to_vec();
-        req.truncate(6);
-        let crc = mbtap_core::proto::crc16(&req);
-        req.extend_from_slice(&crc.to_le_bytes());
-        r.update(9, 10, &req, Some(&resp1), &[], Lang::En);
-        r.update(9, 20, &req, Some(&resp2), &[], Lang::En);
+        r.update(9, 10, &READ_100_TWO, Some(&VALUES_1_2), &[], Lang::En);
+        r.update(9, 20, &READ_100_TWO, Some(&VALUES_1_3), &[], Lang::En);
         let regs: Vec<_> = r.of(9).collect();
         assert_eq!(regs.len(), 2);
         assert_eq!((regs[0].1, regs[0].2.raw, regs[0].2.changed_ns), (100, 1, 10), "unchanged since 10");

@@ -157,6 +157,8 @@ mod tests {
             function: 3,
             request: Some(req),
             response: None,
+            request_pdu: None,
+            response_pdu: None,
             t_start: Timestamp(at_ms * 1_000_000),
             latency_ns: latency_ms.map(|l| l * 1_000_000),
             input_ended: false,

@@ -4,7 +4,6 @@
 use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::{AsciiFramer, Frame, FrameEvent, FramerConfig, Noise, RtuFramer};
 use crate::pairing::{Pairing, PairingConfig, Role, Transaction};
-use crate::proto::parse_ascii;
 
 /// Serial transmission mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -213,23 +212,7 @@ fn route<S: Sink>(pairing: &mut Pairing, scratch: &mut Vec<u8>, e: FrameEvent<'_
         FrameEvent::Noise(n) => sink.event(&Event::Noise(&n)),
         FrameEvent::Glitch(n) => sink.event(&Event::Glitch(&n)),
         FrameEvent::Frame(f) => {
-            let decoded: Option<(u8, &[u8])> = if f.bytes.first() == Some(&b':') {
-                match parse_ascii(f.bytes) {
-                    Ok(a) => {
-                        scratch.clear();
-                        scratch.push(a.unit());
-                        scratch.extend_from_slice(a.pdu());
-                        scratch.split_first().map(|(u, p)| (*u, p))
-                    }
-                    Err(_) => None,
-                }
-            } else {
-                // The framer has checked the CRC already: split without computing it again.
-                match f.bytes {
-                    [unit, pdu @ .., _, _] if !pdu.is_empty() => Some((*unit, pdu)),
-                    _ => None,
-                }
-            };
+            let decoded = f.unit_pdu(scratch);
             // The frame's event goes out before the transaction it completes; a sink is needed
             // by both callbacks, so it is shared through a cell for the duration of the call.
             let cell = std::cell::RefCell::new(sink);

@@ -54,6 +54,8 @@ impl Outcome {
 /// Longest frame on the wire (an ASCII frame: 513 characters, Modbus over Serial Line v1.02
 /// §2.5.2.1); request copies are kept in a fixed buffer of this size.
 const MAX: usize = 513;
+/// The longest PDU: 253 bytes (MAP v1.1b3 §4.1).
+const MAX_PDU: usize = 253;
 
 /// A completed (or abandoned) transaction, borrowing its frames (RTU, as on the wire) for the
 /// duration of the callback: pairing allocates nothing per transaction.
@@ -65,6 +67,10 @@ pub struct Transaction<'a> {
     pub function: u8,
     pub request: Option<&'a [u8]>,
     pub response: Option<&'a [u8]>,
+    /// The request's PDU, as the framer decoded it (no one splits the wire bytes again).
+    pub request_pdu: Option<&'a [u8]>,
+    /// The response's PDU when its check passed (a damaged answer's bytes carry no values).
+    pub response_pdu: Option<&'a [u8]>,
     /// Start of the first frame.
     pub t_start: Timestamp,
     /// End of the request to start of the response; `None` without one, or when the reads'
@@ -98,6 +104,8 @@ impl Default for PairingConfig {
 struct Pending {
     bytes: [u8; MAX],
     len: usize,
+    pdu: [u8; MAX_PDU],
+    pdu_len: usize,
     unit: u8,
     function: u8,
     t_start: Timestamp,
@@ -124,8 +132,16 @@ enum Decision {
 }
 
 impl Pending {
-    const EMPTY: Self =
-        Self { bytes: [0; MAX], len: 0, unit: 0, function: 0, t_start: Timestamp(0), t_end: Timestamp(0) };
+    const EMPTY: Self = Self {
+        bytes: [0; MAX],
+        len: 0,
+        pdu: [0; MAX_PDU],
+        pdu_len: 0,
+        unit: 0,
+        function: 0,
+        t_start: Timestamp(0),
+        t_end: Timestamp(0),
+    };
 }
 
 /// What pairing decided about one frame.
@@ -237,14 +253,14 @@ impl Pairing {
                 // The newer request is answered: the overtaken one will not be.
                 self.give_up_overtaken(emit);
                 if let Some(p) = self.pending.take() {
-                    emit(Self::finish(&p, outcome, Some(f)));
+                    emit(Self::finish(&p, outcome, Some((f, pdu))));
                     self.spare = Some(p);
                 }
                 Role::Response
             }
             Decision::AnswersOvertaken(outcome) => {
                 if let Some(p) = self.overtaken.take() {
-                    emit(Self::finish(&p, outcome, Some(f)));
+                    emit(Self::finish(&p, outcome, Some((f, pdu))));
                     self.spare = Some(p);
                 }
                 Role::Response
@@ -260,6 +276,8 @@ impl Pairing {
                         function: fc,
                         request: Some(f.bytes),
                         response: None,
+                        request_pdu: Some(pdu),
+                        response_pdu: None,
                         t_start: f.t_start,
                         latency_ns: None,
                         input_ended: false,
@@ -270,6 +288,9 @@ impl Pairing {
                     let len = f.bytes.len().min(MAX);
                     p.bytes[..len].copy_from_slice(&f.bytes[..len]);
                     p.len = len;
+                    let pdu_len = pdu.len().min(MAX_PDU);
+                    p.pdu[..pdu_len].copy_from_slice(&pdu[..pdu_len]);
+                    p.pdu_len = pdu_len;
                     p.unit = unit;
                     p.function = fc;
                     p.t_start = f.t_start;
@@ -286,6 +307,8 @@ impl Pairing {
                     function: fc & !EXCEPTION_FLAG,
                     request: None,
                     response: Some(f.bytes),
+                    request_pdu: None,
+                    response_pdu: f.check_ok.then_some(pdu),
                     t_start: f.t_start,
                     latency_ns: None,
                     input_ended: false,
@@ -324,13 +347,17 @@ impl Pairing {
         }
     }
 
-    fn finish<'a>(p: &'a Pending, outcome: Outcome, response: Option<&Frame<'a>>) -> Transaction<'a> {
+    fn finish<'a>(p: &'a Pending, outcome: Outcome, response: Option<(&Frame<'a>, &'a [u8])>) -> Transaction<'a> {
+        let response_pdu = response.filter(|(f, _)| f.check_ok).map(|(_, pdu)| pdu);
+        let response = response.map(|(f, _)| f);
         Transaction {
             outcome,
             unit: p.unit,
             function: p.function,
             request: Some(&p.bytes[..p.len]),
             response: response.map(|f| f.bytes),
+            request_pdu: Some(&p.pdu[..p.pdu_len]),
+            response_pdu,
             t_start: p.t_start,
             // Not measurable when the answer began inside a read: its start time is a guess.
             latency_ns: response.filter(|f| f.gap_before_known).map(|f| f.t_start.since(p.t_end)),
@@ -417,5 +444,39 @@ mod tests {
     fn a_third_request_gives_up_the_overtaken_one() {
         let tx = pair(&[(0, ask(9)), (100, ask(8)), (200, ask(1)), (205, answer(1))], 210);
         assert_eq!(tx, [(9, Outcome::NoResponse, None), (8, Outcome::NoResponse, None), (1, Outcome::Ok, Some(4))]);
+    }
+
+    /// Issue 26: a transaction carries its frames' PDUs as the framer decoded them, so no
+    /// consumer splits the wire bytes again; a damaged answer's PDU is not handed on as values.
+    #[test]
+    fn transactions_carry_their_pdus_and_a_damaged_answer_none() {
+        let frame = |bytes: &'static [u8], ms: u64, check_ok: bool| Frame {
+            port: PortId(0),
+            bytes,
+            t_start: Timestamp(ms * 1_000_000),
+            t_end: Timestamp((ms + 1) * 1_000_000),
+            check_ok,
+            gap_violation_ns: None,
+            short_gap_before_ns: None,
+            gap_tolerance_ns: None,
+            short_gap_tolerance_ns: None,
+            resolution_ns: 0,
+            gap_before_known: true,
+            bad_chars: false,
+            alt_len: None,
+        };
+        let (req, resp): (&'static [u8], &'static [u8]) = (ask(1).leak(), answer(1).leak());
+        for check_ok in [true, false] {
+            let mut p = Pairing::new(PairingConfig::default());
+            let mut got = Vec::new();
+            let mut emit = |t: Transaction<'_>| {
+                got.push((t.request_pdu.map(<[u8]>::to_vec), t.response_pdu.map(<[u8]>::to_vec), t.outcome));
+            };
+            p.frame(&frame(req, 0, true), Some((1, &req[1..req.len() - 2])), &mut emit);
+            p.frame(&frame(resp, 10, check_ok), Some((1, &resp[1..resp.len() - 2])), &mut emit);
+            let want_resp = check_ok.then(|| vec![0x03, 0x02, 0x00, 0x07]);
+            let outcome = if check_ok { Outcome::Ok } else { Outcome::BadResponse };
+            assert_eq!(got, [(Some(vec![0x03, 0x00, 0x64, 0x00, 0x01]), want_resp, outcome)]);
+        }
     }
 }

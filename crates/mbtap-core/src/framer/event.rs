@@ -46,6 +46,29 @@ pub struct Frame<'a> {
     pub alt_len: Option<usize>,
 }
 
+impl<'a> Frame<'a> {
+    /// The frame's unit and PDU: RTU's split from its address and CRC (the framer checked the
+    /// CRC already), ASCII's decoded from its hex into `scratch`. `None` when the bytes are too
+    /// short to hold both, or not ASCII hex. The one place a frame's bytes are split: pairing,
+    /// reports, annotation and the UI read the PDU that comes with the frame and its transaction.
+    pub fn unit_pdu<'s>(&self, scratch: &'s mut Vec<u8>) -> Option<(u8, &'s [u8])>
+    where
+        'a: 's,
+    {
+        if self.bytes.first() == Some(&b':') {
+            let a = crate::proto::parse_ascii(self.bytes).ok()?;
+            scratch.clear();
+            scratch.push(a.unit());
+            scratch.extend_from_slice(a.pdu());
+            return scratch.split_first().map(|(u, p)| (*u, p));
+        }
+        match self.bytes {
+            [unit, pdu @ .., _, _] if !pdu.is_empty() => Some((*unit, pdu)),
+            _ => None,
+        }
+    }
+}
+
 /// Bytes that belong to no frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Noise<'a> {

@@ -473,14 +473,14 @@ impl Health {
 
     /// Values outside the profile's range, and readings that jump.
     fn check_values(&mut self, t: &crate::pairing::Transaction<'_>, given: Option<&[Annotation]>) {
-        let (Some(p), Some(req)) = (self.profiles.get(&t.unit), t.request) else { return };
+        let (Some(p), Some(req)) = (self.profiles.get(&t.unit), t.request_pdu) else { return };
         let Some(u) = self.units.get_mut(&t.unit) else { return };
         let at = t.t_start.0;
         let made;
         let annotations = if let Some(a) = given {
             a
         } else {
-            made = crate::profile::transaction::annotate_wire(p, req, t.response);
+            made = crate::profile::transaction::annotate_pdus(p, req, t.response_pdu);
             &made
         };
         if annotations.iter().any(|a| a.notes.iter().any(|n| matches!(n, Note::OutOfRange { .. }))) {

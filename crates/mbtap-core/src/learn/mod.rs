@@ -177,11 +177,9 @@ impl Learner {
 impl crate::analyzer::Sink for Learner {
     fn event(&mut self, event: &crate::analyzer::Event<'_>) {
         if let crate::analyzer::Event::Transaction(t) = event
-            && let (Some(req), Some(resp)) = (t.request, t.response)
-            && let (Some(req), Some(resp)) =
-                (crate::profile::transaction::wire_pdu(req), crate::profile::transaction::wire_pdu(resp))
+            && let (Some(req), Some(resp)) = (t.request_pdu, t.response_pdu)
         {
-            self.observe(t.unit, &req, &resp, t.t_start.0);
+            self.observe(t.unit, req, resp, t.t_start.0);
         }
     }
 }

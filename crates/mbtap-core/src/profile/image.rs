@@ -40,14 +40,6 @@ impl Default for RegisterImage {
     }
 }
 
-fn pdu_of(wire: &[u8]) -> Option<Vec<u8>> {
-    if wire.first() == Some(&b':') {
-        crate::proto::parse_ascii(wire).ok().filter(crate::proto::AsciiFrame::check_ok).map(|f| f.pdu().to_vec())
-    } else {
-        crate::proto::parse_rtu(wire).ok().filter(crate::proto::RtuFrame::check_ok).map(|f| f.pdu.to_vec())
-    }
-}
-
 impl RegisterImage {
     /// An image that keeps at most `limit` addresses.
     #[must_use]
@@ -76,14 +68,13 @@ impl RegisterImage {
         }
     }
 
-    /// Takes in a completed transaction (frames as on the wire).
-    pub fn update(&mut self, unit: u8, t_ns: u64, request: &[u8], response: Option<&[u8]>) {
+    /// Takes in a completed transaction: its request's PDU, and its response's when it checked
+    /// (`Transaction::request_pdu`, `response_pdu`: the framer's, never split from the wire again).
+    pub fn update(&mut self, unit: u8, t_ns: u64, request_pdu: &[u8], response_pdu: Option<&[u8]>) {
         self.transactions += 1;
         self.touched.clear();
-        let Some(req_pdu) = pdu_of(request) else { return };
-        let Ok(([], req)) = crate::proto::parse_request(&req_pdu) else { return };
-        let resp_pdu = response.and_then(pdu_of);
-        let resp = match resp_pdu.as_deref().map(crate::proto::parse_response) {
+        let Ok(([], req)) = crate::proto::parse_request(request_pdu) else { return };
+        let resp = match response_pdu.map(crate::proto::parse_response) {
             Some(Ok(([], r))) => Some(r),
             _ => None,
         };
@@ -304,7 +295,7 @@ mod serve_tests {
         assert_eq!(crate::proto::crc16(&REQUEST[..6]).to_le_bytes(), [0x85, 0xD4]);
         assert_eq!(crate::proto::crc16(&RESPONSE[..7]).to_le_bytes(), [0x4A, 0x34]);
         let mut img = RegisterImage::default();
-        img.update(1, 1_000, &REQUEST, Some(&RESPONSE));
+        img.update(1, 1_000, &REQUEST[1..6], Some(&RESPONSE[1..7]));
         img
     }
 
@@ -323,9 +314,10 @@ mod serve_tests {
     #[test]
     fn a_full_image_keeps_updating_what_it_has_and_counts_the_rest() {
         let mut img = RegisterImage::with_limit(1);
-        img.update(1, 1_000, &REQUEST, Some(&RESPONSE));
+        // The image takes PDUs (the frames' unit, CRC dropped).
+        img.update(1, 1_000, &REQUEST[1..6], Some(&RESPONSE[1..7]));
         assert_eq!((img.values.len(), img.overflowed), (1, 1), "holding 100 kept, 101 counted");
-        img.update(1, 2_000, &REQUEST, Some(&RESPONSE));
+        img.update(1, 2_000, &REQUEST[1..6], Some(&RESPONSE[1..7]));
         assert_eq!(img.values[&(1, Table::HoldingRegisters, 100)].t_ns, 2_000, "a known address still updates");
         assert_eq!(img.overflowed, 2);
     }

@@ -56,22 +56,12 @@ pub fn annotate_transaction(p: &Profile, request: &Request<'_>, response: Option
     }
 }
 
-/// The unit's PDU of a frame as on the wire (RTU with CRC, or ASCII characters).
-pub(crate) fn wire_pdu(wire: &[u8]) -> Option<Vec<u8>> {
-    if wire.first() == Some(&b':') {
-        crate::proto::parse_ascii(wire).ok().map(|f| f.pdu().to_vec())
-    } else {
-        crate::proto::parse_rtu(wire).ok().map(|f| f.pdu.to_vec())
-    }
-}
-
-/// Annotations for a transaction given as frames on the wire (what the analyzer reports).
+/// Annotations for a transaction given as its PDUs (what pairing reports:
+/// `Transaction::request_pdu`, `response_pdu`).
 #[must_use]
-pub fn annotate_wire(p: &Profile, request: &[u8], response: Option<&[u8]>) -> Vec<Annotation> {
-    let Some(req_pdu) = wire_pdu(request) else { return Vec::new() };
-    let Ok(([], req)) = crate::proto::parse_request(&req_pdu) else { return Vec::new() };
-    let resp_pdu = response.and_then(wire_pdu);
-    let resp = match resp_pdu.as_deref().map(crate::proto::parse_response) {
+pub fn annotate_pdus(p: &Profile, request_pdu: &[u8], response_pdu: Option<&[u8]>) -> Vec<Annotation> {
+    let Ok(([], req)) = crate::proto::parse_request(request_pdu) else { return Vec::new() };
+    let resp = match response_pdu.map(crate::proto::parse_response) {
         Some(Ok(([], r))) => Some(r),
         _ => None,
     };
