@@ -197,10 +197,11 @@ impl Outbox {
         }
     }
 
-    /// Forwards up to [`FORWARD_BATCH`] held records; true when more wait.
-    fn forward_some(&mut self) -> bool {
+    /// Forwards up to [`FORWARD_BATCH`] held records: whether more wait, and whether the
+    /// connection's queue was full.
+    fn forward_some(&mut self) -> Forward {
         if !self.connected {
-            return false;
+            return Forward::Idle;
         }
         for _ in 0..FORWARD_BATCH {
             if self.forwarding.is_none()
@@ -222,11 +223,11 @@ impl Outbox {
                             f64::from(u32::try_from(n).unwrap_or(u32::MAX)) / secs.max(1e-6)
                         );
                     }
-                    return false;
+                    return Forward::Idle;
                 };
                 self.forwarding = Some((n, recs.into()));
             }
-            let Some((n, recs)) = self.forwarding.as_mut() else { return false };
+            let Some((n, recs)) = self.forwarding.as_mut() else { return Forward::Idle };
             let n = *n;
             let Some((kind, body)) = recs.pop_front() else {
                 self.forwarding = None;
@@ -245,7 +246,7 @@ impl Outbox {
                             if let Some((_, recs)) = self.forwarding.as_mut() {
                                 recs.push_front((kind, body));
                             }
-                            return true;
+                            return Forward::Full;
                         }
                         self.published += 1;
                     }
@@ -258,7 +259,7 @@ impl Outbox {
                 Kind::Other(_) => {}
             }
         }
-        true
+        Forward::More
     }
 
     /// A message arrived: a command to the Sparkplug node (NCMD), a write to one of its devices
@@ -335,9 +336,24 @@ pub fn lock(outbox: &Mutex<Outbox>) -> std::sync::MutexGuard<'_, Outbox> {
 /// (so a Sparkplug sequence number is handed to the connection in the order it was counted).
 async fn forwarder(outbox: Arc<Mutex<Outbox>>, connected: Arc<AtomicBool>) {
     loop {
-        let more = connected.load(Ordering::SeqCst) && lock(&outbox).forward_some();
-        tokio::time::sleep(Duration::from_millis(if more { 2 } else { 50 })).await;
+        let turn = if connected.load(Ordering::SeqCst) { lock(&outbox).forward_some() } else { Forward::Idle };
+        match turn {
+            // The connection's task runs between two batches (one runtime thread for both).
+            Forward::More => tokio::task::yield_now().await,
+            Forward::Full => tokio::time::sleep(Duration::from_millis(5)).await,
+            Forward::Idle => tokio::time::sleep(Duration::from_millis(50)).await,
+        }
     }
+}
+
+/// What a forwarding turn left.
+enum Forward {
+    /// Nothing held, or not connected.
+    Idle,
+    /// A batch went out; more wait.
+    More,
+    /// The connection's queue is full: wait for it to drain.
+    Full,
 }
 
 /// Runs the connection until the client disconnects; `connected` mirrors its state.
