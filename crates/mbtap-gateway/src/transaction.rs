@@ -334,7 +334,7 @@ impl Transaction<'_> {
                         self.notes.push(Note::EchoMissing);
                         self.master.timeouts.timed_out(self.unit);
                         self.notes.push(Note::WaitedInVain(self.timeout));
-                        self.retry_or_fail(now)
+                        self.retry_or_fail(now, now)
                     }
                     (true, false) => self.answer(now, heard.clone(), Some(heard)),
                     (false, _) => {
@@ -442,7 +442,12 @@ impl Transaction<'_> {
             let last = (*last).max(now);
             return self.answered(now, None, last);
         }
-        let quiet_until = if buf.is_empty() { deadline } else { (*last + self.master.config.silence()).min(deadline) };
+        // Bytes in hand wait for the silence that ends them; once it has passed and they are still
+        // not a whole answer, only more bytes or the deadline can decide (the fuzzer found a
+        // buffer that stays pending after its silence: the machine asked to wait until a moment
+        // already past, and the shell spun on it until the deadline).
+        let quiet = *last + self.master.config.silence();
+        let quiet_until = if buf.is_empty() || now >= quiet { deadline } else { quiet.min(deadline) };
         Step::WaitUntil(quiet_until)
     }
 
@@ -464,7 +469,7 @@ impl Transaction<'_> {
             // The monitor sees what was really on the line in place of the request.
             self.notes.push(Note::Heard { port: 0, bytes: heard });
             self.notes.push(Note::Collision);
-            return self.retry_or_fail(last);
+            return self.retry_or_fail(now, last);
         }
         if last.saturating_sub(self.sent) >= self.timeout {
             self.master.timeouts.timed_out(self.unit);
@@ -476,14 +481,15 @@ impl Transaction<'_> {
             self.master.suspect.insert(self.unit);
             self.flush = Some(self.timeout);
         }
-        let _ = now;
-        self.retry_or_fail(last)
+        self.retry_or_fail(now, last)
     }
 
-    fn retry_or_fail(&mut self, last: Duration) -> Step {
+    /// Retries after the line has been quiet for its guard since `last` (never a moment before
+    /// `now`: a damaged answer judged late needs no wait), or gives up with 0x0B.
+    fn retry_or_fail(&mut self, now: Duration, last: Duration) -> Step {
         if self.attempt <= self.master.config.retries {
             self.phase = Phase::Pause;
-            return Step::PauseUntil(last + self.master.config.line_guard());
+            return Step::PauseUntil((last + self.master.config.line_guard()).max(now));
         }
         self.finish(Reply::Gateway(GATEWAY_TARGET_FAILED), last)
     }
@@ -827,5 +833,51 @@ mod tests {
         let mut noisy = LateListener::new(&m.config, TIMEOUT, ms(0));
         noisy.bytes(ms(199));
         assert_eq!(noisy.wait_until(), ms(200));
+    }
+
+    /// Regression (issue 26, found by the `gateway` fuzz target): bytes that stay pending after
+    /// their silence — an answer to a two-register read whose byte count says 5 — made the
+    /// machine ask to wait until a moment already past, and the shell spun on it until the
+    /// deadline. Now the wait after the silence runs to the deadline.
+    #[test]
+    fn bytes_still_pending_after_their_silence_wait_for_the_deadline_not_the_past() {
+        // Unit 1, function 03, byte count 05, then four bytes of values and one more.
+        const ODD_ANSWER: [u8; 7] = [0x01, 0x03, 0x05, 0x01, 0x00, 0x05, 0xF6];
+        let mut m = master(SerialMode::Rtu, EchoMode::Off, 0);
+        let (mut t, step) = m.transaction(1, &READ_TWO);
+        assert!(matches!(step, Step::Send(_)));
+        let deadline = match t.sent(Duration::ZERO, true) {
+            Step::WaitUntil(at) => at,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(deadline, TIMEOUT);
+        let _ = t.bytes(ms(10), &ODD_ANSWER);
+        // 20 ms: well past the bytes' silence (t3.5 + 1 ms), well before the deadline.
+        match t.tick(ms(20)) {
+            Step::WaitUntil(at) => assert_eq!(at, deadline, "waits for more bytes or the deadline"),
+            other => panic!("{other:?}"),
+        }
+        match t.tick(deadline) {
+            Step::Done => assert_eq!(t.outcome().unwrap().reply, Reply::Gateway(GATEWAY_TARGET_FAILED)),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Regression (issue 26, found by the `gateway` fuzz target): a collision judged when the
+    /// shell next looked — long after the last byte — asked for a pause until a moment already
+    /// past. A pause never ends before it is asked for.
+    #[test]
+    fn a_retry_never_pauses_until_a_moment_already_past() {
+        // Another driver's bytes over the request: the same length, not a frame.
+        const GARBLED: [u8; 8] = [0x01, 0x03, 0x00, 0x02, 0xC4, 0x02, 0xC4, 0x0B];
+        let mut m = master(SerialMode::Rtu, EchoMode::On, 1);
+        let (mut t, _) = m.transaction(1, &READ_TWO);
+        let _ = t.sent(Duration::ZERO, true);
+        let _ = t.bytes(ms(5), &GARBLED);
+        match t.tick(ms(15)) {
+            Step::PauseUntil(at) => assert!(at >= ms(15), "{at:?}"),
+            other => panic!("{other:?}"),
+        }
+        assert!(t.take_notes().contains(&Note::Collision));
     }
 }
