@@ -209,6 +209,45 @@ pub fn discovery(
     (node, object, if bits { "binary_sensor" } else { "sensor" }, config)
 }
 
+/// With writes from the broker on (`watch --mqtt-writes`): a register the profile documents as
+/// writable is announced as a control instead of a sensor — a coil as a `switch`, a numeric
+/// holding register as a `number` within its documented range (scaled) — whose commands go to its
+/// `…/set` topic and through the profile's checks. `None`: stays a sensor (read-only, labels,
+/// text, or no profile).
+pub fn control(
+    r: &Row,
+    profile: Option<&mbtap_core::profile::Profile>,
+    state_topic: &str,
+    mut config: serde_json::Value,
+) -> Option<(&'static str, serde_json::Value)> {
+    use mbtap_core::profile::format::Access;
+    let (_, def) = profile?.slot(r.table, r.address)?;
+    if def.access == Access::Read || !matches!(r.table, Table::Coils | Table::HoldingRegisters) {
+        return None;
+    }
+    let o = config.as_object_mut()?;
+    o.insert("command_topic".into(), format!("{state_topic}/set").into());
+    if r.table == Table::Coils {
+        o.insert("state_on".into(), "1".into());
+        o.insert("state_off".into(), "0".into());
+        return Some(("switch", config));
+    }
+    // Labels (a select) and text are not numbers; a value without a documented range is not
+    // offered as a slider either.
+    if !def.labels.is_empty() || !r.value.is_number() {
+        return None;
+    }
+    let (lo, hi) = def.range?;
+    let scale = def.scale.unwrap_or(1.0);
+    #[allow(clippy::cast_precision_loss)] // documented ranges are far inside f64's exact integers
+    let (min, max) = (lo as f64 * scale, hi as f64 * scale);
+    o.insert("min".into(), min.min(max).into());
+    o.insert("max".into(), max.max(min).into());
+    o.insert("step".into(), scale.abs().into());
+    o.insert("mode".into(), "box".into());
+    Some(("number", config))
+}
+
 /// This machine's name, for the default prefix.
 fn hostname() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
@@ -299,6 +338,8 @@ pub struct Mqtt {
     outbox: Arc<Mutex<super::outbox::Outbox>>,
     /// Sparkplug B instead of plain topics.
     sparkplug: bool,
+    /// `--mqtt-writes` on a command that writes: writable registers are announced as controls.
+    writes_on: bool,
     prefix: String,
     qos: QoS,
     retain: bool,
@@ -438,6 +479,7 @@ impl Mqtt {
         };
         let mut ob = super::outbox::Outbox::new(client.clone(), spool, node, (!sparkplug).then(|| status.clone()));
         ob.writes = writes.filter(|_| args.mqtt_writes);
+        let writes_on = ob.writes.is_some();
         ob.prefix.clone_from(&prefix);
         ob.profiles = profiles.clone();
         ob.memory_cap = args.mqtt_queue.max(1);
@@ -471,6 +513,7 @@ impl Mqtt {
             client,
             outbox,
             sparkplug,
+            writes_on,
             prefix,
             qos: qos(args.mqtt_qos),
             retain: args.mqtt_retain,
@@ -508,8 +551,14 @@ impl Mqtt {
     /// Home Assistant MQTT discovery: one entity per named value, grouped by device — a
     /// `binary_sensor` for coils and discrete inputs (on/off), a `sensor` for registers.
     fn announce(&self, r: &Row, state_topic: &str) {
-        let (node, object, component, config) = discovery(&self.prefix, r, self.profiles.get(&r.unit), state_topic);
+        let profile = self.profiles.get(&r.unit);
+        let (node, object, component, config) = discovery(&self.prefix, r, profile, state_topic);
         let _ = object;
+        let (component, config) =
+            match self.writes_on.then(|| control(r, profile, state_topic, config.clone())).flatten() {
+                Some(control) => control,
+                None => (component, config),
+            };
         self.send(
             &format!("homeassistant/{component}/{node}/{}/config", discovery_object(r)),
             QoS::AtLeastOnce,
@@ -809,5 +858,32 @@ mod tests {
         assert!(parse_url("mqtt://user:pw@host:1883").is_err(), "credentials never on the command line");
         assert_eq!(topic_level("ttyUSB0"), "ttyUSB0");
         assert_eq!(topic_level("a/b+c#"), "a_b_c_");
+    }
+
+    /// Issue 30: with writes on, writable registers become Home Assistant controls — a rw coil a
+    /// switch, a ranged set point a number within its scaled range — and the rest stay sensors.
+    #[test]
+    fn writable_registers_are_announced_as_controls() {
+        use mbtap_core::profile::Table;
+        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
+        let row = |table, address, raw: u16| {
+            mbtap_core::query::rows::rows(1, table, address, &[raw], Some(&mk4)).into_iter().next().unwrap()
+        };
+        let announce = |r: &Row| {
+            let (_, _, _, config) = discovery("p", r, Some(&mk4), "p/unit/1/x");
+            control(r, Some(&mk4), "p/unit/1/x", config)
+        };
+        let (component, config) = announce(&row(Table::Coils, 0, 1)).unwrap();
+        assert_eq!(component, "switch");
+        assert_eq!(config["command_topic"], "p/unit/1/x/set");
+        assert!(announce(&row(Table::Coils, 3, 1)).is_none(), "coil 3 is documented read-only");
+        let (component, config) = announce(&row(Table::HoldingRegisters, 105, 250)).unwrap();
+        assert_eq!(component, "number");
+        assert_eq!(
+            (config["min"].as_f64(), config["max"].as_f64(), config["step"].as_f64()),
+            (Some(0.0), Some(100.0), Some(0.01))
+        );
+        assert!(announce(&row(Table::HoldingRegisters, 101, 0)).is_none(), "an enum is no number");
+        assert!(announce(&row(Table::InputRegisters, 430, 2305)).is_none(), "input registers are read-only");
     }
 }
