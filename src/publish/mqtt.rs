@@ -332,19 +332,27 @@ struct State {
     refused_sent: u64,
 }
 
+/// What Home Assistant discovery announces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Announce {
+    Nothing,
+    /// Every named value as a sensor (or binary sensor).
+    Sensors,
+    /// With writes from the broker on: writable registers as switches and numbers.
+    Controls,
+}
+
 /// The publisher.
 pub struct Mqtt {
     client: AsyncClient,
     outbox: Arc<Mutex<super::outbox::Outbox>>,
     /// Sparkplug B instead of plain topics.
     sparkplug: bool,
-    /// `--mqtt-writes` on a command that writes: writable registers are announced as controls.
-    writes_on: bool,
     prefix: String,
     qos: QoS,
     retain: bool,
     interval_ns: u64,
-    discovery: bool,
+    discovery: Announce,
     profiles: Profiles,
     state: Mutex<State>,
     connected: Arc<AtomicBool>,
@@ -513,12 +521,15 @@ impl Mqtt {
             client,
             outbox,
             sparkplug,
-            writes_on,
             prefix,
             qos: qos(args.mqtt_qos),
             retain: args.mqtt_retain,
             interval_ns: u64::try_from(args.mqtt_interval.as_nanos()).unwrap_or(u64::MAX),
-            discovery: args.mqtt_discovery.is_some(),
+            discovery: match (args.mqtt_discovery.is_some(), writes_on) {
+                (false, _) => Announce::Nothing,
+                (true, false) => Announce::Sensors,
+                (true, true) => Announce::Controls,
+            },
             profiles,
             state: Mutex::new(State { health, ..State::default() }),
             connected,
@@ -543,7 +554,8 @@ impl Mqtt {
         let topic = self.value_topic(r);
         self.send(&topic, self.qos, self.retain, payload.to_string());
         st.last.insert((r.unit, r.table, r.address), Sent { raw: r.raw, shown: r.shown.clone(), t_ns });
-        if self.discovery && r.name.is_some() && st.discovered.insert((r.unit, r.table, r.address)) {
+        if self.discovery != Announce::Nothing && r.name.is_some() && st.discovered.insert((r.unit, r.table, r.address))
+        {
             self.announce(r, &topic);
         }
     }
@@ -554,11 +566,13 @@ impl Mqtt {
         let profile = self.profiles.get(&r.unit);
         let (node, object, component, config) = discovery(&self.prefix, r, profile, state_topic);
         let _ = object;
-        let (component, config) =
-            match self.writes_on.then(|| control(r, profile, state_topic, config.clone())).flatten() {
-                Some(control) => control,
-                None => (component, config),
-            };
+        let (component, config) = match (self.discovery == Announce::Controls)
+            .then(|| control(r, profile, state_topic, config.clone()))
+            .flatten()
+        {
+            Some(control) => control,
+            None => (component, config),
+        };
         self.send(
             &format!("homeassistant/{component}/{node}/{}/config", discovery_object(r)),
             QoS::AtLeastOnce,
