@@ -10,8 +10,10 @@
 //! UDP clients),
 //! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`reverse`] (an RTU slave on
 //! the serial side, a Modbus TCP client behind), [`run`] (starts them all), [`config`] (the
-//! configuration file), [`modes`] (the command line's enums).
+//! configuration file), [`modes`] (the command line's enums), [`broker`] (writes from the MQTT
+//! broker through the same admission).
 
+pub mod broker;
 pub mod config;
 pub mod connection;
 pub mod line;

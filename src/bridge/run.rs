@@ -42,6 +42,8 @@ pub struct BridgeOptions {
     pub reverse: Option<ReverseOptions>,
     /// The Modbus/TCP Security listener, when asked for.
     pub tls: crate::bridge::tls::TlsArgs,
+    /// `--mqtt-writes`: writes from the broker, through the same admission as clients'.
+    pub broker_writes: Option<Arc<crate::bridge::broker::BrokerWrites>>,
 }
 
 /// What the bridge serves, for the metrics endpoint and the notes on stderr.
@@ -145,6 +147,9 @@ pub async fn bridge<W: Write>(
         let routes = Arc::new(routes);
         // The admission policy routes by the lines' units, in the order they were given.
         opts.server.policy.routes = routes.iter().map(|r| r.units.clone()).collect();
+        if let Some(w) = &opts.broker_writes {
+            crate::bridge::broker::start(w, Arc::clone(&routes), Arc::new(opts.server.clone()));
+        }
         // One table of connections for every listener: one limit, eviction across them.
         let connections: Arc<server::Table> = Arc::default();
         for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {

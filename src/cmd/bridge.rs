@@ -145,6 +145,10 @@ pub struct Args {
     /// Publish what the monitor hears (values, unit health, findings) to MQTT.
     #[command(flatten)]
     pub mqtt: crate::publish::mqtt::MqttArgs,
+    /// With --mqtt-writes: the role (one of --role) whose rules also judge the broker's writes;
+    /// without it they pass the plain listeners' rules (--read-only, --allow-function, routes).
+    #[arg(long, value_name = "NAME", requires = "mqtt_writes")]
+    pub mqtt_role: Option<String>,
 }
 
 /// Runs the bridge; `matches` tells which options the command line gave, for `--config`.
@@ -192,6 +196,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         rs485,
         tls,
         mqtt,
+        mqtt_role,
     } = args;
     let serial = match serial_match {
         Some(m) => {
@@ -324,13 +329,34 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         duration,
         reverse,
         tls,
+        broker_writes: None,
     };
+    let mut opts = opts;
     let profiles = crate::config::devices::load_devices(&devices)?;
     anyhow::ensure!(
         mqtt.mqtt.is_none() || monitor.is_some(),
         "--mqtt on the bridge publishes what its monitor hears: add --monitor (text, jsonl or tui)"
     );
-    let publisher = crate::publish::mqtt::Mqtt::start(&mqtt, &source, profiles.clone(), true)?;
+    // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
+    let (asks_tx, asks) = std::sync::mpsc::channel();
+    let writer = (opts.reverse.is_none()).then_some(asks_tx);
+    let publisher = crate::publish::mqtt::Mqtt::start_with(&mqtt, &source, profiles.clone(), true, writer)?;
+    if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {
+        let role = match &mqtt_role {
+            None => None,
+            Some(name) => Some(
+                crate::bridge::tls::parse_roles(&opts.tls.role)?
+                    .remove(name.as_str())
+                    .with_context(|| format!("--mqtt-role {name:?}: no --role {name}=… defines it"))?,
+            ),
+        };
+        opts.broker_writes = Some(std::sync::Arc::new(crate::bridge::broker::BrokerWrites {
+            asks: std::sync::Mutex::new(Some(asks)),
+            publisher: std::sync::Arc::clone(p),
+            profiles: profiles.clone(),
+            role,
+        }));
+    }
     let taps: Vec<std::sync::Arc<dyn crate::output::Tap>> =
         publisher.iter().map(|m| std::sync::Arc::clone(m) as std::sync::Arc<dyn crate::output::Tap>).collect();
     let result = run_monitored(monitor, profiles, settings, opts, taps);
@@ -504,6 +530,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "mqtt_buffer" => mqtt.mqtt_buffer,
         "mqtt_buffer_max" => mqtt.mqtt_buffer_max,
         "mqtt_writes" => mqtt.mqtt_writes,
+        "mqtt_role" => mqtt_role,
     }
     merged.config = cli.config;
     Ok(merged)

@@ -70,10 +70,11 @@ pub struct MqttArgs {
     /// messages are dropped, counted and said.
     #[arg(long, default_value = "256MB", value_parser = parse_size, value_name = "SIZE")]
     pub mqtt_buffer_max: u64,
-    /// Let the broker write (`watch` only): `PREFIX/unit/U/TABLE/ADDRESS/set` (the value) and
+    /// Let the broker write (`watch`, `bridge`): `PREFIX/unit/U/TABLE/ADDRESS/set` (the value) and
     /// `PREFIX/unit/U/set` (`NAME=VALUE`), or Sparkplug DCMD by metric name — through the
     /// profile's names, scale, ranges and access, as `mbtap write`; each outcome published on
-    /// `PREFIX/unit/U/write` (Sparkplug: the value read back as DDATA). Off: refused and counted.
+    /// `PREFIX/unit/U/write` (Sparkplug: the value read back as DDATA); on the bridge also through
+    /// its read-only, allow-lists, routes and `--mqtt-role`. Off: refused and counted.
     #[arg(long)]
     pub mqtt_writes: bool,
 }
@@ -412,7 +413,7 @@ impl Mqtt {
         let Some(url) = &args.mqtt else { return Ok(None) };
         anyhow::ensure!(
             !args.mqtt_writes || writes.is_some(),
-            "--mqtt-writes: only `watch` writes what the broker asks; this command only listens, and a passive sniffer never writes to the line"
+            "--mqtt-writes: only `watch` and `bridge` write what the broker asks; this command only listens, and a passive sniffer never writes to the line"
         );
         let (tls, host, port) = parse_url(url)?;
         let prefix = args.mqtt_prefix.clone().unwrap_or_else(|| {

@@ -1,0 +1,89 @@
+//! Writes from the broker through the bridge (`bridge --mqtt-writes`): each write the broker asks
+//! for is checked by the profile as `mbtap write` checks it (name, scale, documented range,
+//! access), then by the bridge's own admission policy — read-only, `--allow-function`, routes and,
+//! with `--mqtt-role`, that role's rules — exactly as a Modbus TCP client's request would be, and
+//! only then queued on its line like any client's. A refusal never reaches the line; it is counted
+//! with the bridge's refusals and published back.
+
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use tokio::sync::oneshot;
+use tokio::time::Instant;
+
+use super::request::{Route, ServerOptions};
+use super::shared::Job;
+use crate::publish::mqtt::Mqtt;
+use mbtap_core::profile::Profiles;
+use mbtap_core::query::encode::encode_write;
+use mbtap_core::query::remote::{Ask, Outcome};
+use mbtap_core::query::resolve;
+use mbtap_gateway::admit::{Asked, Role, RoleRules};
+use mbtap_gateway::queue::ClientId;
+use mbtap_gateway::transaction::Reply;
+
+/// The queue's client id of the broker's writes: a client of its own, taking its turn.
+const BROKER_CLIENT: ClientId = ClientId::MAX - 1;
+
+/// What the bridge needs to carry out the broker's writes.
+pub struct BrokerWrites {
+    /// The asks, taken once by the bridge when it starts.
+    pub asks: Mutex<Option<std::sync::mpsc::Receiver<Ask>>>,
+    pub publisher: Arc<Mqtt>,
+    pub profiles: Profiles,
+    /// `--mqtt-role`: the role whose rules also judge the broker's writes.
+    pub role: Option<RoleRules>,
+}
+
+impl std::fmt::Debug for BrokerWrites {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BrokerWrites").field("role", &self.role).finish_non_exhaustive()
+    }
+}
+
+/// Starts carrying out the broker's writes on `routes`, on a thread of its own (the asks arrive
+/// on a blocking channel), for as long as the bridge runs.
+pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Vec<Route>>, opts: Arc<ServerOptions>) {
+    let Some(asks) = writes.asks.lock().unwrap_or_else(PoisonError::into_inner).take() else { return };
+    let writes = Arc::clone(writes);
+    let handle = tokio::runtime::Handle::current();
+    let _ = std::thread::Builder::new().name("broker-writes".into()).spawn(move || {
+        for ask in asks {
+            let outcome = handle.block_on(apply(&ask, &writes, &routes, &opts));
+            writes.publisher.write_result(&ask, &outcome, crate::source::serial::now().0);
+        }
+    });
+}
+
+/// One write: the profile's checks, the bridge's admission, the line.
+async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &[Route], opts: &ServerOptions) -> Outcome {
+    let text = &ask.item.text;
+    let profile = writes.profiles.get(&ask.unit);
+    let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;
+    let w = encode_write(&target, profile, false).map_err(|e| e.to_string())?;
+    let pdu = w.pdu();
+    let role = writes.role.as_ref().map_or(Role::Plain, |r| Role::Tls(Some(r)));
+    let first = routes.first().ok_or_else(|| format!("{text}: the bridge has no serial line"))?;
+    let asked = Asked { unit: ask.unit, pdu: &pdu, role, peer_high: false };
+    let admitted = opts.policy.admit(asked, None, first.line.now()).map_err(|why| {
+        first.line.metrics.refused(why.reason());
+        format!("{text}: refused by the bridge ({}, exception {})", why.reason(), why.exception())
+    })?;
+    let route = routes.get(admitted.route).ok_or_else(|| format!("{text}: no line serves unit {}", ask.unit))?;
+    let (tx, rx) = oneshot::channel();
+    let write = route.line.write_pending(admitted.target, &pdu);
+    let job = Job { unit: admitted.target, pdu, reply: tx, queued: Instant::now(), high: false, write };
+    route.line.submit(BROKER_CLIENT, job).map_err(|_| format!("{text}: the line's queue is full"))?;
+    match tokio::time::timeout(Duration::from_secs(30), rx).await {
+        Ok(Ok(Reply::Pdu(answer))) if answer.first().is_some_and(|f| f & mbtap_core::proto::EXCEPTION_FLAG == 0) => {
+            Ok(None)
+        }
+        Ok(Ok(Reply::Pdu(answer))) => Err(format!(
+            "{text}: the device answered exception {}",
+            mbtap_core::proto::ExceptionCode::from(answer.get(1).copied().unwrap_or(0))
+        )),
+        Ok(Ok(Reply::Gateway(code))) => Err(format!("{text}: the bridge answered exception {code}")),
+        Ok(Ok(Reply::Silence)) => Ok(None),
+        Ok(Err(_)) | Err(_) => Err(format!("{text}: no answer from the line")),
+    }
+}
