@@ -116,7 +116,11 @@ impl Host {
 
 /// The message type of a Sparkplug topic (`spBv1.0/G/NBIRTH/N…` → `NBIRTH`), and its device.
 fn kind(m: &serde_json::Value) -> (&str, Option<&str>) {
-    let mut parts = m["topic"].as_str().unwrap().split('/');
+    let topic = m["topic"].as_str().unwrap();
+    if topic.starts_with("spBv1.0/STATE/") {
+        return ("STATE", None);
+    }
+    let mut parts = topic.split('/');
     let k = parts.nth(2).unwrap();
     (k, parts.nth(1))
 }
@@ -145,8 +149,8 @@ fn assert_seq_counts(got: &[serde_json::Value]) {
     for m in got {
         assert!(m.get("error").is_none(), "the specification's schema refused a payload: {m}");
         match kind(m).0 {
-            // Commands are the host's, not the node's.
-            "NCMD" | "DCMD" => {}
+            // Commands and the host's state are the host's, not the node's.
+            "NCMD" | "DCMD" | "STATE" => {}
             "NDEATH" => assert_eq!(seq(m), None, "{m}"),
             "NBIRTH" => {
                 assert_eq!(seq(m), Some(0), "{m}");
@@ -474,4 +478,55 @@ fn a_dbirth_over_10_kib_goes_out_whole_on_one_connection() {
         assert!(got.iter().any(|m| is(m, "DDATA", Some(unit))), "no data from {unit}: {:#?}", kinds(&got));
     }
     assert_seq_counts(&got);
+}
+
+/// Says the primary host `id` is online or offline (a retained STATE, Sparkplug 3.0 JSON).
+fn host_state(port: u16, id: &str, online: bool) {
+    let ok = Command::new("python3")
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/interop/sparkplug_host.py"))
+        .args(["state", &port.to_string(), id, if online { "online" } else { "offline" }])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+/// Issue 30: with `--sparkplug-host`, the node is not born until its primary host's STATE says
+/// online; what it measures meanwhile arrives after the births as historical data; when the host
+/// goes offline it holds again, and when it is back it is born again with the session's bdSeq.
+#[test]
+#[ignore = "needs mosquitto, python3 and pysparkplug; .ci/run installs them and runs this with --ignored"]
+fn the_node_waits_for_its_primary_host() {
+    let d = dir("host");
+    let port = free_port();
+    let _broker = Kill(broker(&d, port));
+    let host = Host::start(port);
+    host_state(port, "scada", false);
+    let mut mbtap = spawn_demo(
+        port,
+        &["--speed", "1", "--duration", "600", "--sparkplug", "plant/station", "--sparkplug-host", "scada"],
+    );
+    mbtap.drain();
+    let _mbtap = Kill(mbtap);
+    let waiting_from = now_ms();
+    std::thread::sleep(Duration::from_secs(4));
+    let node_messages = |g: &[serde_json::Value]| g.iter().filter(|m| kind(m).0 != "STATE").count();
+    assert_eq!(node_messages(&host.got()), 0, "born before its host: {:#?}", kinds(&host.got()));
+    host_state(port, "scada", true);
+    host.wait_for("births, then what was measured meanwhile", Duration::from_secs(30), |g| {
+        g.iter().any(|m| is(m, "NBIRTH", None)) && historical(g).iter().any(|&t| t <= waiting_from + 2_000)
+    });
+    let first_births = host.got().iter().filter(|m| is(m, "NBIRTH", None)).count();
+    host_state(port, "scada", false);
+    std::thread::sleep(Duration::from_secs(3));
+    let away_from = now_ms();
+    std::thread::sleep(Duration::from_secs(2));
+    host_state(port, "scada", true);
+    host.wait_for("born again, and the away time's values", Duration::from_secs(30), |g| {
+        g.iter().filter(|m| is(m, "NBIRTH", None)).count() > first_births
+            && historical(g).iter().any(|&t| t >= away_from && t <= away_from + 2_000)
+    });
+    let got = host.got();
+    let births: Vec<u64> = got.iter().filter(|m| is(m, "NBIRTH", None)).map(bd_seq).collect();
+    assert!(births.windows(2).all(|w| w[0] == w[1]), "one MQTT session, one bdSeq: {births:?}");
+    assert_seq_counts(&got[got.iter().rposition(|m| is(m, "NBIRTH", None)).unwrap()..]);
 }

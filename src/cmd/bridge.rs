@@ -527,6 +527,7 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
         "mqtt_discovery" => mqtt.mqtt_discovery,
         "mqtt_queue" => mqtt.mqtt_queue,
         "sparkplug" => mqtt.sparkplug,
+        "sparkplug_host" => mqtt.sparkplug_host,
         "mqtt_buffer" => mqtt.mqtt_buffer,
         "mqtt_buffer_max" => mqtt.mqtt_buffer_max,
         "mqtt_writes" => mqtt.mqtt_writes,

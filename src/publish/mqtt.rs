@@ -60,6 +60,11 @@ pub struct MqttArgs {
     /// DDEATH when it falls silent, rebirth on the `Node Control/Rebirth` command.
     #[arg(long, value_name = "GROUP/NODE")]
     pub sparkplug: Option<String>,
+    /// With --sparkplug: the primary host's id. Until its STATE (`spBv1.0/STATE/ID`) says it is
+    /// online, and whenever it says it is offline, nothing is born or published live — what is
+    /// measured is held and forwarded as historical data once it is back.
+    #[arg(long, value_name = "HOST_ID", requires = "sparkplug")]
+    pub sparkplug_host: Option<String>,
     /// Store and forward: while the broker is away, hold messages on disk here and forward them
     /// when it is back (Sparkplug: as historical data with their timestamps). Without DIR:
     /// $XDG_STATE_HOME/mbtap/mqtt-buffer/PREFIX (~/.local/state/…). Without the option,
@@ -492,6 +497,7 @@ impl Mqtt {
         ob.prefix.clone_from(&prefix);
         ob.profiles = profiles.clone();
         ob.memory_cap = args.mqtt_queue.max(1);
+        ob.host = args.sparkplug_host.as_deref().map(|h| (mbtap_core::sparkplug::state_topic(h), false));
         let outbox = Arc::new(Mutex::new(ob));
         let connected = Arc::new(AtomicBool::new(false));
         let (done_tx, done_rx) = std::sync::mpsc::channel();

@@ -63,6 +63,10 @@ pub struct Outbox {
     pub profiles: Profiles,
     /// Writes refused (off, unreadable, refused by the profile or the device).
     pub refused_writes: u64,
+    /// `--sparkplug-host`: the primary host's STATE topic, and whether it said it is online
+    /// (until it does, nothing is born or published live: Sparkplug 3.0 edge nodes wait for their
+    /// primary host).
+    pub host: Option<(String, bool)>,
     /// Sparkplug updates held in memory when there is no disk buffer (at most `memory_cap`,
     /// the oldest dropped and counted): forwarded as historical data like the disk's.
     memory: std::collections::VecDeque<Vec<u8>>,
@@ -102,6 +106,7 @@ impl Outbox {
             prefix: String::new(),
             profiles: Profiles::new(),
             refused_writes: 0,
+            host: None,
             memory: std::collections::VecDeque::new(),
             memory_cap: 10_000,
         }
@@ -165,12 +170,16 @@ impl Outbox {
     fn connected(&mut self) {
         self.connected = true;
         self.forwarding = None;
+        if let Some((topic, _)) = &self.host {
+            let _ = self.client.try_subscribe(topic.clone(), QoS::AtLeastOnce);
+        }
         if let Some(node) = self.node.as_mut() {
-            let births = node.online(now_ms());
             for t in node.command_topics() {
                 let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
             }
-            self.send_outs(births);
+        }
+        if self.host_hears() {
+            self.born();
         }
         if self.writes.is_some() && self.node.is_none() {
             for t in [format!("{}/unit/+/set", self.prefix), format!("{}/unit/+/+/+/set", self.prefix)] {
@@ -180,6 +189,23 @@ impl Outbox {
         if let Some(status) = self.status.clone() {
             // Retained, so a late subscriber sees it; replaces the will.
             self.publish_now(&status, QoS::AtLeastOnce, true, b"online".to_vec());
+            self.live = !self.holding();
+            if !self.live {
+                self.forward_start = Some((std::time::Instant::now(), self.forwarded));
+            }
+        }
+    }
+
+    /// Whether a primary host can hear: none configured, or its STATE says online.
+    fn host_hears(&self) -> bool {
+        self.host.as_ref().is_none_or(|(_, online)| *online)
+    }
+
+    /// Connected and heard: the node's births, then forwarding whatever was held.
+    fn born(&mut self) {
+        if let Some(node) = self.node.as_mut() {
+            let births = node.online(now_ms());
+            self.send_outs(births);
         }
         self.live = !self.holding();
         if !self.live {
@@ -200,7 +226,7 @@ impl Outbox {
     /// Forwards up to [`FORWARD_BATCH`] held records: whether more wait, and whether the
     /// connection's queue was full.
     fn forward_some(&mut self) -> Forward {
-        if !self.connected {
+        if !self.connected || !self.host_hears() {
             return Forward::Idle;
         }
         for _ in 0..FORWARD_BATCH {
@@ -265,6 +291,31 @@ impl Outbox {
     /// A message arrived: a command to the Sparkplug node (NCMD), a write to one of its devices
     /// (DCMD), or a plain `…/set`.
     fn incoming(&mut self, topic: &str, payload: &[u8]) {
+        if let Some((state, online)) = self.host.as_mut()
+            && topic == state.as_str()
+        {
+            let now = mbtap_core::sparkplug::host_online(payload);
+            match (now, *online) {
+                (Some(true), false) => {
+                    *online = true;
+                    eprintln!("mbtap: mqtt: the primary host is online: births, then what was held");
+                    if self.connected {
+                        self.born();
+                    }
+                }
+                (Some(false), true) => {
+                    *online = false;
+                    self.live = false;
+                    self.forwarding = None;
+                    if let Some(node) = self.node.as_mut() {
+                        node.pause();
+                    }
+                    eprintln!("mbtap: mqtt: the primary host is offline: holding what is measured until it is back");
+                }
+                _ => {}
+            }
+            return;
+        }
         if let Some(node) = self.node.as_mut() {
             if let Some(device) = node.dcmd_device(topic) {
                 for ask in parse_dcmd(device, payload, &self.profiles) {

@@ -6,6 +6,7 @@ asking a node for a rebirth.
     sparkplug_host.py listen PORT
     sparkplug_host.py rebirth PORT GROUP NODE
     sparkplug_host.py dcmd PORT GROUP NODE DEVICE METRIC VALUE   (a Double)
+    sparkplug_host.py state PORT HOST_ID online|offline            (retained, Sparkplug 3.0 JSON)
 """
 
 import json
@@ -67,6 +68,14 @@ if __name__ == "__main__":
     port = int(sys.argv[2])
     if sys.argv[1] == "listen":
         listen(port)
+    elif sys.argv[1] == "state":
+        body = json.dumps({"online": sys.argv[4] == "online", "timestamp": int(time.time() * 1000)})
+        c = client(f"sparkplug-state-{port}", False)
+        c.connect("127.0.0.1", port)
+        c.loop_start()
+        c.publish(f"spBv1.0/STATE/{sys.argv[3]}", body, qos=1, retain=True).wait_for_publish()
+        c.loop_stop()
+        c.disconnect()
     elif sys.argv[1] == "rebirth":
         topic = f"spBv1.0/{sys.argv[3]}/NCMD/{sys.argv[4]}"
         command(port, topic, "Node Control/Rebirth", 11, "boolean_value", True)  # Boolean

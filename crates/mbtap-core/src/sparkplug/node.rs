@@ -196,6 +196,16 @@ impl EdgeNode {
         self.online
     }
 
+    /// The primary host went offline while the MQTT session stays: nothing is published until
+    /// it is back (updates are held), and then the node is born again — with the same bdSeq, as
+    /// the session's will still carries it.
+    pub fn pause(&mut self) {
+        self.online = false;
+        for d in self.devices.values_mut() {
+            d.born = false;
+        }
+    }
+
     fn dbirth(&mut self, device: &str, now_ms: u64) -> Out {
         let metrics = self
             .devices
