@@ -498,12 +498,12 @@ fn writable_registers_are_home_assistant_controls_that_write() {
     sub.wait_for("both written and read back", |g| {
         raw(g, "ha/unit/1/holding_registers/105") == Some(425.into()) && raw(g, "ha/unit/1/coils/0") == Some(1.into())
     });
-    let outcomes: Vec<serde_json::Value> = sub
-        .got()
-        .iter()
-        .filter(|(t, _)| t == "ha/unit/1/write")
-        .map(|(_, p)| serde_json::from_str(p).unwrap())
-        .collect();
+    let outcomes = |g: &[(String, String)]| -> Vec<serde_json::Value> {
+        g.iter().filter(|(t, _)| t == "ha/unit/1/write").map(|(_, p)| serde_json::from_str(p).unwrap()).collect()
+    };
+    // The coil may have been on already: its outcome, not its value, says the write happened.
+    sub.wait_for("both outcomes", |g| outcomes(g).len() >= 2);
+    let outcomes = outcomes(&sub.got());
     assert_eq!(outcomes.len(), 2, "{outcomes:#?}");
     assert!(outcomes.iter().all(|o| o["ok"] == true), "{outcomes:#?}");
 }
