@@ -476,6 +476,7 @@ fn writable_registers_are_home_assistant_controls_that_write() {
     let verdict = home_assistant_check(&got);
     assert!(verdict["by_component"]["switch"].as_u64().unwrap() >= 1, "coils 0–2 are rw: {verdict}");
     assert!(verdict["by_component"]["number"].as_u64().unwrap() >= 3, "holding 102, 104, 105: {verdict}");
+    assert!(verdict["by_component"]["select"].as_u64().unwrap() >= 1, "holding 103, an enumeration: {verdict}");
     assert!(verdict["by_component"]["binary_sensor"].as_u64().unwrap() >= 1, "coil 3 is read-only: {verdict}");
     let config = |object: &str| -> serde_json::Value {
         let (_, p) = got.iter().find(|(t, _)| t.starts_with("homeassistant/number/") && t.contains(object)).unwrap();
@@ -492,6 +493,13 @@ fn writable_registers_are_home_assistant_controls_that_write() {
         got.iter().find(|(t, _)| t.starts_with("homeassistant/switch/") && t.contains("u1_coils_0")).unwrap();
     let switch: serde_json::Value = serde_json::from_str(switch).unwrap();
     publish(port, switch["command_topic"].as_str().unwrap(), switch["payload_on"].as_str().unwrap());
+    // And the select of the standby pump (0 = "no", 1 = "yes"): Home Assistant sends the option.
+    let (_, select) = got
+        .iter()
+        .find(|(t, _)| t.starts_with("homeassistant/select/") && t.contains("u1_holding_registers_103"))
+        .unwrap();
+    let select: serde_json::Value = serde_json::from_str(select).unwrap();
+    publish(port, select["command_topic"].as_str().unwrap(), "yes");
     let raw = |g: &[(String, String)], topic: &str| {
         last(g, topic).map(|p| serde_json::from_str::<serde_json::Value>(p).unwrap()["raw"].clone())
     };
@@ -502,9 +510,10 @@ fn writable_registers_are_home_assistant_controls_that_write() {
         g.iter().filter(|(t, _)| t == "ha/unit/1/write").map(|(_, p)| serde_json::from_str(p).unwrap()).collect()
     };
     // The coil may have been on already: its outcome, not its value, says the write happened.
-    sub.wait_for("both outcomes", |g| outcomes(g).len() >= 2);
+    sub.wait_for("the three outcomes", |g| outcomes(g).len() >= 3);
     let outcomes = outcomes(&sub.got());
-    assert_eq!(outcomes.len(), 2, "{outcomes:#?}");
+    assert_eq!(outcomes.len(), 3, "{outcomes:#?}");
+    assert_eq!(outcomes[2]["read_back"]["raw"], 1, "{outcomes:#?}");
     assert!(outcomes.iter().all(|o| o["ok"] == true), "{outcomes:#?}");
 }
 

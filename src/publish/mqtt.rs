@@ -216,8 +216,9 @@ pub fn discovery(
 }
 
 /// With writes from the broker on (`watch --mqtt-writes`): a register the profile documents as
-/// writable is announced as a control instead of a sensor — a coil as a `switch`, a numeric
-/// holding register as a `number` within its documented range (scaled) — whose commands go to its
+/// writable is announced as a control instead of a sensor — a coil as a `switch`, a register
+/// with labels as a `select` of them, a numeric holding register as a `number` within its
+/// documented range (scaled) — whose commands go to its
 /// `…/set` topic and through the profile's checks. `None`: stays a sensor (read-only, labels,
 /// text, or no profile).
 pub fn control(
@@ -238,9 +239,15 @@ pub fn control(
         o.insert("state_off".into(), "0".into());
         return Some(("switch", config));
     }
-    // Labels (a select) and text are not numbers; a value without a documented range is not
-    // offered as a slider either.
-    if !def.labels.is_empty() || !r.value.is_number() {
+    // A register with labels is a choice among them: a select whose option is written by its
+    // label (the write path takes labels as `mbtap write` does).
+    if !def.labels.is_empty() {
+        let options: Vec<serde_json::Value> = def.labels.values().map(|l| l.clone().into()).collect();
+        o.insert("options".into(), options.into());
+        return Some(("select", config));
+    }
+    // Text is not a number; a value without a documented range is not offered as one either.
+    if !r.value.is_number() {
         return None;
     }
     let (lo, hi) = def.range?;
@@ -904,7 +911,9 @@ mod tests {
             (config["min"].as_f64(), config["max"].as_f64(), config["step"].as_f64()),
             (Some(0.0), Some(100.0), Some(0.01))
         );
-        assert!(announce(&row(Table::HoldingRegisters, 101, 0)).is_none(), "an enum is no number");
+        let (component, config) = announce(&row(Table::HoldingRegisters, 101, 0)).unwrap();
+        assert_eq!(component, "select", "an enumeration is a choice");
+        assert_eq!(config["options"][1], "fill by level sensors");
         assert!(announce(&row(Table::InputRegisters, 430, 2305)).is_none(), "input registers are read-only");
     }
 }

@@ -1,5 +1,5 @@
 """Validates mbtap's Home Assistant MQTT discovery messages with Home Assistant's own schemas
-(the `homeassistant` package's MQTT sensor, binary_sensor, number and switch DISCOVERY_SCHEMA), as Home
+(the `homeassistant` package's MQTT sensor, binary_sensor, number, select and switch DISCOVERY_SCHEMA), as Home
 Assistant does when the message arrives. Reads "TOPIC PAYLOAD" lines (mosquitto_sub -v) on
 stdin; prints one JSON object: {"checked": N, "by_component": {...}, "refused": [[topic, why]]}.
 Exit status 1 when any was refused or none was checked."""
@@ -9,12 +9,13 @@ import sys
 # Importing the bootstrap first settles an import cycle among the http, websocket_api and
 # persistent_notification components that a direct import of the MQTT platforms runs into.
 import homeassistant.bootstrap  # noqa: F401
-from homeassistant.components.mqtt import binary_sensor, number, sensor, switch
+from homeassistant.components.mqtt import binary_sensor, number, select, sensor, switch
 
 schemas = {
     "sensor": sensor.DISCOVERY_SCHEMA,
     "binary_sensor": binary_sensor.DISCOVERY_SCHEMA,
     "number": number.DISCOVERY_SCHEMA,
+    "select": select.DISCOVERY_SCHEMA,
     "switch": switch.DISCOVERY_SCHEMA,
 }
 checked, refused, by_component = 0, [], {}
