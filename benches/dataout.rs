@@ -135,18 +135,7 @@ fn mqtt(d: &Path) {
     let g =
         Command::new(BIN).args(["generate", capture.to_str().unwrap(), "--transactions", "200000"]).output().unwrap();
     assert!(g.status.success());
-    let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    let conf = d.join("mosquitto.conf");
-    std::fs::write(
-        &conf,
-        format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nmax_queued_messages 0\n"),
-    )
-    .unwrap();
-    let mosquitto = if Path::new("/usr/sbin/mosquitto").exists() { "/usr/sbin/mosquitto" } else { "mosquitto" };
-    let _broker = Kill(Command::new(mosquitto).arg("-c").arg(&conf).stderr(Stdio::null()).spawn().expect("mosquitto"));
-    while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let (_broker, port) = broker(d, "mqtt");
     let replay = |mqtt: bool| {
         let mut c = Command::new(BIN);
         c.args(["replay", capture.to_str().unwrap(), "--format", "summary"]);
@@ -159,33 +148,10 @@ fn mqtt(d: &Path) {
         (t.elapsed().as_secs_f64(), String::from_utf8_lossy(&o.stderr).into_owned())
     };
     // A subscriber counting what arrives.
-    let mut sub = Command::new("mosquitto_sub")
-        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-t", "mbtap/#"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("mosquitto_sub");
-    let count = Arc::new(AtomicU64::new(0));
-    let last = Arc::new(std::sync::Mutex::new(Instant::now()));
-    let (out, c, l) = (sub.stdout.take().unwrap(), Arc::clone(&count), Arc::clone(&last));
-    std::thread::spawn(move || {
-        for _ in BufReader::new(out).lines().map_while(Result::ok) {
-            c.fetch_add(1, Ordering::Relaxed);
-            *l.lock().unwrap() = Instant::now();
-        }
-    });
-    let _sub = Kill(sub);
-    std::thread::sleep(Duration::from_millis(500));
+    let counter = Counter::start(port, "mbtap/#");
     let start = Instant::now();
     let (secs, err) = replay(true);
-    // Wait until nothing more arrives for a second.
-    loop {
-        std::thread::sleep(Duration::from_millis(200));
-        if last.lock().unwrap().elapsed() > Duration::from_secs(1) {
-            break;
-        }
-    }
-    let got = count.load(Ordering::Relaxed);
-    let end = (*last.lock().unwrap() - start).as_secs_f64();
+    let (got, end) = counter.settled(start);
     let queued = err.lines().find(|l| l.contains("queued for the broker")).unwrap_or("").to_owned();
     println!(
         "mqtt: replay with --mqtt {secs:.2} s; {got} messages received by mosquitto_sub in {end:.2} s = {:.0} msg/s ({queued})",
@@ -202,6 +168,47 @@ fn mqtt(d: &Path) {
         percentile(&mut off, 0.5),
         percentile(&mut on, 0.5)
     );
+}
+
+/// A subscriber counting the messages that arrive on a topic filter (one line each: `-F %t`
+/// prints topics only, as payloads may be binary) and when the last one came.
+struct Counter {
+    _sub: Kill,
+    count: Arc<AtomicU64>,
+    last: Arc<std::sync::Mutex<Instant>>,
+}
+
+impl Counter {
+    fn start(port: u16, filter: &str) -> Self {
+        let mut sub = Command::new("mosquitto_sub")
+            .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-t", filter, "-F", "%t"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("mosquitto_sub");
+        let count = Arc::new(AtomicU64::new(0));
+        let last = Arc::new(std::sync::Mutex::new(Instant::now()));
+        let (out, c, l) = (sub.stdout.take().unwrap(), Arc::clone(&count), Arc::clone(&last));
+        std::thread::spawn(move || {
+            for _ in BufReader::new(out).lines().map_while(Result::ok) {
+                c.fetch_add(1, Ordering::Relaxed);
+                *l.lock().unwrap() = Instant::now();
+            }
+        });
+        std::thread::sleep(Duration::from_millis(500));
+        Self { _sub: Kill(sub), count, last }
+    }
+
+    /// Once nothing has arrived for a second: how many arrived, and the seconds from `start` to
+    /// the last.
+    fn settled(&self, start: Instant) -> (u64, f64) {
+        loop {
+            std::thread::sleep(Duration::from_millis(200));
+            if self.last.lock().unwrap().elapsed() > Duration::from_secs(1) {
+                break;
+            }
+        }
+        (self.count.load(Ordering::Relaxed), (*self.last.lock().unwrap() - start).as_secs_f64())
+    }
 }
 
 /// A Mosquitto broker on a free loopback port (no persistence, no queue limit).
@@ -234,22 +241,7 @@ fn sparkplug(d: &Path) {
         assert!(g.status.success());
     }
     let (_broker, port) = broker(d, "sparkplug");
-    let mut sub = Command::new("mosquitto_sub")
-        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-t", "spBv1.0/#", "-F", "%t"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("mosquitto_sub");
-    let count = Arc::new(AtomicU64::new(0));
-    let last = Arc::new(std::sync::Mutex::new(Instant::now()));
-    let (out, c, l) = (sub.stdout.take().unwrap(), Arc::clone(&count), Arc::clone(&last));
-    std::thread::spawn(move || {
-        for _ in BufReader::new(out).lines().map_while(Result::ok) {
-            c.fetch_add(1, Ordering::Relaxed);
-            *l.lock().unwrap() = Instant::now();
-        }
-    });
-    let _sub = Kill(sub);
-    std::thread::sleep(Duration::from_millis(500));
+    let counter = Counter::start(port, "spBv1.0/#");
     let url = format!("mqtt://127.0.0.1:{port}");
     let start = Instant::now();
     let o = Command::new(BIN)
@@ -259,14 +251,7 @@ fn sparkplug(d: &Path) {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let secs = start.elapsed().as_secs_f64();
-    loop {
-        std::thread::sleep(Duration::from_millis(200));
-        if last.lock().unwrap().elapsed() > Duration::from_secs(1) {
-            break;
-        }
-    }
-    let got = count.load(Ordering::Relaxed);
-    let end = (*last.lock().unwrap() - start).as_secs_f64();
+    let (got, end) = counter.settled(start);
     println!("sparkplug: replay {secs:.2} s; {got} messages received in {end:.2} s = {:.0} msg/s", got as f64 / end);
     // Held: the same replay with the broker's port closed, every message to the disk buffer.
     let held = d.join("held");

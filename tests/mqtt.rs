@@ -247,22 +247,7 @@ fn watch_and_the_bridge_monitor_publish_what_they_read() {
     sub.wait_for("watch's voltages", |g| g.iter().any(|(t, _)| t == "w/unit/1/input_registers/433"));
 
     // The bridge publishes what its monitor hears: a read through it shows up as values.
-    let mut bridge = Command::new(BIN)
-        .args(["bridge", "--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0", "--monitor", "jsonl"])
-        .args(["--device", "17=mkzp", "--mqtt", &url, "--mqtt-prefix", "b"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(bridge.stderr.take().unwrap()).lines();
-    let tcp = loop {
-        let l = lines.next().expect("the bridge ended before listening").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            break rest.split_whitespace().next().unwrap().to_owned();
-        }
-    };
-    std::thread::spawn(move || for _ in lines {});
-    let _bridge = Kill(bridge);
+    let (_bridge, tcp) = monitored_bridge(&bus, port, "b", &["--device", "17=mkzp"]);
     let read = Command::new(BIN)
         .args(["read", &tcp, "--unit", "17", "--format", "jsonl", "holding", "50..52"])
         .output()
@@ -601,12 +586,12 @@ fn writes_from_the_broker_reach_the_device_through_the_profile() {
     );
 }
 
-/// A bridge with `--mqtt-writes` and `--monitor jsonl` on the simulator, its TCP address.
-fn bridge_with_writes(bus: &std::path::Path, port: u16, prefix: &str, extra: &[&str]) -> (Kill, String) {
+/// A bridge on the simulator publishing what its monitor hears under `prefix`, with `extra`
+/// options: the process and its TCP address.
+fn monitored_bridge(bus: &std::path::Path, port: u16, prefix: &str, extra: &[&str]) -> (Kill, String) {
     let mut bridge = Command::new(BIN)
         .args(["bridge", "--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0", "--monitor", "jsonl"])
-        .args(["--device", "1=mk4", "--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", prefix])
-        .arg("--mqtt-writes")
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", prefix])
         .args(extra)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -651,7 +636,7 @@ fn the_brokers_writes_through_the_bridge_pass_its_rules() {
         g.iter().filter(|(t, _)| *t == topic).map(|(_, p)| serde_json::from_str(p).unwrap()).collect()
     };
     {
-        let (_bridge, tcp) = bridge_with_writes(&bus, port, "open", &[]);
+        let (_bridge, tcp) = monitored_bridge(&bus, port, "open", &["--device", "1=mk4", "--mqtt-writes"]);
         std::thread::sleep(Duration::from_millis(500));
         publish(port, "open/unit/1/holding_registers/105/set", "2.5");
         sub.wait_for("the write's outcome", |g| !outcomes(g, "open").is_empty());
@@ -659,10 +644,14 @@ fn the_brokers_writes_through_the_bridge_pass_its_rules() {
         assert_eq!(raw_through(&tcp, 105), 250);
     }
     for (prefix, extra, reason) in [
-        ("ro", &["--read-only"][..], "read_only"),
-        ("role", &["--role", "viewer=read-only", "--mqtt-role", "viewer"][..], "role"),
+        ("ro", &["--device", "1=mk4", "--mqtt-writes", "--read-only"][..], "read_only"),
+        (
+            "role",
+            &["--device", "1=mk4", "--mqtt-writes", "--role", "viewer=read-only", "--mqtt-role", "viewer"][..],
+            "role",
+        ),
     ] {
-        let (_bridge, tcp) = bridge_with_writes(&bus, port, prefix, extra);
+        let (_bridge, tcp) = monitored_bridge(&bus, port, prefix, extra);
         std::thread::sleep(Duration::from_millis(500));
         publish(port, &format!("{prefix}/unit/1/holding_registers/105/set"), "7.5");
         sub.wait_for("the refusal", |g| !outcomes(g, prefix).is_empty());

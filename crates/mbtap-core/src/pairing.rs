@@ -393,27 +393,32 @@ mod tests {
         out
     }
 
+    /// A frame of `bytes` starting at `ms`, one millisecond long, its check as given.
+    fn frame_at(bytes: &[u8], ms: u64, check_ok: bool) -> Frame<'_> {
+        Frame {
+            port: PortId(0),
+            bytes,
+            t_start: Timestamp(ms * 1_000_000),
+            t_end: Timestamp((ms + 1) * 1_000_000),
+            check_ok,
+            gap_violation_ns: None,
+            short_gap_before_ns: None,
+            gap_tolerance_ns: None,
+            short_gap_tolerance_ns: None,
+            resolution_ns: 0,
+            gap_before_known: true,
+            bad_chars: false,
+            alt_len: None,
+        }
+    }
+
     /// Feeds `(start ms, bytes)` frames; the transactions as (unit, outcome, latency ms).
     fn pair(frames: &[(u64, Vec<u8>)], end_ms: u64) -> Vec<(u8, Outcome, Option<u64>)> {
         let mut p = Pairing::new(PairingConfig::default());
         let mut out = Vec::new();
         let mut emit = |t: Transaction<'_>| out.push((t.unit, t.outcome, t.latency_ns.map(|l| l / 1_000_000)));
         for (ms, bytes) in frames {
-            let f = Frame {
-                port: PortId(0),
-                bytes,
-                t_start: Timestamp(ms * 1_000_000),
-                t_end: Timestamp((ms + 1) * 1_000_000),
-                check_ok: true,
-                gap_violation_ns: None,
-                short_gap_before_ns: None,
-                gap_tolerance_ns: None,
-                short_gap_tolerance_ns: None,
-                resolution_ns: 0,
-                gap_before_known: true,
-                bad_chars: false,
-                alt_len: None,
-            };
+            let f = frame_at(bytes, *ms, true);
             let len = bytes.len().saturating_sub(2);
             p.frame(&f, Some((bytes[0], &bytes[1..len])), &mut emit);
         }
@@ -450,30 +455,15 @@ mod tests {
     /// consumer splits the wire bytes again; a damaged answer's PDU is not handed on as values.
     #[test]
     fn transactions_carry_their_pdus_and_a_damaged_answer_none() {
-        let frame = |bytes: &'static [u8], ms: u64, check_ok: bool| Frame {
-            port: PortId(0),
-            bytes,
-            t_start: Timestamp(ms * 1_000_000),
-            t_end: Timestamp((ms + 1) * 1_000_000),
-            check_ok,
-            gap_violation_ns: None,
-            short_gap_before_ns: None,
-            gap_tolerance_ns: None,
-            short_gap_tolerance_ns: None,
-            resolution_ns: 0,
-            gap_before_known: true,
-            bad_chars: false,
-            alt_len: None,
-        };
-        let (req, resp): (&'static [u8], &'static [u8]) = (ask(1).leak(), answer(1).leak());
+        let (req, resp) = (ask(1), answer(1));
         for check_ok in [true, false] {
             let mut p = Pairing::new(PairingConfig::default());
             let mut got = Vec::new();
             let mut emit = |t: Transaction<'_>| {
                 got.push((t.request_pdu.map(<[u8]>::to_vec), t.response_pdu.map(<[u8]>::to_vec), t.outcome));
             };
-            p.frame(&frame(req, 0, true), Some((1, &req[1..req.len() - 2])), &mut emit);
-            p.frame(&frame(resp, 10, check_ok), Some((1, &resp[1..resp.len() - 2])), &mut emit);
+            p.frame(&frame_at(&req, 0, true), Some((1, &req[1..req.len() - 2])), &mut emit);
+            p.frame(&frame_at(&resp, 10, check_ok), Some((1, &resp[1..resp.len() - 2])), &mut emit);
             let want_resp = check_ok.then(|| vec![0x03, 0x02, 0x00, 0x07]);
             let outcome = if check_ok { Outcome::Ok } else { Outcome::BadResponse };
             assert_eq!(got, [(Some(vec![0x03, 0x00, 0x64, 0x00, 0x01]), want_resp, outcome)]);
