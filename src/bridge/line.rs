@@ -37,6 +37,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         missing: None,
     };
     let mut master = opts.master();
+    master.config.monitored = monitor.is_some();
     // The line is free for the next request from this time on (t3.5 + turnaround after the
     // last byte, Serial Line v1.02 §2.5.1.1).
     let mut free_at = Instant::now();

@@ -57,6 +57,7 @@ impl LineOptions {
             turnaround: self.turnaround,
             broadcast_reply: self.broadcast_reply,
             latency: self.latency,
+            monitored: false,
         };
         SerialMaster::new(config, Timeouts::new(self.timeout, self.timeout_mode, self.unit_timeouts.clone()))
     }

@@ -32,7 +32,9 @@ pub struct Spool {
     dir: PathBuf,
     max_bytes: u64,
     /// Segment numbers on disk, oldest first, with their sizes.
-    segments: Vec<(u64, u64)>,
+    segments: std::collections::VecDeque<(u64, u64)>,
+    /// Their sizes' sum, kept as they change (asked on every append and forwarding turn).
+    total: u64,
     /// The segment being appended to (the newest), open.
     current: Option<File>,
     synced_at: Instant,
@@ -68,7 +70,8 @@ impl Spool {
         Ok(Self {
             dir: dir.to_owned(),
             max_bytes: max_bytes.max(SEGMENT_BYTES),
-            segments,
+            total: segments.iter().map(|(_, b)| b).sum(),
+            segments: segments.into(),
             current: None,
             synced_at: Instant::now(),
             unsynced: false,
@@ -80,7 +83,7 @@ impl Spool {
     /// Bytes held.
     #[must_use]
     pub fn bytes(&self) -> u64 {
-        self.segments.iter().map(|(_, b)| b).sum()
+        self.total
     }
 
     #[must_use]
@@ -97,24 +100,26 @@ impl Spool {
         if !encode_record(kind, body, &mut rec) {
             return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "a message too long to hold"));
         }
-        let need_new = self.current.is_none() || self.segments.last().is_none_or(|(_, b)| *b >= SEGMENT_BYTES);
+        let need_new = self.current.is_none() || self.segments.back().is_none_or(|(_, b)| *b >= SEGMENT_BYTES);
         if need_new {
             self.sync();
-            let n = self.segments.last().map_or(1, |(n, _)| n + 1);
+            let n = self.segments.back().map_or(1, |(n, _)| n + 1);
             let f = OpenOptions::new().create(true).append(true).open(segment_path(&self.dir, n))?;
-            self.segments.push((n, 0));
+            self.segments.push_back((n, 0));
             self.current = Some(f);
         }
         let rec_len = rec.len() as u64;
         if let Some(f) = self.current.as_mut() {
             f.write_all(&rec)?;
         }
-        if let Some((_, b)) = self.segments.last_mut() {
+        if let Some((_, b)) = self.segments.back_mut() {
             *b += rec_len;
         }
+        self.total += rec_len;
         self.unsynced = true;
-        while self.bytes() > self.max_bytes && self.segments.len() > 1 {
-            let (n, _) = self.segments.remove(0);
+        while self.total > self.max_bytes && self.segments.len() > 1 {
+            let Some((n, size)) = self.segments.pop_front() else { break };
+            self.total -= size;
             let path = segment_path(&self.dir, n);
             let lost = std::fs::read(&path).map_or(0, |b| parse_records(&b).records.len() as u64);
             let _ = std::fs::remove_file(&path);
@@ -146,7 +151,7 @@ impl Spool {
     /// The oldest segment's records, to forward: (its number, records). The segment being
     /// appended to is closed first, so new records go to a fresh one.
     pub fn oldest(&mut self) -> Option<(u64, Vec<Record>)> {
-        let &(n, _) = self.segments.first()?;
+        let &(n, _) = self.segments.front()?;
         if self.segments.len() == 1 {
             self.sync();
             self.current = None;
@@ -166,7 +171,9 @@ impl Spool {
 
     /// A segment was forwarded whole: removed.
     pub fn forwarded(&mut self, n: u64) {
+        let gone: u64 = self.segments.iter().filter(|(s, _)| *s == n).map(|(_, b)| b).sum();
         self.segments.retain(|(s, _)| *s != n);
+        self.total -= gone;
         let _ = std::fs::remove_file(segment_path(&self.dir, n));
     }
 }

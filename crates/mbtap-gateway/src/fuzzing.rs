@@ -33,6 +33,7 @@ pub fn transaction(data: &[u8]) {
         turnaround: Duration::ZERO,
         broadcast_reply: setup & 0x20 != 0,
         latency: Duration::from_millis(u64::from(setup >> 6)),
+        monitored: true,
     };
     let mut master =
         SerialMaster::new(config, Timeouts::new(Duration::from_millis(50), TimeoutMode::Auto, BTreeMap::new()));

@@ -63,6 +63,9 @@ pub struct MasterConfig {
     /// How late the adapter may deliver a byte (a USB adapter's latency timer): added to the
     /// silence that ends an answer of unknown length.
     pub latency: Duration,
+    /// Someone watches the line (`--monitor`): the bytes heard come back as [`Note::Heard`].
+    /// Without it they are not copied (one allocation per read on the bridge's hot path).
+    pub monitored: bool,
 }
 
 impl MasterConfig {
@@ -308,7 +311,9 @@ impl Transaction<'_> {
                 self.tick(now)
             }
             Phase::Answer { buf, last, .. } => {
-                self.notes.push(Note::Heard { port: 1, bytes: got.to_vec() });
+                if self.master.config.monitored {
+                    self.notes.push(Note::Heard { port: 1, bytes: got.to_vec() });
+                }
                 buf.extend_from_slice(got);
                 *last = now;
                 self.judge(now, false)
@@ -357,7 +362,9 @@ impl Transaction<'_> {
     fn answer(&mut self, now: Duration, initial: Vec<u8>, collision: Option<Vec<u8>>) -> Step {
         let mut last = self.sent;
         if !initial.is_empty() {
-            self.notes.push(Note::Heard { port: 1, bytes: initial.clone() });
+            if self.master.config.monitored {
+                self.notes.push(Note::Heard { port: 1, bytes: initial.clone() });
+            }
             last = now;
         }
         // Bytes already in hand are judged before waiting for more: the answer may be whole
@@ -467,7 +474,9 @@ impl Transaction<'_> {
         }
         if let Some(heard) = collision {
             // The monitor sees what was really on the line in place of the request.
-            self.notes.push(Note::Heard { port: 0, bytes: heard });
+            if self.master.config.monitored {
+                self.notes.push(Note::Heard { port: 0, bytes: heard });
+            }
             self.notes.push(Note::Collision);
             return self.retry_or_fail(now, last);
         }
@@ -597,6 +606,7 @@ mod tests {
             turnaround: Duration::ZERO,
             broadcast_reply: false,
             latency: Duration::ZERO,
+            monitored: true,
         };
         SerialMaster::new(config, Timeouts::new(TIMEOUT, TimeoutMode::Fixed, BTreeMap::new()))
     }

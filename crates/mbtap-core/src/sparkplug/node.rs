@@ -20,6 +20,10 @@ pub const BD_SEQ: &str = "bdSeq";
 const SILENT_PERIODS: u64 = 3;
 /// …once at least this many inter-arrival gaps are known; the shortest silence said dead.
 const MIN_GAPS: usize = 3;
+/// Metrics a device may declare: a DBIRTH carries them all, so a line that reads ever new
+/// addresses (garbage that parses, a scanner) must not grow one past what a broker takes.
+/// A real device's map is far smaller; metrics beyond are not published, and counted.
+pub const MAX_METRICS: usize = 4096;
 
 /// One message to publish.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -85,6 +89,8 @@ pub struct EdgeNode {
     devices: BTreeMap<String, Device>,
     /// The shortest silence said dead (bus time, ns), whatever the poll period.
     min_silence_ns: u64,
+    /// Values not published because their device already declares [`MAX_METRICS`].
+    pub over_limit: u64,
 }
 
 impl EdgeNode {
@@ -100,6 +106,7 @@ impl EdgeNode {
             online: false,
             devices: BTreeMap::new(),
             min_silence_ns,
+            over_limit: 0,
         }
     }
 
@@ -241,6 +248,7 @@ impl EdgeNode {
         for s in samples {
             match dev.metrics.get(&s.name) {
                 Some(k) if k.value == s.value && k.unit == s.unit => {}
+                None if dev.metrics.len() >= MAX_METRICS => self.over_limit += 1,
                 known => {
                     new_metric |= known.is_none();
                     changed.push(s.clone());
@@ -544,5 +552,16 @@ mod tests {
         assert_eq!(level(""), "_");
         let n = EdgeNode::new("g/x", "#", SEC);
         assert_eq!(n.will().topic, "spBv1.0/g_x/NDEATH/_");
+    }
+
+    /// A line reading ever new addresses cannot grow a device's birth without bound.
+    #[test]
+    fn a_device_declares_at_most_max_metrics() {
+        let mut n = EdgeNode::new("g", "n", 60 * SEC);
+        n.online(0);
+        let samples: Vec<Sample> = (0..MAX_METRICS + 10).map(|i| sample(&format!("r{i}"), 1.into(), 1)).collect();
+        let out = sends(n.update("d", samples, SEC, 1));
+        assert_eq!(decode(&out[0]).metrics.len(), MAX_METRICS);
+        assert_eq!(n.over_limit, 10);
     }
 }
