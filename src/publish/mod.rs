@@ -3,7 +3,10 @@
 //! are [`crate::output::Tap`]s fed by the analysing thread; neither ever writes to the serial
 //! line, and neither can slow the analysis down.
 
+pub mod connection;
+pub mod discovery;
 pub mod mqtt;
+pub mod mqtt_options;
 pub mod outbox;
 pub mod spool;
 pub mod spy;

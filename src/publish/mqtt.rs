@@ -9,13 +9,11 @@
 //! reconnects every second while the broker is away.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context as _;
-use clap::Args;
 use mbtap_core::analyzer::Event;
 use mbtap_core::health::Health;
 use mbtap_core::profile::image::RegisterImage;
@@ -23,292 +21,9 @@ use mbtap_core::profile::{Profiles, Table};
 use mbtap_core::query::rows::{Row, rows};
 use rumqttc::{AsyncClient, MqttOptions, QoS, Transport};
 
-/// `--mqtt` options (on `sniff`, `tap`, `replay`, `watch` and `bridge --monitor`).
-#[derive(Debug, Clone, Args, Default)]
-pub struct MqttArgs {
-    /// Publish to an MQTT broker: `mqtt://HOST[:PORT]` (1883) or `mqtts://HOST[:PORT]` (8883,
-    /// with --mqtt-ca). User and password come from --mqtt-credentials or the environment
-    /// (MBTAP_MQTT_USER, MBTAP_MQTT_PASSWORD), never from the command line.
-    #[arg(long, value_name = "URL")]
-    pub mqtt: Option<String>,
-    /// Topic prefix [default: mbtap/HOSTNAME/PORT].
-    #[arg(long, value_name = "TOPIC")]
-    pub mqtt_prefix: Option<String>,
-    /// The CA certificate (PEM) that signed the broker's, for mqtts://.
-    #[arg(long, value_name = "FILE")]
-    pub mqtt_ca: Option<PathBuf>,
-    /// A file holding `USER:PASSWORD` on its first line.
-    #[arg(long, value_name = "FILE")]
-    pub mqtt_credentials: Option<PathBuf>,
-    /// QoS of value, health and findings messages (the status is always QoS 1).
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=2))]
-    pub mqtt_qos: u8,
-    /// Retain value messages (the status and discovery messages always are).
-    #[arg(long)]
-    pub mqtt_retain: bool,
-    /// A value that changes is published at most this often (bus time): `1s`, `250ms`, `0`.
-    #[arg(long, default_value = "1s", value_parser = parse_interval, value_name = "INTERVAL")]
-    pub mqtt_interval: Duration,
-    /// Announce a sensor per register heard that the profile names.
-    #[arg(long, value_enum, value_name = "KIND")]
-    pub mqtt_discovery: Option<Discovery>,
-    /// Messages waiting for the broker at most; more are dropped and counted.
-    #[arg(long, default_value_t = 10_000, value_name = "MESSAGES")]
-    pub mqtt_queue: usize,
-    /// Publish as a Sparkplug B 3.0 edge node GROUP/NODE instead of plain topics: NBIRTH and
-    /// NDEATH (the will, with bdSeq), a device per unit with DBIRTH, DDATA on change and
-    /// DDEATH when it falls silent, rebirth on the `Node Control/Rebirth` command.
-    #[arg(long, value_name = "GROUP/NODE")]
-    pub sparkplug: Option<String>,
-    /// With --sparkplug: the primary host's id. Until its STATE (`spBv1.0/STATE/ID`) says it is
-    /// online, and whenever it says it is offline, nothing is born or published live — what is
-    /// measured is held and forwarded as historical data once it is back.
-    #[arg(long, value_name = "HOST_ID", requires = "sparkplug")]
-    pub sparkplug_host: Option<String>,
-    /// Store and forward: while the broker is away, hold messages on disk here and forward them
-    /// when it is back (Sparkplug: as historical data with their timestamps). Without DIR:
-    /// $XDG_STATE_HOME/mbtap/mqtt-buffer/PREFIX (~/.local/state/…). Without the option,
-    /// messages wait in memory (--mqtt-queue) and are dropped when it is full.
-    #[arg(long, value_name = "DIR", num_args = 0..=1, default_missing_value = "")]
-    pub mqtt_buffer: Option<PathBuf>,
-    /// The most the buffer holds on disk (`500MB`, `2GB`, bytes); beyond it the oldest held
-    /// messages are dropped, counted and said.
-    #[arg(long, default_value = "256MB", value_parser = parse_size, value_name = "SIZE")]
-    pub mqtt_buffer_max: u64,
-    /// Let the broker write (`watch`, `bridge`): `PREFIX/unit/U/TABLE/ADDRESS/set` (the value) and
-    /// `PREFIX/unit/U/set` (`NAME=VALUE`), or Sparkplug DCMD by metric name — through the
-    /// profile's names, scale, ranges and access, as `mbtap write`; each outcome published on
-    /// `PREFIX/unit/U/write` (Sparkplug: the value read back as DDATA); on the bridge also through
-    /// its read-only, allow-lists, routes and `--mqtt-role`. Off: refused and counted.
-    #[arg(long)]
-    pub mqtt_writes: bool,
-}
-
-/// `256MB`, `2GB`, `64KB` or bytes.
-fn parse_size(s: &str) -> Result<u64, String> {
-    let t = s.trim();
-    let (num, mult) = [("GB", 1u64 << 30), ("MB", 1 << 20), ("KB", 1 << 10), ("B", 1)]
-        .iter()
-        .find_map(|(suffix, m)| t.strip_suffix(suffix).map(|n| (n.trim(), *m)))
-        .unwrap_or((t, 1));
-    num.parse::<u64>()
-        .ok()
-        .and_then(|n| n.checked_mul(mult))
-        .filter(|&n| n >= 1 << 20)
-        .ok_or_else(|| format!("{s:?}: expected a size of at least 1MB, like 256MB or 2GB"))
-}
-
-/// Discovery conventions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Discovery {
-    /// Home Assistant's MQTT discovery (`homeassistant/sensor/…/config`).
-    Homeassistant,
-}
-
-/// From 0 (every change) to a day.
-fn parse_interval(s: &str) -> Result<Duration, String> {
-    mbtap_core::duration::parse_duration(s, Duration::ZERO, Duration::from_hours(24))
-}
-
-/// A topic level from free text: MQTT reserves `/`, `+` and `#` (MQTT v3.1.1 §4.7).
-#[must_use]
-pub fn topic_level(s: &str) -> String {
-    let t: String =
-        s.chars().map(|c| if c.is_alphanumeric() || c == '-' || c == '_' || c == '.' { c } else { '_' }).collect();
-    if t.is_empty() { "_".into() } else { t }
-}
-
-/// Room left after the prefix for the topic levels mbtap adds (`/unit/247/holding_registers/65535`,
-/// discovery ids): a whole topic is at most 65 535 bytes (MQTT v3.1.1 §1.5.3, §4.7.3).
-const MAX_PREFIX_BYTES: usize = 65_535 - 1_024;
-
-/// Whether `prefix` can start every topic mbtap publishes: the broker drops a publication to a
-/// topic it cannot take without telling a QoS 0 publisher, so a prefix it would refuse is
-/// refused here (issue 24: `$SYS/x`, a tab, 70 kB: every message dropped, "0 dropped" said).
-///
-/// # Errors
-/// What is wrong, with the rule: no `+`/`#` (MQTT v3.1.1 §4.7.1), no leading `$` (topics
-/// starting with `$` are the broker's, §4.7.2), no control characters (U+0000 is forbidden,
-/// §1.5.3, and the others never reach a subscriber intact), not empty, not too long (§1.5.3).
-pub fn check_prefix(prefix: &str) -> Result<(), String> {
-    if prefix.is_empty() {
-        return Err("the prefix is empty; give one like site/line1".into());
-    }
-    if prefix.contains(['+', '#']) {
-        return Err("a topic prefix cannot contain + or # (wildcards, MQTT v3.1.1 §4.7.1)".into());
-    }
-    if prefix.starts_with('$') {
-        return Err(
-            "topics starting with $ are the broker's own ($SYS…, MQTT v3.1.1 §4.7.2): it drops publications to them"
-                .into(),
-        );
-    }
-    if let Some((at, c)) = prefix.char_indices().find(|(_, c)| c.is_control()) {
-        return Err(format!(
-            "a control character (U+{:04X}) at byte {at}; topics are printable UTF-8 (MQTT v3.1.1 §1.5.3)",
-            u32::from(c)
-        ));
-    }
-    if prefix.len() > MAX_PREFIX_BYTES {
-        return Err(format!(
-            "{} bytes; a topic is at most 65 535 bytes (MQTT v3.1.1 §1.5.3) and mbtap adds levels after the prefix: at most {MAX_PREFIX_BYTES}",
-            prefix.len()
-        ));
-    }
-    Ok(())
-}
-
-/// The discovery object id of a row: `u1_holding_registers_105`.
-fn discovery_object(r: &Row) -> String {
-    format!("u{}_{}_{}", r.unit, r.table.name(), r.address)
-}
-
-/// A Home Assistant discovery message for `r`: (node id, object id, component, config).
-/// Keys without a value are left out (issue 31: `"manufacturer": null` for a profile without a
-/// vendor, which Home Assistant's schema refuses: a string or no key); coils and discrete inputs
-/// are binary sensors with the raw 1/0 as their state, not numeric sensors.
-///
-/// Writable registers are announced as sensors, not `number`/`switch`/`select` controls: a
-/// control whose commands nothing executes would mislead; they come with writes from the broker.
-pub fn discovery(
-    prefix: &str,
-    r: &Row,
-    profile: Option<&mbtap_core::profile::Profile>,
-    state_topic: &str,
-) -> (String, String, &'static str, serde_json::Value) {
-    let node = topic_level(&prefix.replace('/', "_"));
-    let object = discovery_object(r);
-    let mut device = serde_json::json!({
-        "identifiers": [format!("{node}_u{}", r.unit)],
-        "name": format!("{} (unit {})", profile.map_or("Modbus device", |p| p.meta.device.as_str()), r.unit),
-        "via_device": node,
-    });
-    if let Some(d) = device.as_object_mut() {
-        if let Some(vendor) = profile.and_then(|p| p.meta.vendor.clone()) {
-            d.insert("manufacturer".into(), vendor.into());
-        }
-        if let Some(p) = profile {
-            d.insert("model".into(), p.meta.name.clone().into());
-        }
-    }
-    let bits = mbtap_core::query::is_bits(r.table);
-    let mut config = serde_json::json!({
-        "name": r.name,
-        "unique_id": format!("{node}_{object}"),
-        "object_id": format!("{node}_{object}"),
-        "state_topic": state_topic,
-        "availability_topic": format!("{prefix}/status"),
-        "device": device,
-    });
-    if let Some(o) = config.as_object_mut() {
-        if bits {
-            o.insert("value_template".into(), "{{ value_json.raw }}".into());
-            o.insert("payload_on".into(), "1".into());
-            o.insert("payload_off".into(), "0".into());
-        } else {
-            o.insert("value_template".into(), "{{ value_json.value }}".into());
-            if let Some(u) = &r.unit_of_measure {
-                o.insert("unit_of_measurement".into(), u.clone().into());
-            }
-        }
-    }
-    (node, object, if bits { "binary_sensor" } else { "sensor" }, config)
-}
-
-/// With writes from the broker on (`watch --mqtt-writes`): a register the profile documents as
-/// writable is announced as a control instead of a sensor — a coil as a `switch`, a register
-/// with labels as a `select` of them, a numeric holding register as a `number` within its
-/// documented range (scaled) — whose commands go to its
-/// `…/set` topic and through the profile's checks. `None`: stays a sensor (read-only, labels,
-/// text, or no profile).
-pub fn control(
-    r: &Row,
-    profile: Option<&mbtap_core::profile::Profile>,
-    state_topic: &str,
-    mut config: serde_json::Value,
-) -> Option<(&'static str, serde_json::Value)> {
-    use mbtap_core::profile::format::Access;
-    let (_, def) = profile?.slot(r.table, r.address)?;
-    if def.access == Access::Read || !matches!(r.table, Table::Coils | Table::HoldingRegisters) {
-        return None;
-    }
-    let o = config.as_object_mut()?;
-    o.insert("command_topic".into(), format!("{state_topic}/set").into());
-    if r.table == Table::Coils {
-        o.insert("state_on".into(), "1".into());
-        o.insert("state_off".into(), "0".into());
-        return Some(("switch", config));
-    }
-    // A register with labels is a choice among them: a select whose option is written by its
-    // label (the write path takes labels as `mbtap write` does).
-    if !def.labels.is_empty() {
-        let options: Vec<serde_json::Value> = def.labels.values().map(|l| l.clone().into()).collect();
-        o.insert("options".into(), options.into());
-        return Some(("select", config));
-    }
-    // Text is not a number; a value without a documented range is not offered as one either.
-    if !r.value.is_number() {
-        return None;
-    }
-    let (lo, hi) = def.range?;
-    let scale = def.scale.unwrap_or(1.0);
-    #[allow(clippy::cast_precision_loss)] // documented ranges are far inside f64's exact integers
-    let (min, max) = (lo as f64 * scale, hi as f64 * scale);
-    o.insert("min".into(), min.min(max).into());
-    o.insert("max".into(), max.max(min).into());
-    o.insert("step".into(), scale.abs().into());
-    o.insert("mode".into(), "box".into());
-    Some(("number", config))
-}
-
-/// This machine's name, for the default prefix.
-fn hostname() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .ok()
-        .or_else(|| std::env::var("HOSTNAME").ok())
-        .map_or_else(|| "host".into(), |h| topic_level(h.trim()))
-}
-
-/// `mqtt://host:port` → (tls, host, port).
-fn parse_url(url: &str) -> anyhow::Result<(bool, String, u16)> {
-    let (tls, rest) = if let Some(r) = url.strip_prefix("mqtts://") {
-        (true, r)
-    } else if let Some(r) = url.strip_prefix("mqtt://") {
-        (false, r)
-    } else {
-        anyhow::bail!("--mqtt {url:?}: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT]");
-    };
-    let rest = rest.trim_end_matches('/');
-    let (host, port) = match rest.rsplit_once(':') {
-        Some((h, p)) if !h.is_empty() => {
-            (h, p.parse().with_context(|| format!("--mqtt {url:?}: port {p:?} is not a number 1..=65535"))?)
-        }
-        _ => (rest, if tls { 8883 } else { 1883 }),
-    };
-    anyhow::ensure!(!host.is_empty(), "--mqtt {url:?}: no host");
-    anyhow::ensure!(
-        !host.contains('@'),
-        "--mqtt {url:?}: credentials do not go in the URL; use --mqtt-credentials FILE or MBTAP_MQTT_USER/MBTAP_MQTT_PASSWORD"
-    );
-    Ok((tls, host.trim_matches(['[', ']']).to_owned(), port))
-}
-
-fn credentials(args: &MqttArgs) -> anyhow::Result<Option<(String, String)>> {
-    if let Some(path) = &args.mqtt_credentials {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("--mqtt-credentials {}: cannot read it", path.display()))?;
-        let line = text.lines().next().unwrap_or_default();
-        let (u, p) = line
-            .split_once(':')
-            .with_context(|| format!("--mqtt-credentials {}: line 1: expected USER:PASSWORD", path.display()))?;
-        return Ok(Some((u.to_owned(), p.to_owned())));
-    }
-    match (std::env::var("MBTAP_MQTT_USER"), std::env::var("MBTAP_MQTT_PASSWORD")) {
-        (Ok(u), Ok(p)) => Ok(Some((u, p))),
-        (Ok(_), Err(_)) => anyhow::bail!("MBTAP_MQTT_USER is set but MBTAP_MQTT_PASSWORD is not"),
-        _ => Ok(None),
-    }
-}
+use super::discovery::{control, discovery, discovery_object};
+pub use super::mqtt_options::{MqttArgs, topic_level};
+use super::mqtt_options::{check_prefix, credentials, default_buffer_dir, hostname, parse_url};
 
 /// The largest MQTT packet sent or taken: a DBIRTH of a big device fits many times over.
 const MAX_PACKET: usize = 4 << 20;
@@ -391,18 +106,6 @@ impl std::fmt::Debug for Mqtt {
 }
 
 use super::outbox::{lock, qos};
-
-/// The buffer directory when `--mqtt-buffer` is given without one.
-fn default_buffer_dir(prefix: &str) -> PathBuf {
-    let state = std::env::var_os("XDG_STATE_HOME")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local").join("state")));
-    state
-        .unwrap_or_else(std::env::temp_dir)
-        .join("mbtap")
-        .join("mqtt-buffer")
-        .join(topic_level(&prefix.replace('/', "_")))
-}
 
 impl Mqtt {
     /// Connects (in the background) as `args` say. `source` names the line for the default
@@ -514,7 +217,7 @@ impl Mqtt {
         std::thread::Builder::new()
             .name("mqtt".into())
             .spawn(move || {
-                rt.block_on(super::outbox::run(eventloop, loop_outbox, loop_connected, broker));
+                rt.block_on(super::connection::run(eventloop, loop_outbox, loop_connected, broker));
                 let _ = done_tx.send(());
             })
             .context("--mqtt: starting the publisher thread")?;
@@ -726,6 +429,13 @@ impl Mqtt {
             let _ = done.recv_timeout(Duration::from_secs(2));
         }
         let ob = lock(&self.outbox);
+        if let Some(n) = ob.node.as_ref().filter(|n| n.over_limit > 0) {
+            eprintln!(
+                "mbtap: mqtt: {} values not published: their device already declares {} metrics (the most one Sparkplug birth carries here)",
+                n.over_limit,
+                mbtap_core::sparkplug::node::MAX_METRICS
+            );
+        }
         let held = match &ob.spool {
             Some(s) if !s.is_empty() => format!("; {} held on disk for the next run ({} bytes)", ob.held, s.bytes()),
             Some(s) if s.dropped > 0 => format!("; {} held messages dropped (the buffer was full)", s.dropped),
@@ -831,89 +541,5 @@ impl crate::output::Tap for Mqtt {
             }
         }
         self.take_rows(st, out, t);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Issue 31: the MKZP (a profile without a vendor) was announced with `"manufacturer":
-    /// null`, which Home Assistant's schema refuses, and coils as numeric sensors.
-    #[test]
-    fn discovery_leaves_out_absent_keys_and_announces_bits_as_binary_sensors() {
-        use mbtap_core::profile::Table;
-        let mkzp = mbtap_core::profile::builtin::get("mkzp").unwrap().unwrap();
-        assert!(mkzp.meta.vendor.is_none(), "the test needs a profile without a vendor");
-        let regs = mbtap_core::query::rows::rows(17, Table::HoldingRegisters, 50, &[123], Some(&mkzp));
-        let (_, _, component, config) = discovery("mbtap/site", &regs[0], Some(&mkzp), "t");
-        assert_eq!(component, "sensor");
-        assert!(!config.to_string().contains("null"), "{config}");
-        assert!(config["device"].get("manufacturer").is_none(), "{config}");
-        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
-        let coil = mbtap_core::query::rows::rows(1, Table::Coils, 0, &[1], Some(&mk4));
-        let (_, _, component, config) = discovery("mbtap/site", &coil[0], Some(&mk4), "t");
-        assert_eq!(component, "binary_sensor");
-        assert_eq!((config["payload_on"].as_str(), config["payload_off"].as_str()), (Some("1"), Some("0")));
-        assert_eq!(config["value_template"], "{{ value_json.raw }}");
-        assert!(config.get("unit_of_measurement").is_none());
-        assert!(config["device"]["manufacturer"].is_string(), "the MK4 has a vendor: {config}");
-    }
-
-    /// Issue 24: `$SYS/x`, a tab or 70 kB were accepted and every message silently dropped.
-    #[test]
-    fn a_prefix_the_broker_would_drop_is_refused() {
-        assert!(check_prefix("mbtap/site/line1").is_ok());
-        for (bad, why) in [
-            ("$SYS/x", "broker"),
-            ("a\tb", "U+0009"),
-            ("", "empty"),
-            ("a/+/b", "wildcards"),
-            ("a/#", "wildcards"),
-            ("a\u{0}b", "U+0000"),
-        ] {
-            let e = check_prefix(bad).unwrap_err();
-            assert!(e.contains(why), "{bad:?}: {e}");
-        }
-        assert!(check_prefix(&"x".repeat(70_000)).unwrap_err().contains("65 535"));
-    }
-
-    #[test]
-    fn broker_urls_and_topic_levels() {
-        assert_eq!(parse_url("mqtt://127.0.0.1:1884").unwrap(), (false, "127.0.0.1".into(), 1884));
-        assert_eq!(parse_url("mqtts://broker").unwrap(), (true, "broker".into(), 8883));
-        assert!(parse_url("http://x").is_err());
-        assert!(parse_url("mqtt://user:pw@host:1883").is_err(), "credentials never on the command line");
-        assert_eq!(topic_level("ttyUSB0"), "ttyUSB0");
-        assert_eq!(topic_level("a/b+c#"), "a_b_c_");
-    }
-
-    /// Issue 30: with writes on, writable registers become Home Assistant controls — a rw coil a
-    /// switch, a ranged set point a number within its scaled range — and the rest stay sensors.
-    #[test]
-    fn writable_registers_are_announced_as_controls() {
-        use mbtap_core::profile::Table;
-        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
-        let row = |table, address, raw: u16| {
-            mbtap_core::query::rows::rows(1, table, address, &[raw], Some(&mk4)).into_iter().next().unwrap()
-        };
-        let announce = |r: &Row| {
-            let (_, _, _, config) = discovery("p", r, Some(&mk4), "p/unit/1/x");
-            control(r, Some(&mk4), "p/unit/1/x", config)
-        };
-        let (component, config) = announce(&row(Table::Coils, 0, 1)).unwrap();
-        assert_eq!(component, "switch");
-        assert_eq!(config["command_topic"], "p/unit/1/x/set");
-        assert!(announce(&row(Table::Coils, 3, 1)).is_none(), "coil 3 is documented read-only");
-        let (component, config) = announce(&row(Table::HoldingRegisters, 105, 250)).unwrap();
-        assert_eq!(component, "number");
-        assert_eq!(
-            (config["min"].as_f64(), config["max"].as_f64(), config["step"].as_f64()),
-            (Some(0.0), Some(100.0), Some(0.01))
-        );
-        let (component, config) = announce(&row(Table::HoldingRegisters, 101, 0)).unwrap();
-        assert_eq!(component, "select", "an enumeration is a choice");
-        assert_eq!(config["options"][1], "fill by level sensors");
-        assert!(announce(&row(Table::InputRegisters, 430, 2305)).is_none(), "input registers are read-only");
     }
 }

@@ -5,19 +5,18 @@
 //! edge node lives here too: the connection thread starts and ends its sessions (births, the
 //! will's bdSeq) and carries out its commands.
 //!
-//! The connection thread: rumqttc's event loop on a runtime of its own, reconnecting every
-//! second; on each connection the births (or the `online` status), then the held messages,
-//! oldest first, in small batches so the connection keeps flowing.
+//! The connection's thread ([`super::connection`]) starts and ends sessions here: on each
+//! connection the births (or the `online` status), then the held messages, oldest first, in
+//! small batches so the connection keeps flowing.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::sync::{Mutex, PoisonError};
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use mbtap_core::profile::Profiles;
 use mbtap_core::query::remote::{Ask, parse_dcmd, parse_set};
 use mbtap_core::sparkplug::{EdgeNode, Emit, Out};
 use mbtap_core::spool::{Kind, mqtt_body, parse_mqtt_body};
-use rumqttc::{AsyncClient, EventLoop, LastWill, QoS};
+use rumqttc::{AsyncClient, LastWill, QoS};
 
 use super::spool::{Record, Spool};
 
@@ -69,7 +68,7 @@ pub struct Outbox {
     pub host: Option<(String, bool)>,
     /// Sparkplug updates held in memory when there is no disk buffer (at most `memory_cap`,
     /// the oldest dropped and counted): forwarded as historical data like the disk's.
-    memory: std::collections::VecDeque<Vec<u8>>,
+    pub(super) memory: std::collections::VecDeque<Vec<u8>>,
     pub memory_cap: usize,
 }
 
@@ -162,12 +161,12 @@ impl Outbox {
     }
 
     /// Whether held messages wait (forwarding or on disk).
-    fn holding(&self) -> bool {
+    pub(super) fn holding(&self) -> bool {
         self.forwarding.is_some() || !self.memory.is_empty() || self.spool.as_ref().is_some_and(|s| !s.is_empty())
     }
 
     /// The connection is up: births or status first, then forwarding if anything is held.
-    fn connected(&mut self) {
+    pub(super) fn connected(&mut self) {
         self.connected = true;
         self.forwarding = None;
         if let Some((topic, _)) = &self.host {
@@ -178,9 +177,6 @@ impl Outbox {
                 let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
             }
         }
-        if self.host_hears() {
-            self.born();
-        }
         if self.writes.is_some() && self.node.is_none() {
             for t in [format!("{}/unit/+/set", self.prefix), format!("{}/unit/+/+/+/set", self.prefix)] {
                 let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
@@ -189,10 +185,9 @@ impl Outbox {
         if let Some(status) = self.status.clone() {
             // Retained, so a late subscriber sees it; replaces the will.
             self.publish_now(&status, QoS::AtLeastOnce, true, b"online".to_vec());
-            self.live = !self.holding();
-            if !self.live {
-                self.forward_start = Some((std::time::Instant::now(), self.forwarded));
-            }
+        }
+        if self.host_hears() {
+            self.born();
         }
     }
 
@@ -201,7 +196,8 @@ impl Outbox {
         self.host.as_ref().is_none_or(|(_, online)| *online)
     }
 
-    /// Connected and heard: the node's births, then forwarding whatever was held.
+    /// Connected and heard: the node's births (Sparkplug), then forwarding whatever was held
+    /// (live once it is all out).
     fn born(&mut self) {
         if let Some(node) = self.node.as_mut() {
             let births = node.online(now_ms());
@@ -214,7 +210,7 @@ impl Outbox {
     }
 
     /// The connection is gone: hold from now on; the node's next session has the next bdSeq.
-    fn disconnected(&mut self) {
+    pub(super) fn disconnected(&mut self) {
         self.connected = false;
         self.live = false;
         self.forwarding = None;
@@ -225,7 +221,7 @@ impl Outbox {
 
     /// Forwards up to [`FORWARD_BATCH`] held records: whether more wait, and whether the
     /// connection's queue was full.
-    fn forward_some(&mut self) -> Forward {
+    pub(super) fn forward_some(&mut self) -> Forward {
         if !self.connected || !self.host_hears() {
             return Forward::Idle;
         }
@@ -290,7 +286,7 @@ impl Outbox {
 
     /// A message arrived: a command to the Sparkplug node (NCMD), a write to one of its devices
     /// (DCMD), or a plain `…/set`.
-    fn incoming(&mut self, topic: &str, payload: &[u8]) {
+    pub(super) fn incoming(&mut self, topic: &str, payload: &[u8]) {
         if let Some((state, online)) = self.host.as_mut()
             && topic == state.as_str()
         {
@@ -363,7 +359,7 @@ impl Outbox {
     }
 
     /// The will of the next connection: the node's NDEATH (with the next bdSeq), or `offline`.
-    fn will(&self) -> Option<LastWill> {
+    pub(super) fn will(&self) -> Option<LastWill> {
         Self::will_of(self.node.as_ref(), self.status.as_deref())
     }
 
@@ -383,79 +379,12 @@ pub fn lock(outbox: &Mutex<Outbox>) -> std::sync::MutexGuard<'_, Outbox> {
     outbox.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// Forwards held records while connected, a batch at a time, each batch under the outbox's lock
-/// (so a Sparkplug sequence number is handed to the connection in the order it was counted).
-async fn forwarder(outbox: Arc<Mutex<Outbox>>, connected: Arc<AtomicBool>) {
-    loop {
-        let turn = if connected.load(Ordering::SeqCst) { lock(&outbox).forward_some() } else { Forward::Idle };
-        match turn {
-            // The connection's task runs between two batches (one runtime thread for both).
-            Forward::More => tokio::task::yield_now().await,
-            Forward::Full => tokio::time::sleep(Duration::from_millis(5)).await,
-            Forward::Idle => tokio::time::sleep(Duration::from_millis(50)).await,
-        }
-    }
-}
-
 /// What a forwarding turn left.
-enum Forward {
+pub(super) enum Forward {
     /// Nothing held, or not connected.
     Idle,
     /// A batch went out; more wait.
     More,
     /// The connection's queue is full: wait for it to drain.
     Full,
-}
-
-/// Runs the connection until the client disconnects; `connected` mirrors its state.
-pub async fn run(mut eventloop: EventLoop, outbox: Arc<Mutex<Outbox>>, connected: Arc<AtomicBool>, broker: String) {
-    let forwarding = tokio::spawn(forwarder(Arc::clone(&outbox), Arc::clone(&connected)));
-    let mut said_down = false;
-    loop {
-        match eventloop.poll().await {
-            Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
-                connected.store(true, Ordering::SeqCst);
-                eprintln!("mbtap: mqtt: connected to {broker}");
-                said_down = false;
-                let mut ob = lock(&outbox);
-                ob.connected();
-                if ob.holding() {
-                    let on_disk = ob.spool.as_ref().map_or(0, Spool::bytes);
-                    let in_memory = ob.memory.len();
-                    eprintln!(
-                        "mbtap: mqtt: forwarding what was held while the broker was away ({on_disk} bytes on disk, {in_memory} updates in memory; historical data in Sparkplug)"
-                    );
-                }
-            }
-            Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => lock(&outbox).incoming(&p.topic, &p.payload),
-            Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
-                // The DISCONNECT may still sit in the write buffer behind the last
-                // publications: poll on until the broker closes (bounded).
-                let drain = async { while eventloop.poll().await.is_ok() {} };
-                let _ = tokio::time::timeout(Duration::from_secs(1), drain).await;
-                break;
-            }
-            Ok(_) => {}
-            Err(e) => {
-                if connected.swap(false, Ordering::SeqCst) || !said_down {
-                    eprintln!("mbtap: mqtt: {broker}: {e}; analysis goes on, retrying every second");
-                    said_down = true;
-                }
-                if matches!(e, rumqttc::ConnectionError::RequestsDone) {
-                    break;
-                }
-                let will = {
-                    let mut ob = lock(&outbox);
-                    ob.disconnected();
-                    ob.will()
-                };
-                // The next session's will carries the next bdSeq (Sparkplug 3.0 §7.2).
-                if let Some(w) = will {
-                    eventloop.mqtt_options.set_last_will(w);
-                }
-                tokio::time::sleep(Duration::from_secs(1)).await;
-            }
-        }
-    }
-    forwarding.abort();
 }

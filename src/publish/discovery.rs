@@ -1,0 +1,166 @@
+//! Home Assistant MQTT discovery: a sensor (or binary sensor) per named value heard, and with
+//! writes from the broker on, a switch, select or number per writable register.
+
+use mbtap_core::profile::Table;
+use mbtap_core::query::rows::Row;
+
+use super::mqtt_options::topic_level;
+
+/// The discovery object id of a row: `u1_holding_registers_105`.
+pub(super) fn discovery_object(r: &Row) -> String {
+    format!("u{}_{}_{}", r.unit, r.table.name(), r.address)
+}
+
+/// A Home Assistant discovery message for `r`: (node id, object id, component, config).
+/// Keys without a value are left out (issue 31: `"manufacturer": null` for a profile without a
+/// vendor, which Home Assistant's schema refuses: a string or no key); coils and discrete inputs
+/// are binary sensors with the raw 1/0 as their state, not numeric sensors.
+///
+/// Writable registers are sensors here too; [`control`] makes them controls when writes from the
+/// broker are on (a control whose commands nothing executes would mislead).
+pub fn discovery(
+    prefix: &str,
+    r: &Row,
+    profile: Option<&mbtap_core::profile::Profile>,
+    state_topic: &str,
+) -> (String, String, &'static str, serde_json::Value) {
+    let node = topic_level(&prefix.replace('/', "_"));
+    let object = discovery_object(r);
+    let mut device = serde_json::json!({
+        "identifiers": [format!("{node}_u{}", r.unit)],
+        "name": format!("{} (unit {})", profile.map_or("Modbus device", |p| p.meta.device.as_str()), r.unit),
+        "via_device": node,
+    });
+    if let Some(d) = device.as_object_mut() {
+        if let Some(vendor) = profile.and_then(|p| p.meta.vendor.clone()) {
+            d.insert("manufacturer".into(), vendor.into());
+        }
+        if let Some(p) = profile {
+            d.insert("model".into(), p.meta.name.clone().into());
+        }
+    }
+    let bits = mbtap_core::query::is_bits(r.table);
+    let mut config = serde_json::json!({
+        "name": r.name,
+        "unique_id": format!("{node}_{object}"),
+        "object_id": format!("{node}_{object}"),
+        "state_topic": state_topic,
+        "availability_topic": format!("{prefix}/status"),
+        "device": device,
+    });
+    if let Some(o) = config.as_object_mut() {
+        if bits {
+            o.insert("value_template".into(), "{{ value_json.raw }}".into());
+            o.insert("payload_on".into(), "1".into());
+            o.insert("payload_off".into(), "0".into());
+        } else {
+            o.insert("value_template".into(), "{{ value_json.value }}".into());
+            if let Some(u) = &r.unit_of_measure {
+                o.insert("unit_of_measurement".into(), u.clone().into());
+            }
+        }
+    }
+    (node, object, if bits { "binary_sensor" } else { "sensor" }, config)
+}
+
+/// With writes from the broker on (`watch --mqtt-writes`): a register the profile documents as
+/// writable is announced as a control instead of a sensor — a coil as a `switch`, a register
+/// with labels as a `select` of them, a numeric holding register as a `number` within its
+/// documented range (scaled) — whose commands go to its
+/// `…/set` topic and through the profile's checks. `None`: stays a sensor (read-only, labels,
+/// text, or no profile).
+pub fn control(
+    r: &Row,
+    profile: Option<&mbtap_core::profile::Profile>,
+    state_topic: &str,
+    mut config: serde_json::Value,
+) -> Option<(&'static str, serde_json::Value)> {
+    use mbtap_core::profile::format::Access;
+    let (_, def) = profile?.slot(r.table, r.address)?;
+    if def.access == Access::Read || !matches!(r.table, Table::Coils | Table::HoldingRegisters) {
+        return None;
+    }
+    let o = config.as_object_mut()?;
+    o.insert("command_topic".into(), format!("{state_topic}/set").into());
+    if r.table == Table::Coils {
+        o.insert("state_on".into(), "1".into());
+        o.insert("state_off".into(), "0".into());
+        return Some(("switch", config));
+    }
+    // A register with labels is a choice among them: a select whose option is written by its
+    // label (the write path takes labels as `mbtap write` does).
+    if !def.labels.is_empty() {
+        let options: Vec<serde_json::Value> = def.labels.values().map(|l| l.clone().into()).collect();
+        o.insert("options".into(), options.into());
+        return Some(("select", config));
+    }
+    // Text is not a number; a value without a documented range is not offered as one either.
+    if !r.value.is_number() {
+        return None;
+    }
+    let (lo, hi) = def.range?;
+    let scale = def.scale.unwrap_or(1.0);
+    #[allow(clippy::cast_precision_loss)] // documented ranges are far inside f64's exact integers
+    let (min, max) = (lo as f64 * scale, hi as f64 * scale);
+    o.insert("min".into(), min.min(max).into());
+    o.insert("max".into(), max.max(min).into());
+    o.insert("step".into(), scale.abs().into());
+    o.insert("mode".into(), "box".into());
+    Some(("number", config))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 31: the MKZP (a profile without a vendor) was announced with `"manufacturer":
+    /// null`, which Home Assistant's schema refuses, and coils as numeric sensors.
+    #[test]
+    fn discovery_leaves_out_absent_keys_and_announces_bits_as_binary_sensors() {
+        use mbtap_core::profile::Table;
+        let mkzp = mbtap_core::profile::builtin::get("mkzp").unwrap().unwrap();
+        assert!(mkzp.meta.vendor.is_none(), "the test needs a profile without a vendor");
+        let regs = mbtap_core::query::rows::rows(17, Table::HoldingRegisters, 50, &[123], Some(&mkzp));
+        let (_, _, component, config) = discovery("mbtap/site", &regs[0], Some(&mkzp), "t");
+        assert_eq!(component, "sensor");
+        assert!(!config.to_string().contains("null"), "{config}");
+        assert!(config["device"].get("manufacturer").is_none(), "{config}");
+        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
+        let coil = mbtap_core::query::rows::rows(1, Table::Coils, 0, &[1], Some(&mk4));
+        let (_, _, component, config) = discovery("mbtap/site", &coil[0], Some(&mk4), "t");
+        assert_eq!(component, "binary_sensor");
+        assert_eq!((config["payload_on"].as_str(), config["payload_off"].as_str()), (Some("1"), Some("0")));
+        assert_eq!(config["value_template"], "{{ value_json.raw }}");
+        assert!(config.get("unit_of_measurement").is_none());
+        assert!(config["device"]["manufacturer"].is_string(), "the MK4 has a vendor: {config}");
+    }
+
+    /// Issue 30: with writes on, writable registers become Home Assistant controls — a rw coil a
+    /// switch, a ranged set point a number within its scaled range — and the rest stay sensors.
+    #[test]
+    fn writable_registers_are_announced_as_controls() {
+        use mbtap_core::profile::Table;
+        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
+        let row = |table, address, raw: u16| {
+            mbtap_core::query::rows::rows(1, table, address, &[raw], Some(&mk4)).into_iter().next().unwrap()
+        };
+        let announce = |r: &Row| {
+            let (_, _, _, config) = discovery("p", r, Some(&mk4), "p/unit/1/x");
+            control(r, Some(&mk4), "p/unit/1/x", config)
+        };
+        let (component, config) = announce(&row(Table::Coils, 0, 1)).unwrap();
+        assert_eq!(component, "switch");
+        assert_eq!(config["command_topic"], "p/unit/1/x/set");
+        assert!(announce(&row(Table::Coils, 3, 1)).is_none(), "coil 3 is documented read-only");
+        let (component, config) = announce(&row(Table::HoldingRegisters, 105, 250)).unwrap();
+        assert_eq!(component, "number");
+        assert_eq!(
+            (config["min"].as_f64(), config["max"].as_f64(), config["step"].as_f64()),
+            (Some(0.0), Some(100.0), Some(0.01))
+        );
+        let (component, config) = announce(&row(Table::HoldingRegisters, 101, 0)).unwrap();
+        assert_eq!(component, "select", "an enumeration is a choice");
+        assert_eq!(config["options"][1], "fill by level sensors");
+        assert!(announce(&row(Table::InputRegisters, 430, 2305)).is_none(), "input registers are read-only");
+    }
+}
