@@ -140,3 +140,43 @@ fn diff_names_what_changed_between_a_capture_and_an_image() {
     );
     assert!(out.contains("1 differ"), "{out}");
 }
+
+/// Issue 28: on recordings of real meters (bytes or register values from public reports, see
+/// `captures/README.md`), `mbtap learn` finds the float pairs and their word order the reports
+/// give — high word first on the EV meter (six floats at input 6–17) and the PM5350 (frequency
+/// at holding 3109), low word first on the device of the Node-RED report (holding 2 and 6) —
+/// and joins nothing else.
+#[test]
+fn learn_finds_float_pairs_and_their_word_order_on_real_meter_recordings() {
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let cases: [(&str, &[(u64, &str)]); 3] = [
+        (
+            "rtu-real-ev-meter-floats.pcapng",
+            &[
+                (6, "f32 high word first"),
+                (8, "f32 high word first"),
+                (10, "f32 high word first"),
+                (12, "f32 high word first"),
+                (14, "f32 high word first"),
+                (16, "f32 high word first"),
+            ],
+        ),
+        ("rtu-real-cdab-floats.pcapng", &[(2, "f32 low word first"), (6, "f32 low word first")]),
+        ("rtu-real-pm5350-frequency.pcapng", &[(3109, "f32 high word first")]),
+    ];
+    for (file, expected) in cases {
+        let path = format!("{}/captures/{file}", env!("CARGO_MANIFEST_DIR"));
+        let o = std::process::Command::new(bin).args(["learn", &path, "--format", "json"]).output().unwrap();
+        assert!(o.status.success(), "{file}: {}", String::from_utf8_lossy(&o.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let wide: Vec<(u64, String)> = report["units"][0]["registers"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["width"] == 2)
+            .map(|r| (r["address"].as_u64().unwrap(), r["type"].as_str().unwrap().to_owned()))
+            .collect();
+        let expected: Vec<(u64, String)> = expected.iter().map(|&(a, t)| (a, t.to_owned())).collect();
+        assert_eq!(wide, expected, "{file}");
+    }
+}

@@ -119,3 +119,42 @@ fn probe_finds_each_simulated_devices_map_reading_only() {
     assert!(functions.iter().all(|f| matches!(f, 1..=4 | 0x11 | 0x2B)), "functions on the line: {functions:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 28: `mbtap diff` of two probe dumps — the MK4 probed, its operating mode written
+/// (holding 101), probed again: the diff names that register, labelled by the profile, with
+/// the value before and the value written, and exits 1 (as diff(1)).
+#[test]
+#[ignore = "needs a pseudo-terminal with `mbtap simulate`; .ci/run runs this with --ignored"]
+fn diff_of_two_probe_dumps_names_the_setting_written_between() {
+    let dir = std::env::temp_dir().join(format!("mbtap-probe-diff-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bus = dir.join("bus");
+    let _sim = common::simulate(&bus, &[]);
+    wait_for(&bus);
+    let link = bus.to_str().unwrap();
+    let dump = |name: &str| {
+        let (doc, ok) = probe(link, &["--unit", "1", "--range", "100-110", "--tables", "holding"]);
+        assert!(ok, "{doc}");
+        assert!(doc["image"].as_array().is_some_and(|rows| !rows.is_empty()), "{doc}");
+        let path = dir.join(name);
+        std::fs::write(&path, doc.to_string()).unwrap();
+        path
+    };
+    let before = dump("before.json");
+    let w = Command::new(BIN)
+        .args(["write", link, "--parity", "even", "--unit", "1", "--device", "mk4", "Operating mode=2"])
+        .output()
+        .unwrap();
+    assert!(w.status.success(), "{}", String::from_utf8_lossy(&w.stderr));
+    let after = dump("after.json");
+    let o = Command::new(BIN)
+        .args(["diff", before.to_str().unwrap(), after.to_str().unwrap(), "--device", "1=mk4"])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    let line =
+        out.lines().find(|l| l.starts_with("unit 1 holding 101 Operating mode:")).unwrap_or_else(|| panic!("{out}"));
+    assert!(line.ends_with("→ control over RS-485 (2)"), "{line}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,5 +1,5 @@
-//! `mbtap diff A B`: which registers changed between two captures or register images, and how
-//! ([`mbtap_core::learn::diff`]), named and scaled by profiles when given.
+//! `mbtap diff A B`: which registers changed between two captures, register images or probe
+//! dumps, and how ([`mbtap_core::learn::diff`]), named and scaled by profiles when given.
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -8,15 +8,16 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use mbtap_core::learn::diff::{Image, diff, parse_image_csv, parse_image_json};
 
-/// Which registers changed between two captures or register images (`replay --image` CSV or
-/// JSON) — before and after a settings change or a firmware update.
+/// Which registers changed between two captures, register images (`replay --image` CSV or
+/// JSON) or probe dumps (`probe --format json` saved) — before and after a settings change or
+/// a firmware update.
 ///
 /// The latest value of every register heard in each is compared. Exit status: 0 nothing
 /// differs, 1 something does (as diff(1)), 2 an input cannot be read.
 /// Example: `mbtap diff before.pcapng after.pcapng --device 1=mk4`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Before: a capture (pcap/pcapng) or a register image (.csv, .json).
+    /// Before: a capture (pcap/pcapng), a register image (.csv, .json) or a probe dump (.json).
     pub before: PathBuf,
     /// After: the same kinds.
     pub after: PathBuf,

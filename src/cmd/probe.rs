@@ -193,10 +193,22 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
                     )
                 })
                 .collect();
+            // Every value read, as `replay --image FILE.json` writes an image: two probe dumps
+            // (this output, saved) are what `mbtap diff` compares.
+            let image: Vec<serde_json::Value> = probe
+                .found
+                .iter()
+                .flat_map(|(t, f)| {
+                    f.present.iter().map(move |(&address, &raw)| {
+                        serde_json::json!({"unit": args.unit, "table": t.name(), "address": address, "raw": raw})
+                    })
+                })
+                .collect();
             let doc = serde_json::json!({
                 "unit": args.unit, "identification": ident.map(|o| o.into_iter().map(|(id, v)| serde_json::json!({"id": id, "value": v})).collect::<Vec<_>>()),
                 "server_id": server, "tables": tables, "requests": probe.requests,
                 "assumed_absent": probe.assumed_absent, "stopped": probe.stopped, "seconds": took.as_secs_f64(),
+                "image": image,
             });
             writeln!(stdout, "{doc}")?;
         }

@@ -40,13 +40,16 @@ pub fn diff(a: &Image, b: &Image) -> (Vec<Change>, usize) {
 }
 
 /// A register image as `replay --image FILE.json` writes it: an array of rows with `unit`,
-/// `table`, `address`, `raw`.
+/// `table`, `address`, `raw` — or a probe dump (`probe --format json`), whose `image` holds
+/// the same rows: every value the probe read.
 ///
 /// # Errors
 /// What is wrong and in which row.
 pub fn parse_image_json(text: &str) -> Result<Image, String> {
     let v: serde_json::Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
-    let rows = v.as_array().ok_or("expected an array of rows, as replay --image FILE.json writes")?;
+    let rows = v.get("image").unwrap_or(&v).as_array().ok_or(
+        "expected an array of rows (as replay --image FILE.json writes) or a probe dump (probe --format json)",
+    )?;
     let mut out = Image::new();
     for (i, r) in rows.iter().enumerate() {
         let field = |k: &str| r.get(k).ok_or_else(|| format!("row {}: no {k:?}", i + 1));
@@ -142,5 +145,9 @@ mod tests {
         let json = r#"[{"unit": 1, "table": "coils", "address": 3, "raw": 1}]"#;
         assert_eq!(parse_image_json(json).unwrap().get(&(1, Table::Coils, 3)), Some(&1));
         assert!(parse_image_json(r#"[{"unit": 1}]"#).unwrap_err().contains("row 1"));
+        // A probe dump: its image rows, the rest of the report ignored.
+        let dump = r#"{"unit": 3, "requests": 9, "tables": {}, "image": [{"unit": 3, "table": "holding_registers", "address": 7, "raw": 42}]}"#;
+        assert_eq!(parse_image_json(dump).unwrap().get(&(3, Table::HoldingRegisters, 7)), Some(&42));
+        assert!(parse_image_json(r#"{"unit": 3}"#).unwrap_err().contains("probe dump"));
     }
 }

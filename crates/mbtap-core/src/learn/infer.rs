@@ -162,6 +162,25 @@ fn float_fit(pair: &PairStat, high_first: bool) -> Option<u32> {
     (no <= yes / 4).then_some(yes + 1)
 }
 
+/// A float in this word order from a short series (fewer than [`ENOUGH`] joint samples, down
+/// to a single snapshot — what a pasted log or a short recording holds): every sample a
+/// plausible number and not all zero, the other word order *not* plausible in some sample (so
+/// the order is decided by the bits, not guessed), and the high word changing no more often
+/// than the low word (a mantissa's low half moves first). Weaker evidence than a series, and
+/// said so; a random pair of registers passes about one time in seven, so the confidence
+/// stays low.
+fn short_float_fit(pair: &PairStat, high_first: bool) -> bool {
+    let words = ordered(pair, high_first);
+    if words.is_empty() || words.len() >= ENOUGH {
+        return false;
+    }
+    let value = |&(h, l): &(u16, u16)| (u32::from(h) << 16) | u32::from(l);
+    let this = words.iter().all(|w| plausible_float(value(w))) && words.iter().any(|&(h, _)| h != 0);
+    let other = words.iter().all(|&(h, l)| plausible_float(value(&(l, h))));
+    let steps = |f: fn(&(u16, u16)) -> u16| words.windows(2).filter(|w| f(&w[0]) != f(&w[1])).count();
+    this && !other && steps(|w| w.0) <= steps(|w| w.1)
+}
+
 /// A 32-bit integer in this word order: the high word takes more than one value and either
 /// changes only as its low word's carry, or the low word alone jumps about (wrapping) while
 /// the two together move smoothly. Signed when the high word is found on both sides of zero
@@ -292,10 +311,39 @@ fn wide_at<'a>(
 ) -> Option<(Guess, u32)> {
     let &(a, r) = regs.get(i)?;
     let &(b, r2) = regs.get(i + 1)?;
-    if u32::from(b) != u32::from(a) + 1 || (r.changes == 0 && r2.changes == 0) {
+    if u32::from(b) != u32::from(a) + 1 {
         return None;
     }
-    wide(a, pair(a)?, r, r2)
+    let p = pair(a)?;
+    // Over a short series "never changed" says little (one snapshot changes nothing): the
+    // plausibility of the bits decides there.
+    if usize::try_from(p.samples).unwrap_or(usize::MAX) < ENOUGH {
+        return short(a, p);
+    }
+    if r.changes == 0 && r2.changes == 0 {
+        return None;
+    }
+    wide(a, p, r, r2)
+}
+
+/// The pair `a`, `a + 1` as a float from a short series ([`short_float_fit`]), score 1.
+fn short(a: u16, p: &PairStat) -> Option<(Guess, u32)> {
+    let high_first = [true, false].into_iter().find(|&h| short_float_fit(p, h))?;
+    let last = p.recent.back().map(|&(x, y)| f32::from_bits(join(x, y, high_first))).unwrap_or_default();
+    Some((
+        Guess {
+            address: a,
+            kind: Kind::F32 { high_first },
+            confidence: confidence(p.samples, 0).min(0.2),
+            evidence: format!(
+                "only {} joint sample(s): every one a plausible float {} and not in the other word order \
+                 (last {last}); by the bits alone — a longer recording would show the series",
+                p.samples,
+                if high_first { "high word first" } else { "low word first" },
+            ),
+        },
+        1,
+    ))
 }
 
 /// The pair `a`, `a + 1` as one 32-bit value, when the series say so, with its score (how much
@@ -357,4 +405,46 @@ fn wide(a: u16, p: &PairStat, r: &RegStat, r2: &RegStat) -> Option<(Guess, u32)>
         },
         score,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(samples: &[(u16, u16)]) -> PairStat {
+        let mut p = PairStat::default();
+        for &(a, b) in samples {
+            p.push(a, b);
+        }
+        p
+    }
+
+    /// Issue 28, real recordings hold a few polls: the order a float's words come in is decided
+    /// by the bits when only one order is a plausible number, and not at all when both are.
+    #[test]
+    fn regression_issue_28_short_series_floats_are_decided_by_their_bits() {
+        // PM5350 frequency, high word first: 0x426F_FC67 = 59.99 Hz; 0xFC67_426F is -4.8e36.
+        let hz = pair(&[(0x426F, 0xFC67), (0x426F, 0xF642)]);
+        assert!(short_float_fit(&hz, true));
+        assert!(!short_float_fit(&hz, false));
+        // A voltage low word first: 0x42BB_07F7 = 93.5; 0x07F7_42BB is 3.7e-34.
+        let volts = pair(&[(0x07F7, 0x42BB)]);
+        assert!(short_float_fit(&volts, false));
+        assert!(!short_float_fit(&volts, true));
+        // Two small integers: no order is a plausible float.
+        let small = pair(&[(3, 7), (4, 7)]);
+        assert!(!short_float_fit(&small, true) && !short_float_fit(&small, false));
+        // Both orders plausible (0x4120_4120 is 10.0 either way): undecided, not guessed.
+        let both = pair(&[(0x4120, 0x4120)]);
+        assert!(!short_float_fit(&both, true) && !short_float_fit(&both, false));
+        // A high word that moves more often than the low word is not a float's.
+        let moving_high = pair(&[(0x4270, 0x0001), (0x4271, 0x0001), (0x4272, 0x0001)]);
+        assert!(!short_float_fit(&moving_high, true));
+        // All zero: nothing says float.
+        assert!(!short_float_fit(&pair(&[(0, 0)]), true));
+        // A long series ([`ENOUGH`] samples) is not judged this way (the series tests decide there).
+        let long: Vec<(u16, u16)> = (0..8u16).map(|i| (0x426F, 0xF000 + i)).collect();
+        assert_eq!(long.len(), ENOUGH);
+        assert!(!short_float_fit(&pair(&long), true));
+    }
 }
