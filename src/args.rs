@@ -279,7 +279,7 @@ pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result
     }
     if let Some(path) = &o.learn {
         writer.learn =
-            Some(crate::output::learn_draft::LiveDraft::new(path.clone(), "the line mbtap listened to".into()));
+            Some(crate::output::learn_draft::LiveDraft::new(Some(path.clone()), "the line mbtap listened to".into()));
     }
     Ok(writer)
 }

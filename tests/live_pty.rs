@@ -286,3 +286,29 @@ fn sniff_learn_keeps_draft_profiles_up_to_date_while_listening() {
     assert!(!draft.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 28: `mbtap learn PORT` listens to a live line (here `simulate --poll` on a pty) for
+/// `--duration`, then says what it learned of every unit the master polls, as for a capture.
+#[test]
+#[ignore = "needs a pseudo-terminal with `mbtap simulate --poll`; .ci/run runs this with --ignored"]
+fn learn_listens_to_a_port_for_its_duration() {
+    let dir = std::env::temp_dir().join(format!("mbtap-learn-port-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let line = dir.join("line");
+    let _sim = common::simulate(&line, &["--poll"]);
+    let o = Command::new(BIN)
+        .args(["learn", line.to_str().unwrap(), "--parity", "even", "--duration", "4", "--format", "json"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let units: Vec<u64> = report["units"].as_array().unwrap().iter().map(|u| u["unit"].as_u64().unwrap()).collect();
+    assert_eq!(units, [1, 5, 17], "{report}");
+    assert!(report["units"].as_array().unwrap().iter().all(|u| !u["blocks"].as_array().unwrap().is_empty()));
+    // --duration belongs to a port; given with a capture, it is refused and said why.
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-real-pm5350-frequency.pcapng");
+    let o = Command::new(BIN).args(["learn", capture, "--duration", "4"]).output().unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--duration is for listening to a port"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,7 +1,8 @@
-//! `mbtap learn CAPTURE`: a register map drafted from what a recorded line says
+//! `mbtap learn CAPTURE|PORT`: a register map drafted from what a recorded or a live line says
 //! ([`mbtap_core::learn`]): the blocks the master polls, its writes, the exceptions, and each
 //! register's likely type with its evidence; `-o DRAFT.toml` writes a profile per unit that
-//! `profiles check` accepts.
+//! `profiles check` accepts. A live line is heard through the sniffer's loop
+//! ([`crate::source::sniff`]) until `--duration` or Ctrl-C.
 
 use std::io::Write as _;
 use std::path::PathBuf;
@@ -11,16 +12,22 @@ use anyhow::Context as _;
 
 use crate::args::CaptureLineArgs;
 
-/// Draft a register map from a capture: blocks polled, writes, exceptions, and each register's
-/// likely type (constant, counter, enumeration, bits, signed, 32-bit integers and floats in
-/// either word order, text) with the evidence for it.
+/// Draft a register map from a capture or a live line: blocks polled, writes, exceptions, and
+/// each register's likely type (constant, counter, enumeration, bits, signed, 32-bit integers
+/// and floats in either word order, text) with the evidence for it.
 ///
 /// Example: `mbtap learn site.pcapng -o meter.toml`, then `mbtap profiles check meter.toml` and
-/// `mbtap replay site.pcapng --device 7=meter.toml`.
+/// `mbtap replay site.pcapng --device 7=meter.toml`; `mbtap learn /dev/ttyUSB0 --duration
+/// 10min -o meter.toml` listens (the drafts rewritten every 10 s while it does).
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The capture (pcap or pcapng, as `sniff --record` writes).
+    /// The capture (pcap or pcapng, as `sniff --record` writes), or a serial port to listen
+    /// to (`/dev/ttyUSB0`, `rtu-over-tcp://HOST:PORT`) until --duration or Ctrl-C.
     pub capture: PathBuf,
+    /// Listening to a port: stop after this long (`90s`, `10min`, `1h`; a bare number is
+    /// seconds). Without it, until Ctrl-C.
+    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    pub duration: Option<std::time::Duration>,
     #[command(flatten)]
     pub line: CaptureLineArgs,
     /// Write the draft profile here (one unit heard), or `NAME-unit-N.toml` beside it per unit.
@@ -45,11 +52,48 @@ pub enum Format {
     Json,
 }
 
+/// A live line rather than a capture: a serial server's URL, or a path that is not a regular
+/// file (a character device, a pseudo-terminal).
+fn is_port(path: &std::path::Path) -> bool {
+    let s = path.to_string_lossy();
+    s.starts_with("rtu-over-tcp://")
+        || s.starts_with("rtu+tcp://")
+        || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
+/// Listens to `args.capture` as a port, the learner fed as the sniffer hears.
+fn listen(args: &Args) -> anyhow::Result<mbtap_core::learn::Learner> {
+    let (mode, settings, latency_ns) = args.line.line.overrides().resolve();
+    let port = args.capture.to_string_lossy().into_owned();
+    let opts = crate::source::sniff::SniffOptions {
+        port: port.clone(),
+        mode,
+        line: settings,
+        latency_ns: args.line.line.latency_ms.is_some().then_some(latency_ns),
+        record: None,
+        duration: args.duration,
+    };
+    let mut writer = crate::output::EventWriter::new(std::io::sink(), crate::output::EventFormat::Summary);
+    writer.learn = Some(crate::output::learn_draft::LiveDraft::new(args.output.clone(), port));
+    crate::cmd::runtime()?.block_on(crate::source::sniff::sniff(opts, &mut writer, &mut std::io::stderr()))?;
+    Ok(writer.learn.take().map(|l| l.learner).unwrap_or_default())
+}
+
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
-    let input = crate::output::progress::open_capture(&args.capture, true)?;
-    let mut learner = mbtap_core::learn::Learner::default();
-    mbtap_core::replay::replay_into(input, args.line.overrides(), &mut learner)
-        .with_context(|| format!("reading {}", args.capture.display()))?;
+    let mut learner = if is_port(&args.capture) {
+        listen(args)?
+    } else {
+        anyhow::ensure!(
+            args.duration.is_none(),
+            "--duration is for listening to a port; {} is a capture, read whole",
+            args.capture.display()
+        );
+        let input = crate::output::progress::open_capture(&args.capture, true)?;
+        let mut learner = mbtap_core::learn::Learner::default();
+        mbtap_core::replay::replay_into(input, args.line.overrides(), &mut learner)
+            .with_context(|| format!("reading {}", args.capture.display()))?;
+        learner
+    };
     if let Some(u) = args.unit {
         learner.units.retain(|&k, _| k == u);
     }

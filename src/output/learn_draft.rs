@@ -51,7 +51,8 @@ pub fn write_drafts(
 #[derive(Debug)]
 pub struct LiveDraft {
     pub learner: Learner,
-    pub path: PathBuf,
+    /// Where the drafts go; `None`: kept in memory only (`mbtap learn PORT` without `-o`).
+    pub path: Option<PathBuf>,
     pub source: String,
     last_write_ns: Option<u64>,
     /// The drafts so far went to `path` itself (one unit heard): when a second unit is heard,
@@ -61,15 +62,16 @@ pub struct LiveDraft {
 
 impl LiveDraft {
     #[must_use]
-    pub fn new(path: PathBuf, source: String) -> Self {
+    pub fn new(path: Option<PathBuf>, source: String) -> Self {
         Self { learner: Learner::default(), path, source, last_write_ns: None, wrote_single: false }
     }
 
     fn write(&mut self) -> anyhow::Result<Vec<(u8, PathBuf)>> {
-        let written = write_drafts(&self.learner, &self.path, &self.source, &[])?;
+        let Some(path) = &self.path else { return Ok(Vec::new()) };
+        let written = write_drafts(&self.learner, path, &self.source, &[])?;
         let single = written.len() == 1;
         if !single && self.wrote_single {
-            std::fs::remove_file(&self.path).with_context(|| format!("removing {}", self.path.display()))?;
+            std::fs::remove_file(path).with_context(|| format!("removing {}", path.display()))?;
         }
         self.wrote_single = single;
         Ok(written)
