@@ -1,5 +1,5 @@
 //! Fuzz harness bodies, kept in the library so the `fuzz/` targets stay one-liners and the same
-//! bodies run over the seed corpus in `cargo test` (tests/fuzz_corpus.rs).
+//! bodies run over the seed corpus in `cargo test` (tests/decode/fuzz_corpus.rs).
 //!
 //! Each function must not panic on any input; `roundtrip` additionally asserts the
 //! parse → encode identity, which is the one place a panic here is the point.

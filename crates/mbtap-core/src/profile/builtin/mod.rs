@@ -1,5 +1,5 @@
 //! The built-in profiles, compiled into the binary. Each is checked by the same loader as a
-//! user's file, and tested against the document it was made from (tests/builtin_profiles.rs).
+//! user's file, and tested against the document it was made from (tests/decode/builtin_profiles.rs).
 
 use super::loader::{ProfileError, load};
 use super::model::Profile;
