@@ -11,7 +11,7 @@ use std::time::Duration;
 use tokio::sync::oneshot;
 use tokio::time::Instant;
 
-use super::request::{Route, ServerOptions};
+use super::request::{Routes, ServerOptions};
 use super::shared::Job;
 use crate::publish::mqtt::Mqtt;
 use mbtap_core::profile::Profiles;
@@ -43,7 +43,7 @@ impl std::fmt::Debug for BrokerWrites {
 
 /// Starts carrying out the broker's writes on `routes`, on a thread of its own (the asks arrive
 /// on a blocking channel), for as long as the bridge runs.
-pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Vec<Route>>, opts: Arc<ServerOptions>) {
+pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Routes>, opts: Arc<ServerOptions>) {
     let Some(asks) = writes.asks.lock().unwrap_or_else(PoisonError::into_inner).take() else { return };
     let writes = Arc::clone(writes);
     let handle = tokio::runtime::Handle::current();
@@ -56,7 +56,7 @@ pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Vec<Route>>, opts: Arc<Serv
 }
 
 /// One write: the profile's checks, the bridge's admission, the line.
-async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &[Route], opts: &ServerOptions) -> Outcome {
+async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerOptions) -> Outcome {
     let text = &ask.item.text;
     let profile = writes.profiles.get(&ask.unit);
     let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;
@@ -66,7 +66,7 @@ async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &[Route], opts: &Server
     let first = routes.first().ok_or_else(|| format!("{text}: the bridge has no serial line"))?;
     let asked = Asked { unit: ask.unit, pdu: &pdu, role, peer_high: false };
     let admitted = opts.policy.admit(asked, None, first.line.now()).map_err(|why| {
-        first.line.metrics.refused(why.reason());
+        routes.server.refused(why.reason());
         format!("{text}: refused by the bridge ({}, exception {})", why.reason(), why.exception())
     })?;
     let route = routes.get(admitted.route).ok_or_else(|| format!("{text}: no line serves unit {}", ask.unit))?;

@@ -9,7 +9,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
-use super::request::{Client, Pending, Route, ServerOptions, request};
+use super::request::{Client, Pending, Routes, ServerOptions, request};
 use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
 use mbtap_core::proto::{encode_rtu, encode_tcp};
 use mbtap_gateway::admit::Role;
@@ -30,7 +30,7 @@ pub(super) async fn connection<S>(
     stream: S,
     peer: SocketAddr,
     client: ClientId,
-    routes: &[Route],
+    routes: &Routes,
     opts: &ServerOptions,
     seen: &(dyn Fn(ClientId) + Sync),
     role: Role<'_>,
@@ -92,9 +92,7 @@ pub(super) async fn connection<S>(
             }
             Err(_) if partial_since.is_some() => {
                 // Slowloris: a request begun and never finished ends this connection only.
-                if let Some(r) = routes.first() {
-                    r.line.metrics.refused("slow_request");
-                }
+                routes.server.refused("slow_request");
                 break;
             }
             // EOF, an error, or idle too long: the connection ends.
@@ -109,9 +107,7 @@ pub(super) async fn connection<S>(
                     // Kilobytes that hold no request are not a Modbus client: end this
                     // connection only.
                     if rtu_frames.discarded > RTU_GARBAGE_LIMIT {
-                        if let Some(r) = routes.first() {
-                            r.line.metrics.refused("garbage");
-                        }
+                        routes.server.refused("garbage");
                         break 'read;
                     }
                     break;
@@ -128,9 +124,7 @@ pub(super) async fn connection<S>(
                     }
                     Err(_) => {
                         // Protocol id ≠ 0, length 0, 1 or > 254: this connection only.
-                        if let Some(r) = routes.first() {
-                            r.line.metrics.refused("malformed_mbap");
-                        }
+                        routes.server.refused("malformed_mbap");
                         break 'read;
                     }
                 }

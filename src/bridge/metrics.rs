@@ -209,9 +209,39 @@ impl Metrics {
         self.with(|m| (m.units.values().map(|u| u.requests).sum(), m.units.values().map(|u| u.responses).sum()))
     }
 
-    /// The Prometheus text exposition.
+    /// The Prometheus text exposition: the line's families and the server's.
     #[must_use]
     pub fn render(&self) -> String {
+        self.render_line() + &self.render_server()
+    }
+
+    /// The server's families: connections and refusals, counted once for every listener
+    /// whatever line a request would have gone to.
+    #[must_use]
+    pub fn render_server(&self) -> String {
+        self.with(|m| {
+            let mut s = String::new();
+            let counter = |s: &mut String, name: &str, help: &str| {
+                let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} counter");
+            };
+            counter(&mut s, "mbtap_bridge_connections_total", "TCP connections accepted.");
+            let _ = writeln!(s, "mbtap_bridge_connections_total {}", m.connections);
+            let _ = writeln!(
+                s,
+                "# HELP mbtap_bridge_connections_open TCP connections open.\n# TYPE mbtap_bridge_connections_open gauge\nmbtap_bridge_connections_open {}",
+                m.connections_open
+            );
+            counter(&mut s, "mbtap_bridge_refused_total", "Connections or requests refused, by reason.");
+            for (r, n) in &m.refused {
+                let _ = writeln!(s, "mbtap_bridge_refused_total{{reason=\"{r}\"}} {n}");
+            }
+            s
+        })
+    }
+
+    /// One line's families: per unit, the queue, the port, the cache, line time.
+    #[must_use]
+    pub fn render_line(&self) -> String {
         self.with(|m| {
             let mut s = String::new();
             let counter = |s: &mut String, name: &str, help: &str| {
@@ -299,13 +329,6 @@ impl Metrics {
             let _ = writeln!(s, "mbtap_bridge_dropped_total {}", m.dropped);
             counter(&mut s, "mbtap_bridge_port_reopened_total", "Times the serial port was reopened.");
             let _ = writeln!(s, "mbtap_bridge_port_reopened_total {}", m.reopened);
-            counter(&mut s, "mbtap_bridge_connections_total", "TCP connections accepted.");
-            let _ = writeln!(s, "mbtap_bridge_connections_total {}", m.connections);
-            let _ = writeln!(
-                s,
-                "# HELP mbtap_bridge_connections_open TCP connections open.\n# TYPE mbtap_bridge_connections_open gauge\nmbtap_bridge_connections_open {}",
-                m.connections_open
-            );
             counter(&mut s, "mbtap_bridge_cache_hits_total", "Reads answered from the cache (--cache).");
             let _ = writeln!(s, "mbtap_bridge_cache_hits_total {}", m.cache_hits);
             counter(&mut s, "mbtap_bridge_cache_misses_total", "Reads the cache covers that went to the line (missing or stale).");
@@ -315,10 +338,6 @@ impl Metrics {
             counter(&mut s, "mbtap_bridge_line_seconds_total", "Line time used, by class (high: --priority, poll: --poll).");
             for (c, d) in &m.line_time {
                 let _ = writeln!(s, "mbtap_bridge_line_seconds_total{{class=\"{c}\"}} {}", d.as_secs_f64());
-            }
-            counter(&mut s, "mbtap_bridge_refused_total", "Connections or requests refused, by reason.");
-            for (r, n) in &m.refused {
-                let _ = writeln!(s, "mbtap_bridge_refused_total{{reason=\"{r}\"}} {n}");
             }
             s
         })

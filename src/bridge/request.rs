@@ -23,6 +23,22 @@ pub struct Route {
     pub line: Arc<LineShared>,
 }
 
+/// The lines a bridge serves, in the order given, and the counters of the server in front of
+/// them: connections and refusals belong to no line (they were counted on the first line's
+/// metrics, issue 26), so they are kept and exported once, without a line label.
+#[derive(Debug, Default)]
+pub struct Routes {
+    pub lines: Vec<Route>,
+    pub server: super::metrics::Metrics,
+}
+
+impl std::ops::Deref for Routes {
+    type Target = [Route];
+    fn deref(&self) -> &[Route] {
+        &self.lines
+    }
+}
+
 /// What the TCP side allows and how it frames.
 #[derive(Debug, Clone)]
 pub struct ServerOptions {
@@ -98,16 +114,13 @@ pub(super) fn request(
     transaction_id: u16,
     unit: u8,
     pdu: Vec<u8>,
-    routes: &[Route],
+    routes: &Routes,
     opts: &ServerOptions,
 ) -> Pending {
     let function = pdu.first().copied().unwrap_or(0);
     let reply = |answer| Pending { transaction_id, unit, function, answer };
     let refuse = |why: Refusal| {
-        // Server-wide refusals are counted with the first line's metrics (the one exported).
-        if let Some(r) = routes.first() {
-            r.line.metrics.refused(why.reason());
-        }
+        routes.server.refused(why.reason());
         reply(Answer::Now(Reply::Gateway(why.exception())))
     };
     let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());

@@ -14,7 +14,7 @@ use tokio::sync::mpsc;
 
 use crate::bridge::line::{self, LineOptions, MonitorChunk};
 use crate::bridge::metrics::Metrics;
-use crate::bridge::request::{Route, ServerOptions};
+use crate::bridge::request::{Route, Routes, ServerOptions};
 use crate::bridge::reverse::ReverseOptions;
 use crate::bridge::server;
 use crate::bridge::shared::LineShared;
@@ -48,7 +48,7 @@ pub struct BridgeOptions {
 
 /// What the bridge serves, for the metrics endpoint and the notes on stderr.
 enum Served {
-    Lines(Arc<Vec<Route>>),
+    Lines(Arc<Routes>),
     Reverse(Arc<Metrics>),
 }
 
@@ -62,7 +62,7 @@ impl Served {
         };
         let mut body = String::new();
         for (i, r) in routes.iter().enumerate() {
-            let text = r.line.metrics.render();
+            let text = r.line.metrics.render_line();
             if routes.len() == 1 {
                 body.push_str(&text);
                 continue;
@@ -80,6 +80,8 @@ impl Served {
                 }
             }
         }
+        // Connections and refusals are the server's: once, without a line label.
+        body.push_str(&routes.server.render_server());
         body
     }
 
@@ -144,7 +146,7 @@ pub async fn bridge<W: Write>(
                 units.end()
             );
         }
-        let routes = Arc::new(routes);
+        let routes = Arc::new(Routes { lines: routes, server: Metrics::default() });
         // The admission policy routes by the lines' units, in the order they were given.
         opts.server.policy.routes = routes.iter().map(|r| r.units.clone()).collect();
         if let Some(w) = &opts.broker_writes {

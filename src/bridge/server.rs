@@ -12,7 +12,7 @@ use tokio::net::TcpListener;
 use tokio::time::Instant;
 
 use super::connection::connection;
-pub use super::request::{Route, ServerOptions};
+pub use super::request::{Route, Routes, ServerOptions};
 use mbtap_gateway::admit::{Role, ip_allowed};
 use mbtap_gateway::queue::ClientId;
 
@@ -41,7 +41,7 @@ pub type Table = std::sync::Mutex<std::collections::HashMap<ClientId, Conn>>;
 /// task runs its destructors, not its remaining code).
 struct Cleanup {
     client: ClientId,
-    routes: Arc<Vec<Route>>,
+    routes: Arc<Routes>,
     table: Arc<Table>,
 }
 
@@ -50,9 +50,7 @@ impl Drop for Cleanup {
         for r in self.routes.iter() {
             r.line.forget(self.client);
         }
-        if let Some(r) = self.routes.first() {
-            r.line.metrics.connection_closed();
-        }
+        self.routes.server.connection_closed();
         self.table.lock().unwrap_or_else(std::sync::PoisonError::into_inner).remove(&self.client);
     }
 }
@@ -91,45 +89,36 @@ const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
 /// (within [`HANDSHAKE_TIMEOUT`]); its role decides what it may do.
 pub async fn serve(
     listener: TcpListener,
-    routes: Arc<Vec<Route>>,
+    routes: Arc<Routes>,
     opts: Arc<ServerOptions>,
     tls: Option<super::tls::Tls>,
     table: Arc<Table>,
 ) {
     static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1);
-    let metrics_line = routes.first().map(|r| Arc::clone(&r.line));
     loop {
         let Ok((stream, peer)) = listener.accept().await else {
             // Out of file descriptors or similar: back off a little, keep serving.
             tokio::time::sleep(Duration::from_millis(50)).await;
             continue;
         };
-        let metrics = metrics_line.as_ref().map(|l| &l.metrics);
+        let metrics = &routes.server;
         if !ip_allowed(&opts.allow_ips, peer.ip()) {
-            if let Some(m) = metrics {
-                m.refused("ip_not_allowed");
-            }
+            metrics.refused("ip_not_allowed");
             continue;
         }
-        if metrics.is_some_and(|m| m.open_connections() >= i64::try_from(opts.max_connections).unwrap_or(i64::MAX)) {
+        if metrics.open_connections() >= i64::try_from(opts.max_connections).unwrap_or(i64::MAX) {
             // Full: the idlest connection makes room (idle sockets must not lock everyone
             // out); when all are busy, the newcomer is refused.
             if evict_idlest(&table) {
-                if let Some(m) = metrics {
-                    m.refused("evicted_idle");
-                }
+                metrics.refused("evicted_idle");
                 // Its slot frees when its task has run its cleanup.
                 tokio::task::yield_now().await;
             } else {
-                if let Some(m) = metrics {
-                    m.refused("max_connections");
-                }
+                metrics.refused("max_connections");
                 continue;
             }
         }
-        if let Some(m) = metrics {
-            m.connection_opened();
-        }
+        metrics.connection_opened();
         let client = NEXT_CLIENT.fetch_add(1, Ordering::Relaxed);
         let (routes, opts, table_for_task, tls) =
             (Arc::clone(&routes), Arc::clone(&opts), Arc::clone(&table), tls.clone());
@@ -146,7 +135,7 @@ pub async fn serve(
             match &tls {
                 None => connection(stream, peer, client, &routes, &opts, &seen, Role::Plain).await,
                 Some(tls) => {
-                    let metrics = routes.first().map(|r| &r.line.metrics);
+                    let metrics = &routes.server;
                     let Some(acceptor) = tls.current() else { return };
                     match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(stream)).await {
                         Ok(Ok(tls_stream)) => {
@@ -160,9 +149,7 @@ pub async fn serve(
                             tokio::select! {
                                 () = connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy)) => {}
                                 () = revoked => {
-                                    if let Some(m) = metrics {
-                                        m.refused("revoked");
-                                    }
+                                    metrics.refused("revoked");
                                     eprintln!("mbtap: TLS client {peer}: its certificate is revoked by the reloaded CRL; session closed");
                                 }
                             }
@@ -170,14 +157,10 @@ pub async fn serve(
                         // No certificate, an expired one, one from another CA, a slow or
                         // broken handshake: the connection ends here, counted.
                         Ok(Err(_)) => {
-                            if let Some(m) = metrics {
-                                m.refused("tls_handshake");
-                            }
+                            metrics.refused("tls_handshake");
                         }
                         Err(_) => {
-                            if let Some(m) = metrics {
-                                m.refused("tls_handshake_timeout");
-                            }
+                            metrics.refused("tls_handshake_timeout");
                         }
                     }
                 }

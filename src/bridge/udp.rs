@@ -14,7 +14,7 @@ use tokio::time::Instant;
 use mbtap_core::proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
 use tokio::net::UdpSocket;
 
-use super::request::{Client, Pending, Route, ServerOptions, request};
+use super::request::{Client, Pending, Routes, ServerOptions, request};
 use mbtap_gateway::admit::{Role, ip_allowed};
 
 /// Senders remembered (their client id and rate-limit bucket); the oldest is forgotten beyond.
@@ -28,7 +28,7 @@ struct Peer {
 }
 
 /// Serves Modbus UDP on `socket` until the process ends.
-pub async fn serve_udp(socket: UdpSocket, routes: Arc<Vec<Route>>, opts: Arc<ServerOptions>) {
+pub async fn serve_udp(socket: UdpSocket, routes: Arc<Routes>, opts: Arc<ServerOptions>) {
     // Client ids apart from the TCP listener's (which count up from 1).
     static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1 << 48);
     let socket = Arc::new(socket);
@@ -36,11 +36,9 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Vec<Route>>, opts: Arc<Ser
     let mut buf = vec![0u8; DATAGRAM];
     loop {
         let Ok((n, peer)) = socket.recv_from(&mut buf).await else { continue };
-        let metrics = routes.first().map(|r| &r.line.metrics);
+        let metrics = &routes.server;
         if !ip_allowed(&opts.allow_ips, peer.ip()) {
-            if let Some(m) = metrics {
-                m.refused("ip_not_allowed");
-            }
+            metrics.refused("ip_not_allowed");
             continue;
         }
         let datagram = buf.get(..n).unwrap_or_default();
@@ -48,9 +46,7 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Vec<Route>>, opts: Arc<Ser
             Ok(Streaming::Complete(f, used)) if used == n => (f.header.transaction_id, f.header.unit, f.pdu.to_vec()),
             // Short, long, two ADUs in one datagram, protocol id ≠ 0: dropped, counted.
             _ => {
-                if let Some(m) = metrics {
-                    m.refused("malformed_mbap");
-                }
+                metrics.refused("malformed_mbap");
                 continue;
             }
         };

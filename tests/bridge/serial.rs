@@ -907,3 +907,33 @@ fn the_ascii_bridge_answers_its_first_request_at_once() {
     assert_eq!(answer[..2], [0x04, 0x08], "{answer:02X?}");
     assert_eq!(c.call(2, 17, &[0x03, 0x00, 0x32, 0x00, 0x01])[..2], [0x03, 0x02]);
 }
+
+/// Issue 26: with two serial lines, the server's counters (connections, refusals) were counted
+/// on the first line's metrics and exported as `line="0"`. They belong to no line: exported
+/// once without a line label, while each line's own series keep theirs.
+#[test]
+#[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
+fn server_refusals_belong_to_no_line() {
+    let d = dir("two-lines");
+    let (_a, _b) = (simulator(&d.join("a"), &[]), simulator(&d.join("b"), &[]));
+    let route = format!("17-17={}", d.join("b").display());
+    let (_bridge, addr, others) = bridge(&d.join("a"), &["--read-only", "--route", &route, "--metrics", "127.0.0.1:0"]);
+    let mut c = Client::connect(&addr);
+    assert_eq!(c.call(1, 17, &[0x06, 0x00, 0x32, 0x00, 0x07]), [0x86, 0x01]);
+    assert_eq!(c.call(2, 17, &[0x03, 0x00, 0x32, 0x00, 0x03])[..2], [0x03, 0x06]);
+    assert_eq!(c.call(3, 1, &[0x03, 0x00, 0x65, 0x00, 0x01])[..2], [0x03, 0x02]);
+    let text = metrics(&others[0]);
+    for line in [
+        "mbtap_bridge_refused_total{reason=\"read_only\"} 1",
+        "mbtap_bridge_connections_open 1",
+        // The --route lines first, in the order given; the plain --serial line last.
+        "mbtap_bridge_responses_total{line=\"0\",unit=\"17\"} 1",
+        "mbtap_bridge_responses_total{line=\"1\",unit=\"1\"} 1",
+    ] {
+        assert!(text.lines().any(|l| l == line), "{line} missing:\n{text}");
+    }
+    let labelled =
+        text.lines().filter(|l| l.starts_with("mbtap_bridge_refused") || l.starts_with("mbtap_bridge_connections"));
+    assert!(labelled.clone().all(|l| !l.contains("line=")), "{text}");
+    assert_eq!(text.lines().filter(|l| l.starts_with("# TYPE mbtap_bridge_refused_total")).count(), 1, "{text}");
+}
