@@ -209,7 +209,6 @@ impl Metrics {
     pub fn totals(&self) -> (u64, u64) {
         self.with(|m| (m.units.values().map(|u| u.requests).sum(), m.units.values().map(|u| u.responses).sum()))
     }
-
 }
 
 #[cfg(test)]

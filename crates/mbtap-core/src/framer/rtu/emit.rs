@@ -1,0 +1,379 @@
+//! What the framer emits: valid frames with their timing evidence, damaged frames and noise
+//! split at known silences, CRC twins, and what each valid frame teaches the observer learner.
+
+use super::RtuFramer;
+use super::expect::{Expect, MAX_ADDRESS, Reading, diagnostics_even_len, next_expect, sender_of};
+use crate::chunk::{Chunk, Timestamp};
+use crate::framer::event::{Frame, FrameEvent, Noise};
+use crate::framer::glitch::Sender;
+use crate::framer::observer::SampleSender;
+use crate::proto::function::EXCEPTION_FLAG;
+use crate::proto::length::{PduLength, request_len, response_len};
+use crate::proto::rtu::RTU_MIN_LEN;
+
+impl RtuFramer {
+    /// Emits a chunk that [`Self::whole_frame`] accepted, with the same timing the buffered
+    /// path would give it.
+    pub(super) fn emit_whole_chunk<F: FnMut(FrameEvent<'_>)>(
+        &mut self,
+        chunk: &Chunk<'_>,
+        reading: Reading,
+        emit: &mut F,
+    ) {
+        let c = self.char_ns;
+        let n = u64::try_from(chunk.bytes.len()).unwrap_or(u64::MAX);
+        let mut e0 = chunk.t.0.saturating_sub((n - 1).saturating_mul(c));
+        let ub = match self.last_end {
+            Some(prev) => {
+                e0 = e0.max(prev.saturating_add(c));
+                e0.saturating_sub(c).saturating_sub(prev.saturating_sub(self.latency))
+            }
+            None => u64::MAX,
+        };
+        let t_end = e0.saturating_add((n - 1).saturating_mul(c));
+        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
+        emit(FrameEvent::Frame(Frame {
+            port: self.port,
+            bytes: chunk.bytes,
+            t_start: Timestamp(e0.saturating_sub(c)),
+            t_end: Timestamp(t_end),
+            check_ok: true,
+            gap_violation_ns: None,
+            short_gap_before_ns: (self.after_frame && ub < self.t35).then_some(ub),
+            gap_tolerance_ns: None,
+            short_gap_tolerance_ns: self.short_tolerance(apparent_before),
+            resolution_ns: self.learner.estimate.resolution_ns(),
+            gap_before_known: ub != u64::MAX,
+            bad_chars: false,
+            alt_len: None,
+        }));
+        self.known_units[usize::from(chunk.bytes[0])] = true;
+        self.last_sender = sender_of(self.expect, chunk.bytes, Some(reading));
+        self.after_damage = false;
+        self.turn.frame(self.last_sender);
+        self.learner.frame();
+        self.last_end = Some(t_end);
+        self.last_read = self.last_read.max(chunk.t.0);
+        self.after_frame = true;
+        self.wait_at = usize::MAX;
+        self.expect = next_expect(self.expect, chunk.bytes, Some(reading));
+        self.since_glitch = self.since_glitch.saturating_add(1);
+        // The next byte buffered lands at the end of the (empty) live buffer.
+        self.glitch_at = Some(self.buf.len());
+    }
+
+    /// Emits the first `n` live bytes, known to form no valid frame, split at known silences:
+    /// each piece a failed frame if it looks like one, else noise.
+    pub(super) fn emit_garbage<F: FnMut(FrameEvent<'_>)>(&mut self, n: usize, emit: &mut F) {
+        let stop = self.head + n;
+        let mut a = self.head;
+        while a < stop {
+            let mut b = a + 1;
+            while b < stop && self.gap_lb[b] < self.t35 {
+                b += 1;
+            }
+            // A slow slave pauses inside its frame: when the structure says the frame goes on
+            // past this silence, and it ends at a silence or at the end of the garbage, follow it.
+            if let Some(l) = self.structural_len(a, stop)
+                && a + l > b
+                && (a + l == stop || self.gap_lb[a + l] >= self.t35)
+                && self.gap_lb[a + 1..a + l].iter().all(|&g| g < self.incomplete_timeout)
+            {
+                b = a + l;
+            }
+            self.emit_piece(a, b, emit);
+            a = b;
+        }
+        self.garbage = self.garbage.saturating_sub(n);
+    }
+
+    /// Emits bytes `a..b` (absolute, `a == self.head`) that no silence divides. A frame whose
+    /// end the structure could not confirm in time (a user-defined code followed by another)
+    /// lands here whole, with a valid CRC; a valid frame glued to a corrupted one or to noise
+    /// is split off when its CRC and structure agree. The rest is a failed frame or noise.
+    pub(super) fn emit_piece<F: FnMut(FrameEvent<'_>)>(&mut self, mut a: usize, b: usize, emit: &mut F) {
+        while a < b {
+            let piece = &self.buf[a..b];
+            // A frame of a length the structure cannot tell with its `00` glitch also passes the
+            // CRC (the shift property): Diagnostics' structure decides, else the odds on this line.
+            if piece.len() > RTU_MIN_LEN && piece.last() == Some(&0) && self.plausible_frame(&piece[..piece.len() - 1])
+            {
+                let n = piece.len();
+                if self.twin_len(a, n, self.sender_at(a - self.head)) < n {
+                    self.emit_frame(n - 1, Some(Reading::Unknown), emit);
+                    self.emit_unframed(b - 1, b, emit);
+                } else {
+                    self.emit_frame(n, Some(Reading::Unknown), emit);
+                }
+                return;
+            }
+            if self.plausible_frame(piece) {
+                self.emit_frame(b - a, Some(Reading::Unknown), emit);
+                return;
+            }
+            if let Some(e) = (RTU_MIN_LEN..piece.len()).find(|&e| {
+                self.known_units[usize::from(piece[0])]
+                    && self.plausible_frame(&piece[..e])
+                    && self.looks_like_frame(&piece[e..])
+            }) {
+                // The shift property again: when the frame checks one byte longer too (its next
+                // byte a `00`) and a frame starts after that byte as well, the odds on this line
+                // decide whether the `00` is a glitch or the CRC's high byte.
+                let twin = piece.get(e) == Some(&0)
+                    && e + 1 < piece.len()
+                    && self.plausible_frame(&piece[..=e])
+                    && self.looks_like_frame(&piece[e + 1..]);
+                let e = if twin { self.twin_len(a, e + 1, self.sender_at(a - self.head)) } else { e };
+                self.emit_frame(e, Some(Reading::Unknown), emit);
+                a += e;
+                continue;
+            }
+            if let Some(s) = (1..piece.len().saturating_sub(RTU_MIN_LEN - 1))
+                .find(|&s| self.known_units[usize::from(piece[s])] && self.plausible_frame(&piece[s..]))
+            {
+                // With its `00` glitch the frame passes the CRC too: trim it where Diagnostics'
+                // structure or the odds on this line say the `00` is a glitch.
+                let n = piece.len() - s;
+                let both = piece.last() == Some(&0) && self.plausible_frame(&piece[s..piece.len() - 1]);
+                self.emit_unframed(a, a + s, emit);
+                if both && self.twin_len(a + s, n, Sender::Unknown) < n {
+                    self.emit_frame(n - 1, Some(Reading::Unknown), emit);
+                    self.emit_unframed(b - 1, b, emit);
+                } else {
+                    self.emit_frame(n, Some(Reading::Unknown), emit);
+                }
+                return;
+            }
+            self.emit_unframed(a, b, emit);
+            return;
+        }
+    }
+
+    /// The `n` bytes at absolute `at` end in `00` and check one byte shorter too (CRC-16's shift
+    /// property): the length to take — Diagnostics' structure decides where it can, else the
+    /// odds that `sender` leaves a `00` glitch — with the other length kept for the frame event
+    /// (see [`Frame::alt_len`]) when it is not negligible.
+    pub(super) fn twin_len(&mut self, at: usize, n: usize, sender: Sender) -> usize {
+        if let Some(even) = diagnostics_even_len(&self.buf[at..], n - 1) {
+            self.next_alt = None;
+            return even;
+        }
+        if let Some(len) = self.lengths.choose(self.buf[at], self.buf[at + 1], sender, n - 1) {
+            self.next_alt = None;
+            return len;
+        }
+        let odds = self.turn.zero_tail(sender);
+        let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
+        self.next_alt = odds.ambiguous.then_some(other);
+        take
+    }
+
+    /// Where a damaged frame at absolute `a` ends inside `a..b`, if its structure says so and a
+    /// frame of a known unit plausibly starts there.
+    pub(super) fn split_damaged(&self, a: usize, b: usize) -> Option<usize> {
+        // With timing that can show a t3.5 silence, frames were already cut at their silences;
+        // a damaged byte count would only mislead. This is for adapters whose latency hides them.
+        if self.latency < self.t35 {
+            return None;
+        }
+        let piece = &self.buf[a..b];
+        if !self.looks_like_frame(piece) {
+            return None;
+        }
+        let pdu = &piece[1..];
+        let req = if piece[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
+        let mut cands: Vec<usize> = [req, response_len(pdu)]
+            .into_iter()
+            .filter_map(|c| match c {
+                PduLength::Exact(k) if k + 3 >= RTU_MIN_LEN && k + 3 + 2 <= piece.len() => Some(k + 3),
+                _ => None,
+            })
+            .collect();
+        // The expected reading first (a request after a completed transaction), then the shorter.
+        let expected_request = self.expect == Expect::Request && a == self.head;
+        let req_len = match req {
+            PduLength::Exact(k) => Some(k + 3),
+            _ => None,
+        };
+        cands.sort_unstable_by_key(|&l| (!(expected_request && Some(l) == req_len), l));
+        // Only when the rest starts like a frame of a known unit: a short rest is as likely the
+        // tail of this frame read with the wrong reading (a request's response reading is 5
+        // bytes) as noise that followed it.
+        cands.into_iter().find(|&l| self.looks_like_frame_start(a - self.head + l))
+    }
+
+    /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise;
+    /// a lone byte right after a frame is its turnaround glitch.
+    pub(super) fn emit_unframed<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, b: usize, emit: &mut F) {
+        // Glued to what follows (no silence seen between them), the glitch is split off when it
+        // cannot start a frame, takes a value this line's glitches take, or the bytes start like
+        // a frame of a known unit only after it.
+        let i = a - self.head;
+        let v = self.buf[a];
+        // A lone byte glued to the start of a frame, after a silence: the glitch of the driver
+        // switching on (seen as a `00` before answers on real lines).
+        if b - a == 1
+            && self.frame_next_at == Some(b)
+            && self.gap_lb[b] < self.t15
+            && self.gap_lb[a] >= self.t35
+            && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitch_value(v))
+            && !self.at_glitch(a)
+        {
+            // The silence before the glitch is the silence before the frame.
+            self.gap_lb[b] = self.gap_lb[a];
+            self.gap_ub[b] = self.gap_ub[a];
+            self.emit_glitch(a, emit);
+            return;
+        }
+        if self.at_glitch(a)
+            && (b - a == 1
+                // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line
+                // is known to glitch, only the values drivers leave (`FE`, `FF`) count.
+                || (v > MAX_ADDRESS && (self.glitchy() || v >= 0xFE))
+                || (self.glitchy() && self.glitch_value_after(self.last_sender, v))
+                || ((self.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
+                    && !self.looks_like_frame_start(i)
+                    && self.looks_like_frame_start(i + 1)))
+        {
+            self.emit_glitch(a, emit);
+            if b > a + 1 {
+                self.emit_unframed(a + 1, b, emit);
+            }
+            return;
+        }
+        // A damaged frame with its turnaround glitch, on a line that glitches: the last byte
+        // takes a value this line's glitches take.
+        if b - a > RTU_MIN_LEN
+            && self.glitchy()
+            && self.glitch_value_after(self.sender_at(a - self.head), self.buf[b - 1])
+            && !self.expected_len_at(a, b - a)
+        {
+            self.emit_frame(b - a - 1, None, emit);
+            self.emit_unframed(b - 1, b, emit);
+            return;
+        }
+        // The awaited answer, damaged, with more after it: the request fixed its length
+        // (an exception's is 5), whatever its damaged byte count says.
+        if let Expect::Response { unit, fc, len: Some(n) } = self.expect
+            && self.buf[a] == unit
+        {
+            let n = if self.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { n };
+            if b - a > n && self.latency >= self.t35 {
+                self.emit_frame(n, None, emit);
+                self.emit_unframed(a + n, b, emit);
+                return;
+            }
+        }
+        // Two damaged frames back to back (no silence between them to go by): cut the first
+        // at its structural length when what follows starts like a frame of a known unit.
+        if let Some(l) = self.split_damaged(a, b) {
+            self.emit_frame(l, None, emit);
+            self.emit_unframed(a + l, b, emit);
+            return;
+        }
+        if self.looks_like_frame(&self.buf[a..b]) {
+            self.emit_frame(b - a, None, emit);
+        } else {
+            emit(FrameEvent::Noise(Noise {
+                port: self.port,
+                bytes: &self.buf[a..b],
+                t_start: Timestamp(self.end[a].saturating_sub(self.char_ns)),
+                t_end: Timestamp(self.end[b - 1]),
+            }));
+            self.head = b;
+            self.wait_at = usize::MAX;
+            self.after_frame = false;
+            self.after_damage = true;
+        }
+    }
+
+    /// Emits the first `len` live bytes as a frame: valid, read as `reading`, or failed (`None`).
+    pub(super) fn emit_frame<F: FnMut(FrameEvent<'_>)>(&mut self, len: usize, reading: Option<Reading>, emit: &mut F) {
+        let check_ok = reading.is_some();
+        let a = self.head;
+        let b = a + len;
+        let inner_gap = self.gap_lb[a + 1..b].iter().copied().max().unwrap_or(0);
+        let ub = self.gap_ub[a];
+        let short_gap_before_ns = (self.after_frame && ub < self.t35).then_some(ub);
+        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
+        let (every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
+        let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.t15));
+        emit(FrameEvent::Frame(Frame {
+            port: self.port,
+            bytes: &self.buf[a..b],
+            t_start: Timestamp(self.end[a].saturating_sub(self.char_ns)),
+            t_end: Timestamp(self.end[b - 1]),
+            check_ok,
+            gap_violation_ns: (inner_gap >= self.t15).then_some(inner_gap),
+            short_gap_before_ns,
+            gap_tolerance_ns,
+            short_gap_tolerance_ns: self.short_tolerance(apparent_before),
+            resolution_ns: self.learner.estimate.resolution_ns(),
+            gap_before_known: ub != u64::MAX,
+            bad_chars: false,
+            alt_len: self.next_alt.take().filter(|_| check_ok),
+        }));
+        self.last_sender = sender_of(self.expect, &self.buf[a..b], reading);
+        self.after_damage = !check_ok;
+        if check_ok {
+            self.lengths.record(&self.buf[a..b], self.buf.get(b).copied(), self.last_sender);
+            self.known_units[usize::from(self.buf[a])] = true;
+            self.turn.frame(self.last_sender);
+            self.learn_from(a, every_silence);
+        }
+        self.expect = next_expect(self.expect, &self.buf[a..b], reading);
+        self.since_glitch = self.since_glitch.saturating_add(1);
+        self.glitch_at = Some(b);
+        self.head = b;
+        self.wait_at = usize::MAX;
+        self.after_frame = true;
+    }
+
+    /// A valid frame at absolute `a`, `delay` the longest apparent silence between two of its
+    /// reads (`None`: it came in one): its bytes were sent back to back, so that silence is the
+    /// observer's delay.
+    pub(super) fn learn_from(&mut self, a: usize, delay: Option<u64>) {
+        self.learner.frame();
+        let sender = match self.last_sender {
+            Sender::Master => SampleSender::Master,
+            Sender::Slave | Sender::Unknown => SampleSender::Unit(self.buf[a]),
+        };
+        if let Some(d) = delay
+            && self.learner.sample(sender, d).is_some()
+        {
+            self.latency = self.learner.estimate.effective_latency_ns();
+        }
+    }
+
+    /// The longest apparent silence between two reads inside absolute `a..b`, taken at face
+    /// value (no latency allowed for); `None` when the bytes came in one read.
+    ///
+    /// A read's bytes are placed back to back before its timestamp; where the frame's last read
+    /// also holds bytes of the next frame, the silence between the two frames is hidden inside
+    /// that read and its first bytes look later than they were — by up to that silence. That
+    /// read's boundary says nothing about the observer or the sender and is left out (issue 25:
+    /// through a 16550 FIFO, which holds the tail of one frame with the head of the next, it
+    /// made healthy frames look paused). For learning the observer's delay it is kept (the
+    /// first of the pair returned): that errs high, towards fewer findings, and a glitchy
+    /// line's frames always share their last read with their glitch. One pass over the frame
+    /// gives both: `(every boundary, the boundaries the gap evidence may use)`.
+    pub(super) fn apparent_inner_silence(&self, a: usize, b: usize) -> (Option<u64>, Option<u64>) {
+        let c = self.char_ns;
+        // A read began at `i` where the gap before it is bounded (inside a read it is unknown
+        // and set to `u64::MAX`).
+        let starts_read = |i: usize| self.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
+        let (mut before_last, mut last) = (None::<u64>, None::<u64>);
+        for i in (a + 1..b).filter(|&i| starts_read(i)) {
+            before_last = before_last.max(last);
+            last = Some(self.end[i].saturating_sub(c).saturating_sub(self.end[i - 1]));
+        }
+        let every = before_last.max(last);
+        let last_read_spills = b < self.buf.len() && !starts_read(b);
+        (every, if last_read_spills { before_last } else { every })
+    }
+
+    /// How far an apparent silence before a frame fell short of t3.5 after the previous frame.
+    pub(super) fn short_tolerance(&self, apparent_before: Option<u64>) -> Option<u64> {
+        apparent_before.filter(|_| self.after_frame).and_then(|g| self.t35.checked_sub(g)).filter(|&t| t > 0)
+    }
+}

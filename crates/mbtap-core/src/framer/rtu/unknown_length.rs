@@ -1,0 +1,200 @@
+//! Frames whose structure does not fix their length (vendor codes, some diagnostics): ended by
+//! the CRC and what follows it, or by a known silence.
+
+use super::RtuFramer;
+use super::candidates::Try;
+use super::expect::{Reading, diagnostics_even_len, sane_header};
+use crate::proto::checksum::{crc16, crc16_update};
+use crate::proto::function::{EXCEPTION_FLAG, FunctionCode};
+use crate::proto::length::{PduLength, request_len, response_len};
+use crate::proto::rtu::{RTU_MAX_LEN, RTU_MIN_LEN};
+
+impl RtuFramer {
+    /// The structure cannot say where this frame ends: accept a CRC match only where something
+    /// confirms an end — a known silence, the end of input, or a valid frame after it. Public
+    /// and user-defined codes may pause inside a frame (slow slaves), so for them only a
+    /// silence longer than the incomplete-frame timeout bounds the search.
+    pub(super) fn unknown_length_at(&self, g: usize, flushing: bool) -> Try {
+        let live_len = self.buf.len() - self.head;
+        let s = &self.buf[self.head + g..];
+        let base = FunctionCode::from(s[1]);
+        let lenient = (base.name().is_some() || base.is_user_defined()) && self.known_units[usize::from(s[0])];
+        // A code with no public layout from an address never seen before is far more likely
+        // garbage than a vendor frame; such frames are still reported, with their boundaries,
+        // once a silence or a valid frame ends them (`emit_piece`).
+        if s[0] > self.max_address
+            || !(base.name().is_some() || base.is_user_defined() || self.known_units[usize::from(s[0])])
+        {
+            return Try::NotHere;
+        }
+        // After damage (bytes before `g` that are not a lone glitch), a known unit's frame must
+        // carry a public or user-defined code too: there a 4-byte "frame" of any code is a CRC
+        // matching by chance as often as not.
+        let after_glitch = g == 1 && self.at_glitch(self.head);
+        if g > 0 && !after_glitch && !(base.name().is_some() || base.is_user_defined()) {
+            return Try::NotHere;
+        }
+        // Broadcasts carry writes only (Modbus over Serial Line v1.02 §2.1), and every write has
+        // a fixed layout: address 0 with a length the structure cannot tell is garbage.
+        if s[0] == 0 || !sane_header(s, self.pasted) {
+            return Try::NotHere;
+        }
+        let max = s.len().min(RTU_MAX_LEN);
+        let mut bounded = false;
+        let mut crc = 0;
+        let mut first_match = true;
+        for l in RTU_MIN_LEN..=max {
+            // `crc` covers the body s[..l - 2], one byte more each step.
+            crc = if l == RTU_MIN_LEN { crc16(&s[..2]) } else { crc16_update(crc, &s[l - 3..l - 2]) };
+            let received = u16::from_le_bytes([s[l - 2], s[l - 1]]);
+            if crc == received {
+                let at_end = g + l == live_len;
+                // The first CRC match is taken when a frame plausibly starts right after it
+                // (request and response of the same vendor code follow each other); later
+                // matches need stronger evidence, because over hundreds of lengths a chance
+                // match becomes likely.
+                let next_starts = !at_end && self.looks_like_frame_start(g + l);
+                // A lone byte and then a silence or a frame: this frame's turnaround glitch.
+                // Only on a line seen to glitch: elsewhere a CRC match with one stray byte after it
+                // is a chance match inside damage (1 in 65 536 per length tried) as often as not.
+                let glitch_after = self.glitchy()
+                    && (self.glitch_then_end(g + l) || (flushing && g + l + 1 == live_len))
+                    || self.glitch_then_start(g + l);
+                if self.boundary_at(g + l)
+                    || (flushing && at_end)
+                    || self.exact_frame_at(g + l)
+                    || (first_match && next_starts)
+                    || glitch_after
+                {
+                    // CRC shift property: a frame whose CRC high byte is 0x00 also validates
+                    // one byte shorter. When the byte after this match is 0x00 and the longer
+                    // frame validates too, take the longer unless only the shorter is followed
+                    // by something that looks like a frame.
+                    if s.get(l) == Some(&0) && l < RTU_MAX_LEN && s.len() > l && Self::crc_ok(&s[..=l]) {
+                        // Diagnostics data is N × 2 bytes (MAP v1.1b3 §6.8): its structure
+                        // decides where the CRC can.
+                        if let Some(even) = diagnostics_even_len(s, l) {
+                            return Try::Found(even, Reading::Unknown, None);
+                        }
+                        // The lengths this unit's function was seen with unambiguously decide.
+                        if let Some(len) = self.lengths.choose(s[0], s[1], self.sender_at(g), l) {
+                            return Try::Found(len, Reading::Unknown, None);
+                        }
+                        // What follows the longer frame decides below: wait until its start
+                        // (two bytes) has arrived, unless nothing more can come.
+                        if !flushing && s.len() < l + 3 && !self.boundary_at(g + l + 1) {
+                            return Try::NeedMore(l + 3);
+                        }
+                        // The longer frame followed by its own glitch byte is the longer frame —
+                        // a byte taking a glitch's value: a lone other byte before a silence is
+                        // as likely a slow slave pausing after its answer's first byte.
+                        let glitch_like =
+                            s.get(l + 1).is_some_and(|&v| self.glitch_value(v) || matches!(v, 0x00 | 0xFE | 0xFF));
+                        let longer_glitch =
+                            (glitch_like && self.glitch_then_end(g + l + 1)) || self.glitch_then_start(g + l + 1);
+                        let longer_ok = g + l + 1 == live_len
+                            || self.boundary_at(g + l + 1)
+                            || self.exact_frame_at(g + l + 1)
+                            || self.looks_like_frame_start(g + l + 1)
+                            || longer_glitch;
+                        let evidence = self.boundary_at(g + l) || self.exact_frame_at(g + l) || longer_glitch;
+                        // Nothing else decides: whether this sender's `00` glitch is likelier
+                        // than a CRC ending in `00` (1 in 256).
+                        let odds = self.turn.zero_tail(self.sender_at(g));
+                        let shorter_strong = self.boundary_at(g + l)
+                            || self.exact_frame_at(g + l)
+                            || (odds.glitch_likelier && !longer_glitch);
+                        // A lone `00` between two silences is noise after the frame, or its CRC's
+                        // high byte after a slave paused longer than t3.5 inside it: both check.
+                        let lone_zero = self.boundary_at(g + l) && self.boundary_at(g + l + 1);
+                        let alt =
+                            |other: usize| (longer_ok && ((!evidence && odds.ambiguous) || lone_zero)).then_some(other);
+                        if longer_ok && !shorter_strong {
+                            return Try::Found(l + 1, Reading::Unknown, alt(l));
+                        }
+                        return Try::Found(l, Reading::Unknown, alt(l + 1));
+                    }
+                    return Try::Found(l, Reading::Unknown, None);
+                }
+                first_match = false;
+            }
+            // A whole valid frame starting inside this one means this one ended before it (or
+            // was never a frame): over hundreds of lengths, running past it invites a chance
+            // CRC match further on.
+            if !lenient && l < s.len() && self.exact_frame_at(g + l) {
+                bounded = true;
+                break;
+            }
+            if l < s.len() {
+                let gap = self.gap_lb[self.head + g + l];
+                // Even a slow slave's frame cannot hold a whole valid frame after a silence.
+                if gap >= self.incomplete_timeout || (gap >= self.t35 && (!lenient || self.exact_frame_at(g + l))) {
+                    bounded = true;
+                    break;
+                }
+            }
+        }
+        if !bounded && !flushing && s.len() < RTU_MAX_LEN { Try::NeedMore(s.len() + 1) } else { Try::NotHere }
+    }
+
+    /// The exact length the structure gives a frame starting at absolute `a`, if it fits
+    /// before `stop`.
+    pub(super) fn structural_len(&self, a: usize, stop: usize) -> Option<usize> {
+        let f = &self.buf[a..stop];
+        if !self.looks_like_frame(f) {
+            return None;
+        }
+        let pdu = &f[1..];
+        let req = if f[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
+        [response_len(pdu), req].into_iter().find_map(|c| match c {
+            PduLength::Exact(k) if k + 3 <= f.len() => Some(k + 3),
+            _ => None,
+        })
+    }
+
+    /// A failed-check piece is reported as a frame when it could be one: 4 to 256 bytes
+    /// starting with a unicast or broadcast address and either a public, user-defined or
+    /// exception function code, or an address already seen in valid frames.
+    pub(super) fn looks_like_frame(&self, piece: &[u8]) -> bool {
+        let [addr, fc, ..] = *piece else { return false };
+        let base = FunctionCode::from(fc & !EXCEPTION_FLAG);
+        (RTU_MIN_LEN..=RTU_MAX_LEN).contains(&piece.len())
+            && addr <= self.max_address
+            && ((fc != 0 && (base.name().is_some() || base.is_user_defined())) || self.known_units[usize::from(addr)])
+    }
+
+    /// Do the two bytes at live index `i` look like the start of a frame: an address already
+    /// seen in valid frames and a public, user-defined or exception function code?
+    pub(super) fn looks_like_frame_start(&self, i: usize) -> bool {
+        let (Some(&addr), Some(&fc)) = (self.buf.get(self.head + i), self.buf.get(self.head + i + 1)) else {
+            return false;
+        };
+        let base = FunctionCode::from(fc & !EXCEPTION_FLAG);
+        if addr == 0 {
+            // Broadcasts carry writes only (Modbus over Serial Line v1.02 §2.1).
+            return self.known_units[0] && matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16);
+        }
+        self.known_units[usize::from(addr)] && fc != 0 && (base.name().is_some() || base.is_user_defined())
+    }
+
+    /// A whole frame: it looks like one, its CRC holds, and its length is one its structure allows.
+    pub(super) fn plausible_frame(&self, f: &[u8]) -> bool {
+        // A code with no public layout that is not a user-defined one either (MAP v1.1b3 §5):
+        // from garbage, a chance CRC match is likelier than such a frame.
+        let base = FunctionCode::from(f.get(1).map_or(0, |fc| fc & !EXCEPTION_FLAG));
+        if !self.looks_like_frame(f)
+            || !sane_header(f, self.pasted)
+            || !(base.name().is_some() || base.is_user_defined())
+            || !Self::crc_ok(f)
+        {
+            return false;
+        }
+        let pdu = &f[1..];
+        let fits = |c: PduLength| match c {
+            PduLength::Exact(k) => k + 3 == f.len(),
+            PduLength::AtLeast(_) => false,
+            PduLength::Unknown => true,
+        };
+        fits(response_len(pdu)) || (f[1] & EXCEPTION_FLAG == 0 && fits(request_len(pdu)))
+    }
+}
