@@ -62,12 +62,12 @@ impl RtuFramer {
 
     /// Is there a known silence (≥ t3.5) before live index `i`?
     pub(super) fn boundary_at(&self, i: usize) -> bool {
-        self.gap_lb.get(self.head + i).is_some_and(|&g| g >= self.t35)
+        self.timed.gap_lb.get(self.timed.head + i).is_some_and(|&g| g >= self.t35)
     }
 
     /// Does a valid frame of structurally exact length start at live index `i`?
     pub(super) fn exact_frame_at(&self, i: usize) -> bool {
-        let s = &self.buf[self.head + i..];
+        let s = &self.timed.buf[self.timed.head + i..];
         if s.len() < RTU_MIN_LEN {
             return false;
         }
@@ -81,7 +81,7 @@ impl RtuFramer {
     }
 
     pub(super) fn try_frame_at(&self, g: usize, flushing: bool) -> Try {
-        let live = &self.buf[self.head..];
+        let live = &self.timed.buf[self.timed.head..];
         let s = &live[g..];
         let [addr, fc, ..] = *s else { return if flushing { Try::NotHere } else { Try::NeedMore(2) } };
         // Addresses 248–255 are reserved (Modbus over Serial Line v1.02 §2.2): no frame on a line
@@ -94,7 +94,7 @@ impl RtuFramer {
         // before it — unless what follows confirms it too (a silence, another valid frame, its
         // glitch): then a damaged start does not hide the valid frames after it. Right after a
         // frame's glitch byte a frame may start anyway.
-        let after_glitch = g == 1 && self.at_glitch(self.head);
+        let after_glitch = g == 1 && self.at_glitch(self.timed.head);
         let unconfirmed_start = g > 0 && !self.known_units[usize::from(addr)] && !self.boundary_at(g) && !after_glitch;
         // Inside damage, a never-seen unit's frame must at least carry a function code with a
         // public layout: checked before any CRC is computed, so a stream of garbage costs a
@@ -247,7 +247,7 @@ impl RtuFramer {
     pub(super) fn best(&self, g: usize, a: (usize, bool), b: (usize, bool)) -> (usize, bool) {
         let score = |(l, is_request): (usize, bool)| {
             let confirmed = self.ends_at(g + l) || self.glitch_then_end(g + l);
-            let s = &self.buf[self.head + g..self.head + g + l];
+            let s = &self.timed.buf[self.timed.head + g..self.timed.head + g + l];
             let clean = decodes_clean(&s[1..l - 2], is_request);
             (self.expected(g, l, Reading::of(is_request)), clean, confirmed, std::cmp::Reverse(l))
         };
@@ -256,7 +256,7 @@ impl RtuFramer {
 
     /// Who sends the frame starting at live index `g`, as far as the expectation says.
     pub(super) fn sender_at(&self, g: usize) -> Sender {
-        sender_of(self.expect_at(g), &self.buf[self.head + g..], None)
+        sender_of(self.expect_at(g), &self.timed.buf[self.timed.head + g..], None)
     }
 
     /// Does a frame end before live index `i`: a known silence or a valid frame starts there?

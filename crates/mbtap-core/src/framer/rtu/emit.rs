@@ -23,7 +23,7 @@ impl RtuFramer {
         let c = self.char_ns;
         let n = u64::try_from(chunk.bytes.len()).unwrap_or(u64::MAX);
         let mut e0 = chunk.t.0.saturating_sub((n - 1).saturating_mul(c));
-        let ub = match self.last_end {
+        let ub = match self.timed.last_end {
             Some(prev) => {
                 e0 = e0.max(prev.saturating_add(c));
                 e0.saturating_sub(c).saturating_sub(prev.saturating_sub(self.latency))
@@ -50,34 +50,34 @@ impl RtuFramer {
         self.known_units[usize::from(chunk.bytes[0])] = true;
         self.last_sender = sender_of(self.expect, chunk.bytes, Some(reading));
         self.after_damage = false;
-        self.turn.frame(self.last_sender);
+        self.glitches.turn.frame(self.last_sender);
         self.learner.frame();
-        self.last_end = Some(t_end);
-        self.last_read = self.last_read.max(chunk.t.0);
+        self.timed.last_end = Some(t_end);
+        self.timed.last_read = self.timed.last_read.max(chunk.t.0);
         self.after_frame = true;
         self.wait_at = usize::MAX;
         self.expect = next_expect(self.expect, chunk.bytes, Some(reading));
-        self.since_glitch = self.since_glitch.saturating_add(1);
+        self.glitches.frame();
         // The next byte buffered lands at the end of the (empty) live buffer.
-        self.glitch_at = Some(self.buf.len());
+        self.glitch_at = Some(self.timed.buf.len());
     }
 
     /// Emits the first `n` live bytes, known to form no valid frame, split at known silences:
     /// each piece a failed frame if it looks like one, else noise.
     pub(super) fn emit_garbage<F: FnMut(FrameEvent<'_>)>(&mut self, n: usize, emit: &mut F) {
-        let stop = self.head + n;
-        let mut a = self.head;
+        let stop = self.timed.head + n;
+        let mut a = self.timed.head;
         while a < stop {
             let mut b = a + 1;
-            while b < stop && self.gap_lb[b] < self.t35 {
+            while b < stop && self.timed.gap_lb[b] < self.t35 {
                 b += 1;
             }
             // A slow slave pauses inside its frame: when the structure says the frame goes on
             // past this silence, and it ends at a silence or at the end of the garbage, follow it.
             if let Some(l) = self.structural_len(a, stop)
                 && a + l > b
-                && (a + l == stop || self.gap_lb[a + l] >= self.t35)
-                && self.gap_lb[a + 1..a + l].iter().all(|&g| g < self.incomplete_timeout)
+                && (a + l == stop || self.timed.gap_lb[a + l] >= self.t35)
+                && self.timed.gap_lb[a + 1..a + l].iter().all(|&g| g < self.incomplete_timeout)
             {
                 b = a + l;
             }
@@ -87,19 +87,19 @@ impl RtuFramer {
         self.garbage = self.garbage.saturating_sub(n);
     }
 
-    /// Emits bytes `a..b` (absolute, `a == self.head`) that no silence divides. A frame whose
+    /// Emits bytes `a..b` (absolute, `a == self.timed.head`) that no silence divides. A frame whose
     /// end the structure could not confirm in time (a user-defined code followed by another)
     /// lands here whole, with a valid CRC; a valid frame glued to a corrupted one or to noise
     /// is split off when its CRC and structure agree. The rest is a failed frame or noise.
     pub(super) fn emit_piece<F: FnMut(FrameEvent<'_>)>(&mut self, mut a: usize, b: usize, emit: &mut F) {
         while a < b {
-            let piece = &self.buf[a..b];
+            let piece = &self.timed.buf[a..b];
             // A frame of a length the structure cannot tell with its `00` glitch also passes the
             // CRC (the shift property): Diagnostics' structure decides, else the odds on this line.
             if piece.len() > RTU_MIN_LEN && piece.last() == Some(&0) && self.plausible_frame(&piece[..piece.len() - 1])
             {
                 let n = piece.len();
-                if self.twin_len(a, n, self.sender_at(a - self.head)) < n {
+                if self.twin_len(a, n, self.sender_at(a - self.timed.head)) < n {
                     self.emit_frame(n - 1, Some(Reading::Unknown), emit);
                     self.emit_unframed(b - 1, b, emit);
                 } else {
@@ -123,7 +123,7 @@ impl RtuFramer {
                     && e + 1 < piece.len()
                     && self.plausible_frame(&piece[..=e])
                     && self.looks_like_frame(&piece[e + 1..]);
-                let e = if twin { self.twin_len(a, e + 1, self.sender_at(a - self.head)) } else { e };
+                let e = if twin { self.twin_len(a, e + 1, self.sender_at(a - self.timed.head)) } else { e };
                 self.emit_frame(e, Some(Reading::Unknown), emit);
                 a += e;
                 continue;
@@ -154,15 +154,15 @@ impl RtuFramer {
     /// odds that `sender` leaves a `00` glitch — with the other length kept for the frame event
     /// (see [`Frame::alt_len`]) when it is not negligible.
     pub(super) fn twin_len(&mut self, at: usize, n: usize, sender: Sender) -> usize {
-        if let Some(even) = diagnostics_even_len(&self.buf[at..], n - 1) {
+        if let Some(even) = diagnostics_even_len(&self.timed.buf[at..], n - 1) {
             self.next_alt = None;
             return even;
         }
-        if let Some(len) = self.lengths.choose(self.buf[at], self.buf[at + 1], sender, n - 1) {
+        if let Some(len) = self.lengths.choose(self.timed.buf[at], self.timed.buf[at + 1], sender, n - 1) {
             self.next_alt = None;
             return len;
         }
-        let odds = self.turn.zero_tail(sender);
+        let odds = self.glitches.turn.zero_tail(sender);
         let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
         self.next_alt = odds.ambiguous.then_some(other);
         take
@@ -176,7 +176,7 @@ impl RtuFramer {
         if self.latency < self.t35 {
             return None;
         }
-        let piece = &self.buf[a..b];
+        let piece = &self.timed.buf[a..b];
         if !self.looks_like_frame(piece) {
             return None;
         }
@@ -190,7 +190,7 @@ impl RtuFramer {
             })
             .collect();
         // The expected reading first (a request after a completed transaction), then the shorter.
-        let expected_request = self.expect == Expect::Request && a == self.head;
+        let expected_request = self.expect == Expect::Request && a == self.timed.head;
         let req_len = match req {
             PduLength::Exact(k) => Some(k + 3),
             _ => None,
@@ -199,7 +199,7 @@ impl RtuFramer {
         // Only when the rest starts like a frame of a known unit: a short rest is as likely the
         // tail of this frame read with the wrong reading (a request's response reading is 5
         // bytes) as noise that followed it.
-        cands.into_iter().find(|&l| self.looks_like_frame_start(a - self.head + l))
+        cands.into_iter().find(|&l| self.looks_like_frame_start(a - self.timed.head + l))
     }
 
     /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise;
@@ -208,20 +208,20 @@ impl RtuFramer {
         // Glued to what follows (no silence seen between them), the glitch is split off when it
         // cannot start a frame, takes a value this line's glitches take, or the bytes start like
         // a frame of a known unit only after it.
-        let i = a - self.head;
-        let v = self.buf[a];
+        let i = a - self.timed.head;
+        let v = self.timed.buf[a];
         // A lone byte glued to the start of a frame, after a silence: the glitch of the driver
         // switching on (seen as a `00` before answers on real lines).
         if b - a == 1
             && self.frame_next_at == Some(b)
-            && self.gap_lb[b] < self.t15
-            && self.gap_lb[a] >= self.t35
-            && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitch_value(v))
+            && self.timed.gap_lb[b] < self.t15
+            && self.timed.gap_lb[a] >= self.t35
+            && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitches.value(v))
             && !self.at_glitch(a)
         {
             // The silence before the glitch is the silence before the frame.
-            self.gap_lb[b] = self.gap_lb[a];
-            self.gap_ub[b] = self.gap_ub[a];
+            self.timed.gap_lb[b] = self.timed.gap_lb[a];
+            self.timed.gap_ub[b] = self.timed.gap_ub[a];
             self.emit_glitch(a, emit);
             return;
         }
@@ -229,9 +229,9 @@ impl RtuFramer {
             && (b - a == 1
                 // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line
                 // is known to glitch, only the values drivers leave (`FE`, `FF`) count.
-                || (v > MAX_ADDRESS && (self.glitchy() || v >= 0xFE))
-                || (self.glitchy() && self.glitch_value_after(self.last_sender, v))
-                || ((self.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
+                || (v > MAX_ADDRESS && (self.glitches.glitchy() || v >= 0xFE))
+                || (self.glitches.glitchy() && self.glitches.value_after(self.last_sender, v))
+                || ((self.glitches.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
                     && !self.looks_like_frame_start(i)
                     && self.looks_like_frame_start(i + 1)))
         {
@@ -244,8 +244,8 @@ impl RtuFramer {
         // A damaged frame with its turnaround glitch, on a line that glitches: the last byte
         // takes a value this line's glitches take.
         if b - a > RTU_MIN_LEN
-            && self.glitchy()
-            && self.glitch_value_after(self.sender_at(a - self.head), self.buf[b - 1])
+            && self.glitches.glitchy()
+            && self.glitches.value_after(self.sender_at(a - self.timed.head), self.timed.buf[b - 1])
             && !self.expected_len_at(a, b - a)
         {
             self.emit_frame(b - a - 1, None, emit);
@@ -255,9 +255,9 @@ impl RtuFramer {
         // The awaited answer, damaged, with more after it: the request fixed its length
         // (an exception's is 5), whatever its damaged byte count says.
         if let Expect::Response { unit, fc, len: Some(n) } = self.expect
-            && self.buf[a] == unit
+            && self.timed.buf[a] == unit
         {
-            let n = if self.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { n };
+            let n = if self.timed.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { n };
             if b - a > n && self.latency >= self.t35 {
                 self.emit_frame(n, None, emit);
                 self.emit_unframed(a + n, b, emit);
@@ -271,16 +271,16 @@ impl RtuFramer {
             self.emit_unframed(a + l, b, emit);
             return;
         }
-        if self.looks_like_frame(&self.buf[a..b]) {
+        if self.looks_like_frame(&self.timed.buf[a..b]) {
             self.emit_frame(b - a, None, emit);
         } else {
             emit(FrameEvent::Noise(Noise {
                 port: self.port,
-                bytes: &self.buf[a..b],
-                t_start: Timestamp(self.end[a].saturating_sub(self.char_ns)),
-                t_end: Timestamp(self.end[b - 1]),
+                bytes: &self.timed.buf[a..b],
+                t_start: Timestamp(self.timed.end[a].saturating_sub(self.char_ns)),
+                t_end: Timestamp(self.timed.end[b - 1]),
             }));
-            self.head = b;
+            self.timed.head = b;
             self.wait_at = usize::MAX;
             self.after_frame = false;
             self.after_damage = true;
@@ -290,19 +290,19 @@ impl RtuFramer {
     /// Emits the first `len` live bytes as a frame: valid, read as `reading`, or failed (`None`).
     pub(super) fn emit_frame<F: FnMut(FrameEvent<'_>)>(&mut self, len: usize, reading: Option<Reading>, emit: &mut F) {
         let check_ok = reading.is_some();
-        let a = self.head;
+        let a = self.timed.head;
         let b = a + len;
-        let inner_gap = self.gap_lb[a + 1..b].iter().copied().max().unwrap_or(0);
-        let ub = self.gap_ub[a];
+        let inner_gap = self.timed.gap_lb[a + 1..b].iter().copied().max().unwrap_or(0);
+        let ub = self.timed.gap_ub[a];
         let short_gap_before_ns = (self.after_frame && ub < self.t35).then_some(ub);
         let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
         let (every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
         let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.t15));
         emit(FrameEvent::Frame(Frame {
             port: self.port,
-            bytes: &self.buf[a..b],
-            t_start: Timestamp(self.end[a].saturating_sub(self.char_ns)),
-            t_end: Timestamp(self.end[b - 1]),
+            bytes: &self.timed.buf[a..b],
+            t_start: Timestamp(self.timed.end[a].saturating_sub(self.char_ns)),
+            t_end: Timestamp(self.timed.end[b - 1]),
             check_ok,
             gap_violation_ns: (inner_gap >= self.t15).then_some(inner_gap),
             short_gap_before_ns,
@@ -313,18 +313,18 @@ impl RtuFramer {
             bad_chars: false,
             alt_len: self.next_alt.take().filter(|_| check_ok),
         }));
-        self.last_sender = sender_of(self.expect, &self.buf[a..b], reading);
+        self.last_sender = sender_of(self.expect, &self.timed.buf[a..b], reading);
         self.after_damage = !check_ok;
         if check_ok {
-            self.lengths.record(&self.buf[a..b], self.buf.get(b).copied(), self.last_sender);
-            self.known_units[usize::from(self.buf[a])] = true;
-            self.turn.frame(self.last_sender);
+            self.lengths.record(&self.timed.buf[a..b], self.timed.buf.get(b).copied(), self.last_sender);
+            self.known_units[usize::from(self.timed.buf[a])] = true;
+            self.glitches.turn.frame(self.last_sender);
             self.learn_from(a, every_silence);
         }
-        self.expect = next_expect(self.expect, &self.buf[a..b], reading);
-        self.since_glitch = self.since_glitch.saturating_add(1);
+        self.expect = next_expect(self.expect, &self.timed.buf[a..b], reading);
+        self.glitches.frame();
         self.glitch_at = Some(b);
-        self.head = b;
+        self.timed.head = b;
         self.wait_at = usize::MAX;
         self.after_frame = true;
     }
@@ -336,7 +336,7 @@ impl RtuFramer {
         self.learner.frame();
         let sender = match self.last_sender {
             Sender::Master => SampleSender::Master,
-            Sender::Slave | Sender::Unknown => SampleSender::Unit(self.buf[a]),
+            Sender::Slave | Sender::Unknown => SampleSender::Unit(self.timed.buf[a]),
         };
         if let Some(d) = delay
             && self.learner.sample(sender, d).is_some()
@@ -361,14 +361,14 @@ impl RtuFramer {
         let c = self.char_ns;
         // A read began at `i` where the gap before it is bounded (inside a read it is unknown
         // and set to `u64::MAX`).
-        let starts_read = |i: usize| self.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
+        let starts_read = |i: usize| self.timed.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
         let (mut before_last, mut last) = (None::<u64>, None::<u64>);
         for i in (a + 1..b).filter(|&i| starts_read(i)) {
             before_last = before_last.max(last);
-            last = Some(self.end[i].saturating_sub(c).saturating_sub(self.end[i - 1]));
+            last = Some(self.timed.end[i].saturating_sub(c).saturating_sub(self.timed.end[i - 1]));
         }
         let every = before_last.max(last);
-        let last_read_spills = b < self.buf.len() && !starts_read(b);
+        let last_read_spills = b < self.timed.buf.len() && !starts_read(b);
         (every, if last_read_spills { before_last } else { every })
     }
 

@@ -143,15 +143,15 @@ pub(super) fn sane_header(f: &[u8], pasted: bool) -> bool {
 }
 
 impl RtuFramer {
-    /// Is `n` bytes the length a damaged frame at absolute `a` (`== self.head`) must have: the
+    /// Is `n` bytes the length a damaged frame at absolute `a` (`== self.timed.head`) must have: the
     /// awaited answer's (an exception's 5), or — a request awaited — its own structure's?
     pub(super) fn expected_len_at(&self, a: usize, n: usize) -> bool {
         match self.expect {
-            Expect::Response { unit, fc, len: Some(l) } if self.buf[a] == unit => {
-                n == if self.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { l }
+            Expect::Response { unit, fc, len: Some(l) } if self.timed.buf[a] == unit => {
+                n == if self.timed.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { l }
             }
             Expect::Request => {
-                let f = &self.buf[a..a + n];
+                let f = &self.timed.buf[a..a + n];
                 f.len() >= 2
                     && f[1] & EXCEPTION_FLAG == 0
                     && matches!(request_len(&f[1..]), PduLength::Exact(k) if k + 3 == n)
@@ -164,12 +164,12 @@ impl RtuFramer {
     /// glitch are damage nobody can read — one frame or several, requests or answers: after
     /// them nothing is expected.
     pub(super) fn expect_at(&self, g: usize) -> Expect {
-        if g == 0 || (g == 1 && self.at_glitch(self.head)) { self.expect } else { Expect::Unknown }
+        if g == 0 || (g == 1 && self.at_glitch(self.timed.head)) { self.expect } else { Expect::Unknown }
     }
 
     /// Does reading `l` bytes at live index `g` as `reading` give what the bus expects next?
     pub(super) fn expected(&self, g: usize, l: usize, reading: Reading) -> bool {
-        let s = &self.buf[self.head + g..];
+        let s = &self.timed.buf[self.timed.head + g..];
         match self.expect_at(g) {
             Expect::Unknown => false,
             Expect::Request => reading == Reading::Request,

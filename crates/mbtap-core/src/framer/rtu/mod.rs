@@ -29,17 +29,20 @@
 //! after a frame that begins no frame is reported as a [`FrameEvent::Glitch`], never as part of
 //! the frame, a frame of its own, or noise.
 
+mod buffer;
 mod candidates;
 mod emit;
 mod expect;
 mod glitches;
 mod unknown_length;
 
+use self::buffer::TimedBuffer;
 use self::candidates::Try;
 use self::expect::{Expect, MAX_ADDRESS, Reading};
+use self::glitches::GlitchState;
 use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::event::FrameEvent;
-use crate::framer::glitch::{Sender, TurnaroundStats};
+use crate::framer::glitch::Sender;
 use crate::framer::lengths::LearnedLengths;
 use crate::framer::observer::{ObserverEstimate, ObserverLearner};
 use crate::framer::timing::LineSettings;
@@ -121,20 +124,10 @@ pub struct RtuFramer {
     t35: u64,
     latency: u64,
     incomplete_timeout: u64,
-    buf: Vec<u8>,
-    /// Latest possible end time of each buffered byte (ns).
-    end: Vec<u64>,
-    /// Silence known to precede each buffered byte (lower bound, ns).
-    gap_lb: Vec<u64>,
-    /// Silence that may at most precede each buffered byte (upper bound, ns; `u64::MAX` unknown).
-    gap_ub: Vec<u64>,
-    /// First live byte.
-    head: usize,
-    /// Live bytes from `head` known not to start a valid frame.
+    /// The bytes not yet decided, with what their timing proves.
+    timed: TimedBuffer,
+    /// Live bytes from `timed.head` known not to start a valid frame.
     garbage: usize,
-    /// End time and read time of the last byte received.
-    last_end: Option<u64>,
-    last_read: u64,
     /// The last event emitted was a frame (for the inter-frame gap check).
     after_frame: bool,
     /// The candidate start last found waiting (`garbage` then), and how many bytes from it
@@ -148,18 +141,11 @@ pub struct RtuFramer {
     expect: Expect,
     /// Absolute buffer index right after the last frame: a lone byte there is a glitch.
     glitch_at: Option<usize>,
-    /// Frames since the last glitch (`u32::MAX`: none seen).
-    since_glitch: u32,
-    /// How often each byte value was a glitch (`00`, `FE`, `FF` on most transceivers); see
-    /// [`Self::glitch_value`].
-    glitch_counts: [u32; 256],
-    /// The count of the commonest glitch value.
-    glitch_top: u32,
+    /// What the line's turnaround glitches have shown.
+    glitches: GlitchState,
     /// While the garbage before a found frame goes out: where that frame starts (a lone byte
     /// glued to its start is the sender's driver switching on).
     frame_next_at: Option<usize>,
-    /// How often the master's and the slaves' frames are followed by a `00` glitch.
-    turn: TurnaroundStats,
     /// Who sent the last frame emitted (whose glitch the next lone byte would be).
     last_sender: Sender,
     /// The other length of the frame about to be emitted, if any (see [`Frame::alt_len`]).
@@ -183,25 +169,16 @@ impl RtuFramer {
             t35: config.line.t35_ns(),
             latency: config.latency_ns,
             incomplete_timeout: config.incomplete_timeout_ns,
-            buf: Vec::with_capacity(4 * RTU_MAX_LEN),
-            end: Vec::with_capacity(4 * RTU_MAX_LEN),
-            gap_lb: Vec::with_capacity(4 * RTU_MAX_LEN),
-            gap_ub: Vec::with_capacity(4 * RTU_MAX_LEN),
-            head: 0,
+            timed: TimedBuffer::new(),
             garbage: 0,
-            last_end: None,
-            last_read: 0,
             after_frame: false,
             wait_at: usize::MAX,
             wait_for: 0,
             known_units: [false; 256],
             expect: Expect::Unknown,
             glitch_at: None,
-            since_glitch: u32::MAX,
-            glitch_counts: [0; 256],
-            glitch_top: 0,
+            glitches: GlitchState::new(),
             frame_next_at: None,
-            turn: TurnaroundStats::default(),
             last_sender: Sender::Unknown,
             next_alt: None,
             after_damage: false,
@@ -227,7 +204,7 @@ impl RtuFramer {
     /// Bytes waiting for a decision.
     #[must_use]
     pub fn pending(&self) -> usize {
-        self.buf.len() - self.head
+        self.timed.live_len()
     }
 
     /// Feeds one chunk; emits every event it decides.
@@ -249,33 +226,7 @@ impl RtuFramer {
             self.emit_whole_chunk(chunk, reading, emit);
             return;
         }
-        if n > 0 {
-            // Bytes in one chunk are taken as sent back to back, the last ending when the read
-            // returned; and bytes cannot overlap on the wire, so each ends at least a character
-            // after the one before. Both make the end times a run of step `c` from `e0`.
-            let behind = u64::try_from(n - 1).unwrap_or(u64::MAX).saturating_mul(c);
-            let mut e0 = t.saturating_sub(behind);
-            let (lb, ub) = match self.last_end {
-                Some(prev) => {
-                    e0 = e0.max(prev.saturating_add(c));
-                    let start = e0.saturating_sub(c);
-                    (
-                        start.saturating_sub(self.latency).saturating_sub(prev),
-                        start.saturating_sub(prev.saturating_sub(self.latency)),
-                    )
-                }
-                None => (u64::MAX, u64::MAX),
-            };
-            let at = self.buf.len();
-            self.buf.extend_from_slice(chunk.bytes);
-            self.end.extend((0..n as u64).map(|i| e0.saturating_add(i.saturating_mul(c))));
-            self.gap_lb.resize(at + n, 0);
-            self.gap_ub.resize(at + n, u64::MAX);
-            self.gap_lb[at] = lb;
-            self.gap_ub[at] = ub;
-            self.last_end = self.end.last().copied();
-        }
-        self.last_read = self.last_read.max(t);
+        self.timed.append(chunk.bytes, t, c, self.latency);
         self.process(Flush::No, emit);
     }
 
@@ -307,7 +258,7 @@ impl RtuFramer {
     /// Tells the framer the time is `now` with nothing new received: if the line has been
     /// silent longer than t3.5 (plus latency), pending bytes are decided.
     pub fn tick<F: FnMut(FrameEvent<'_>)>(&mut self, now: Timestamp, emit: &mut F) {
-        let Some(last) = self.last_end else { return };
+        let Some(last) = self.timed.last_end else { return };
         if self.pending() == 0 {
             return;
         }
@@ -327,7 +278,7 @@ impl RtuFramer {
     fn process<F: FnMut(FrameEvent<'_>)>(&mut self, flush: Flush, emit: &mut F) {
         let flushing = flush == Flush::All;
         loop {
-            let live_len = self.buf.len() - self.head;
+            let live_len = self.timed.live_len();
             if self.garbage >= live_len {
                 break;
             }
@@ -336,7 +287,7 @@ impl RtuFramer {
             }
             match self.try_frame_at(self.garbage, flushing) {
                 Try::Found(len, reading, alt) => {
-                    self.frame_next_at = Some(self.head + self.garbage);
+                    self.frame_next_at = Some(self.timed.head + self.garbage);
                     self.emit_garbage(self.garbage, emit);
                     self.frame_next_at = None;
                     self.next_alt = alt;
@@ -373,13 +324,8 @@ impl RtuFramer {
     }
 
     fn compact(&mut self) {
-        if self.head > 0 && (self.head == self.buf.len() || self.head >= 8192) {
-            self.buf.drain(..self.head);
-            self.end.drain(..self.head);
-            self.gap_lb.drain(..self.head);
-            self.gap_ub.drain(..self.head);
-            self.glitch_at = self.glitch_at.and_then(|g| g.checked_sub(self.head));
-            self.head = 0;
+        if let Some(dropped) = self.timed.compact() {
+            self.glitch_at = self.glitch_at.and_then(|g| g.checked_sub(dropped));
         }
     }
 }

@@ -15,8 +15,8 @@ impl RtuFramer {
     /// and user-defined codes may pause inside a frame (slow slaves), so for them only a
     /// silence longer than the incomplete-frame timeout bounds the search.
     pub(super) fn unknown_length_at(&self, g: usize, flushing: bool) -> Try {
-        let live_len = self.buf.len() - self.head;
-        let s = &self.buf[self.head + g..];
+        let live_len = self.timed.live_len();
+        let s = &self.timed.buf[self.timed.head + g..];
         let base = FunctionCode::from(s[1]);
         let lenient = (base.name().is_some() || base.is_user_defined()) && self.known_units[usize::from(s[0])];
         // A code with no public layout from an address never seen before is far more likely
@@ -30,7 +30,7 @@ impl RtuFramer {
         // After damage (bytes before `g` that are not a lone glitch), a known unit's frame must
         // carry a public or user-defined code too: there a 4-byte "frame" of any code is a CRC
         // matching by chance as often as not.
-        let after_glitch = g == 1 && self.at_glitch(self.head);
+        let after_glitch = g == 1 && self.at_glitch(self.timed.head);
         if g > 0 && !after_glitch && !(base.name().is_some() || base.is_user_defined()) {
             return Try::NotHere;
         }
@@ -57,7 +57,7 @@ impl RtuFramer {
                 // A lone byte and then a silence or a frame: this frame's turnaround glitch.
                 // Only on a line seen to glitch: elsewhere a CRC match with one stray byte after it
                 // is a chance match inside damage (1 in 65 536 per length tried) as often as not.
-                let glitch_after = self.glitchy()
+                let glitch_after = self.glitches.glitchy()
                     && (self.glitch_then_end(g + l) || (flushing && g + l + 1 == live_len))
                     || self.glitch_then_start(g + l);
                 if self.boundary_at(g + l)
@@ -89,7 +89,7 @@ impl RtuFramer {
                         // a byte taking a glitch's value: a lone other byte before a silence is
                         // as likely a slow slave pausing after its answer's first byte.
                         let glitch_like =
-                            s.get(l + 1).is_some_and(|&v| self.glitch_value(v) || matches!(v, 0x00 | 0xFE | 0xFF));
+                            s.get(l + 1).is_some_and(|&v| self.glitches.value(v) || matches!(v, 0x00 | 0xFE | 0xFF));
                         let longer_glitch =
                             (glitch_like && self.glitch_then_end(g + l + 1)) || self.glitch_then_start(g + l + 1);
                         let longer_ok = g + l + 1 == live_len
@@ -100,7 +100,7 @@ impl RtuFramer {
                         let evidence = self.boundary_at(g + l) || self.exact_frame_at(g + l) || longer_glitch;
                         // Nothing else decides: whether this sender's `00` glitch is likelier
                         // than a CRC ending in `00` (1 in 256).
-                        let odds = self.turn.zero_tail(self.sender_at(g));
+                        let odds = self.glitches.turn.zero_tail(self.sender_at(g));
                         let shorter_strong = self.boundary_at(g + l)
                             || self.exact_frame_at(g + l)
                             || (odds.glitch_likelier && !longer_glitch);
@@ -126,7 +126,7 @@ impl RtuFramer {
                 break;
             }
             if l < s.len() {
-                let gap = self.gap_lb[self.head + g + l];
+                let gap = self.timed.gap_lb[self.timed.head + g + l];
                 // Even a slow slave's frame cannot hold a whole valid frame after a silence.
                 if gap >= self.incomplete_timeout || (gap >= self.t35 && (!lenient || self.exact_frame_at(g + l))) {
                     bounded = true;
@@ -140,7 +140,7 @@ impl RtuFramer {
     /// The exact length the structure gives a frame starting at absolute `a`, if it fits
     /// before `stop`.
     pub(super) fn structural_len(&self, a: usize, stop: usize) -> Option<usize> {
-        let f = &self.buf[a..stop];
+        let f = &self.timed.buf[a..stop];
         if !self.looks_like_frame(f) {
             return None;
         }
@@ -166,7 +166,9 @@ impl RtuFramer {
     /// Do the two bytes at live index `i` look like the start of a frame: an address already
     /// seen in valid frames and a public, user-defined or exception function code?
     pub(super) fn looks_like_frame_start(&self, i: usize) -> bool {
-        let (Some(&addr), Some(&fc)) = (self.buf.get(self.head + i), self.buf.get(self.head + i + 1)) else {
+        let (Some(&addr), Some(&fc)) =
+            (self.timed.buf.get(self.timed.head + i), self.timed.buf.get(self.timed.head + i + 1))
+        else {
             return false;
         };
         let base = FunctionCode::from(fc & !EXCEPTION_FLAG);

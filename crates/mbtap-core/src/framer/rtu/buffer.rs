@@ -1,0 +1,93 @@
+//! The timed buffer: the bytes not yet decided, each with the latest moment it can have ended
+//! and the bounds of the silence before it — what the reads' timestamps prove, given the
+//! observer's latency (see the timing model in the module's documentation).
+
+use crate::proto::rtu::RTU_MAX_LEN;
+
+/// Decided bytes are dropped from the front once this many have gathered (or all are decided).
+const COMPACT_AT: usize = 8192;
+
+/// Buffered bytes and their timing; indices are absolute until [`TimedBuffer::compact`].
+#[derive(Debug)]
+pub(super) struct TimedBuffer {
+    pub(super) buf: Vec<u8>,
+    /// Latest possible end time of each buffered byte (ns).
+    pub(super) end: Vec<u64>,
+    /// Silence known to precede each buffered byte (lower bound, ns).
+    pub(super) gap_lb: Vec<u64>,
+    /// Silence that may at most precede each buffered byte (upper bound, ns; `u64::MAX` unknown).
+    pub(super) gap_ub: Vec<u64>,
+    /// First live (undecided) byte.
+    pub(super) head: usize,
+    /// End time of the last byte received.
+    pub(super) last_end: Option<u64>,
+    /// Time of the last read.
+    pub(super) last_read: u64,
+}
+
+impl TimedBuffer {
+    pub(super) fn new() -> Self {
+        Self {
+            buf: Vec::with_capacity(4 * RTU_MAX_LEN),
+            end: Vec::with_capacity(4 * RTU_MAX_LEN),
+            gap_lb: Vec::with_capacity(4 * RTU_MAX_LEN),
+            gap_ub: Vec::with_capacity(4 * RTU_MAX_LEN),
+            head: 0,
+            last_end: None,
+            last_read: 0,
+        }
+    }
+
+    /// Bytes waiting for a decision.
+    pub(super) fn live_len(&self) -> usize {
+        self.buf.len() - self.head
+    }
+
+    /// Appends one read's `bytes`, returned at `t`, on a line of `c` ns per character, read
+    /// through an observer that may deliver up to `latency` ns late.
+    pub(super) fn append(&mut self, bytes: &[u8], t: u64, c: u64, latency: u64) {
+        let n = bytes.len();
+        if n > 0 {
+            // Bytes in one chunk are taken as sent back to back, the last ending when the read
+            // returned; and bytes cannot overlap on the wire, so each ends at least a character
+            // after the one before. Both make the end times a run of step `c` from `e0`.
+            let behind = u64::try_from(n - 1).unwrap_or(u64::MAX).saturating_mul(c);
+            let mut e0 = t.saturating_sub(behind);
+            let (lb, ub) = match self.last_end {
+                Some(prev) => {
+                    e0 = e0.max(prev.saturating_add(c));
+                    let start = e0.saturating_sub(c);
+                    (
+                        start.saturating_sub(latency).saturating_sub(prev),
+                        start.saturating_sub(prev.saturating_sub(latency)),
+                    )
+                }
+                None => (u64::MAX, u64::MAX),
+            };
+            let at = self.buf.len();
+            self.buf.extend_from_slice(bytes);
+            self.end.extend((0..n as u64).map(|i| e0.saturating_add(i.saturating_mul(c))));
+            self.gap_lb.resize(at + n, 0);
+            self.gap_ub.resize(at + n, u64::MAX);
+            self.gap_lb[at] = lb;
+            self.gap_ub[at] = ub;
+            self.last_end = self.end.last().copied();
+        }
+        self.last_read = self.last_read.max(t);
+    }
+
+    /// Drops the decided bytes when all are decided or enough have gathered; how many were
+    /// dropped (absolute indices kept elsewhere move down by as many).
+    pub(super) fn compact(&mut self) -> Option<usize> {
+        let head = self.head;
+        if head == 0 || (head != self.buf.len() && head < COMPACT_AT) {
+            return None;
+        }
+        self.buf.drain(..head);
+        self.end.drain(..head);
+        self.gap_lb.drain(..head);
+        self.gap_ub.drain(..head);
+        self.head = 0;
+        Some(head)
+    }
+}
