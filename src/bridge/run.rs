@@ -19,7 +19,8 @@ use crate::bridge::reverse::ReverseOptions;
 use crate::bridge::server;
 use crate::bridge::shared::LineShared;
 use crate::output::EventWriter;
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
+use crate::source::session::Session;
+use mbtap_core::analyzer::AnalyzerConfig;
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::FramerConfig;
 use mbtap_core::pairing::PairingConfig;
@@ -216,9 +217,9 @@ pub async fn bridge<W: Write>(
         tokio::spawn(serve_metrics(listener, Arc::clone(&served)));
     }
     let _ = err.flush();
-    let mut analyzer = writer
+    let mut session = writer
         .is_some()
-        .then(|| Analyzer::new(AnalyzerConfig { mode, framer: FramerConfig::new(settings, 0), pairing }));
+        .then(|| Session::new(AnalyzerConfig { mode, framer: FramerConfig::new(settings, 0), pairing }));
     let mut writer = writer;
     let stop = crate::signals::shutdown_signal();
     tokio::pin!(stop);
@@ -229,20 +230,20 @@ pub async fn bridge<W: Write>(
             () = &mut stop => break,
             () = async { if let Some(d) = deadline { tokio::time::sleep_until(d).await } else { std::future::pending().await } } => break,
             Some((port, t, bytes, whole)) = monitor_rx.recv(), if monitoring => {
-                if let (Some(a), Some(w)) = (analyzer.as_mut(), writer.as_deref_mut()) {
+                if let (Some(s), Some(w)) = (session.as_mut(), writer.as_deref_mut()) {
                     let chunk = Chunk { port, t, bytes: &bytes };
                     // What the bridge wrote is one frame, shown at once (before its answer).
                     if whole {
-                        a.push_frame(&chunk, &mut |e: &Event<'_>| w.write(e));
+                        s.frame(&chunk, w);
                     } else {
-                        a.push(&chunk, &mut |e: &Event<'_>| w.write(e));
+                        s.chunk(&chunk, w, err);
                     }
                 }
             }
             _ = tick.tick() => {
-                if let (Some(a), Some(w)) = (analyzer.as_mut(), writer.as_deref_mut()) {
-                    a.tick(crate::source::serial::now(), &mut |e: &Event<'_>| w.write(e));
-                    let _ = w.out.flush();
+                if let (Some(s), Some(w)) = (session.as_mut(), writer.as_deref_mut()) {
+                    s.tick(crate::source::serial::now(), w);
+                    s.flush(w, err);
                 }
                 for note in served.notes() {
                     let _ = writeln!(err, "mbtap: {note}");
@@ -250,8 +251,8 @@ pub async fn bridge<W: Write>(
             }
         }
     }
-    if let (Some(a), Some(w)) = (analyzer.as_mut(), writer) {
-        a.finish(&mut |e: &Event<'_>| w.write(e));
+    if let (Some(s), Some(w)) = (session, writer) {
+        s.finish(w, err)?;
     }
     Ok(())
 }

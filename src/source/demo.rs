@@ -8,7 +8,8 @@ use std::time::Duration;
 
 use crate::output::EventWriter;
 use crate::source::serial::now;
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
+use crate::source::session::Session;
+use mbtap_core::analyzer::AnalyzerConfig;
 use mbtap_core::chunk::{Chunk, PortId, Timestamp};
 use mbtap_core::framer::{FramerConfig, LineSettings};
 use mbtap_core::sim::Slave;
@@ -43,8 +44,8 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     bus.faults = opts.faults;
     let heard_at = opts.heard_at.unwrap_or(line);
     let mut listener = Listener::new(line, heard_at);
-    let mut analyzer =
-        Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(heard_at, 0), ..AnalyzerConfig::default() });
+    let mut session =
+        Session::new(AnalyzerConfig { framer: FramerConfig::new(heard_at, 0), ..AnalyzerConfig::default() });
     let start = tokio::time::Instant::now();
     let start_t = now();
     let mut stop = Box::pin(crate::signals::shutdown_signal());
@@ -70,15 +71,14 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
             }
             let heard: Vec<u8> = listener.hear(&frame).into_iter().map(|(_, b)| b).collect();
             let t = Timestamp(start_t.0.saturating_add(frame.end_ns));
-            analyzer.push(&Chunk { port: PortId(0), t, bytes: &heard }, &mut |e: &Event<'_>| writer.write(e));
+            session.chunk(&Chunk { port: PortId(0), t, bytes: &heard }, writer, &mut std::io::sink());
             // The frame's end is only certain after the line stays quiet: let the framer see it.
-            analyzer.tick(Timestamp(t.0.saturating_add(2_000_000)), &mut |e: &Event<'_>| writer.write(e));
-            let _ = writer.out.flush();
+            session.tick(Timestamp(t.0.saturating_add(2_000_000)), writer);
+            session.flush(writer, &mut std::io::sink());
         }
         if let Some(e) = writer.error.take() {
             return Err(e.into());
         }
     }
-    analyzer.finish(&mut |e: &Event<'_>| writer.write(e));
-    Ok(())
+    session.finish(writer, &mut std::io::sink())
 }

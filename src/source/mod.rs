@@ -11,6 +11,7 @@ pub mod record;
 pub mod rs485;
 pub mod scan;
 pub mod serial;
+pub mod session;
 pub mod simulate;
 pub mod sniff;
 pub mod tap;

@@ -20,7 +20,8 @@ use tokio::io::AsyncReadExt;
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
 use crate::source::serial::now;
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
+use crate::source::session::Session;
+use mbtap_core::analyzer::{AnalyzerConfig, SerialMode};
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
 use mbtap_core::line_args::LineOverrides;
@@ -119,7 +120,7 @@ pub async fn sniff<W: Write>(
         crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err)
     };
     let description = LineOverrides::describe(opts.mode, opts.line, latency_ns);
-    let mut recorder = match &opts.record {
+    let recorder = match &opts.record {
         Some(path) => Some(Recorder::create(path, &[(&opts.port, &description)])?),
         None => None,
     };
@@ -129,7 +130,7 @@ pub async fn sniff<W: Write>(
         framer: FramerConfig { learn_latency: opts.latency_ns.is_none(), ..FramerConfig::new(opts.line, latency_ns) },
         ..AnalyzerConfig::default()
     };
-    let mut analyzer = Analyzer::new(config);
+    let mut session = Session::new(config).recording(recorder).telling_observers();
     let mut watch = crate::source::serial::DeviceWatch::default();
     let mut stream =
         open_source(&opts, &mut watch, err).await.map_err(|e| anyhow::Error::new(NeverOpened(format!("{e:#}"))))?;
@@ -157,21 +158,17 @@ pub async fn sniff<W: Write>(
             r = tokio::time::timeout(TICK, stream.read(&mut buf)) => match r {
                 Ok(Ok(n)) if n > 0 => {
                     let t = now();
-                    let chunk = Chunk { port: PortId(0), t, bytes: &buf[..n] };
-                    if let Some(r) = recorder.as_mut() {
-                        r.write(0, t, chunk.bytes, err);
-                    }
-                    analyzer.push(&chunk, &mut |e: &Event<'_>| writer.write(e));
+                    session.chunk(&Chunk { port: PortId(0), t, bytes: &buf[..n] }, writer, err);
                 }
                 Ok(Ok(_) | Err(_)) => {
                     let _ = writeln!(err, "mbtap: lost {}; waiting for it to come back", opts.port);
-                    analyzer.tick(now(), &mut |e: &Event<'_>| writer.write(e));
+                    session.tick(now(), writer);
                     stream = loop {
                         tokio::select! {
-                            () = &mut stop => return finish(&mut analyzer, writer, recorder, err),
+                            () = &mut stop => return session.finish(writer, err),
                             () = tokio::time::sleep(Duration::from_secs(1)) => {}
                         }
-                        if let Some(r) = recorder.as_mut() {
+                        if let Some(r) = session.recorder() {
                             r.flush(err);
                         }
                         // A by-id link or usb:VID:PID finds the adapter under its new name; a
@@ -182,35 +179,13 @@ pub async fn sniff<W: Write>(
                         }
                     };
                 }
-                Err(_) => analyzer.tick(now(), &mut |e: &Event<'_>| writer.write(e)),
+                Err(_) => session.tick(now(), writer),
             },
         }
         if last_flush.elapsed() >= FLUSH {
             last_flush = tokio::time::Instant::now();
-            if let Some(r) = recorder.as_mut() {
-                r.flush(err);
-            }
-            let _ = writer.out.flush();
+            session.flush(writer, err);
         }
     }
-    finish(&mut analyzer, writer, recorder, err)
-}
-
-/// The analysis to its end; then the recording's verdict (the summary is written either way,
-/// by the caller, before a failed recording's error reaches the exit status).
-fn finish<W: Write>(
-    analyzer: &mut Analyzer,
-    writer: &mut EventWriter<W>,
-    recorder: Option<Recorder>,
-    err: &mut dyn Write,
-) -> anyhow::Result<()> {
-    analyzer.finish(&mut |e: &Event<'_>| writer.write(e));
-    let mut recorder = recorder;
-    for (port, estimate) in analyzer.observers() {
-        writer.observer(port, &estimate);
-        if let Some(r) = recorder.as_mut() {
-            r.note_observer(port, &estimate, err);
-        }
-    }
-    recorder.map_or(Ok(()), |r| r.finish(err))
+    session.finish(writer, err)
 }

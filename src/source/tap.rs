@@ -18,7 +18,8 @@ use tokio_serial::SerialStream;
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
 use crate::source::serial::now;
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event, SerialMode};
+use crate::source::session::Session;
+use mbtap_core::analyzer::{AnalyzerConfig, SerialMode};
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
 use mbtap_core::line_args::LineOverrides;
@@ -65,7 +66,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
         opts.link.display()
     );
 
-    let mut recorder = match &opts.record {
+    let recorder = match &opts.record {
         Some(path) => {
             let d = LineOverrides::describe(opts.mode, opts.line, latency_ns);
             let app_name = format!("{} (application)", opts.link.display());
@@ -78,7 +79,8 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
         PairingConfig { request_port: Some(APP_PORT), response_port: Some(BUS_PORT), ..PairingConfig::default() };
     // A latency the user gave is kept; otherwise valid frames may show the reads later.
     let framer = FramerConfig { learn_latency: opts.latency_ns.is_none(), ..FramerConfig::new(opts.line, latency_ns) };
-    let mut analyzer = Analyzer::new(AnalyzerConfig { mode: opts.mode, framer, pairing });
+    let mut session =
+        Session::new(AnalyzerConfig { mode: opts.mode, framer, pairing }).recording(recorder).telling_observers();
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     // The deadline is part of the stop, so it holds while the port is away too.
     let mut stop = Box::pin(crate::signals::stop_or_deadline(deadline));
@@ -104,10 +106,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
                 _ => {
                     if !app_closed {
                         app_closed = true;
-                        if let Some(r) = recorder.as_mut() {
-                            r.flush(err);
-                        }
-                        let _ = writer.out.flush();
+                        session.flush(writer, err);
                     }
                     tokio::time::sleep(Duration::from_millis(20)).await;
                     (APP_PORT, 0)
@@ -125,7 +124,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
                 // reopened as `sniff` does.
                 _ => {
                     let _ = writeln!(err, "mbtap: lost {}; the application's side stays open, waiting for the port to come back", opts.port);
-                    match reopen(&opts, &mut app, &mut stop, recorder.as_mut(), &mut watch, err).await {
+                    match reopen(&opts, &mut app, &mut stop, session.recorder(), &mut watch, err).await {
                         Some(b) => {
                             let _ = writeln!(err, "mbtap: {} is back", opts.port);
                             bus = b;
@@ -136,37 +135,22 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
                 }
             },
             () = tokio::time::sleep(Duration::from_millis(10)) => {
-                analyzer.tick(now(), &mut |e: &Event<'_>| writer.write(e));
+                session.tick(now(), writer);
                 (APP_PORT, 0)
             }
         };
         if n > 0 {
             let t = now();
             let bytes = if port == APP_PORT { &from_app[..n] } else { &from_bus[..n] };
-            if let Some(r) = recorder.as_mut() {
-                r.write(u32::from(port.0), t, bytes, err);
-            }
-            analyzer.push(&Chunk { port, t, bytes }, &mut |e: &Event<'_>| writer.write(e));
+            session.chunk(&Chunk { port, t, bytes }, writer, err);
         }
         // At least once a second, traffic or not: a killed process loses at most a second.
         if last_flush.elapsed() >= Duration::from_secs(1) {
             last_flush = tokio::time::Instant::now();
-            if let Some(r) = recorder.as_mut() {
-                r.flush(err);
-            }
-            let _ = writer.out.flush();
+            session.flush(writer, err);
         }
     }
-    analyzer.finish(&mut |e: &Event<'_>| writer.write(e));
-    for (port, estimate) in analyzer.observers() {
-        writer.observer(port, &estimate);
-        if let Some(r) = recorder.as_mut() {
-            r.note_observer(port, &estimate, err);
-        }
-    }
-    if let Some(r) = recorder {
-        r.finish(err)?;
-    }
+    session.finish(writer, err)?;
     super::link::remove(&opts.link, &slave_path);
     Ok(())
 }
