@@ -9,6 +9,8 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::parser::ValueSource;
 use clap::{ArgMatches, FromArgMatches};
+use std::collections::BTreeSet;
+use std::ffi::OsString;
 use std::path::Path;
 
 use crate::args::{EventFormatArg, LineArgs};
@@ -435,9 +437,13 @@ fn known_keys() -> Vec<String> {
     bridge.get_arguments().filter_map(|a| a.get_long().map(str::to_owned)).filter(|l| l != "config").collect()
 }
 
-/// `--config FILE` under the command line: every option the command line gave (`matches`)
-/// keeps its value, lists included (a `--allow-ip` on the command line replaces the file's list,
-/// it does not add to it); every other option takes the file's value, else its default.
+/// `--config FILE` under the command line, merged *before* parsing: the file's settings (as
+/// options, [`crate::bridge::config::options`]) and the command line's options as given (raw,
+/// from `matches`) make one argument list, from which clap builds one typed [`Args`] — every
+/// value checked once, by the same parsers. An option the command line gave replaces the
+/// file's setting of it, lists included (a `--allow-ip` on the command line replaces the
+/// file's list, it does not add to it); every other option takes the file's value, else its
+/// default. No option has to be listed here: a new one is merged as it is declared.
 ///
 /// # Errors
 /// The file cannot be read, or a setting is unknown or has a value its option refuses — each
@@ -447,99 +453,44 @@ fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result
     let text = std::fs::read_to_string(path).with_context(|| format!("reading the configuration {shown}"))?;
     let options = crate::bridge::config::options(&text, &known_keys()).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
     let command = <Args as clap::Args>::augment_args(clap::Command::new("bridge").no_binary_name(true));
-    let file_matches = command.try_get_matches_from(&options).map_err(|e| {
+    let (given, from_cli) = matches.map_or_else(Default::default, |m| command_line_options(&command, m));
+    let from_file = options.into_iter().map(OsString::from).filter(|o| {
+        let key = o.to_str().and_then(|o| o.strip_prefix("--")).map(|k| k.split_once('=').map_or(k, |(k, _)| k));
+        !key.is_some_and(|k| given.contains(k))
+    });
+    let argv: Vec<OsString> = from_file.chain(from_cli).collect();
+    let parsed = command.try_get_matches_from(&argv).map_err(|e| {
         let message = e.to_string();
         let first = message.lines().next().unwrap_or("").trim_start_matches("error: ");
         anyhow::anyhow!("{shown}: {first}")
     })?;
-    let mut merged = Args::from_arg_matches(&file_matches).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
-    let given: Vec<&str> = matches.map_or_else(Vec::new, |m| {
-        m.ids().map(clap::Id::as_str).filter(|id| m.value_source(id) == Some(ValueSource::CommandLine)).collect()
-    });
-    macro_rules! command_line_wins {
-        ($($id:literal => $($field:ident).+),* $(,)?) => {
-            $(if given.contains(&$id) { merged.$($field).+ = cli.$($field).+.clone(); })*
-            /// Every option's id, so a test can prove none is forgotten.
-            #[cfg(test)]
-            const MERGED: &[&str] = &[$($id),*];
-            #[cfg(test)]
-            MERGED_IDS.with(|m| m.set(MERGED));
-        };
-    }
-    command_line_wins! {
-        "config" => config,
-        "serial" => serial,
-        "serial_match" => serial_match,
-        "mode" => line.serial.mode,
-        "baud" => line.serial.baud,
-        "parity" => line.serial.parity,
-        "stop_bits" => line.serial.stop_bits,
-        "data_bits" => line.serial.data_bits,
-        "latency_ms" => line.latency_ms,
-        "listen" => listen,
-        "listen_rtu" => listen_rtu,
-        "listen_udp" => listen_udp,
-        "routes" => routes,
-        "timeout_ms" => timeout_ms,
-        "timeout" => timeout,
-        "unit_timeout" => unit_timeout,
-        "echo" => echo,
-        "cache" => cache,
-        "poll" => poll,
-        "priority" => priority,
-        "retries" => retries,
-        "turnaround_ms" => turnaround_ms,
-        "broadcast_reply" => broadcast_reply,
-        "read_only" => read_only,
-        "allow_functions" => allow_functions,
-        "allow_ips" => allow_ips,
-        "max_connections" => max_connections,
-        "idle_timeout" => idle_timeout,
-        "rate_limit" => rate_limit,
-        "queue_per_client" => queue_per_client,
-        "unit_map" => unit_map,
-        "metrics" => metrics,
-        "reverse" => reverse,
-        "target" => target,
-        "target_rtu" => target_rtu,
-        "answer_as" => answer_as,
-        "monitor" => monitor,
-        "devices" => devices,
-        "duration" => duration,
-        "listen_tls" => tls.listen_tls,
-        "cert" => tls.cert,
-        "key" => tls.key,
-        "client_ca" => tls.client_ca,
-        "crl" => tls.crl,
-        "role" => tls.role,
-        "tls_allow_ip" => tls.tls_allow_ip,
-        "rs485" => rs485.rs485,
-        "rs485_delay_before_us" => rs485.rs485_delay_before_us,
-        "rs485_delay_after_us" => rs485.rs485_delay_after_us,
-        "rs485_rx_during_tx" => rs485.rs485_rx_during_tx,
-        "mqtt" => mqtt.mqtt,
-        "mqtt_prefix" => mqtt.mqtt_prefix,
-        "mqtt_ca" => mqtt.mqtt_ca,
-        "mqtt_credentials" => mqtt.mqtt_credentials,
-        "mqtt_qos" => mqtt.mqtt_qos,
-        "mqtt_retain" => mqtt.mqtt_retain,
-        "mqtt_interval" => mqtt.mqtt_interval,
-        "mqtt_discovery" => mqtt.mqtt_discovery,
-        "mqtt_queue" => mqtt.mqtt_queue,
-        "sparkplug" => mqtt.sparkplug,
-        "sparkplug_host" => mqtt.sparkplug_host,
-        "mqtt_buffer" => mqtt.mqtt_buffer,
-        "mqtt_buffer_max" => mqtt.mqtt_buffer_max,
-        "mqtt_writes" => mqtt.mqtt_writes,
-        "mqtt_role" => mqtt_role,
-    }
+    let mut merged = Args::from_arg_matches(&parsed).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
     merged.config = cli.config;
     Ok(merged)
 }
 
-#[cfg(test)]
-thread_local! {
-    static MERGED_IDS: std::cell::Cell<&'static [&'static str]> = const { std::cell::Cell::new(&[]) };
+/// The options the command line gave (`matches`), as `--long=VALUE` (or `--long` for a flag)
+/// in the order declared, and their long names. The bridge takes no positional arguments, and
+/// every option is a flag or takes values (`tests::every_option_can_be_given_again`).
+fn command_line_options(command: &clap::Command, m: &ArgMatches) -> (BTreeSet<String>, Vec<OsString>) {
+    let (mut given, mut argv) = (BTreeSet::new(), Vec::new());
+    for arg in command.get_arguments() {
+        let id = arg.get_id().as_str();
+        let (Some(long), true) = (arg.get_long(), m.value_source(id) == Some(ValueSource::CommandLine)) else {
+            continue;
+        };
+        given.insert(long.to_owned());
+        if arg.get_action().takes_values() {
+            for value in m.get_raw_occurrences(id).into_iter().flatten().flatten() {
+                let mut option = OsString::from(format!("--{long}="));
+                option.push(value);
+                argv.push(option);
+            }
+        } else {
+            argv.push(OsString::from(format!("--{long}")));
+        }
+    }
+    (given, argv)
 }
 
 #[cfg(test)]
@@ -662,16 +613,54 @@ mod tests {
         assert!(crate::bridge::tls::parse_roles(&roles).is_err(), "{roles:?}");
     }
 
+    /// The merge gives the command line's options again by their long name: every bridge option
+    /// must have one, and be a flag set once or take values (a counted flag or a positional
+    /// argument would not survive it).
     #[test]
-    fn every_bridge_option_is_merged() {
-        let file = file("all", "");
-        let (cli, m) = parse(&["mbtap", "bridge", "--config", file.to_str().unwrap()]);
-        merge(&file, cli, Some(&m)).unwrap();
-        let merged = MERGED_IDS.with(std::cell::Cell::get);
+    fn every_option_can_be_given_again() {
         let bridge = <Args as clap::Args>::augment_args(clap::Command::new("bridge"));
         for arg in bridge.get_arguments() {
-            assert!(merged.contains(&arg.get_id().as_str()), "--config merge forgets {}", arg.get_id());
+            assert!(arg.get_long().is_some(), "{} has no long name", arg.get_id());
+            assert!(
+                matches!(arg.get_action(), clap::ArgAction::SetTrue | clap::ArgAction::Set | clap::ArgAction::Append),
+                "{}: {:?}",
+                arg.get_id(),
+                arg.get_action()
+            );
         }
+    }
+
+    /// Every kind of option the command line gives wins over the file: a flag, a value, a list,
+    /// options of the flattened groups (TLS, RS-485, MQTT); the file's others stay.
+    #[test]
+    fn the_command_line_wins_for_every_kind_of_option() {
+        let f = file(
+            "kinds",
+            "[bridge]\nserial = \"/dev/ttyS0\"\nlisten = \"127.0.0.1:1502\"\nallow-ip = [\"10.0.0.1\", \"10.0.0.2\"]\n\
+             timeout-ms = 700\nmqtt-prefix = \"file/prefix\"\nrs485-delay-before-us = 5\n",
+        );
+        let path = f.to_str().unwrap();
+        let (cli, m) = parse(&[
+            "mbtap",
+            "bridge",
+            "--config",
+            path,
+            "--read-only",
+            "--allow-ip",
+            "127.0.0.1",
+            "--timeout-ms",
+            "300",
+            "--mqtt-prefix",
+            "cli/prefix",
+        ]);
+        let b = merge(&f, cli, Some(&m)).unwrap();
+        assert!(b.read_only);
+        assert_eq!(b.allow_ips, ["127.0.0.1"]);
+        assert_eq!(b.timeout_ms, 300);
+        assert_eq!(b.mqtt.mqtt_prefix.as_deref(), Some("cli/prefix"));
+        assert_eq!(b.rs485.rs485_delay_before_us, 5);
+        assert_eq!(b.listen.as_deref(), Some("127.0.0.1:1502"));
+        assert_eq!(b.config.as_deref(), Some(f.as_path()));
     }
 
     #[test]
