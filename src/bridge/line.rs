@@ -10,15 +10,14 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
-use tokio::io::AsyncReadExt;
 use tokio::sync::mpsc;
 use tokio::time::Instant;
-use tokio_serial::SerialPort;
 
 use super::metrics::Metrics;
 use super::port::Port;
 pub use super::port::{LineOptions, MonitorChunk};
 use super::shared::{Job, LineShared, POLL_CLIENT};
+use super::stream::Transport;
 use mbtap_core::chunk::{PortId, Timestamp};
 use mbtap_gateway::breaker::Breaker;
 use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED};
@@ -35,7 +34,9 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         next_open: Instant::now(),
         watch: crate::source::serial::DeviceWatch::default(),
         missing: None,
+        device: mbtap_gateway::tcp_device::TcpDevice::default(),
     };
+    let device = matches!(Transport::of(&opts.port), Transport::ModbusTcp(_));
     let mut master = opts.master();
     master.config.monitored = monitor.is_some();
     // The line is free for the next request from this time on (t3.5 + turnaround after the
@@ -47,7 +48,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             // Wake on a new request, or now and then to retry opening the port.
             let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
             if port.stream.is_none() && Instant::now() >= port.next_open {
-                port.open();
+                port.open().await;
             }
             continue;
         };
@@ -57,7 +58,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             continue;
         }
         if port.stream.is_none() && Instant::now() >= port.next_open {
-            port.reopen();
+            port.reopen().await;
         }
         if port.stream.is_none() {
             answer(&shared, job, Reply::Gateway(GATEWAY_PATH_UNAVAILABLE));
@@ -74,7 +75,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let twins = shared.twins(client, &job);
         // A write may change what the cache holds, whatever its outcome.
         shared.cache().invalidate(job.unit, &job.pdu);
-        let done = port.transact(&mut master, &job).await;
+        let done = if device { port.transact_tcp(&job).await } else { port.transact(&mut master, &job).await };
         let Ok(outcome) = done else {
             // The port failed under us: answer 0x0A and reopen with backoff.
             for twin in twins {
@@ -107,7 +108,8 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             let answered = reply != Reply::Gateway(GATEWAY_TARGET_FAILED);
             breakers.entry(job.unit).or_default().record(answered, shared.now());
         }
-        let guard = master.config.line_guard();
+        // A Modbus TCP device needs no quiet time between requests; a line does.
+        let guard = if device { Duration::ZERO } else { master.config.line_guard() };
         free_at = last + guard;
         shared.metrics.latency(job.unit, job.queued.elapsed());
         let unit = job.unit;
@@ -155,8 +157,8 @@ impl Port<'_> {
                 Step::Send(adu) => {
                     // Stale bytes (a late answer to an earlier request, noise) must not be taken
                     // for this request's answer.
-                    let _ = port.clear(tokio_serial::ClearBuffer::Input);
-                    self.opts.rs485.send(port, &adu).await?;
+                    port.clear_input();
+                    port.send(&self.opts.rs485, &adu).await?;
                     self.observe_sent(&adu);
                     // With --rs485 rts the send returned when the last character left (tcdrain).
                     let drained = self.opts.rs485.rs485 == crate::source::rs485::Rs485Mode::Rts;
@@ -235,7 +237,7 @@ impl Port<'_> {
     }
 
     /// Bytes read from the line, stamped when the read returned.
-    fn observe(&self, port: u8, bytes: &[u8]) {
+    pub(super) fn observe(&self, port: u8, bytes: &[u8]) {
         if let Some(m) = self.monitor {
             let _ = m.send((PortId(port), crate::source::serial::now(), bytes.to_vec(), false));
         }
@@ -244,7 +246,7 @@ impl Port<'_> {
     /// A frame this program wrote, stamped when its last character leaves the wire (the write
     /// returns as soon as the bytes are queued; stamping them then back-dated the request by
     /// its own transmission time, and the monitor saw a gap shorter than the line's).
-    fn observe_sent(&self, bytes: &[u8]) {
+    pub(super) fn observe_sent(&self, bytes: &[u8]) {
         if let Some(m) = self.monitor {
             let on_wire = self.opts.line.char_ns().saturating_mul(bytes.len() as u64);
             let t = Timestamp(crate::source::serial::now().0.saturating_add(on_wire));

@@ -16,6 +16,7 @@
 pub mod broker;
 pub mod config;
 pub mod connection;
+pub mod device;
 pub mod line;
 pub mod metrics;
 pub mod modes;
@@ -25,5 +26,6 @@ pub mod reverse;
 pub mod run;
 pub mod server;
 pub mod shared;
+pub mod stream;
 pub mod tls;
 pub mod udp;

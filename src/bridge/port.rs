@@ -1,14 +1,16 @@
-//! The line's serial port and its settings: opened by name (a by-id link or
-//! `usb:VID:PID[:SERIAL]` found again wherever the adapter came back), reopened with backoff
-//! when it goes away, its absence said once a minute.
+//! The line's port and its settings: a serial port opened by name (a by-id link or
+//! `usb:VID:PID[:SERIAL]` found again wherever the adapter came back), or a serial server or
+//! Modbus TCP device connected to ([`super::stream`]); reopened with backoff when it goes
+//! away, its absence said once a minute.
 
 use std::time::Duration;
 
 use tokio::sync::mpsc;
 use tokio::time::Instant;
-use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+use tokio_serial::{SerialPort, SerialPortBuilderExt};
 
 use super::shared::LineShared;
+use super::stream::{LineStream, Transport};
 use mbtap_core::analyzer::SerialMode;
 use mbtap_core::chunk::{PortId, Timestamp};
 use mbtap_core::framer::LineSettings;
@@ -73,7 +75,9 @@ pub(super) struct Port<'a> {
     pub(super) opts: &'a LineOptions,
     pub(super) shared: &'a LineShared,
     pub(super) monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
-    pub(super) stream: Option<SerialStream>,
+    pub(super) stream: Option<LineStream>,
+    /// `tcp://`: the bridge's side of the one connection to a Modbus TCP device.
+    pub(super) device: mbtap_gateway::tcp_device::TcpDevice,
     pub(super) backoff: Duration,
     pub(super) next_open: Instant,
     pub(super) watch: crate::source::serial::DeviceWatch,
@@ -83,8 +87,8 @@ pub(super) struct Port<'a> {
 
 impl Port<'_> {
     /// Opens the port when due; backoff doubles while it stays away.
-    pub(super) fn reopen(&mut self) {
-        self.open();
+    pub(super) async fn reopen(&mut self) {
+        self.open().await;
         if self.stream.is_some() {
             self.backoff = Duration::from_millis(100);
             self.shared.metrics.reopened();
@@ -103,9 +107,22 @@ impl Port<'_> {
 
     /// Opens the line's port (a by-id link or `usb:VID:PID[:SERIAL]` found again wherever the
     /// adapter came back), telling when the device behind the name changed.
-    pub(super) fn open(&mut self) {
+    pub(super) async fn open(&mut self) {
         let opts = self.opts;
-        let opened = (|| -> Result<SerialStream, String> {
+        let transport = Transport::of(&opts.port);
+        let opened = if transport.networked() {
+            self.device.reset();
+            LineStream::connect(transport, opts.line).await
+        } else {
+            self.open_serial()
+        };
+        self.opened(opened);
+    }
+
+    /// Opens a serial port.
+    fn open_serial(&mut self) -> Result<LineStream, String> {
+        let opts = self.opts;
+        (|| -> Result<LineStream, String> {
             let path = crate::source::serial::resolve_port(&opts.port).map_err(|e| format!("{e:#}"))?;
             // Checked at start-up; a port that comes back must take the mode again.
             opts.rs485.prepare(&path).map_err(|e| format!("{e:#}"))?;
@@ -115,8 +132,13 @@ impl Port<'_> {
             if let Some(said) = self.watch.opened(&opts.port, &path) {
                 self.shared.metrics.note(&said);
             }
-            Ok(port)
-        })();
+            Ok(LineStream::Serial(port))
+        })()
+    }
+
+    /// What opening gave: the stream, or why not (said at once, then once a minute).
+    fn opened(&mut self, opened: Result<LineStream, String>) {
+        let opts = self.opts;
         match opened {
             Ok(port) => {
                 if self.missing.take().is_some() {

@@ -24,7 +24,11 @@ pub struct Args {
     /// Read settings from this TOML file ([bridge] table; the command line wins).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// The serial port of the line (all units; see --route for several lines).
+    /// The line (all units; see --route for several lines): a serial port, or
+    /// `rtu-over-tcp://HOST:PORT` (a serial server in transparent mode, e.g. ser2net raw, USR,
+    /// Elfin), `rfc2217://HOST:PORT` (a remote port whose settings the bridge sets, e.g.
+    /// ser2net telnet(rfc2217), Moxa NPort), `tcp://HOST:PORT` (a Modbus TCP device: every
+    /// client through the bridge's one connection).
     #[arg(long)]
     pub serial: Option<String>,
     /// The line's USB adapter by its ids instead of a path, `VID:PID[:SERIAL]` (hex, as lsusb
@@ -153,6 +157,10 @@ pub struct Args {
     pub mqtt_role: Option<String>,
 }
 
+/// The least silence taken as the end of an answer on a networked line (`rtu-over-tcp://`,
+/// `rfc2217://`): the network and the server's buffering split answers by more than t3.5.
+const NETWORK_LATENCY: std::time::Duration = std::time::Duration::from_millis(50);
+
 /// Runs the bridge; `matches` tells which options the command line gave, for `--config`.
 pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode> {
     let args = match &args.config {
@@ -271,7 +279,6 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     // What the bridge polls is what it answers from memory.
     cache.extend(polls.iter().map(|p| p.rule.clone()));
     let line_for = |port: String| crate::bridge::line::LineOptions {
-        port,
         line: settings,
         mode,
         timeout: std::time::Duration::from_millis(timeout_ms),
@@ -284,7 +291,14 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         retries,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         broadcast_reply,
-        latency: std::time::Duration::from_nanos(latency_ns),
+        // A serial server's TCP stream keeps no timing: silences shorter than this are not
+        // taken as the end of an answer whose length the structure does not give.
+        latency: if crate::bridge::stream::Transport::of(&port).networked() {
+            std::time::Duration::from_nanos(latency_ns).max(NETWORK_LATENCY)
+        } else {
+            std::time::Duration::from_nanos(latency_ns)
+        },
+        port,
     };
     let mut lines = Vec::new();
     for r in &routes {
@@ -299,6 +313,11 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     // Direction control the port cannot do is refused now, never a silent fallback.
     for port in lines.iter().map(|(_, l)| l.port.as_str()).chain(reverse.as_ref().map(|r| r.port.as_str())) {
         if rs485.rs485 != crate::source::rs485::Rs485Mode::Off {
+            anyhow::ensure!(
+                !crate::bridge::stream::Transport::of(port).networked(),
+                "--rs485 {:?}: {port} is reached over the network, where the serial server drives the line; leave --rs485 out for it",
+                rs485.rs485
+            );
             rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
         }
     }

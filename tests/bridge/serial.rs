@@ -14,13 +14,13 @@ use std::time::{Duration, Instant};
 use crate::common;
 use common::{BIN, Kill, socat_pair, wait_for, wait_port};
 
-fn dir(name: &str) -> PathBuf {
+pub(super) fn dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mbtap-bridge-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
 }
 
-fn simulator(link: &Path, extra: &[&str]) -> Kill {
+pub(super) fn simulator(link: &Path, extra: &[&str]) -> Kill {
     // The duration is only a safety net: the test kills it when done (the full-size load run
     // takes about 21 minutes).
     let mut args = vec!["simulate", "--link", link.to_str().unwrap(), "--duration", "3600"];
@@ -32,7 +32,7 @@ fn simulator(link: &Path, extra: &[&str]) -> Kill {
 
 /// Starts the bridge (Modbus TCP on a free port, plus `extra`); the process, the TCP address,
 /// and the other addresses it printed (RTU over TCP, metrics).
-fn bridge(serial: &Path, extra: &[&str]) -> (Kill, String, Vec<String>) {
+pub(super) fn bridge(serial: &Path, extra: &[&str]) -> (Kill, String, Vec<String>) {
     bridge_spawned(serial, extra, Stdio::inherit())
 }
 

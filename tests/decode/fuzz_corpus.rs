@@ -34,6 +34,7 @@ fn run_dir(dir: &Path) -> usize {
             "spool" => mbtap_core::fuzzing::spool,
             "sparkplug" => mbtap_core::fuzzing::sparkplug,
             "gateway" => mbtap_gateway::fuzzing::transaction,
+            "gateway_transports" => mbtap_gateway::fuzzing::transports,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

@@ -74,3 +74,44 @@ pub fn transaction(data: &[u8]) {
         assert!(t.outcome().is_some(), "done without an outcome");
     }
 }
+
+/// Any bytes as what a networked line delivers: the first byte picks the transport — even, a
+/// Modbus TCP device's stream ([`crate::tcp_device`]); odd, a Telnet/RFC 2217 server's
+/// ([`crate::rfc2217`]) — the rest arrives in reads of 1 to 16 bytes. Neither may panic, nor
+/// buffer without bound, nor make more line bytes than it received.
+///
+/// # Panics
+/// When one of those is broken: the point of this harness.
+pub fn transports(data: &[u8]) {
+    let (&pick, rest) = data.split_first().unwrap_or((&0, &[]));
+    let reads = rest.chunks(usize::from(pick >> 4) + 1);
+    if pick % 2 == 0 {
+        let mut device = crate::tcp_device::TcpDevice::default();
+        let (mut id, _) = device.request(1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+        for read in reads {
+            match device.bytes(id, read).0 {
+                crate::tcp_device::Heard::Answer { pdu, .. } => {
+                    assert!(pdu.len() <= 253, "a PDU of {} bytes", pdu.len());
+                    id = device.request(1, &[0x03, 0x00, 0x00, 0x00, 0x01]).0;
+                }
+                crate::tcp_device::Heard::Broken => device.reset(),
+                crate::tcp_device::Heard::More => {}
+            }
+        }
+    } else {
+        let setup = crate::rfc2217::LineSetup {
+            baud: 19_200,
+            data_bits: 8,
+            parity: crate::rfc2217::Parity::Even,
+            stop_bits: 1,
+        };
+        let mut telnet = crate::rfc2217::Telnet::new(setup);
+        let (mut data, mut reply) = (Vec::new(), Vec::new());
+        for read in reads {
+            telnet.feed(read, &mut data, &mut reply);
+        }
+        assert!(data.len() <= rest.len(), "{} line bytes from {} received", data.len(), rest.len());
+        // At most the settings (4 subnegotiations) and one refusal per option value.
+        assert!(reply.len() <= 64 + 3 * 256, "{} bytes of answers", reply.len());
+    }
+}

@@ -26,7 +26,9 @@ pub mod cache;
 pub mod fuzzing;
 pub mod parse;
 pub mod queue;
+pub mod rfc2217;
 pub mod rules;
+pub mod tcp_device;
 pub mod timeouts;
 pub mod transaction;
 

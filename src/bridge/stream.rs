@@ -1,0 +1,197 @@
+//! What a bridge line is made of: a serial port, a serial server's TCP stream carrying the
+//! remote line's bytes as they are (`rtu-over-tcp://`), a remote port set over Telnet
+//! (`rfc2217://`, the gateway core's [`Telnet`] codec), or a Modbus TCP device
+//! (`tcp://`, one connection for every client). The line task reads and writes through
+//! [`LineStream`] whatever it is.
+
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+use tokio_serial::{SerialPort, SerialStream};
+
+use mbtap_core::framer::{LineSettings, Parity};
+use mbtap_gateway::rfc2217::{self, LineSetup, Telnet};
+
+/// How long connecting to a serial server or a device may take.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// Where a line's bytes go, by the name `--serial`/`--route` gave.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transport<'a> {
+    /// A serial port (a path, a by-id link, `usb:VID:PID`).
+    Serial(&'a str),
+    /// `rtu-over-tcp://HOST:PORT` (also `rtu+tcp://`): a serial server in transparent mode.
+    RtuOverTcp(&'a str),
+    /// `rfc2217://HOST:PORT`: a remote serial port whose settings the bridge sets.
+    Rfc2217(&'a str),
+    /// `tcp://HOST:PORT`: a Modbus TCP device.
+    ModbusTcp(&'a str),
+}
+
+impl<'a> Transport<'a> {
+    #[must_use]
+    pub fn of(port: &'a str) -> Self {
+        if let Some(a) = port.strip_prefix("rtu-over-tcp://").or_else(|| port.strip_prefix("rtu+tcp://")) {
+            Self::RtuOverTcp(a)
+        } else if let Some(a) = port.strip_prefix("rfc2217://") {
+            Self::Rfc2217(a)
+        } else if let Some(a) = port.strip_prefix("tcp://") {
+            Self::ModbusTcp(a)
+        } else {
+            Self::Serial(port)
+        }
+    }
+
+    /// Reached over the network: no RS-485 direction control, no serial ioctls.
+    #[must_use]
+    pub fn networked(self) -> bool {
+        !matches!(self, Self::Serial(_))
+    }
+}
+
+/// An open line.
+pub(super) enum LineStream {
+    Serial(SerialStream),
+    /// A serial server's stream, or a Modbus TCP device's connection.
+    Tcp(TcpStream),
+    /// A remote port over Telnet: the session's state and line bytes already decoded.
+    Telnet {
+        tcp: TcpStream,
+        telnet: Box<Telnet>,
+        pending: Vec<u8>,
+    },
+}
+
+impl std::fmt::Debug for LineStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Serial(_) => "LineStream::Serial",
+            Self::Tcp(_) => "LineStream::Tcp",
+            Self::Telnet { .. } => "LineStream::Telnet",
+        })
+    }
+}
+
+async fn connect(addr: &str) -> Result<TcpStream, String> {
+    let tcp = tokio::time::timeout(CONNECT_TIMEOUT, TcpStream::connect(addr))
+        .await
+        .map_err(|_| format!("no connection to {addr} within {} s", CONNECT_TIMEOUT.as_secs()))?
+        .map_err(|e| format!("connecting to {addr}: {e}"))?;
+    // A request is one small write that must leave at once.
+    let _ = tcp.set_nodelay(true);
+    Ok(tcp)
+}
+
+fn setup(line: LineSettings) -> LineSetup {
+    LineSetup {
+        baud: line.baud,
+        data_bits: line.data_bits,
+        parity: match line.parity {
+            Parity::None => rfc2217::Parity::None,
+            Parity::Odd => rfc2217::Parity::Odd,
+            Parity::Even => rfc2217::Parity::Even,
+        },
+        stop_bits: line.stop_bits,
+    }
+}
+
+impl LineStream {
+    /// Connects to a networked transport; a Telnet server must agree to the COM port option
+    /// (and is given the line's settings) before the line is taken as open.
+    pub(super) async fn connect(transport: Transport<'_>, line: LineSettings) -> Result<Self, String> {
+        match transport {
+            Transport::Serial(_) => Err("a serial port is opened by the port's own path".into()),
+            Transport::RtuOverTcp(addr) | Transport::ModbusTcp(addr) => Ok(Self::Tcp(connect(addr).await?)),
+            Transport::Rfc2217(addr) => {
+                let mut tcp = connect(addr).await?;
+                let mut telnet = Box::new(Telnet::new(setup(line)));
+                tcp.write_all(&Telnet::greeting()).await.map_err(|e| format!("{addr}: {e}"))?;
+                let (mut pending, mut reply, mut buf) = (Vec::new(), Vec::new(), [0u8; 256]);
+                let deadline = tokio::time::Instant::now() + CONNECT_TIMEOUT;
+                while !telnet.configured {
+                    let n = match tokio::time::timeout_at(deadline, tcp.read(&mut buf)).await {
+                        Ok(Ok(n)) if n > 0 => n,
+                        Ok(Ok(_)) => return Err(format!("{addr} closed the connection while negotiating")),
+                        Ok(Err(e)) => return Err(format!("{addr}: {e}")),
+                        Err(_) => {
+                            return Err(format!(
+                                "{addr} does not offer RFC 2217 (no DO COM-PORT-OPTION within {} s); for a raw TCP serial server use rtu-over-tcp://",
+                                CONNECT_TIMEOUT.as_secs()
+                            ));
+                        }
+                    };
+                    telnet.feed(buf.get(..n).unwrap_or_default(), &mut pending, &mut reply);
+                    if !reply.is_empty() {
+                        tcp.write_all(&reply).await.map_err(|e| format!("{addr}: {e}"))?;
+                        reply.clear();
+                    }
+                }
+                // Bytes before the settings took effect were heard at other settings.
+                pending.clear();
+                Ok(Self::Telnet { tcp, telnet, pending })
+            }
+        }
+    }
+
+    /// Drops what was received and not read (a late answer, noise): it must not be taken for
+    /// the next request's answer.
+    pub(super) fn clear_input(&mut self) {
+        let mut buf = [0u8; 512];
+        match self {
+            Self::Serial(port) => {
+                let _ = port.clear(tokio_serial::ClearBuffer::Input);
+            }
+            Self::Tcp(tcp) => while matches!(tcp.try_read(&mut buf), Ok(n) if n > 0) {},
+            Self::Telnet { tcp, telnet, pending } => {
+                let mut reply = Vec::new();
+                while let Ok(n) = tcp.try_read(&mut buf) {
+                    if n == 0 {
+                        break;
+                    }
+                    telnet.feed(buf.get(..n).unwrap_or_default(), pending, &mut reply);
+                }
+                pending.clear();
+                // Telnet's answers go out with the next write.
+                if !reply.is_empty() {
+                    let _ = tcp.try_write(&reply);
+                }
+            }
+        }
+    }
+
+    /// Sends one frame.
+    pub(super) async fn send(&mut self, rs485: &crate::source::rs485::Rs485Args, frame: &[u8]) -> std::io::Result<()> {
+        match self {
+            Self::Serial(port) => rs485.send(port, frame).await,
+            Self::Tcp(tcp) => tcp.write_all(frame).await,
+            Self::Telnet { tcp, .. } => tcp.write_all(&Telnet::escape(frame)).await,
+        }
+    }
+
+    /// Reads the line's next bytes (0: the other end closed).
+    pub(super) async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            Self::Serial(port) => port.read(buf).await,
+            Self::Tcp(tcp) => tcp.read(buf).await,
+            Self::Telnet { tcp, telnet, pending } => loop {
+                if !pending.is_empty() {
+                    let n = pending.len().min(buf.len());
+                    buf.get_mut(..n).unwrap_or_default().copy_from_slice(pending.get(..n).unwrap_or_default());
+                    pending.drain(..n);
+                    return Ok(n);
+                }
+                let mut raw = [0u8; 512];
+                let n = tcp.read(&mut raw).await?;
+                if n == 0 {
+                    return Ok(0);
+                }
+                let mut reply = Vec::new();
+                telnet.feed(raw.get(..n).unwrap_or_default(), pending, &mut reply);
+                if !reply.is_empty() {
+                    tcp.write_all(&reply).await?;
+                }
+            },
+        }
+    }
+}
