@@ -17,7 +17,7 @@ use super::metrics::Metrics;
 use super::port::Port;
 pub use super::port::{LineOptions, MonitorChunk};
 use super::shared::{Job, LineShared, POLL_CLIENT};
-use super::stream::Transport;
+use crate::source::stream::Transport;
 use mbtap_core::chunk::{PortId, Timestamp};
 use mbtap_gateway::breaker::Breaker;
 use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED};

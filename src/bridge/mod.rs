@@ -26,6 +26,5 @@ pub mod reverse;
 pub mod run;
 pub mod server;
 pub mod shared;
-pub mod stream;
 pub mod tls;
 pub mod udp;

@@ -1,6 +1,6 @@
 //! The line's port and its settings: a serial port opened by name (a by-id link or
 //! `usb:VID:PID[:SERIAL]` found again wherever the adapter came back), or a serial server or
-//! Modbus TCP device connected to ([`super::stream`]); reopened with backoff when it goes
+//! Modbus TCP device connected to ([`crate::source::stream`]); reopened with backoff when it goes
 //! away, its absence said once a minute.
 
 use std::time::Duration;
@@ -10,7 +10,7 @@ use tokio::time::Instant;
 use tokio_serial::{SerialPort, SerialPortBuilderExt};
 
 use super::shared::LineShared;
-use super::stream::{LineStream, Transport};
+use crate::source::stream::{LineStream, Transport};
 use mbtap_core::analyzer::SerialMode;
 use mbtap_core::chunk::{PortId, Timestamp};
 use mbtap_core::framer::LineSettings;

@@ -293,7 +293,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         broadcast_reply,
         // A serial server's TCP stream keeps no timing: silences shorter than this are not
         // taken as the end of an answer whose length the structure does not give.
-        latency: if crate::bridge::stream::Transport::of(&port).networked() {
+        latency: if crate::source::stream::Transport::of(&port).networked() {
             std::time::Duration::from_nanos(latency_ns).max(NETWORK_LATENCY)
         } else {
             std::time::Duration::from_nanos(latency_ns)
@@ -314,7 +314,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     for port in lines.iter().map(|(_, l)| l.port.as_str()).chain(reverse.as_ref().map(|r| r.port.as_str())) {
         if rs485.rs485 != crate::source::rs485::Rs485Mode::Off {
             anyhow::ensure!(
-                !crate::bridge::stream::Transport::of(port).networked(),
+                !crate::source::stream::Transport::of(port).networked(),
                 "--rs485 {:?}: {port} is reached over the network, where the serial server drives the line; leave --rs485 out for it",
                 rs485.rs485
             );

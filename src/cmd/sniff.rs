@@ -15,8 +15,9 @@ use crate::cmd::runtime;
 /// every read is written to a pcapng line capture (flushed each second) that `replay`
 /// shows exactly as this session did.
 pub struct Args {
-    /// The serial port (e.g. /dev/ttyUSB0), or `rtu-over-tcp://HOST:PORT`: a serial server in
-    /// transparent mode (ser2net raw, USR, Elfin, NPort), its line framed by structure and CRC.
+    /// The serial port (e.g. /dev/ttyUSB0), or a serial server: `rtu-over-tcp://HOST:PORT` in
+    /// transparent mode (ser2net raw, USR, Elfin, NPort) or `rfc2217://HOST:PORT` (Telnet, the
+    /// line's settings set from the line options), its line framed by structure and CRC.
     pub port: String,
     #[command(flatten)]
     pub line: LineArgs,

@@ -16,7 +16,8 @@ use crate::cmd::runtime;
 /// a configuration tool) to open instead; bytes are relayed untouched both ways and both
 /// directions are analysed with the direction known.
 pub struct Args {
-    /// The real serial port.
+    /// The real serial port, or a serial server (`rtu-over-tcp://HOST:PORT`,
+    /// `rfc2217://HOST:PORT`) whose line the application is put on.
     pub port: String,
     /// Where to create the pseudo-terminal link for the application.
     #[arg(long)]

@@ -14,4 +14,5 @@ pub mod serial;
 pub mod session;
 pub mod simulate;
 pub mod sniff;
+pub mod stream;
 pub mod tap;

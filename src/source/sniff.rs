@@ -14,13 +14,11 @@
 use std::io::Write;
 use std::time::Duration;
 
-use anyhow::Context;
-use tokio::io::AsyncReadExt;
-
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
 use crate::source::serial::now;
 use crate::source::session::Session;
+use crate::source::stream::{LineStream, Transport};
 use mbtap_core::analyzer::{AnalyzerConfig, SerialMode};
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
@@ -41,26 +39,14 @@ pub struct SniffOptions {
 
 /// What a serial server's TCP stream is trusted to in timing (unless `--latency-ms` says):
 /// its buffering and the network's, far beyond t3.5 at any baud rate.
-const SERIAL_SERVER_LATENCY: u64 = 100_000_000;
+pub const SERIAL_SERVER_LATENCY: u64 = 100_000_000;
 
-/// Where the bytes come from: a serial port, or a serial server's TCP stream.
-enum Source {
-    Serial(tokio_serial::SerialStream),
-    Tcp(tokio::net::TcpStream),
-}
-
-impl Source {
-    async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        match self {
-            Self::Serial(s) => s.read(buf).await,
-            Self::Tcp(t) => t.read(buf).await,
-        }
-    }
-}
-
-/// The serial server's `HOST:PORT` when `port` names one.
+/// The serial server's `HOST:PORT` when `port` names one (raw or RFC 2217).
 fn serial_server(port: &str) -> Option<&str> {
-    port.strip_prefix("rtu-over-tcp://").or_else(|| port.strip_prefix("rtu+tcp://"))
+    match Transport::of(port) {
+        Transport::RtuOverTcp(addr) | Transport::Rfc2217(addr) => Some(addr),
+        Transport::Serial(_) | Transport::ModbusTcp(_) => None,
+    }
 }
 
 /// Opens `opts.port`: the serial port (by name, by-id link or usb:VID:PID), or a connection to
@@ -69,20 +55,8 @@ async fn open_source(
     opts: &SniffOptions,
     watch: &mut crate::source::serial::DeviceWatch,
     err: &mut dyn Write,
-) -> anyhow::Result<Source> {
-    match serial_server(&opts.port) {
-        Some(addr) => {
-            let stream = tokio::time::timeout(Duration::from_secs(5), tokio::net::TcpStream::connect(addr))
-                .await
-                .with_context(|| format!("connecting to the serial server {addr}: no answer within 5 s"))?
-                .with_context(|| format!("connecting to the serial server {addr}"))?;
-            Ok(Source::Tcp(stream))
-        }
-        None => Ok(Source::Serial(
-            crate::source::serial::open_named(&opts.port, opts.line, watch, err)
-                .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?,
-        )),
-    }
+) -> anyhow::Result<LineStream> {
+    LineStream::open_line(&opts.port, opts.line, watch, err).await
 }
 
 /// How often the analyzer hears the time while the line is quiet.

@@ -12,13 +12,13 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio_serial::SerialStream;
 
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
+use crate::source::rs485::Rs485Args;
 use crate::source::serial::now;
 use crate::source::session::Session;
+use crate::source::stream::{LineStream, Transport};
 use mbtap_core::analyzer::{AnalyzerConfig, SerialMode};
 use mbtap_core::chunk::{Chunk, PortId};
 use mbtap_core::framer::{FramerConfig, LineSettings};
@@ -50,10 +50,14 @@ const APP_STALL: Duration = Duration::from_millis(50);
 /// # Errors
 /// When the port or the pseudo-terminal cannot be set up, or the recording written.
 pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &mut dyn Write) -> anyhow::Result<()> {
-    let latency_ns = crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err);
+    // A serial server's stream keeps no timing: as for `sniff`, frames are found by structure.
+    let latency_ns = if Transport::of(&opts.port).networked() {
+        opts.latency_ns.unwrap_or(crate::source::sniff::SERIAL_SERVER_LATENCY)
+    } else {
+        crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err)
+    };
     let mut watch = crate::source::serial::DeviceWatch::default();
-    let mut bus = crate::source::serial::open_named(&opts.port, opts.line, &mut watch, err)
-        .with_context(|| format!("opening serial port {} ({})", opts.port, opts.line))?;
+    let mut bus = LineStream::open_line(&opts.port, opts.line, &mut watch, err).await?;
     // The pty lives as long as we hold the master; the application opens the slave's path.
     let (mut app, slave_path) = super::pty::open()?;
     let slave_path = slave_path.to_string_lossy().into_owned();
@@ -96,7 +100,7 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
             r = app.read(&mut from_app) => match r {
                 Ok(n) if n > 0 => {
                     app_closed = false;
-                    AsyncWriteExt::write_all(&mut bus, &from_app[..n]).await.context("writing to the serial port")?;
+                    bus.send(&Rs485Args::default(), &from_app[..n]).await.context("writing to the serial port")?;
                     (APP_PORT, n)
                 }
                 // The application closed its end (EIO on the master): wait for it to reopen.
@@ -165,7 +169,7 @@ async fn reopen(
     mut recorder: Option<&mut Recorder>,
     watch: &mut crate::source::serial::DeviceWatch,
     err: &mut dyn Write,
-) -> Option<SerialStream> {
+) -> Option<LineStream> {
     let mut scratch = [0u8; 1024];
     // One timer for the whole wait: the application's reads must not restart it.
     let mut retry = tokio::time::interval(Duration::from_secs(1));
@@ -183,7 +187,7 @@ async fn reopen(
                 if let Some(r) = recorder.as_deref_mut() {
                     r.flush(err);
                 }
-                if let Ok(b) = crate::source::serial::open_named(&opts.port, opts.line, watch, err) {
+                if let Ok(b) = LineStream::open_line(&opts.port, opts.line, watch, err).await {
                     return Some(b);
                 }
             }

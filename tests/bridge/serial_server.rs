@@ -180,3 +180,48 @@ fn eight_clients_share_a_device_that_takes_one_connection() {
     let said: Vec<String> = said.lock().unwrap()[before..].to_vec();
     assert_eq!(said, ["accepted"], "the device saw: {said:?}");
 }
+
+/// Issue 29: `tap rtu-over-tcp://` — an application reads a device behind ser2net through
+/// mbtap's pseudo-terminal, and the tap hears the transaction, request and answer paired.
+#[test]
+#[ignore = "needs ser2net; .ci/run installs it and runs this with --ignored"]
+fn tap_puts_an_application_on_a_line_behind_ser2net() {
+    let d = super::serial::dir("ser2net-tap");
+    let line = d.join("line");
+    let _sim = super::serial::simulator(&line, &[]);
+    let raw = free_port();
+    let _ser2net = ser2net_in_front(&d, &[(&format!("tcp,127.0.0.1,{raw}"), &line)]);
+    wait_port(raw);
+    let app = d.join("app");
+    let target = format!("rtu-over-tcp://127.0.0.1:{raw}");
+    let mut tap = Kill(
+        Command::new(BIN)
+            .args(["tap", &target, "--link", app.to_str().unwrap(), "--format", "jsonl", "--duration", "4"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    common::wait_for(&app);
+    let read = Command::new(BIN)
+        .args(["read", app.to_str().unwrap(), "--parity", "even", "--unit", "1", "input", "430..433"])
+        .output()
+        .unwrap();
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let volts: Vec<u64> = String::from_utf8_lossy(&read.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|j| j["raw"].as_u64())
+        .collect();
+    assert_eq!(volts.len(), 4, "{volts:?}");
+    let mut stdout = String::new();
+    std::io::Read::read_to_string(&mut tap.0.stdout.take().unwrap(), &mut stdout).unwrap();
+    let heard: Vec<serde_json::Value> = stdout
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .filter(|j: &serde_json::Value| j["event"] == "transaction")
+        .collect();
+    assert_eq!(heard.len(), 1, "{heard:?}");
+    assert_eq!((heard[0]["unit"].as_u64(), heard[0]["function"].as_u64()), (Some(1), Some(4)), "{heard:?}");
+    std::fs::remove_dir_all(&d).unwrap();
+}

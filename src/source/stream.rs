@@ -1,8 +1,8 @@
-//! What a bridge line is made of: a serial port, a serial server's TCP stream carrying the
+//! What a line is reached through: a serial port, a serial server's TCP stream carrying the
 //! remote line's bytes as they are (`rtu-over-tcp://`), a remote port set over Telnet
-//! (`rfc2217://`, the gateway core's [`Telnet`] codec), or a Modbus TCP device
-//! (`tcp://`, one connection for every client). The line task reads and writes through
-//! [`LineStream`] whatever it is.
+//! (`rfc2217://`, the gateway core's [`Telnet`] codec), or — for the bridge only — a Modbus TCP
+//! device (`tcp://`, one connection for every client). `sniff`, `tap` and the bridge's line
+//! task read and write through [`LineStream`] whatever it is.
 
 use std::time::Duration;
 
@@ -51,7 +51,7 @@ impl<'a> Transport<'a> {
 }
 
 /// An open line.
-pub(super) enum LineStream {
+pub enum LineStream {
     Serial(SerialStream),
     /// A serial server's stream, or a Modbus TCP device's connection.
     Tcp(TcpStream),
@@ -99,7 +99,7 @@ fn setup(line: LineSettings) -> LineSetup {
 impl LineStream {
     /// Connects to a networked transport; a Telnet server must agree to the COM port option
     /// (and is given the line's settings) before the line is taken as open.
-    pub(super) async fn connect(transport: Transport<'_>, line: LineSettings) -> Result<Self, String> {
+    pub async fn connect(transport: Transport<'_>, line: LineSettings) -> Result<Self, String> {
         match transport {
             Transport::Serial(_) => Err("a serial port is opened by the port's own path".into()),
             Transport::RtuOverTcp(addr) | Transport::ModbusTcp(addr) => Ok(Self::Tcp(connect(addr).await?)),
@@ -136,7 +136,7 @@ impl LineStream {
 
     /// Drops what was received and not read (a late answer, noise): it must not be taken for
     /// the next request's answer.
-    pub(super) fn clear_input(&mut self) {
+    pub fn clear_input(&mut self) {
         let mut buf = [0u8; 512];
         match self {
             Self::Serial(port) => {
@@ -161,7 +161,7 @@ impl LineStream {
     }
 
     /// Sends one frame.
-    pub(super) async fn send(&mut self, rs485: &crate::source::rs485::Rs485Args, frame: &[u8]) -> std::io::Result<()> {
+    pub async fn send(&mut self, rs485: &crate::source::rs485::Rs485Args, frame: &[u8]) -> std::io::Result<()> {
         match self {
             Self::Serial(port) => rs485.send(port, frame).await,
             Self::Tcp(tcp) => tcp.write_all(frame).await,
@@ -170,7 +170,7 @@ impl LineStream {
     }
 
     /// Reads the line's next bytes (0: the other end closed).
-    pub(super) async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+    pub async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         match self {
             Self::Serial(port) => port.read(buf).await,
             Self::Tcp(tcp) => tcp.read(buf).await,
@@ -192,6 +192,32 @@ impl LineStream {
                     tcp.write_all(&reply).await?;
                 }
             },
+        }
+    }
+}
+
+impl LineStream {
+    /// Opens a line to listen to or to tap (`sniff`, `tap`): a serial port by name (a by-id
+    /// link, `usb:VID:PID`), or a serial server. A Modbus TCP device is not a line.
+    ///
+    /// # Errors
+    /// The port cannot be opened, the server not reached, or `port` names a Modbus TCP device.
+    pub async fn open_line(
+        port: &str,
+        line: LineSettings,
+        watch: &mut crate::source::serial::DeviceWatch,
+        err: &mut dyn std::io::Write,
+    ) -> anyhow::Result<Self> {
+        use anyhow::Context as _;
+        match Transport::of(port) {
+            Transport::Serial(name) => Ok(Self::Serial(
+                crate::source::serial::open_named(name, line, watch, err)
+                    .with_context(|| format!("opening serial port {name} ({line})"))?,
+            )),
+            Transport::ModbusTcp(addr) => anyhow::bail!(
+                "{port}: tcp:// names a Modbus TCP device, not a line; a serial server's line is rtu-over-tcp://{addr} (raw) or rfc2217://{addr} (Telnet)"
+            ),
+            networked => Self::connect(networked, line).await.map_err(|e| anyhow::anyhow!("{e}")),
         }
     }
 }
