@@ -57,7 +57,11 @@ fn main() {
                 "fixed" => (fc.latency_ns, fc.learn_latency) = (0, false),
                 _ => {}
             }
-            let m = score(&wire, &run_framer(&wire, &chunks, fc));
+            let decided = run_framer(&wire, &chunks, fc);
+            if std::env::var_os("DUMP_FALSE_VALID").is_some() {
+                dump_false_valid(&wire, &decided, model);
+            }
+            let m = score(&wire, &decided);
             let g = score(&wire, &run_gap_cutter(&wire, &chunks, fc));
             let a = &mut per_model[mi];
             *a = (
@@ -98,6 +102,77 @@ fn main() {
         println!(
             "| {} | {g:.3} % ({good}/{total}) | {false_valid} | {c:.1} % ({exact}/{corrupted}) | {ambiguous} ({wrong}) |",
             model.name()
+        );
+    }
+}
+
+/// With `DUMP_FALSE_VALID` set: each frame reported valid that was never on the wire, with the
+/// truth around it (what the wire really held there), for finding out why.
+fn dump_false_valid(wire: &mbtap_core::traffic::Wire, decided: &[mbtap_core::traffic::Decided], model: Observation) {
+    use mbtap_core::traffic::TruthKind;
+    let good: std::collections::HashSet<(usize, usize)> =
+        wire.truth.iter().filter(|t| t.kind == TruthKind::Good).map(|t| (t.start, t.end)).collect();
+    if std::env::var_os("DUMP_MISSED_VENDOR").is_some() {
+        let valid: std::collections::HashSet<(usize, usize)> =
+            decided.iter().filter(|d| d.frame && d.check_ok).map(|d| (d.range.start, d.range.end)).collect();
+        for t in wire.truth.iter().filter(|t| t.kind == TruthKind::Good && wire.bytes.get(t.start + 1) == Some(&0x41)) {
+            if !valid.contains(&(t.start, t.end)) {
+                let shown: Vec<String> = decided
+                    .iter()
+                    .filter(|d| d.range.end > t.start && d.range.start < t.end + 2)
+                    .map(|d| {
+                        format!(
+                            "{}..{} frame {} ok {} glitch {}",
+                            d.range.start, d.range.end, d.frame, d.check_ok, d.glitch
+                        )
+                    })
+                    .collect();
+                println!(
+                    "MISSED {model:?} {}..{} req {} [{}]\n    decided: {}",
+                    t.start,
+                    t.end,
+                    t.is_request,
+                    wire.bytes
+                        .get(t.start..t.end + 3)
+                        .unwrap_or_default()
+                        .iter()
+                        .map(|b| format!("{b:02X}"))
+                        .collect::<Vec<_>>()
+                        .join(" "),
+                    shown.join("; ")
+                );
+            }
+        }
+    }
+    for d in decided.iter().filter(|d| d.frame && d.check_ok) {
+        if good.contains(&(d.range.start, d.range.end)) {
+            continue;
+        }
+        let hex = |r: std::ops::Range<usize>| {
+            wire.bytes.get(r).unwrap_or_default().iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
+        };
+        let around: Vec<String> = wire
+            .truth
+            .iter()
+            .filter(|t| t.end > d.range.start.saturating_sub(2) && t.start < d.range.end + 2)
+            .map(|t| {
+                format!(
+                    "{:?}{} {}..{} [{}]",
+                    t.kind,
+                    if t.is_request { " req" } else { "" },
+                    t.start,
+                    t.end,
+                    hex(t.start..t.end)
+                )
+            })
+            .collect();
+        println!(
+            "FALSE VALID {model:?} {}..{} [{}] alt {:?}\n    truth: {}",
+            d.range.start,
+            d.range.end,
+            hex(d.range.clone()),
+            d.alt_len,
+            around.join("\n           ")
         );
     }
 }

@@ -25,6 +25,12 @@ const SURE: u32 = 2;
 /// function whose length varies (sub-functions, variable data) decides nothing.
 const SHARE_TENTHS: u64 = 9;
 
+/// Sightings before a learned length may veto a CRC match of another length.
+const FIRM: u32 = 16;
+/// …and the share (in percent) of the key's sightings it must have: a function seen at that
+/// length nearly always.
+const FIRM_PERCENT: u64 = 98;
+
 /// Direction of a frame, for the key.
 fn dir(sender: Sender) -> Option<u8> {
     match sender {
@@ -83,6 +89,37 @@ impl LearnedLengths {
     /// seen with (at least [`SURE`] times, and never another length). A function seen with
     /// several lengths (sub-functions, variable data) decides nothing.
     pub(crate) fn choose(&self, unit: u8, fc: u8, sender: Sender, short: usize) -> Option<usize> {
+        self.choose_among(unit, fc, sender, &[short, short + 1])
+    }
+
+    /// Does a CRC match of `len` bytes contradict what this unit's function was seen with —
+    /// every direction `sender` may be has a firm length ([`FIRM`] sightings, [`FIRM_PERCENT`]
+    /// of them) and none is `len`? Then the match is far likelier chance (1 in 65 536 per
+    /// length tried, inside damage or noise) than the one odd frame of a device that sends
+    /// the same vendor function with the same length all day (issue 25: a corrupted request and
+    /// the frame after it checked as one 21-byte "frame" of a function seen 7 and 14 bytes long).
+    pub(crate) fn contradicts(&self, unit: u8, fc: u8, sender: Sender, len: usize) -> bool {
+        let dirs: Vec<u8> = dir(sender).map_or_else(|| vec![0, 1], |d| vec![d]);
+        let mut firm = 0;
+        for d in &dirs {
+            let Some(slots) = self.seen.get(&(unit, fc, *d)) else { return false };
+            let total: u64 = slots.iter().map(|&(_, n)| u64::from(n)).sum();
+            let Some(&(l, n)) = slots.iter().max_by_key(|&&(_, n)| n) else { return false };
+            if n < FIRM || u64::from(n) * 100 < total * FIRM_PERCENT {
+                return false;
+            }
+            if usize::from(l) == len {
+                return false;
+            }
+            firm += 1;
+        }
+        firm > 0
+    }
+
+    /// Of the `candidates` (lengths at which the same bytes all check: a frame ending in
+    /// `00 00` checks at three), the one this unit's function from `sender` was (nearly) always
+    /// seen with.
+    pub(crate) fn choose_among(&self, unit: u8, fc: u8, sender: Sender, candidates: &[usize]) -> Option<usize> {
         // The length each direction was (nearly) always seen with (nobody can say who sent a
         // frame after damage: then either direction's).
         let dirs: Vec<u8> = dir(sender).map_or_else(|| vec![0, 1], |d| vec![d]);
@@ -91,7 +128,7 @@ impl LearnedLengths {
             let total: u64 = slots.iter().map(|&(_, n)| u64::from(n)).sum();
             let Some(&(len, n)) = slots.iter().max_by_key(|&&(_, n)| n) else { continue };
             let len = usize::from(len);
-            if n >= SURE && u64::from(n) * 10 >= total * SHARE_TENTHS && (len == short || len == short + 1) {
+            if n >= SURE && u64::from(n) * 10 >= total * SHARE_TENTHS && candidates.contains(&len) {
                 fits.push(len);
             }
         }
@@ -154,5 +191,35 @@ mod tests {
         crate::proto::encode_rtu(5, &[0x03, 0, 1, 0, 2], &mut f);
         l.record(&f, Some(0x11), Sender::Master);
         assert_eq!(l.choose(5, 0x03, Sender::Master, 8), None);
+    }
+
+    /// Issue 25: a CRC match at a length a unit's vendor function is never seen with is
+    /// vetoed only once the learned length is firm, and never for a length either direction
+    /// has; with nothing learned, nothing is vetoed.
+    #[test]
+    fn regression_issue_25_only_a_firm_length_vetoes_another() {
+        let mut l = LearnedLengths::new(true);
+        assert!(!l.contradicts(5, 0x41, Sender::Unknown, 9));
+        let (mut requests, mut k) = (0, 0u8);
+        while requests < FIRM {
+            let f = vendor(5, &[k, 1, 2]);
+            k = k.wrapping_add(1);
+            if f.last() != Some(&0) {
+                l.record(&f, Some(0x05), Sender::Master);
+                requests += 1;
+            }
+            if requests == FIRM - 1 {
+                // Not firm yet.
+                assert!(!l.contradicts(5, 0x41, Sender::Master, 9));
+            }
+        }
+        // Requests are 7 bytes (unit, code, 3 data, CRC).
+        assert!(l.contradicts(5, 0x41, Sender::Master, 9));
+        assert!(!l.contradicts(5, 0x41, Sender::Master, 7));
+        // The answers' direction has learned nothing: who sent it unknown, no veto.
+        assert!(!l.contradicts(5, 0x41, Sender::Unknown, 9));
+        assert!(!l.contradicts(5, 0x41, Sender::Slave, 9));
+        // Another unit: nothing learned.
+        assert!(!l.contradicts(6, 0x41, Sender::Master, 9));
     }
 }

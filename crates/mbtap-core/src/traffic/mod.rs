@@ -8,6 +8,6 @@ pub mod observe;
 pub mod rng;
 pub mod score;
 
-pub use generate::{TrafficConfig, Wire, generate};
+pub use generate::{TrafficConfig, Truth, TruthKind, Wire, generate};
 pub use observe::{Observation, observe};
-pub use score::{Score, run_framer, run_gap_cutter, score};
+pub use score::{Decided, Score, run_framer, run_gap_cutter, score};

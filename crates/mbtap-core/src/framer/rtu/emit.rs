@@ -111,19 +111,9 @@ impl RtuFramer {
                 self.emit_frame(b - a, Some(Reading::Unknown), emit);
                 return;
             }
-            if let Some(e) = (RTU_MIN_LEN..piece.len()).find(|&e| {
-                self.known_units[usize::from(piece[0])]
-                    && self.plausible_frame(&piece[..e])
-                    && self.looks_like_frame(&piece[e..])
-            }) {
-                // The shift property again: when the frame checks one byte longer too (its next
-                // byte a `00`) and a frame starts after that byte as well, the odds on this line
-                // decide whether the `00` is a glitch or the CRC's high byte.
-                let twin = piece.get(e) == Some(&0)
-                    && e + 1 < piece.len()
-                    && self.plausible_frame(&piece[..=e])
-                    && self.looks_like_frame(&piece[e + 1..]);
-                let e = if twin { self.twin_len(a, e + 1, self.sender_at(a - self.timed.head)) } else { e };
+            let sender = self.sender_at(a - self.timed.head);
+            if let Some((e, twin)) = (RTU_MIN_LEN..piece.len()).find_map(|e| self.frame_in_piece(piece, e, sender)) {
+                let e = if twin { self.twin_len(a, e + 1, sender) } else { e };
                 self.emit_frame(e, Some(Reading::Unknown), emit);
                 a += e;
                 continue;
@@ -147,6 +137,45 @@ impl RtuFramer {
             self.emit_unframed(a, b, emit);
             return;
         }
+    }
+
+    /// A known unit's frame at the start of `piece`, checking at `e` bytes: the length to take
+    /// and whether it is a CRC-`00` twin the odds on this line decide (`twin_len`).
+    ///
+    /// Every `00` after a checking frame makes a longer one that checks too (CRC-16's shift
+    /// property): the lengths this unit's function was seen with decide among them (issue 25:
+    /// noise right after a vendor answer whose CRC ends in `00` left its 1-byte-shorter twin
+    /// reported valid, the learned lengths never asked). Otherwise the frame must stand by
+    /// itself — a length the unit's function has, and what follows looking like a frame — and
+    /// when it also checks one byte longer with a frame after that, the odds decide.
+    fn frame_in_piece(&self, piece: &[u8], e: usize, sender: Sender) -> Option<(usize, bool)> {
+        if !self.known_units[usize::from(piece[0])] || !self.plausible_shape(&piece[..e]) {
+            return None;
+        }
+        let mut lengths = vec![e];
+        while let Some(&l) = lengths.last()
+            && piece.get(l) == Some(&0)
+            && self.plausible_shape(&piece[..=l])
+        {
+            lengths.push(l + 1);
+        }
+        if lengths.len() > 1
+            && let Some(len) = self.lengths.choose_among(piece[0], piece[1], sender, &lengths)
+        {
+            return Some((len, false));
+        }
+        // A run of `00`s after it: a frame ending in `00` and its `00` glitch are the last two
+        // readings — a sender leaves one glitch byte, not several (issue 25: a vendor request
+        // ending in `00` and the master's `00` glitch was taken 1 byte short).
+        let e = if lengths.len() > 2 { lengths[lengths.len() - 2] } else { e };
+        if !self.plausible_frame(&piece[..e]) || !self.looks_like_frame(&piece[e..]) {
+            return None;
+        }
+        let twin = piece.get(e) == Some(&0)
+            && e + 1 < piece.len()
+            && self.plausible_frame(&piece[..=e])
+            && self.looks_like_frame(&piece[e + 1..]);
+        Some((e, twin))
     }
 
     /// The `n` bytes at absolute `at` end in `00` and check one byte shorter too (CRC-16's shift

@@ -4,6 +4,7 @@
 use super::RtuFramer;
 use super::candidates::Try;
 use super::expect::{Reading, diagnostics_even_len, sane_header};
+use crate::framer::glitch::Sender;
 use crate::proto::checksum::{crc16, crc16_update};
 use crate::proto::function::{EXCEPTION_FLAG, FunctionCode};
 use crate::proto::length::{PduLength, request_len, response_len};
@@ -47,7 +48,12 @@ impl RtuFramer {
             // `crc` covers the body s[..l - 2], one byte more each step.
             crc = if l == RTU_MIN_LEN { crc16(&s[..2]) } else { crc16_update(crc, &s[l - 3..l - 2]) };
             let received = u16::from_le_bytes([s[l - 2], s[l - 1]]);
-            if crc == received {
+            // A CRC match at a length this unit's function is never seen with is chance — unless
+            // it is the shorter twin of one that is (decided below).
+            let vetoed = crc == received
+                && !(s.get(l) == Some(&0) && l < s.len() && Self::crc_ok(&s[..=l]))
+                && self.lengths.contradicts(s[0], s[1], self.sender_at(g), l);
+            if crc == received && !vetoed {
                 let at_end = g + l == live_len;
                 // The first CRC match is taken when a frame plausibly starts right after it
                 // (request and response of the same vendor code follow each other); later
@@ -184,8 +190,11 @@ impl RtuFramer {
         // A code with no public layout that is not a user-defined one either (MAP v1.1b3 §5):
         // from garbage, a chance CRC match is likelier than such a frame.
         let base = FunctionCode::from(f.get(1).map_or(0, |fc| fc & !EXCEPTION_FLAG));
+        // Addresses 248–255 start no frame on a line (Modbus over Serial Line v1.02 §2.2), as
+        // `try_frame_at` holds: a noise burst that checks by chance stays noise (issue 25).
         if !self.looks_like_frame(f)
             || !sane_header(f, self.pasted)
+            || f.first().is_some_and(|&a| a > self.max_address)
             || !(base.name().is_some() || base.is_user_defined())
             || !Self::crc_ok(f)
         {
@@ -197,6 +206,27 @@ impl RtuFramer {
             PduLength::AtLeast(_) => false,
             PduLength::Unknown => true,
         };
-        fits(response_len(pdu)) || (f[1] & EXCEPTION_FLAG == 0 && fits(request_len(pdu)))
+        let structural = fits(response_len(pdu)) || (f[1] & EXCEPTION_FLAG == 0 && fits(request_len(pdu)));
+        structural && !self.length_vetoed(f)
+    }
+
+    /// A frame whose length only the CRC vouches for (the structure gives none), at a length
+    /// this unit's function is never seen with ([`crate::framer::lengths`]): chance.
+    pub(super) fn length_vetoed(&self, f: &[u8]) -> bool {
+        let unknown = |c: PduLength| matches!(c, PduLength::Unknown);
+        let (Some(&unit), Some(&fc), Some(pdu)) = (f.first(), f.get(1), f.get(1..)) else { return false };
+        unknown(response_len(pdu))
+            && (fc & EXCEPTION_FLAG != 0 || unknown(request_len(pdu)))
+            && self.lengths.contradicts(unit, fc, Sender::Unknown, f.len())
+    }
+
+    /// [`Self::plausible_frame`] at any length: the shape, the code and the CRC.
+    pub(super) fn plausible_shape(&self, f: &[u8]) -> bool {
+        let base = FunctionCode::from(f.get(1).map_or(0, |fc| fc & !EXCEPTION_FLAG));
+        self.looks_like_frame(f)
+            && sane_header(f, self.pasted)
+            && f.first().is_some_and(|&a| a <= self.max_address)
+            && (base.name().is_some() || base.is_user_defined())
+            && Self::crc_ok(f)
     }
 }
