@@ -317,4 +317,8 @@ impl<W: Write> mbtap_core::analyzer::Sink for WriterSink<'_, W> {
     fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
         self.writer.observer(port, estimate);
     }
+
+    fn declared_lengths(&self) -> Vec<mbtap_core::analyzer::DeclaredLength> {
+        mbtap_core::analyzer::declared_lengths(&self.writer.profiles)
+    }
 }

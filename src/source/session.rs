@@ -15,6 +15,8 @@ use crate::source::record::Recorder;
 /// The analysis of one live session, and its recording.
 pub struct Session {
     analyzer: Analyzer,
+    /// The writer's device profiles' vendor lengths were given to the analyzer.
+    declared: bool,
     recorder: Option<Recorder>,
     /// Tell the writer (and the recording) what the framer learned of the observer's reads at
     /// the end: for sources read through real ports, where it was learned.
@@ -33,7 +35,7 @@ impl std::fmt::Debug for Session {
 impl Session {
     #[must_use]
     pub fn new(config: AnalyzerConfig) -> Self {
-        Self { analyzer: Analyzer::new(config), recorder: None, tell_observers: false }
+        Self { analyzer: Analyzer::new(config), declared: false, recorder: None, tell_observers: false }
     }
 
     /// Every chunk also written to `recorder`.
@@ -56,8 +58,17 @@ impl Session {
         self.recorder.as_mut()
     }
 
+    /// The vendor frame lengths the writer's device profiles declare, given once.
+    fn declare<W: Write>(&mut self, writer: &EventWriter<W>) {
+        if !self.declared {
+            self.declared = true;
+            self.analyzer.declare_lengths(&mbtap_core::analyzer::declared_lengths(&writer.profiles));
+        }
+    }
+
     /// One read: recorded, then analyzed.
     pub fn chunk<W: Write>(&mut self, chunk: &Chunk<'_>, writer: &mut EventWriter<W>, err: &mut dyn Write) {
+        self.declare(writer);
         if let Some(r) = self.recorder.as_mut() {
             r.write(u32::from(chunk.port.0), chunk.t, chunk.bytes, err);
         }
@@ -66,6 +77,7 @@ impl Session {
 
     /// A chunk known to be exactly one frame (what the bridge itself wrote), shown at once.
     pub fn frame<W: Write>(&mut self, chunk: &Chunk<'_>, writer: &mut EventWriter<W>) {
+        self.declare(writer);
         self.analyzer.push_frame(chunk, &mut |e: &Event<'_>| writer.write(e));
     }
 

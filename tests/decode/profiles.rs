@@ -132,3 +132,59 @@ fn impossible_line_settings_and_scales_are_refused_where_they_stand() {
     let ok = format!("{head}baud = 9600\nframing = \"8N1\"\nmode = \"rtu\"\n");
     assert!(load("ok.toml", &ok).is_ok());
 }
+
+/// Issue 25: a profile declares a vendor function's frame lengths (`[[vendor_functions]]`);
+/// `replay --device` reads the first answer of a capture at its declared length although its
+/// CRC ends in `00` and its `00` glitch is glued to it — 13, 14 and 15 bytes all check, and
+/// nothing has been learned from the line yet. Without the profile the glitch is taken into
+/// the frame. A code whose structure gives the length, or a length no frame has, is refused
+/// with its line.
+#[test]
+fn regression_issue_25_a_profile_declares_vendor_frame_lengths() {
+    let dir = std::env::temp_dir().join(format!("mbtap-vendor-lengths-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let profile = dir.join("vendor.toml");
+    std::fs::write(
+        &profile,
+        "[profile]\nname = \"vendor\"\ndevice = \"A device with a vendor read\"\n\n\
+         [[vendor_functions]]\ncode = 0x41\nrequest_length = 7\nresponse_length = 14\n",
+    )
+    .unwrap();
+    let frames = dir.join("frames.txt");
+    // The request (unit 1, code 41, 3 data, CRC 9B FC); the answer (10 data, CRC 38 00) with a
+    // 00 glitch after it.
+    std::fs::write(&frames, "01 41 09 08 07 9B FC\n01 41 A3 00 00 01 02 03 04 05 06 07 38 00 00\n").unwrap();
+    let capture = dir.join("vendor.pcapng");
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let o = std::process::Command::new(bin)
+        .args(["generate", capture.to_str().unwrap(), "--frames", frames.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let lengths = |device: Option<&std::path::Path>| -> Vec<(u64, bool)> {
+        let mut cmd = std::process::Command::new(bin);
+        cmd.args(["replay", capture.to_str().unwrap(), "--format", "jsonl"]);
+        if let Some(p) = device {
+            cmd.args(["--device", &format!("1={}", p.display())]);
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .filter(|j| j["event"] == "frame")
+            .map(|j| (j["hex"].as_str().unwrap().len() as u64 / 2, j["check_ok"] == true))
+            .collect()
+    };
+    assert_eq!(lengths(Some(&profile)), [(7, true), (14, true)]);
+    assert_ne!(lengths(None), [(7, true), (14, true)]);
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[profile]\nname = \"bad\"\ndevice = \"x\"\n\n[[vendor_functions]]\ncode = 3\nresponse_length = 9\n",
+    )
+    .unwrap();
+    let e = mbtap_core::profile::load("bad", &std::fs::read_to_string(&bad).unwrap()).unwrap_err().to_string();
+    assert!(e.contains("bad:5:") && e.contains("0x03"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

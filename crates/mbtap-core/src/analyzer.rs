@@ -52,6 +52,24 @@ pub enum Event<'a> {
     Transaction(&'a Transaction<'a>),
 }
 
+/// A vendor function's frame length a profile declares: unit, code, request (else answer), bytes.
+pub type DeclaredLength = (u8, u8, bool, u16);
+
+/// The declared lengths of `profiles` (unit → profile).
+#[must_use]
+pub fn declared_lengths<'a>(
+    profiles: impl IntoIterator<Item = (&'a u8, &'a crate::profile::Profile)>,
+) -> Vec<DeclaredLength> {
+    let mut out = Vec::new();
+    for (&unit, p) in profiles {
+        for &(code, request, response) in &p.vendor_lengths {
+            out.extend(request.map(|n| (unit, code, true, n)));
+            out.extend(response.map(|n| (unit, code, false, n)));
+        }
+    }
+    out
+}
+
 /// Receives analyzer events.
 pub trait Sink {
     fn event(&mut self, event: &Event<'_>);
@@ -65,6 +83,13 @@ pub trait Sink {
     /// header, after the sink was made).
     fn settings(&mut self, line: crate::framer::LineSettings) {
         let _ = line;
+    }
+
+    /// Frame lengths the sink's device profiles declare for vendor functions:
+    /// `(unit, code, request, length)`, given to every framer (see
+    /// [`crate::profile::Profile::vendor_lengths`]).
+    fn declared_lengths(&self) -> Vec<DeclaredLength> {
+        Vec::new()
     }
 
     /// At the end: what a port's framer learned about its observer's reads.
@@ -91,6 +116,8 @@ enum PortFramer {
 #[derive(Debug)]
 pub struct Analyzer {
     config: AnalyzerConfig,
+    /// Lengths device profiles declare, given to each RTU framer as it is made.
+    declared: Vec<DeclaredLength>,
     ports: Vec<(PortId, PortFramer)>,
     pairing: Pairing,
     /// Decoded ASCII frame bytes (address, PDU, LRC), reused.
@@ -100,7 +127,13 @@ pub struct Analyzer {
 impl Analyzer {
     #[must_use]
     pub fn new(config: AnalyzerConfig) -> Self {
-        Self { config, ports: Vec::new(), pairing: Pairing::new(config.pairing), scratch: Vec::new() }
+        Self {
+            config,
+            declared: Vec::new(),
+            ports: Vec::new(),
+            pairing: Pairing::new(config.pairing),
+            scratch: Vec::new(),
+        }
     }
 
     #[must_use]
@@ -113,7 +146,13 @@ impl Analyzer {
             return i;
         }
         let framer = match self.config.mode {
-            SerialMode::Rtu => PortFramer::Rtu(RtuFramer::new(port, self.config.framer)),
+            SerialMode::Rtu => {
+                let mut f = RtuFramer::new(port, self.config.framer);
+                for &(unit, fc, request, len) in &self.declared {
+                    f.declare_length(unit, fc, request, len);
+                }
+                PortFramer::Rtu(f)
+            }
             SerialMode::Ascii => PortFramer::Ascii(AsciiFramer::new(port, self.config.framer.line)),
         };
         self.ports.push((port, framer));
@@ -186,6 +225,18 @@ impl Analyzer {
         }
     }
 
+    /// Vendor functions' frame lengths device profiles declare, for every port's framer.
+    pub fn declare_lengths(&mut self, declared: &[DeclaredLength]) {
+        self.declared.extend_from_slice(declared);
+        for (_, framer) in &mut self.ports {
+            if let PortFramer::Rtu(f) = framer {
+                for &(unit, fc, request, len) in declared {
+                    f.declare_length(unit, fc, request, len);
+                }
+            }
+        }
+    }
+
     /// What the session that recorded `port` learned about its reads (see
     /// [`RtuFramer::set_recorded_latency`]).
     pub fn set_recorded_latency(&mut self, port: PortId, ns: u64) {
@@ -230,5 +281,50 @@ fn route<S: Sink>(pairing: &mut Pairing, scratch: &mut Vec<u8>, e: FrameEvent<'_
                 &mut |t: Transaction<'_>| cell.borrow_mut().event(&Event::Transaction(&t)),
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod declared_length_tests {
+    use super::*;
+
+    /// Unit 1, vendor function 0x41: a request (unit, code, 3 data, CRC `9B FC`).
+    const REQUEST: [u8; 7] = [0x01, 0x41, 0x09, 0x08, 0x07, 0x9B, 0xFC];
+    /// Its 14-byte answer (unit, code, 10 data, CRC `38 00`: the high byte `00`), then a `00`
+    /// turnaround glitch glued to it: 13, 14 and 15 bytes all check.
+    const ANSWER_AND_GLITCH: [u8; 15] = [
+        0x01, 0x41, // unit 1, vendor code
+        0xA3, 0x00, 0x00, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, // data
+        0x38, 0x00, // CRC, high byte 00
+        0x00, // glitch
+    ];
+
+    fn frames(declared: &[DeclaredLength]) -> Vec<(usize, bool)> {
+        let mut a = Analyzer::new(AnalyzerConfig::default());
+        a.declare_lengths(declared);
+        let mut out = Vec::new();
+        let mut sink = |e: &Event<'_>| {
+            if let Event::Frame { frame, .. } = e {
+                out.push((frame.bytes.len(), frame.check_ok));
+            }
+        };
+        let ms = 1_000_000;
+        a.push(&Chunk { port: PortId(0), t: Timestamp(10 * ms), bytes: &REQUEST }, &mut sink);
+        a.push(&Chunk { port: PortId(0), t: Timestamp(30 * ms), bytes: &ANSWER_AND_GLITCH }, &mut sink);
+        a.tick(Timestamp(200 * ms), &mut sink);
+        a.finish(&mut sink);
+        out
+    }
+
+    /// Issue 25: a profile may declare a vendor function's lengths; the first answer of the
+    /// day, whose CRC ends in `00` and which its glitch follows, is then read at its length —
+    /// before any has been learned from the line.
+    #[test]
+    fn regression_issue_25_a_profiles_vendor_length_decides_the_first_twin() {
+        let declared = [(1, 0x41, true, 7), (1, 0x41, false, 14)];
+        assert_eq!(frames(&declared), [(7, true), (14, true)]);
+        // Nothing declared, nothing learned yet: the odds of a line never seen to glitch take
+        // the longest reading, the glitch inside the frame.
+        assert_eq!(frames(&[]), [(7, true), (15, true)]);
     }
 }

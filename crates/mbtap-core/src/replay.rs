@@ -52,7 +52,9 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
         // A latency given on the command line is kept; one the capture stores (or none) is
         // what the recorder knew, and valid frames may show the reads were later still.
         let framer = FramerConfig { learn_latency: cli.latency_ns.is_none(), ..FramerConfig::new(line, latency_ns) };
-        Analyzer::new(AnalyzerConfig { mode, framer, pairing })
+        let mut analyzer = Analyzer::new(AnalyzerConfig { mode, framer, pairing });
+        analyzer.declare_lengths(&sink.declared_lengths());
+        analyzer
     };
     loop {
         let item = reader.next_item()?;
@@ -201,5 +203,9 @@ impl<S: Sink> Sink for Watch<'_, S> {
 
     fn observer(&mut self, port: PortId, estimate: &crate::framer::ObserverEstimate) {
         self.inner.observer(port, estimate);
+    }
+
+    fn declared_lengths(&self) -> Vec<crate::analyzer::DeclaredLength> {
+        self.inner.declared_lengths()
     }
 }

@@ -53,6 +53,22 @@ impl LearnedLengths {
         Self { seen: BTreeMap::new(), on }
     }
 
+    /// A length a device's profile declares for `unit`'s function `fc` (`request` or answer):
+    /// taken as [`FIRM`] × 4 sightings — it decides from the first frame on, and what the line
+    /// shows for long enough still overrules it (a profile written for another firmware).
+    pub(crate) fn declare(&mut self, unit: u8, fc: u8, request: bool, len: u16) {
+        let key = (unit, fc, u8::from(!request));
+        if !self.seen.contains_key(&key) && self.seen.len() >= MAX_KEYS {
+            return;
+        }
+        let slots = self.seen.entry(key).or_default();
+        if let Some(s) = slots.iter_mut().find(|(l, n)| *l == len && *n > 0) {
+            s.1 = s.1.saturating_add(FIRM * 4);
+        } else if let Some(s) = slots.iter_mut().min_by_key(|(_, n)| *n) {
+            *s = (len, FIRM * 4);
+        }
+    }
+
     /// A valid frame `f` from `sender` was emitted; `next` is the byte after it, if it came.
     pub(crate) fn record(&mut self, f: &[u8], next: Option<u8>, sender: Sender) {
         if !self.on || next.is_none_or(|n| n == 0) {

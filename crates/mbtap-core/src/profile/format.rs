@@ -28,6 +28,21 @@ pub struct ProfileFile {
     /// Address ranges the document reserves.
     #[serde(default)]
     pub reserved: Vec<Spanned<ReservedDef>>,
+    /// Functions whose structure does not fix their frames' lengths (vendor codes), with the
+    /// lengths this device uses: they decide CRC-`00` twins from the first frame on.
+    #[serde(default)]
+    pub vendor_functions: Vec<Spanned<VendorFunctionDef>>,
+}
+
+/// A vendor function's frame lengths, in bytes on the line (address and CRC included).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VendorFunctionDef {
+    pub code: u8,
+    #[serde(default)]
+    pub request_length: Option<u16>,
+    #[serde(default)]
+    pub response_length: Option<u16>,
 }
 
 /// Who the device is and where its map comes from.

@@ -59,6 +59,7 @@ pub fn load(file: &str, src: &str) -> Result<Profile, ProfileError> {
         defs: Vec::new(),
         tables: BTreeMap::new(),
         reserved: Vec::new(),
+        vendor_lengths: Vec::new(),
     };
     // Where each address was defined, to name both places when two definitions collide.
     let mut origin: BTreeMap<(Table, u16), usize> = BTreeMap::new();
@@ -99,6 +100,35 @@ pub fn load(file: &str, src: &str) -> Result<Profile, ProfileError> {
             );
         }
         p.reserved.push((r.table, a, b));
+    }
+    for sv in &parsed.vendor_functions {
+        let v = sv.get_ref();
+        let fixed = {
+            let fc = crate::proto::function::FunctionCode::from(v.code);
+            fc.name().is_some() && !matches!(v.code, 0x08 | 0x11 | 0x2B)
+        };
+        if fixed || v.code == 0 || v.code & crate::proto::function::EXCEPTION_FLAG != 0 {
+            return Err(cx.err(
+                sv.span(),
+                format!("code {:#04x}: vendor_functions are codes whose structure gives no length (vendor or user-defined codes, 08, 11, 2B)", v.code),
+            ));
+        }
+        for (what, len) in [("request_length", v.request_length), ("response_length", v.response_length)] {
+            if let Some(n) = len
+                && !(4..=256).contains(&n)
+            {
+                return Err(cx.err(
+                    sv.span(),
+                    format!("{what} = {n}: an RTU frame is 4 to 256 bytes (address and CRC included)"),
+                ));
+            }
+        }
+        if v.request_length.is_none() && v.response_length.is_none() {
+            return Err(
+                cx.err(sv.span(), format!("code {:#04x}: give request_length, response_length or both", v.code))
+            );
+        }
+        p.vendor_lengths.push((v.code, v.request_length, v.response_length));
     }
     Ok(p)
 }

@@ -51,6 +51,9 @@ pub struct Profile {
     pub defs: Vec<Def>,
     pub tables: BTreeMap<Table, BTreeMap<u16, Slot>>,
     pub reserved: Vec<(Table, u16, u16)>,
+    /// Vendor functions' frame lengths the document gives: `(code, request, response)`, in
+    /// bytes on the line.
+    pub vendor_lengths: Vec<(u8, Option<u16>, Option<u16>)>,
 }
 
 impl Profile {

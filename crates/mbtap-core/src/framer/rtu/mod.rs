@@ -201,6 +201,12 @@ impl RtuFramer {
         self.learner.estimate.recorded_latency_ns = Some(ns);
     }
 
+    /// A vendor function's frame length a device profile declares (see
+    /// [`crate::framer::lengths`]): `unit`'s function `fc`, its requests (`request`) or answers.
+    pub fn declare_length(&mut self, unit: u8, fc: u8, request: bool, len: u16) {
+        self.lengths.declare(unit, fc, request, len);
+    }
+
     /// Bytes waiting for a decision.
     #[must_use]
     pub fn pending(&self) -> usize {
