@@ -67,7 +67,11 @@ fn main() {
                     min_idle_ns: Some(t35 + t35 / 20),
                     ..TrafficConfig::default()
                 };
-                let (healthy, latency) = report(&generate(&base), model, line);
+                let healthy_wire = generate(&base);
+                let (healthy, latency) = report(&healthy_wire, model, line);
+                if std::env::var_os("DUMP_WRONG").is_some() {
+                    dump_wrong(&healthy_wire, model, line);
+                }
                 let wrong: Vec<String> = healthy
                     .findings
                     .iter()
@@ -111,4 +115,47 @@ fn main() {
         }
     }
     println!("\n{cells} cells: {wrong_total} with a wrong finding, slow unit missed where visible in {missed}");
+}
+
+/// With `DUMP_WRONG` set: every stretch of a healthy line the framer did not read as a valid
+/// frame or a glitch (noise, a failed check), with what the wire held there, for finding out why.
+fn dump_wrong(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSettings) {
+    use mbtap_core::traffic::{TruthKind, run_framer};
+    let chunks = observe(wire, model, line.char_ns());
+    let hex = |r: std::ops::Range<usize>| {
+        wire.bytes.get(r).unwrap_or_default().iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
+    };
+    for d in run_framer(wire, &chunks, FramerConfig::new(line, 0)) {
+        if d.glitch || (d.frame && d.check_ok) {
+            continue;
+        }
+        let around: Vec<String> = wire
+            .truth
+            .iter()
+            .filter(|t| t.end + 4 > d.range.start && t.start < d.range.end + 4)
+            .map(|t| {
+                let kind = match t.kind {
+                    TruthKind::Good => "good",
+                    TruthKind::Glitch => "glitch",
+                    _ => "other",
+                };
+                format!(
+                    "{kind}{} {}..{} [{}]",
+                    if t.is_request { " req" } else { "" },
+                    t.start,
+                    t.end,
+                    hex(t.start..t.end)
+                )
+            })
+            .collect();
+        println!(
+            "WRONG {} {line} {}..{} {} [{}]\n    wire: {}",
+            model.name(),
+            d.range.start,
+            d.range.end,
+            if d.frame { "bad-check frame" } else { "noise" },
+            hex(d.range.clone()),
+            around.join(" | ")
+        );
+    }
 }

@@ -145,6 +145,9 @@ fn dump_false_valid(wire: &mbtap_core::traffic::Wire, decided: &[mbtap_core::tra
         }
     }
     for d in decided.iter().filter(|d| d.frame && d.check_ok) {
+        if std::env::var_os("DUMP_AMBIGUOUS").is_some() && d.alt_len.is_some() {
+            println!("AMBIGUOUS {model:?} {}..{} alt {:?}", d.range.start, d.range.end, d.alt_len);
+        }
         if good.contains(&(d.range.start, d.range.end)) {
             continue;
         }

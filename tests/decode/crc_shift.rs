@@ -275,3 +275,55 @@ fn an_exception_with_code_00_is_no_frame() {
     assert!(!e.iter().any(|(k, b, _)| *k == "F+" && b[..] == answer[..5]), "{e:02X?}");
     assert_eq!(e[2], ("F-", answer, None), "{e:02X?}");
 }
+
+/// Unit 247's vendor request as the generator sent it at a line's start in the adapter matrix
+/// of issue 25 (seed 700, 9600 8E1): unit `F7`, function `41` (user-defined), data `87 01 4C`,
+/// CRC `75 A5`.
+const VENDOR_REQUEST_247: [u8; 7] = [0xF7, 0x41, 0x87, 0x01, 0x4C, 0x75, 0xA5];
+/// Its answer: unit `F7`, function `41`, 9 data bytes, CRC `79 15`.
+const VENDOR_ANSWER_247: [u8; 13] = [0xF7, 0x41, 0x78, 0x8D, 0xBA, 0x23, 0x93, 0xAD, 0x03, 0x49, 0x32, 0x79, 0x15];
+
+/// Was: at a line's start (no unit heard yet), a vendor request and its answer delivered in one
+/// read by a FIFO or a USB timer (the 1.05 × t3.5 between them invisible) were one 20-byte frame
+/// failing its check — `check_errors` against a healthy unit. The answer starts with the
+/// request's unit and function: the CRC match before it ends the request.
+#[test]
+fn regression_issue_25_a_vendor_request_and_answer_in_one_read_at_the_line_start_are_two_frames() {
+    assert_eq!(rtu(0xF7, &VENDOR_REQUEST_247[1..5]), VENDOR_REQUEST_247, "the request's CRC");
+    assert_eq!(rtu(0xF7, &VENDOR_ANSWER_247[1..11]), VENDOR_ANSWER_247, "the answer's CRC");
+    let mut line = Line::new();
+    line.read(0, &[VENDOR_REQUEST_247.as_slice(), VENDOR_ANSWER_247.as_slice()].concat());
+    line.send(40, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let e = line.events();
+    assert_eq!(
+        e[..2],
+        [("F+", VENDOR_REQUEST_247.to_vec(), None), ("F+", VENDOR_ANSWER_247.to_vec(), None)],
+        "{e:02X?}"
+    );
+}
+
+/// Was: at a line's start, per-byte stamps, the master's `00` glitch after the vendor request and
+/// the slave's `FE` after the answer: the answer and its `FE` were one 14-byte frame failing its
+/// check (the `FE` before a silence was taken for a glitch only once the line was known to
+/// glitch). A CRC match followed by one byte a slave's driver leaves and a silence ends the
+/// frame. The request and its `00` check as one 8-byte frame too (CRC-16's shift property) and
+/// nothing is known yet of the master's glitches: both readings are shown.
+#[test]
+fn regression_issue_25_a_vendor_answer_and_its_fe_glitch_at_the_line_start_are_a_frame_and_a_glitch() {
+    let mut line = Line::new();
+    line.send(0, &VENDOR_REQUEST_247);
+    line.send(0, &[0x00]);
+    line.send(4, &VENDOR_ANSWER_247);
+    line.send(0, &[0xFE]);
+    line.send(40, &rtu(1, &[0x03, 0x00, 0x10, 0x00, 0x01]));
+    let e = line.events();
+    assert_eq!(
+        e[..3],
+        [
+            ("F+", [VENDOR_REQUEST_247.as_slice(), &[0x00]].concat(), Some(VENDOR_REQUEST_247.len())),
+            ("F+", VENDOR_ANSWER_247.to_vec(), None),
+            ("G", vec![0xFE], None)
+        ],
+        "{e:02X?}"
+    );
+}

@@ -58,6 +58,10 @@ pub(crate) struct ZeroTail {
 /// The losing reading is reported too when its odds are at least 1 in this many.
 const AMBIGUOUS_ODDS: u64 = 1000;
 
+/// Until a sender has sent this many valid frames, whether it glitches is unknown: a trailing
+/// `00` of its frames is shown with both readings.
+const FIRST_FRAMES: u32 = 8;
+
 impl TurnaroundStats {
     /// A valid frame from `sender` was emitted.
     pub(crate) fn frame(&mut self, sender: Sender) {
@@ -122,9 +126,16 @@ impl TurnaroundStats {
         let glitch = m * mg + s * sg;
         #[allow(clippy::cast_precision_loss)]
         let odds = AMBIGUOUS_ODDS as f64;
+        // Too few frames from the likely sender to say it never glitches (a line's first
+        // frames): nothing is known, and both readings are shown (issue 25).
+        let seen = match sender {
+            Sender::Master => self.master.frames,
+            Sender::Slave => self.slave.frames,
+            Sender::Unknown => self.master.frames.saturating_add(self.slave.frames),
+        };
         ZeroTail {
             glitch_likelier: glitch > crc,
-            ambiguous: glitch > 0.0 && glitch * odds >= crc && crc * odds >= glitch,
+            ambiguous: (glitch > 0.0 && glitch * odds >= crc && crc * odds >= glitch) || seen < FIRST_FRAMES,
         }
     }
 
@@ -140,6 +151,19 @@ impl TurnaroundStats {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Was: a vendor request ending in `00` as a line's first frame was taken whole without
+    /// doubt, though nothing was known yet of whether its sender glitches (issue 25).
+    #[test]
+    fn regression_issue_25_a_lines_first_frames_show_both_readings_of_a_trailing_zero() {
+        let mut s = TurnaroundStats::default();
+        assert_eq!(s.zero_tail(Sender::Unknown), ZeroTail { glitch_likelier: false, ambiguous: true });
+        for _ in 0..FIRST_FRAMES {
+            s.frame(Sender::Master);
+        }
+        assert_eq!(s.zero_tail(Sender::Master), ZeroTail { glitch_likelier: false, ambiguous: false });
+        assert_eq!(s.zero_tail(Sender::Slave), ZeroTail { glitch_likelier: false, ambiguous: true });
+    }
 
     #[test]
     fn a_line_that_never_glitched_reads_a_trailing_zero_as_the_crc_without_doubt() {

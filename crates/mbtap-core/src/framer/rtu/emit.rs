@@ -254,16 +254,21 @@ impl RtuFramer {
             self.emit_glitch(a, emit);
             return;
         }
-        // A lone byte between a frame's end and the next frame's start, taking a value this
-        // sender's driver leaves, on a line seen to glitch: its glitch, whatever silence the
-        // reads seem to show before it — behind a USB timer that silence is a lower bound
-        // computed with a latency learned short of the timer's (issue 25: 46 glitches in 6 000
-        // frames were reported as noise behind a 16 ms timer at 19200).
+        // A lone byte right after a frame, before the next frame's start, a silence or the end
+        // of what has arrived (emitted on a timeout: a request nobody answers, a broadcast),
+        // taking a value this sender's driver leaves or one any driver leaves (`00`, `FE`, `FF`:
+        // before this sender's own are counted), on a line seen to glitch: its glitch, whatever
+        // silence the reads seem to show before it — behind a USB timer that silence is a lower
+        // bound computed with a latency learned short of the timer's (issue 25: 46 glitches in
+        // 6 000 frames were reported as noise behind a 16 ms timer at 19200; then 5, a slave's
+        // first `FE` and `00`s after unanswered requests).
         if b - a == 1
             && self.glitch_at == Some(a)
-            && self.frame_next_at == Some(b)
+            && (self.frame_next_at == Some(b)
+                || b == self.timed.buf.len()
+                || self.timed.gap_lb.get(b).is_some_and(|&g| g >= self.t35))
             && self.glitches.glitchy()
-            && self.glitches.value_after(self.last_sender, v)
+            && (self.glitches.value_after(self.last_sender, v) || matches!(v, 0x00 | 0xFE | 0xFF))
         {
             self.emit_glitch(a, emit);
             return;

@@ -63,13 +63,30 @@ impl RtuFramer {
                 // A lone byte and then a silence or a frame: this frame's turnaround glitch.
                 // Only on a line seen to glitch: elsewhere a CRC match with one stray byte after it
                 // is a chance match inside damage (1 in 65 536 per length tried) as often as not.
-                let glitch_after = self.glitches.glitchy()
+                // Before the line is seen to glitch (its first frames), only the values slaves'
+                // drivers leave (`FE`, `FF`) count: with one of them the chance match inside damage
+                // is 2 in 256 × 1 in 65 536 (issue 25: a vendor answer and its `FE` at the line's
+                // start was one frame failing its check). A `00` there is the CRC-`00` twin
+                // question, which the odds on this line decide below once it has glitched.
+                let driver_value = s.get(l).is_some_and(|&v| matches!(v, 0xFE | 0xFF));
+                let glitch_after = (self.glitches.glitchy() || driver_value)
                     && (self.glitch_then_end(g + l) || (flushing && g + l + 1 == live_len))
                     || self.glitch_then_start(g + l);
+                // An answer starts with its request's unit and function (an exception's with the
+                // flag set, MAP v1.1b3 §7): the first CRC match followed by this frame's own header
+                // ends it, whether or not the unit was heard before (a chance match and a chance
+                // header together: 1 in 2³²). Vendor requests and answers glued by a FIFO or a USB
+                // timer at the line's start were one frame failing its check (issue 25). Only the
+                // first: a frame and its `00` glitch check too (CRC-16's shift property), and
+                // which of those two it is, is decided at the shorter one below.
+                let answer_next = first_match
+                    && s.get(l) == Some(&s[0])
+                    && s.get(l + 1).is_some_and(|&f| f & !EXCEPTION_FLAG == s[1] & !EXCEPTION_FLAG);
                 if self.boundary_at(g + l)
                     || (flushing && at_end)
                     || self.exact_frame_at(g + l)
                     || (first_match && next_starts)
+                    || answer_next
                     || glitch_after
                 {
                     // CRC shift property: a frame whose CRC high byte is 0x00 also validates
@@ -120,7 +137,7 @@ impl RtuFramer {
                         }
                         return Try::Found(l, Reading::Unknown, alt(l + 1));
                     }
-                    return Try::Found(l, Reading::Unknown, None);
+                    return self.longer_twin(s, g, l, glitch_after);
                 }
                 first_match = false;
             }
@@ -141,6 +158,30 @@ impl RtuFramer {
             }
         }
         if !bounded && !flushing && s.len() < RTU_MAX_LEN { Try::NeedMore(s.len() + 1) } else { Try::NotHere }
+    }
+
+    /// A CRC match of `l` bytes at live index `g`, with an end confirmed after it. When it ends
+    /// in `00` it also checks one byte shorter (CRC-16's shift property) and the shorter reading
+    /// had no end of its own confirmed: which it is, Diagnostics' structure, the lengths this
+    /// unit's function was seen with or the odds that its sender leaves a `00` glitch decide, as
+    /// where the shorter match is weighed — the other length kept where it is not negligible
+    /// (issue 25: a line's first vendor request ending in `00` was taken whole without doubt).
+    /// Followed by its own glitch byte (`glitched`), it is the longer frame: a sender leaves one.
+    fn longer_twin(&self, s: &[u8], g: usize, l: usize, glitched: bool) -> Try {
+        let short = l - 1;
+        if glitched || s[short] != 0 || short < RTU_MIN_LEN || !Self::crc_ok(&s[..short]) {
+            return Try::Found(l, Reading::Unknown, None);
+        }
+        if let Some(even) = diagnostics_even_len(s, short) {
+            return Try::Found(even, Reading::Unknown, None);
+        }
+        let sender = self.sender_at(g);
+        if let Some(len) = self.lengths.choose(s[0], s[1], sender, short) {
+            return Try::Found(len, Reading::Unknown, None);
+        }
+        let odds = self.glitches.turn.zero_tail(sender);
+        let (take, other) = if odds.glitch_likelier { (short, l) } else { (l, short) };
+        Try::Found(take, Reading::Unknown, odds.ambiguous.then_some(other))
     }
 
     /// The exact length the structure gives a frame starting at absolute `a`, if it fits
