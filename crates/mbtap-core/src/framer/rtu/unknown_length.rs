@@ -120,13 +120,20 @@ impl RtuFramer {
                             || self.exact_frame_at(g + l + 1)
                             || self.looks_like_frame_start(g + l + 1)
                             || longer_glitch;
-                        let evidence = self.boundary_at(g + l) || self.exact_frame_at(g + l) || longer_glitch;
+                        // Where reads batch bytes (any read held more than one), a silence before
+                        // the `00` is a lower bound computed with a latency that may not be learned
+                        // yet or short of the adapter's: the longer frame followed by its sender's
+                        // glitch outweighs it — a sender leaves one glitch byte, not a `00` and
+                        // another (issue 25: a vendor answer ending in `00` and its `FF`, 1 215
+                        // bytes into a line behind a 16 ms timer, was taken 1 byte short).
+                        let batched = self.learner.estimate.longest_read > 1;
+                        let shorter_boundary = self.boundary_at(g + l) && !(longer_glitch && batched);
+                        let evidence = shorter_boundary || self.exact_frame_at(g + l) || longer_glitch;
                         // Nothing else decides: whether this sender's `00` glitch is likelier
                         // than a CRC ending in `00` (1 in 256).
                         let odds = self.glitches.turn.zero_tail(self.sender_at(g));
-                        let shorter_strong = self.boundary_at(g + l)
-                            || self.exact_frame_at(g + l)
-                            || (odds.glitch_likelier && !longer_glitch);
+                        let shorter_strong =
+                            shorter_boundary || self.exact_frame_at(g + l) || (odds.glitch_likelier && !longer_glitch);
                         // A lone `00` between two silences is noise after the frame, or its CRC's
                         // high byte after a slave paused longer than t3.5 inside it: both check.
                         let lone_zero = self.boundary_at(g + l) && self.boundary_at(g + l + 1);
