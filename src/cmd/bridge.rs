@@ -1,16 +1,14 @@
 //! `mbtap bridge`: Modbus TCP clients to serial devices (or, `--reverse`, an RTU master to a
-//! TCP device). Settings come from `--config FILE` merged under the command line here, in the
-//! command: an option given on the command line replaces the file's value, lists included.
+//! TCP device). Settings come from `--config FILE` merged under the command line
+//! ([`crate::config::merge`]): an option given on the command line replaces the file's value,
+//! lists included.
 
 use std::io;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
-use clap::parser::ValueSource;
-use clap::{ArgMatches, FromArgMatches};
-use std::collections::BTreeSet;
-use std::ffi::OsString;
+use clap::ArgMatches;
 use std::path::Path;
 
 use crate::args::{EventFormatArg, LineArgs};
@@ -450,74 +448,30 @@ fn check_values(args: &Args, matches: Option<&ArgMatches>) -> anyhow::Result<()>
     Ok(())
 }
 
-/// The long names of the bridge's options a configuration file may set (all but `config`).
-fn known_keys() -> Vec<String> {
-    let bridge = <Args as clap::Args>::augment_args(clap::Command::new("bridge"));
-    bridge.get_arguments().filter_map(|a| a.get_long().map(str::to_owned)).filter(|l| l != "config").collect()
-}
-
-/// `--config FILE` under the command line, merged *before* parsing: the file's settings (as
-/// options, [`crate::bridge::config::options`]) and the command line's options as given (raw,
-/// from `matches`) make one argument list, from which clap builds one typed [`Args`] — every
-/// value checked once, by the same parsers. An option the command line gave replaces the
-/// file's setting of it, lists included (a `--allow-ip` on the command line replaces the
-/// file's list, it does not add to it); every other option takes the file's value, else its
-/// default. No option has to be listed here: a new one is merged as it is declared.
+/// `--config FILE` under the command line ([`crate::config::merge`]): the `[bridge]` table's
+/// settings as options ([`crate::bridge::config::options`]), replaced by any the command line
+/// gave, parsed once into one [`Args`].
 ///
 /// # Errors
 /// The file cannot be read, or a setting is unknown or has a value its option refuses — each
 /// said with the file, the key and the value.
 fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result<Args> {
-    let shown = path.display();
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading the configuration {shown}"))?;
-    let options = crate::bridge::config::options(&text, &known_keys()).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
-    let command = <Args as clap::Args>::augment_args(clap::Command::new("bridge").no_binary_name(true));
-    let (given, from_cli) = matches.map_or_else(Default::default, |m| command_line_options(&command, m));
-    let from_file = options.into_iter().map(OsString::from).filter(|o| {
-        let key = o.to_str().and_then(|o| o.strip_prefix("--")).map(|k| k.split_once('=').map_or(k, |(k, _)| k));
-        !key.is_some_and(|k| given.contains(k))
-    });
-    let argv: Vec<OsString> = from_file.chain(from_cli).collect();
-    let parsed = command.try_get_matches_from(&argv).map_err(|e| {
-        let message = e.to_string();
-        let first = message.lines().next().unwrap_or("").trim_start_matches("error: ");
-        anyhow::anyhow!("{shown}: {first}")
-    })?;
-    let mut merged = Args::from_arg_matches(&parsed).map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
+    let mut merged: Args = crate::config::merge::under_command_line(path, matches, crate::bridge::config::options)?;
     merged.config = cli.config;
     Ok(merged)
 }
 
-/// The options the command line gave (`matches`), as `--long=VALUE` (or `--long` for a flag)
-/// in the order declared, and their long names. The bridge takes no positional arguments, and
-/// every option is a flag or takes values (`tests::every_option_can_be_given_again`).
-fn command_line_options(command: &clap::Command, m: &ArgMatches) -> (BTreeSet<String>, Vec<OsString>) {
-    let (mut given, mut argv) = (BTreeSet::new(), Vec::new());
-    for arg in command.get_arguments() {
-        let id = arg.get_id().as_str();
-        let (Some(long), true) = (arg.get_long(), m.value_source(id) == Some(ValueSource::CommandLine)) else {
-            continue;
-        };
-        given.insert(long.to_owned());
-        if arg.get_action().takes_values() {
-            for value in m.get_raw_occurrences(id).into_iter().flatten().flatten() {
-                let mut option = OsString::from(format!("--{long}="));
-                option.push(value);
-                argv.push(option);
-            }
-        } else {
-            argv.push(OsString::from(format!("--{long}")));
-        }
-    }
-    (given, argv)
-}
-
 #[cfg(test)]
 mod tests {
-    use clap::{CommandFactory, Parser};
+    use clap::{CommandFactory, FromArgMatches, Parser};
 
     use super::*;
     use crate::bridge::config::{SAMPLE, options};
+
+    /// The long names of the bridge's options a configuration file may set.
+    fn known_keys() -> Vec<String> {
+        crate::config::merge::known_keys::<Args>()
+    }
     use crate::cmd::{Cli, Command};
 
     /// The bridge options of a command line, and which it gave.

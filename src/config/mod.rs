@@ -12,6 +12,7 @@
 //! file's unit 1).
 
 pub mod devices;
+pub mod merge;
 pub mod sheets;
 
 use std::collections::BTreeMap;
