@@ -231,6 +231,22 @@ fn report_of_a_recorded_noisy_line() {
     insta::assert_snapshot!(String::from_utf8(out.stdout).unwrap());
 }
 
+/// Was: on the recorded line behind a 16 ms USB timer, an answer garbled in place (its address
+/// byte hit: `A7 06 00 9B B9 4A 0B C6`, "unit 167") with an apparent pause inside it made a
+/// `unit 167` row — availability 0.0 % — in the report of a bus with no unit 167. A failed
+/// frame's address byte names a unit only where that unit's answer was awaited.
+#[test]
+fn regression_issue_25_a_garbled_address_makes_no_unit_row() {
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-9600-8e1-usb16ms.pcapng");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap")).args(["report", capture]).output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let units: Vec<&str> =
+        text.lines().filter_map(|l| l.strip_prefix("unit ")).map(|l| l.split(':').next().unwrap().trim()).collect();
+    assert_eq!(units, ["1", "5", "17", "33", "247"], "{text}");
+    assert!(text.contains("no unit can be named"), "the garbled answer is still a finding: {text}");
+}
+
 /// `scan` on simulated lines: the virtual bus sent at the true settings, heard through the UART
 /// model at every candidate's; the winner must be the truth and the units all three devices.
 fn scan(truth: &str, ascii: bool) -> Vec<mbtap_core::scan::Score> {

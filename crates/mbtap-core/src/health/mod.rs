@@ -341,7 +341,11 @@ impl Health {
         self.resolution_streamed.insert(frame.port.0, frame.resolution_ns);
         // Timing evidence is kept with its margin and judged at report time against the
         // observer's resolution (issue 25: a 16 ms USB timer's delays were blamed on every unit).
-        if let (Some(m), Some(u)) = (frame.gap_tolerance_ns, unit) {
+        // A failed frame's address byte names its unit only where that unit was awaited: else
+        // the byte may be the damage itself (issue 25: a garbled answer's `A7` made a unit 167
+        // row, availability 0.0 %, in the report of a bus that has no unit 167).
+        let named = |u: u8| frame.check_ok || self.pending.as_ref().is_some_and(|p| p.unit == u);
+        if let (Some(m), Some(u)) = (frame.gap_tolerance_ns, unit.filter(|&u| named(u))) {
             self.units.entry(u).or_default().gaps.add(m, frame.t_start.0);
         }
         if let Some(m) = frame.short_gap_tolerance_ns {
