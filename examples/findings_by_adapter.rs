@@ -120,41 +120,20 @@ fn main() {
 /// With `DUMP_WRONG` set: every stretch of a healthy line the framer did not read as a valid
 /// frame or a glitch (noise, a failed check), with what the wire held there, for finding out why.
 fn dump_wrong(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSettings) {
-    use mbtap_core::traffic::{TruthKind, run_framer};
+    use mbtap_core::traffic::run_framer;
     let chunks = observe(wire, model, line.char_ns());
-    let hex = |r: std::ops::Range<usize>| {
-        wire.bytes.get(r).unwrap_or_default().iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
-    };
     for d in run_framer(wire, &chunks, FramerConfig::new(line, 0)) {
         if d.glitch || (d.frame && d.check_ok) {
             continue;
         }
-        let around: Vec<String> = wire
-            .truth
-            .iter()
-            .filter(|t| t.end + 4 > d.range.start && t.start < d.range.end + 4)
-            .map(|t| {
-                let kind = match t.kind {
-                    TruthKind::Good => "good",
-                    TruthKind::Glitch => "glitch",
-                    _ => "other",
-                };
-                format!(
-                    "{kind}{} {}..{} [{}]",
-                    if t.is_request { " req" } else { "" },
-                    t.start,
-                    t.end,
-                    hex(t.start..t.end)
-                )
-            })
-            .collect();
+        let around = wire.truth_around(&d.range, 4);
         println!(
             "WRONG {} {line} {}..{} {} [{}]\n    wire: {}",
             model.name(),
             d.range.start,
             d.range.end,
             if d.frame { "bad-check frame" } else { "noise" },
-            hex(d.range.clone()),
+            wire.hex(d.range.clone()),
             around.join(" | ")
         );
     }

@@ -132,13 +132,7 @@ fn dump_false_valid(wire: &mbtap_core::traffic::Wire, decided: &[mbtap_core::tra
                     t.start,
                     t.end,
                     t.is_request,
-                    wire.bytes
-                        .get(t.start..t.end + 3)
-                        .unwrap_or_default()
-                        .iter()
-                        .map(|b| format!("{b:02X}"))
-                        .collect::<Vec<_>>()
-                        .join(" "),
+                    wire.hex(t.start..t.end + 3),
                     shown.join("; ")
                 );
             }
@@ -151,29 +145,12 @@ fn dump_false_valid(wire: &mbtap_core::traffic::Wire, decided: &[mbtap_core::tra
         if good.contains(&(d.range.start, d.range.end)) {
             continue;
         }
-        let hex = |r: std::ops::Range<usize>| {
-            wire.bytes.get(r).unwrap_or_default().iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
-        };
-        let around: Vec<String> = wire
-            .truth
-            .iter()
-            .filter(|t| t.end > d.range.start.saturating_sub(2) && t.start < d.range.end + 2)
-            .map(|t| {
-                format!(
-                    "{:?}{} {}..{} [{}]",
-                    t.kind,
-                    if t.is_request { " req" } else { "" },
-                    t.start,
-                    t.end,
-                    hex(t.start..t.end)
-                )
-            })
-            .collect();
+        let around = wire.truth_around(&d.range, 2);
         println!(
             "FALSE VALID {model:?} {}..{} [{}] alt {:?}\n    truth: {}",
             d.range.start,
             d.range.end,
-            hex(d.range.clone()),
+            wire.hex(d.range.clone()),
             d.alt_len,
             around.join("\n           ")
         );

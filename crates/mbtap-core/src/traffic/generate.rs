@@ -42,6 +42,28 @@ pub struct Wire {
     pub truth: Vec<Truth>,
 }
 
+impl Wire {
+    /// The wire's bytes in `range` as hex (`"01 03 …"`), for diagnostics; empty out of range.
+    #[must_use]
+    pub fn hex(&self, range: std::ops::Range<usize>) -> String {
+        self.bytes.get(range).unwrap_or_default().iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
+    }
+
+    /// What the wire held within `margin` bytes of `range`: each stretch's kind, direction,
+    /// span and bytes (`Good req 0..8 [01 03 …]`), for saying why a framer read it as it did.
+    #[must_use]
+    pub fn truth_around(&self, range: &std::ops::Range<usize>, margin: usize) -> Vec<String> {
+        self.truth
+            .iter()
+            .filter(|t| t.end + margin > range.start && t.start < range.end + margin)
+            .map(|t| {
+                let dir = if t.is_request { " req" } else { "" };
+                format!("{:?}{dir} {}..{} [{}]", t.kind, t.start, t.end, self.hex(t.start..t.end))
+            })
+            .collect()
+    }
+}
+
 /// Traffic settings.
 #[derive(Debug, Clone, Copy)]
 pub struct TrafficConfig {
