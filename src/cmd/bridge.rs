@@ -467,12 +467,12 @@ mod tests {
 
     use super::*;
     use crate::bridge::config::{SAMPLE, options};
+    use crate::cmd::{Cli, Command};
 
     /// The long names of the bridge's options a configuration file may set.
     fn known_keys() -> Vec<String> {
         crate::config::merge::known_keys::<Args>()
     }
-    use crate::cmd::{Cli, Command};
 
     /// The bridge options of a command line, and which it gave.
     fn parse(args: &[&str]) -> (Args, ArgMatches) {

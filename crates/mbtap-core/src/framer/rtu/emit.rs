@@ -179,22 +179,28 @@ impl RtuFramer {
     }
 
     /// The `n` bytes at absolute `at` end in `00` and check one byte shorter too (CRC-16's shift
-    /// property): the length to take — Diagnostics' structure decides where it can, else the
-    /// odds that `sender` leaves a `00` glitch — with the other length kept for the frame event
-    /// (see [`Frame::alt_len`]) when it is not negligible.
+    /// property): the length to take ([`Self::twin_reading`]), with the other length kept for
+    /// the frame event (see [`Frame::alt_len`]) when it is not negligible.
     pub(super) fn twin_len(&mut self, at: usize, n: usize, sender: Sender) -> usize {
-        if let Some(even) = diagnostics_even_len(&self.timed.buf[at..], n - 1) {
-            self.next_alt = None;
-            return even;
+        let (take, other) = self.twin_reading(&self.timed.buf[at..], n, sender);
+        self.next_alt = other;
+        take
+    }
+
+    /// Which of the two readings of `s[..n]`, ending in `00` and checking one byte shorter too,
+    /// is the frame: Diagnostics' structure decides where it can, then the lengths this unit's
+    /// function was seen with, else the odds that `sender` leaves a `00` glitch — with the other
+    /// length where those odds do not make it negligible.
+    pub(super) fn twin_reading(&self, s: &[u8], n: usize, sender: Sender) -> (usize, Option<usize>) {
+        if let Some(even) = diagnostics_even_len(s, n - 1) {
+            return (even, None);
         }
-        if let Some(len) = self.lengths.choose(self.timed.buf[at], self.timed.buf[at + 1], sender, n - 1) {
-            self.next_alt = None;
-            return len;
+        if let Some(len) = self.lengths.choose(s[0], s[1], sender, n - 1) {
+            return (len, None);
         }
         let odds = self.glitches.turn.zero_tail(sender);
         let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
-        self.next_alt = odds.ambiguous.then_some(other);
-        take
+        (take, odds.ambiguous.then_some(other))
     }
 
     /// Where a damaged frame at absolute `a` ends inside `a..b`, if its structure says so and a

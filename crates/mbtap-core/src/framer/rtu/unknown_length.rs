@@ -169,26 +169,17 @@ impl RtuFramer {
 
     /// A CRC match of `l` bytes at live index `g`, with an end confirmed after it. When it ends
     /// in `00` it also checks one byte shorter (CRC-16's shift property) and the shorter reading
-    /// had no end of its own confirmed: which it is, Diagnostics' structure, the lengths this
-    /// unit's function was seen with or the odds that its sender leaves a `00` glitch decide, as
-    /// where the shorter match is weighed — the other length kept where it is not negligible
-    /// (issue 25: a line's first vendor request ending in `00` was taken whole without doubt).
-    /// Followed by its own glitch byte (`glitched`), it is the longer frame: a sender leaves one.
+    /// had no end of its own confirmed: which it is, is decided as where the shorter match is
+    /// weighed ([`Self::twin_reading`]) (issue 25: a line's first vendor request ending in `00`
+    /// was taken whole without doubt). Followed by its own glitch byte (`glitched`), it is the
+    /// longer frame: a sender leaves one.
     fn longer_twin(&self, s: &[u8], g: usize, l: usize, glitched: bool) -> Try {
         let short = l - 1;
         if glitched || s[short] != 0 || short < RTU_MIN_LEN || !Self::crc_ok(&s[..short]) {
             return Try::Found(l, Reading::Unknown, None);
         }
-        if let Some(even) = diagnostics_even_len(s, short) {
-            return Try::Found(even, Reading::Unknown, None);
-        }
-        let sender = self.sender_at(g);
-        if let Some(len) = self.lengths.choose(s[0], s[1], sender, short) {
-            return Try::Found(len, Reading::Unknown, None);
-        }
-        let odds = self.glitches.turn.zero_tail(sender);
-        let (take, other) = if odds.glitch_likelier { (short, l) } else { (l, short) };
-        Try::Found(take, Reading::Unknown, odds.ambiguous.then_some(other))
+        let (take, other) = self.twin_reading(s, l, self.sender_at(g));
+        Try::Found(take, Reading::Unknown, other)
     }
 
     /// The exact length the structure gives a frame starting at absolute `a`, if it fits
