@@ -62,7 +62,7 @@ async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerO
     let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;
     let w = encode_write(&target, profile, false).map_err(|e| e.to_string())?;
     let pdu = w.pdu();
-    let role = writes.role.as_ref().map_or(Role::Plain, |r| Role::Tls(Some(r)));
+    let role = Role::Broker(writes.role.as_ref());
     let first = routes.first().ok_or_else(|| format!("{text}: the bridge has no serial line"))?;
     let asked = Asked { unit: ask.unit, pdu: &pdu, role, peer_high: false };
     let admitted = opts.policy.admit(asked, None, first.line.now()).map_err(|why| {

@@ -24,9 +24,10 @@ listen = "0.0.0.0:502"
 
 # Per request: response timeout (ms), retries after a timeout or a bad CRC, extra quiet time
 # after t3.5 before the next request (ms).
-timeout-ms = 1000
+timeout-ms = 800
 retries = 0
 turnaround-ms = 0.0
+# allow-broadcast = true  # let writes to unit 0 through to every device (refused otherwise)
 # broadcast-reply = true  # answer broadcast writes at once, for SCADA that insists
 
 # Safety.

@@ -34,7 +34,10 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         next_open: Instant::now(),
         watch: crate::source::serial::DeviceWatch::default(),
         missing: None,
-        device: mbtap_gateway::tcp_device::TcpDevice::default(),
+        opened_once: false,
+        // Transaction ids toward the device start where nobody can guess (issue 38: counted from
+        // 0, an unsolicited answer under the next id was taken).
+        device: mbtap_gateway::tcp_device::TcpDevice::seeded(super::device::random_seed()),
     };
     let device = matches!(Transport::of(&opts.port), Transport::ModbusTcp(_));
     let mut master = opts.master();
@@ -47,8 +50,10 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let Some((client, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
             let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
+            // With backoff (issue 38: a server streaming an endless negotiation was reconnected
+            // every half second, each attempt reading at full speed: 98 % CPU).
             if port.stream.is_none() && Instant::now() >= port.next_open {
-                port.open().await;
+                port.reopen().await;
             }
             continue;
         };
@@ -75,7 +80,8 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let twins = shared.twins(client, &job);
         // A write may change what the cache holds, whatever its outcome.
         shared.cache().invalidate(job.unit, &job.pdu);
-        let done = if device { port.transact_tcp(&job).await } else { port.transact(&mut master, &job).await };
+        let done =
+            if device { port.transact_tcp(&mut master, &job).await } else { port.transact(&mut master, &job).await };
         let Ok(outcome) = done else {
             // The port failed under us: answer 0x0A and reopen with backoff.
             for twin in twins {
@@ -115,8 +121,12 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let unit = job.unit;
         answer(&shared, job, reply);
         // The client has its answer (or 0x0B); now what a slow unit says late is heard and
-        // dropped before the next request goes out.
+        // dropped before the next request goes out — but only where that request could take
+        // it for its own: the same unit's. Another unit's request goes at once (issue 38: a
+        // dead unit cost every queued request two timeouts); a late answer carries its unit's
+        // address and the answer check drops it.
         if let Some(window) = flush
+            && shared.may_take_late_answer(unit)
             && let Some(last) = port.flush_late(unit, window, &master.config).await
         {
             free_at = free_at.max(last + guard);
@@ -157,7 +167,8 @@ impl Port<'_> {
                 Step::Send(adu) => {
                     // Stale bytes (a late answer to an earlier request, noise) must not be taken
                     // for this request's answer.
-                    port.clear_input();
+                    let dropped = port.clear_input();
+                    shared.metrics.garbage(dropped);
                     port.send(&self.opts.rs485, &adu).await?;
                     self.observe_sent(&adu);
                     // With --rs485 rts the send returned when the last character left (tcdrain).
@@ -199,7 +210,8 @@ impl Port<'_> {
                 Note::CrcError => m.crc_error(unit),
                 Note::Timeout => m.timeout(unit),
                 Note::WaitedInVain(d) => m.waited_in_vain(unit, d),
-                Note::LateAnswer => m.late_answer(unit),
+                Note::LateAnswer(why) => m.misfit(unit, why),
+                Note::Garbage(bytes) => m.garbage(bytes),
                 Note::Heard { port, bytes } => self.observe(port, &bytes),
             }
         }
@@ -213,7 +225,19 @@ impl Port<'_> {
         let mut chunk = [0u8; 512];
         loop {
             let port = self.stream.as_mut()?;
-            let read = tokio::time::timeout_at(shared.instant(listener.wait_until()), port.read(&mut chunk)).await;
+            let until = shared.instant(listener.wait_until());
+            let read = tokio::select! {
+                r = tokio::time::timeout_at(until, port.read(&mut chunk)) => r,
+                // A request arrived meanwhile: if it is another unit's, it goes now.
+                () = shared.wake.notified() => {
+                    if shared.may_take_late_answer(unit) {
+                        continue;
+                    }
+                    // The permit taken here is the line loop's: give it back.
+                    shared.wake.notify_one();
+                    break;
+                }
+            };
             match read {
                 Ok(Ok(0)) => {
                     self.lost(&std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed"));
@@ -221,8 +245,12 @@ impl Port<'_> {
                 }
                 Ok(Ok(n)) => {
                     self.observe(1, chunk.get(..n).unwrap_or_default());
-                    if listener.bytes(shared.now()) {
+                    if listener.bytes(shared.now(), n) {
                         shared.metrics.late_answer(unit);
+                    }
+                    if listener.garbage() {
+                        shared.metrics.garbage(n);
+                        break;
                     }
                 }
                 Ok(Err(e)) if e.kind() == std::io::ErrorKind::TimedOut => break,

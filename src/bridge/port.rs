@@ -81,6 +81,8 @@ pub(super) struct Port<'a> {
     pub(super) backoff: Duration,
     pub(super) next_open: Instant,
     pub(super) watch: crate::source::serial::DeviceWatch,
+    /// The port was open once: each later opening is a reopening.
+    pub(super) opened_once: bool,
     /// Since when the port has been said missing (None: open, or not tried yet).
     pub(super) missing: Option<Instant>,
 }
@@ -91,7 +93,6 @@ impl Port<'_> {
         self.open().await;
         if self.stream.is_some() {
             self.backoff = Duration::from_millis(100);
-            self.shared.metrics.reopened();
         } else {
             self.next_open = Instant::now() + self.backoff;
             self.backoff = (self.backoff * 2).min(Duration::from_secs(5));
@@ -141,6 +142,15 @@ impl Port<'_> {
         let opts = self.opts;
         match opened {
             Ok(port) => {
+                // Counted however it came back, idle or at a request's turn (issue 38: 21
+                // reconnections to a tcp:// device left port_reopened_total at 0).
+                if self.opened_once {
+                    self.shared.metrics.reopened();
+                }
+                self.opened_once = true;
+                if let Some(w) = port.warning(&opts.port) {
+                    self.shared.metrics.note(&w);
+                }
                 if self.missing.take().is_some() {
                     self.shared.metrics.note(&format!("serial port {}: open; forwarding requests again", opts.port));
                 }

@@ -12,7 +12,7 @@ use tokio::time::Instant;
 
 use super::shared::{Job, LineShared};
 use mbtap_gateway::admit::{Asked, IpNet, Policy, RateLimit, Refusal, Role};
-use mbtap_gateway::queue::ClientId;
+use mbtap_gateway::queue::{ClientId, Full};
 use mbtap_gateway::rules::{GATEWAY_TARGET_FAILED, exception_pdu};
 use mbtap_gateway::transaction::Reply;
 
@@ -139,6 +139,7 @@ pub(super) fn request(
     let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high: admitted.high, write };
     match route.line.submit(client.id, job) {
         Ok(()) => reply(Answer::Later(rx)),
-        Err(_) => refuse(Refusal::QueueFull),
+        Err(Full::Client) => refuse(Refusal::QueueFull),
+        Err(Full::Line) => refuse(Refusal::LineFull),
     }
 }

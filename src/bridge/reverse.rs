@@ -24,11 +24,12 @@ use mbtap_core::analyzer::SerialMode;
 use mbtap_core::chunk::PortId;
 use mbtap_core::framer::LineSettings;
 use mbtap_core::proto::answer_end::Verdict;
-use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
-use mbtap_core::proto::{encode_ascii, encode_rtu, encode_tcp};
+use mbtap_core::proto::{encode_ascii, encode_rtu};
 use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
 use mbtap_gateway::admit::{Asked, Policy, Role};
+use mbtap_gateway::answer::check;
 use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, exception_pdu};
+use mbtap_gateway::tcp_device::{Heard, TcpDevice};
 use mbtap_proto::ExceptionCode;
 
 /// Reverse-mode settings.
@@ -46,12 +47,9 @@ pub struct ReverseOptions {
     pub timeout: Duration,
     /// Time from the end of a request to the answer (a slave's turnaround).
     pub turnaround: Duration,
-    /// As on the forward bridge: only what cannot change a device is forwarded
-    /// ([`super::rules::read_only_safe`], plus `allow_functions`); the rest is answered 01.
-    pub read_only: bool,
-    /// Without `read_only`: only these function codes are forwarded (None: all); with it, these
-    /// are forwarded too.
-    pub allow_functions: Option<Vec<u8>>,
+    /// The forward bridge's admission policy, built once from the same options (read-only,
+    /// allowed functions, broadcasts, unit map), with one route for every unit answered.
+    pub policy: Policy,
     /// `--rs485`: transmitter direction control for the answers.
     pub rs485: crate::source::rs485::Rs485Args,
 }
@@ -60,7 +58,7 @@ pub struct ReverseOptions {
 /// `monitor`, the bytes heard (port 0) and answered (port 1) go there for `--monitor`.
 pub async fn run(opts: ReverseOptions, metrics: Arc<Metrics>, monitor: Option<mpsc::UnboundedSender<MonitorChunk>>) {
     let mut tcp: Option<TcpStream> = None;
-    let mut tid: u16 = 0;
+    let mut device = TcpDevice::seeded(super::device::random_seed());
     let metrics = &*metrics;
     loop {
         let prepared = opts.rs485.prepare(&opts.port);
@@ -71,7 +69,7 @@ pub async fn run(opts: ReverseOptions, metrics: Arc<Metrics>, monitor: Option<mp
             tokio::time::sleep(Duration::from_secs(1)).await;
             continue;
         };
-        let mut side = Side { tcp: &mut tcp, tid: &mut tid, metrics, monitor: monitor.as_ref() };
+        let mut side = Side { tcp: &mut tcp, device: &mut device, metrics, monitor: monitor.as_ref() };
         if let Err(e) = serve_port(&opts, &mut port, &mut side).await {
             metrics.note(&format!("serial port {} lost: {e}; reopening", opts.port));
             metrics.reopened();
@@ -83,7 +81,7 @@ pub async fn run(opts: ReverseOptions, metrics: Arc<Metrics>, monitor: Option<mp
 /// What serving a port works with besides the port.
 struct Side<'a> {
     tcp: &'a mut Option<TcpStream>,
-    tid: &'a mut u16,
+    device: &'a mut TcpDevice,
     metrics: &'a Metrics,
     monitor: Option<&'a mpsc::UnboundedSender<MonitorChunk>>,
 }
@@ -111,12 +109,7 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
     let mut rtu = RequestAssembler::default();
     let mut ascii = AsciiRequestAssembler::default();
     let silence = Duration::from_nanos(opts.line.t35_ns()) + Duration::from_millis(1);
-    let policy = Policy {
-        read_only: opts.read_only,
-        allow_functions: opts.allow_functions.clone(),
-        routes: vec![0..=255],
-        ..Policy::default()
-    };
+    let policy = &opts.policy;
     let mut buf = [0u8; 512];
     let mut out = Vec::with_capacity(300);
     loop {
@@ -163,7 +156,7 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
                 metrics.refused(why.reason());
                 exception_pdu(fc, why.exception())
             } else {
-                match forward(opts, side.tcp, side.tid, r.unit, &r.pdu).await {
+                match forward(opts, side.tcp, side.device, metrics, r.unit, &r.pdu).await {
                     Ok(pdu) => {
                         metrics.response(r.unit, &pdu);
                         pdu
@@ -194,7 +187,8 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
 async fn forward(
     opts: &ReverseOptions,
     tcp: &mut Option<TcpStream>,
-    tid: &mut u16,
+    device: &mut TcpDevice,
+    metrics: &Metrics,
     unit: u8,
     pdu: &[u8],
 ) -> Result<Vec<u8>, ExceptionCode> {
@@ -205,6 +199,7 @@ async fn forward(
             match connect {
                 Ok(Ok(s)) => {
                     let _ = s.set_nodelay(true);
+                    device.reset();
                     *tcp = Some(s);
                 }
                 _ => return Err(GATEWAY_PATH_UNAVAILABLE),
@@ -225,14 +220,12 @@ async fn forward(
                 }
             }
         }
-        *tid = tid.wrapping_add(1);
-        let mut frame = Vec::with_capacity(pdu.len() + 7);
-        encode_tcp(*tid, unit, pdu, &mut frame);
+        let frame = device.request(unit, pdu);
         if s.write_all(&frame).await.is_err() {
             *tcp = None;
             continue;
         }
-        match tokio::time::timeout(opts.timeout, read_answer(s, *tid)).await {
+        match tokio::time::timeout(opts.timeout, read_answer(s, device, metrics)).await {
             Ok(Ok(pdu)) => return Ok(pdu),
             Ok(Err(_)) => *tcp = None,
             Err(_) => {
@@ -283,7 +276,14 @@ async fn forward_rtu(opts: &ReverseOptions, s: &mut TcpStream, unit: u8, pdu: &[
         match mbtap_core::proto::answer_end::judge_rtu(&buf, unit, function, silent) {
             Verdict::Pending => {}
             Verdict::Answer { len } => {
-                return buf.get(1..len.saturating_sub(2)).map(<[u8]>::to_vec).ok_or(RtuFailure::NoAnswer);
+                let answer = buf.get(1..len.saturating_sub(2)).map(<[u8]>::to_vec).ok_or(RtuFailure::NoAnswer)?;
+                // The core's one answer check, as for every back.
+                match check(unit, pdu, unit, &answer) {
+                    Ok(()) => return Ok(answer),
+                    Err(_) => {
+                        buf.drain(..len);
+                    }
+                }
             }
             Verdict::BadCheck => return Err(RtuFailure::NoAnswer),
             Verdict::Foreign => buf.clear(),
@@ -291,28 +291,31 @@ async fn forward_rtu(opts: &ReverseOptions, s: &mut TcpStream, unit: u8, pdu: &[
     }
 }
 
-/// Reads MBAP frames until the one with `tid`; its PDU.
-async fn read_answer(s: &mut TcpStream, tid: u16) -> std::io::Result<Vec<u8>> {
-    let mut buf = Vec::with_capacity(300);
+/// Reads MBAP frames until the answer to the request `device` awaits — matched by its
+/// transaction id and put through the core's answer check, as on the forward bridge's
+/// `tcp://` lines; what does not fit is dropped and counted.
+async fn read_answer(s: &mut TcpStream, device: &mut TcpDevice, metrics: &Metrics) -> std::io::Result<Vec<u8>> {
     let mut chunk = [0u8; 300];
     loop {
-        match parse_tcp_frame(&buf) {
-            Ok(Streaming::Complete(f, used)) => {
-                let pdu = f.pdu.to_vec();
-                let this = f.header.transaction_id == tid;
-                buf.drain(..used);
-                if this {
-                    return Ok(pdu);
-                }
+        let n = s.read(&mut chunk).await?;
+        if n == 0 {
+            return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the server closed"));
+        }
+        let (heard, dropped) = device.bytes(chunk.get(..n).unwrap_or_default());
+        if let Some(why) = dropped.misfit {
+            for _ in 0..dropped.misfits {
+                metrics.misfit(0, why);
             }
-            Ok(Streaming::Incomplete(_)) => {
-                let n = s.read(&mut chunk).await?;
-                if n == 0 {
-                    return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the server closed"));
-                }
-                buf.extend_from_slice(chunk.get(..n).unwrap_or_default());
+        }
+        match heard {
+            Heard::More => {}
+            Heard::Answer { pdu, .. } => return Ok(pdu),
+            Heard::Broken => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    "the server's stream is not Modbus TCP",
+                ));
             }
-            Err(e) => return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, e.to_string())),
         }
     }
 }

@@ -132,7 +132,10 @@ pub async fn bridge<W: Write>(
     } else {
         let mut routes = Vec::new();
         for (units, line_opts) in &opts.lines {
-            let shared = LineShared::new(opts.queue_per_client, line_opts.cache.clone());
+            // One bound for all of a line's clients together: what --max-connections clients
+            // with full queues hold (UDP senders, the broker and the polls included).
+            let total = opts.server.max_connections.saturating_mul(opts.queue_per_client);
+            let shared = LineShared::new(opts.queue_per_client, total, line_opts.cache.clone());
             let monitor = monitoring.then(|| monitor_tx.clone());
             tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
             tokio::spawn(super::shared::poll(line_opts.polls.clone(), Arc::clone(&shared)));

@@ -62,10 +62,11 @@ pub struct LineShared {
 }
 
 impl LineShared {
+    /// `per_client` requests may wait per client, `total` for all clients together.
     #[must_use]
-    pub fn new(per_client: usize, cache: Vec<Rule>) -> Arc<Self> {
+    pub fn new(per_client: usize, total: usize, cache: Vec<Rule>) -> Arc<Self> {
         Arc::new(Self {
-            queue: Mutex::new(FairQueue::new(per_client)),
+            queue: Mutex::new(FairQueue::bounded(per_client, total)),
             wake: Notify::new(),
             metrics: Metrics::default(),
             cache: Mutex::new(Cache::new(cache)),
@@ -146,7 +147,7 @@ impl LineShared {
     /// Queues a request for the line.
     ///
     /// # Errors
-    /// [`Full`] when the client has too many requests waiting.
+    /// [`Full`] when the client, or the line, has too many requests waiting.
     pub fn submit(&self, client: ClientId, job: Job) -> Result<(), Full> {
         let depth = {
             let mut q = self.queue();
@@ -156,6 +157,13 @@ impl LineShared {
         self.metrics.queue_depth(depth);
         self.wake.notify_one();
         Ok(())
+    }
+
+    /// Whether the next request could take `unit`'s late answer for its own: one of `unit`'s
+    /// own is waiting, or nothing is (then the next to arrive decides).
+    pub(super) fn may_take_late_answer(&self, unit: u8) -> bool {
+        let q = self.queue();
+        q.is_empty() || q.any(|j| j.unit == unit)
     }
 
     /// The client left: its requests that have not started are dropped.

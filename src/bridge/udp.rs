@@ -6,7 +6,7 @@
 //! the fair queue (its address, up to [`MAX_PEERS`] remembered).
 
 use std::collections::HashMap;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use tokio::time::Instant;
@@ -32,7 +32,7 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Routes>, opts: Arc<ServerO
     // Client ids apart from the TCP listener's (which count up from 1).
     static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1 << 48);
     let socket = Arc::new(socket);
-    let mut peers: HashMap<SocketAddr, Peer> = HashMap::new();
+    let mut peers: HashMap<IpAddr, Peer> = HashMap::new();
     let mut buf = vec![0u8; DATAGRAM];
     loop {
         let Ok((n, peer)) = socket.recv_from(&mut buf).await else { continue };
@@ -50,13 +50,23 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Routes>, opts: Arc<ServerO
                 continue;
             }
         };
-        if !peers.contains_key(&peer)
+        // An IPv4-mapped IPv6 source is that IPv4 address: one client either way.
+        let source = match peer.ip() {
+            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(IpAddr::V6(v6), IpAddr::V4),
+            v4 @ IpAddr::V4(_) => v4,
+        };
+        if !peers.contains_key(&source)
             && peers.len() >= MAX_PEERS
             && let Some(oldest) = peers.iter().min_by_key(|(_, p)| p.last).map(|(a, _)| *a)
+            && let Some(gone) = peers.remove(&oldest)
         {
-            peers.remove(&oldest);
+            // Forgotten: its waiting requests go with it, they spend no line time.
+            for r in routes.iter() {
+                r.line.forget(gone.client.id);
+            }
+            metrics.refused("udp_peer_evicted");
         }
-        let p = peers.entry(peer).or_insert_with(|| Peer {
+        let p = peers.entry(source).or_insert_with(|| Peer {
             client: Client::new(NEXT_CLIENT.fetch_add(1, Ordering::Relaxed), Role::Plain, peer, &routes, &opts),
             last: Instant::now(),
         });

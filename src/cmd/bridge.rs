@@ -17,6 +17,8 @@ use crate::output::EventWriter;
 use crate::tui::source::TuiSource;
 
 /// Modbus TCP clients to serial devices: a TCP server in front of a serial master.
+// Flags, each its own switch on the command line (clap), not states of one machine.
+#[allow(clippy::struct_excessive_bools)]
 #[derive(Debug, Clone, clap::Args)]
 pub struct Args {
     /// Read settings from this TOML file ([bridge] table; the command line wins).
@@ -48,8 +50,9 @@ pub struct Args {
     /// Units FIRST-LAST on another serial port (repeatable): --route 11-20=/dev/ttyUSB1.
     #[arg(long = "route", value_name = "UNITS=PORT")]
     pub routes: Vec<String>,
-    /// Response timeout per request, ms; then retries, then exception 0x0B.
-    #[arg(long, default_value_t = 1000)]
+    /// Response timeout per request, ms; then retries, then exception 0x0B. The default answers
+    /// a dead unit's 0x0B before a client's own 1 s timeout (mbpoll's, many SCADAs').
+    #[arg(long, default_value_t = 800)]
     pub timeout_ms: u64,
     /// `fixed`: --timeout-ms for every unit. `auto`: each unit's timeout learnt from its
     /// answers (3 × its slowest of the last 32 + 10 ms, at least 20 ms, at most --timeout-ms,
@@ -87,9 +90,13 @@ pub struct Args {
     /// Extra quiet time after t3.5 before the next request, ms.
     #[arg(long, default_value_t = 0.0)]
     pub turnaround_ms: f64,
-    /// Answer broadcast writes (unit 0) at once instead of not at all.
+    /// Answer broadcast writes (unit 0) at once instead of not at all (implies --allow-broadcast).
     #[arg(long)]
     pub broadcast_reply: bool,
+    /// Let writes to unit 0 through as broadcasts to every device on the line. Without it unit 0
+    /// is refused (exception 01) from every front, the broker's writes included.
+    #[arg(long)]
+    pub allow_broadcast: bool,
     /// Refuse writes (exception 0x01); they never reach the line.
     #[arg(long)]
     pub read_only: bool,
@@ -185,6 +192,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         retries,
         turnaround_ms,
         broadcast_reply,
+        allow_broadcast,
         read_only,
         allow_functions,
         allow_ips,
@@ -233,6 +241,16 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
                 .collect::<anyhow::Result<Vec<u8>>>()?,
         )
     };
+    // What a request may do, built once for every front and reverse mode alike (the routes are
+    // filled from the lines when they start).
+    let policy = mbtap_gateway::admit::Policy {
+        read_only,
+        allow_functions,
+        unit_map: mbtap_gateway::parse::parse_unit_map(&unit_map)?,
+        priority: priority.iter().map(|p| mbtap_gateway::admit::parse_priority(p)).collect::<Result<_, _>>()?,
+        routes: Vec::new(),
+        broadcast: allow_broadcast || broadcast_reply,
+    };
     let reverse = if reverse {
         let port = serial.clone().context("--reverse needs --serial PORT: the line to answer on")?;
         let (target, target_rtu) = match (target, target_rtu) {
@@ -251,8 +269,13 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             target_rtu,
             timeout: std::time::Duration::from_millis(timeout_ms),
             turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
-            read_only,
-            allow_functions: allow_functions.clone(),
+            // Reverse mode answers as every unit it serves: one route for all; --map-unit maps TCP
+            // unit ids, which reverse mode's requests do not carry.
+            policy: mbtap_gateway::admit::Policy {
+                routes: vec![0..=255],
+                unit_map: std::collections::BTreeMap::new(),
+                ..policy.clone()
+            },
             rs485,
         })
     } else {
@@ -330,14 +353,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         listen_udp,
         server: crate::bridge::request::ServerOptions {
             rtu_over_tcp: false,
-            policy: mbtap_gateway::admit::Policy {
-                read_only,
-                allow_functions,
-                unit_map: mbtap_gateway::parse::parse_unit_map(&unit_map)?,
-                priority: priority.iter().map(|p| mbtap_gateway::admit::parse_priority(p)).collect::<Result<_, _>>()?,
-                // Filled from the lines when they start.
-                routes: Vec::new(),
-            },
+            policy,
             allow_ips,
             max_connections,
             idle_timeout,
@@ -360,6 +376,12 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     let (asks_tx, asks) = std::sync::mpsc::channel();
     let writer = (opts.reverse.is_none()).then_some(asks_tx);
     let publisher = crate::publish::mqtt::Mqtt::start_with(&mqtt, &source, profiles.clone(), true, writer)?;
+    // Fails closed (issue 38): with roles, the broker's writes must be given one too — otherwise
+    // anyone on the broker would pass under the plain listeners' rules.
+    anyhow::ensure!(
+        !mqtt.mqtt_writes || opts.tls.role.is_empty() || mqtt_role.is_some(),
+        "--mqtt-writes with --role rules needs --mqtt-role NAME: the role whose rules judge the broker's writes (e.g. --role ops=functions:6,16 --mqtt-role ops); without one, anyone who can publish on the broker would write under the plain listeners' rules"
+    );
     if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {
         let role = match &mqtt_role {
             None => None,
@@ -498,7 +520,7 @@ mod tests {
         let Command::Bridge(b) = cli.command else { panic!("not the bridge") };
         assert_eq!(b.serial.as_deref(), Some("/dev/ttyUSB0"));
         assert_eq!(b.listen.as_deref(), Some("0.0.0.0:502"));
-        assert_eq!(b.timeout_ms, 1000);
+        assert_eq!(b.timeout_ms, 800);
         assert!(!b.read_only);
     }
 

@@ -13,6 +13,9 @@ use tokio_serial::{SerialPort, SerialStream};
 use mbtap_core::framer::{LineSettings, Parity};
 use mbtap_gateway::rfc2217::{self, LineSetup, Telnet};
 
+/// The most bytes one [`LineStream::clear_input`] drops before it returns: sixteen of the
+/// longest MBAP or RTU ADUs (260 bytes, Messaging on TCP/IP v1.0b §4.1).
+const CLEAR_LIMIT: usize = 16 * 260;
 /// How long connecting to a serial server or a device may take.
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
 
@@ -135,28 +138,54 @@ impl LineStream {
     }
 
     /// Drops what was received and not read (a late answer, noise): it must not be taken for
-    /// the next request's answer.
-    pub fn clear_input(&mut self) {
+    /// the next request's answer. Bounded (issue 38: a server streaming garbage kept this loop
+    /// reading, never yielding, and stalled every route): at most [`CLEAR_LIMIT`] bytes a call;
+    /// what is left is the answer check's to drop. Returns the bytes dropped.
+    pub fn clear_input(&mut self) -> usize {
         let mut buf = [0u8; 512];
+        let mut dropped = 0;
         match self {
             Self::Serial(port) => {
                 let _ = port.clear(tokio_serial::ClearBuffer::Input);
             }
-            Self::Tcp(tcp) => while matches!(tcp.try_read(&mut buf), Ok(n) if n > 0) {},
+            Self::Tcp(tcp) => {
+                while dropped < CLEAR_LIMIT
+                    && let Ok(n @ 1..) = tcp.try_read(&mut buf)
+                {
+                    dropped += n;
+                }
+            }
             Self::Telnet { tcp, telnet, pending } => {
                 let mut reply = Vec::new();
-                while let Ok(n) = tcp.try_read(&mut buf) {
-                    if n == 0 {
-                        break;
-                    }
-                    telnet.feed(buf.get(..n).unwrap_or_default(), pending, &mut reply);
-                }
+                dropped += pending.len();
                 pending.clear();
+                while dropped < CLEAR_LIMIT
+                    && let Ok(n @ 1..) = tcp.try_read(&mut buf)
+                {
+                    telnet.feed(buf.get(..n).unwrap_or_default(), pending, &mut reply);
+                    dropped += pending.len();
+                    pending.clear();
+                    // A server may make Telnet answers without end: one read's worth kept.
+                    reply.truncate(1024);
+                }
                 // Telnet's answers go out with the next write.
                 if !reply.is_empty() {
                     let _ = tcp.try_write(&reply);
                 }
             }
+        }
+        dropped
+    }
+
+    /// What the remote end agreed to that the user should hear of (a Telnet server refusing
+    /// binary mode: its CR NUL is undone, but a server that does so may alter other bytes).
+    #[must_use]
+    pub fn warning(&self, name: &str) -> Option<String> {
+        match self {
+            Self::Telnet { telnet, .. } if telnet.binary_refused() => Some(format!(
+                "{name}: the Telnet server refuses binary mode (RFC 856); the line's bytes travel as NVT text, a CR as CR NUL, undone by the bridge — set the server's port to binary (ser2net: telnet(rfc2217) with no 'nobinary') if answers fail"
+            )),
+            _ => None,
         }
     }
 
@@ -165,7 +194,7 @@ impl LineStream {
         match self {
             Self::Serial(port) => rs485.send(port, frame).await,
             Self::Tcp(tcp) => tcp.write_all(frame).await,
-            Self::Telnet { tcp, .. } => tcp.write_all(&Telnet::escape(frame)).await,
+            Self::Telnet { tcp, telnet, .. } => tcp.write_all(&telnet.escape_out(frame)).await,
         }
     }
 

@@ -38,10 +38,15 @@ pub enum Refusal {
     RateLimit,
     /// A broadcast (unit 0) that is not a write (Serial Line v1.02 §2.1). 01.
     BroadcastNotWrite,
+    /// A broadcast (unit 0) without `--allow-broadcast`: it would change every device on the
+    /// line at once (issue 38: a broker client's `unit/0/…/set` did). 01.
+    Broadcast,
     /// No `--route` serves the unit. 0A.
     NoRoute,
     /// The client has too many requests waiting. 06.
     QueueFull,
+    /// The line has its bound of waiting requests, all clients together. 06.
+    LineFull,
 }
 
 impl Refusal {
@@ -50,10 +55,13 @@ impl Refusal {
     pub fn exception(self) -> ExceptionCode {
         match self {
             Self::Malformed => ILLEGAL_DATA_VALUE,
-            Self::NoRole | Self::Role | Self::ReadOnly | Self::FunctionNotAllowed | Self::BroadcastNotWrite => {
-                ILLEGAL_FUNCTION
-            }
-            Self::RateLimit | Self::QueueFull => SERVER_DEVICE_BUSY,
+            Self::NoRole
+            | Self::Role
+            | Self::ReadOnly
+            | Self::FunctionNotAllowed
+            | Self::BroadcastNotWrite
+            | Self::Broadcast => ILLEGAL_FUNCTION,
+            Self::RateLimit | Self::QueueFull | Self::LineFull => SERVER_DEVICE_BUSY,
             Self::NoRoute => GATEWAY_PATH_UNAVAILABLE,
         }
     }
@@ -69,8 +77,10 @@ impl Refusal {
             Self::FunctionNotAllowed => "function_not_allowed",
             Self::RateLimit => "rate_limit",
             Self::BroadcastNotWrite => "broadcast_not_write",
+            Self::Broadcast => "broadcast",
             Self::NoRoute => "no_route",
             Self::QueueFull => "queue_full",
+            Self::LineFull => "line_full",
         }
     }
 }
@@ -89,14 +99,20 @@ pub struct Policy {
     pub priority: Vec<Priority>,
     /// Units served, per route (index = route number).
     pub routes: Vec<RangeInclusive<u8>>,
+    /// `--allow-broadcast`: writes to unit 0 reach every device on the line. Off, they are
+    /// refused whoever asks (fails closed).
+    pub broadcast: bool,
 }
 
 /// Who the client is, for authorisation: anyone on a plain listener; on the TLS listener the
-/// rules of its certificate's role, or none (no role, or one no rule names: nothing allowed).
+/// rules of its certificate's role, or none (no role, or one no rule names: nothing allowed);
+/// the MQTT broker's writes (`--mqtt-writes`) under `--mqtt-role`'s rules, or the plain
+/// listeners' where no `--role` exists (with roles, the bridge refuses to start without one).
 #[derive(Debug, Clone, Copy)]
 pub enum Role<'a> {
     Plain,
     Tls(Option<&'a RoleRules>),
+    Broker(Option<&'a RoleRules>),
 }
 
 /// A request let through: where it goes.
@@ -131,7 +147,7 @@ impl Policy {
     pub fn admit(&self, asked: Asked<'_>, bucket: Option<&mut RateLimit>, now: Duration) -> Result<Admitted, Refusal> {
         let Asked { unit, pdu, role, peer_high } = asked;
         let function = pdu.first().copied().unwrap_or(0);
-        if request_len_problem(pdu).is_some() {
+        if request_len_problem(pdu).is_some() || !forwardable_length(pdu) {
             return Err(Refusal::Malformed);
         }
         // The serial address the request will reach: roles and routes judge that, not the TCP
@@ -139,8 +155,8 @@ impl Policy {
         let target = self.unit_map.get(&unit).copied().unwrap_or(unit);
         match role {
             Role::Tls(None) => return Err(Refusal::NoRole),
-            Role::Tls(Some(r)) if !r.allows(target, pdu) => return Err(Refusal::Role),
-            Role::Plain | Role::Tls(Some(_)) => {}
+            Role::Tls(Some(r)) | Role::Broker(Some(r)) if !r.allows(target, pdu) => return Err(Refusal::Role),
+            Role::Plain | Role::Tls(Some(_)) | Role::Broker(_) => {}
         }
         let listed = self.allow_functions.as_ref().map(|a| a.contains(&function));
         if self.read_only {
@@ -160,6 +176,9 @@ impl Policy {
             // A broadcast read would make every device on the line answer at once (or none).
             return Err(Refusal::BroadcastNotWrite);
         }
+        if target == 0 && !self.broadcast {
+            return Err(Refusal::Broadcast);
+        }
         let route = self.routes.iter().position(|r| r.contains(&target) || target == 0).ok_or(Refusal::NoRoute)?;
         let high = peer_high
             || self.priority.iter().any(|p| match p {
@@ -175,6 +194,16 @@ impl Policy {
     pub fn peer_high(&self, ip: IpAddr) -> bool {
         self.priority.iter().any(|p| matches!(p, Priority::Net(n) if n.contains(ip)))
     }
+}
+
+/// Whether a request PDU is exactly as long as a slave that frames by structure reads it.
+/// Diagnostics (08) is framed by such slaves as sub-function and one data word for every
+/// sub-function — 0000 Return Query Data included (MAP v1.1b3 §6.8 lets its data run on; the
+/// slave does not know where it ends): a longer one would put its tail on the line as a frame
+/// of its own (issue 38: a write smuggled in an FC08/0000 under `--allow-function 8`).
+#[must_use]
+pub fn forwardable_length(pdu: &[u8]) -> bool {
+    !matches!(pdu.first(), Some(0x08)) || pdu.len() == 5
 }
 
 /// A token bucket: `rate` requests per second, bursts up to one second's worth.
@@ -444,9 +473,46 @@ mod tests {
 
     #[test]
     fn broadcasts_carry_writes_only() {
-        let p = policy();
+        let p = Policy { broadcast: true, ..policy() };
         assert_eq!(p.admit(ask(0, &READ_ONE), None, Duration::ZERO), Err(Refusal::BroadcastNotWrite));
         assert_eq!(p.admit(ask(0, &WRITE_ONE), None, Duration::ZERO).map(|a| a.target), Ok(0));
+    }
+
+    /// Issue 38 (`mqtt_bridge_writes.py`, `mqtt_sparkplug.py`): a broker client's write to unit
+    /// 0 went out as a broadcast, "ok": true. Unit 0 is refused from every front unless
+    /// `--allow-broadcast`, the broker's writes included, and a unit mapped to 0 as well.
+    #[test]
+    fn broker_broadcast_writes_are_refused_unless_allowed() {
+        let mut p = policy();
+        let broker = Asked { unit: 0, pdu: &WRITE_ONE, role: Role::Broker(None), peer_high: false };
+        assert_eq!(p.admit(broker, None, Duration::ZERO), Err(Refusal::Broadcast));
+        assert_eq!(p.admit(ask(0, &WRITE_ONE), None, Duration::ZERO), Err(Refusal::Broadcast));
+        p.unit_map.insert(5, 0);
+        assert_eq!(p.admit(ask(5, &WRITE_ONE), None, Duration::ZERO), Err(Refusal::Broadcast));
+        assert_eq!(Refusal::Broadcast.exception().value(), 0x01);
+        p.broadcast = true;
+        assert!(p.admit(broker, None, Duration::ZERO).is_ok());
+        // The broker under a role: its rules judge.
+        let roles = parse_roles(&["viewer=read-only".into()]).unwrap();
+        let viewer = Asked { unit: 1, pdu: &WRITE_ONE, role: Role::Broker(roles.get("viewer")), peer_high: false };
+        assert_eq!(p.admit(viewer, None, Duration::ZERO), Err(Refusal::Role));
+    }
+
+    /// Issue 38 (`round3/policy_probe.py`): `--read-only --allow-function 8` let an FC08/0000
+    /// with a CRC-valid write frame in its data reach the line, where a slave framing by
+    /// structure executed the write.
+    #[test]
+    fn an_fc08_longer_than_one_data_word_is_refused_under_every_policy() {
+        /// Diagnostics 0000 Return Query Data, data 1234, then `01 06 00 65 00 2C` + CRC: a
+        /// write of holding 101 = 44 to unit 1 hidden in the echo.
+        const SMUGGLE: [u8; 13] = [0x08, 0x00, 0x00, 0x12, 0x34, 0x01, 0x06, 0x00, 0x65, 0x00, 0x2C, 0x98, 0x2C];
+        const ECHO: [u8; 5] = [0x08, 0x00, 0x00, 0x12, 0x34];
+        let open = policy();
+        let allowed = Policy { read_only: true, allow_functions: Some(vec![0x08]), ..policy() };
+        for p in [&open, &allowed] {
+            assert_eq!(p.admit(ask(1, &SMUGGLE), None, Duration::ZERO), Err(Refusal::Malformed));
+            assert!(p.admit(ask(1, &ECHO), None, Duration::ZERO).is_ok());
+        }
     }
 
     #[test]

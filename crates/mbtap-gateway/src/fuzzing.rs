@@ -86,15 +86,20 @@ pub fn transports(data: &[u8]) {
     let (&pick, rest) = data.split_first().unwrap_or((&0, &[]));
     let reads = rest.chunks(usize::from(pick >> 4) + 1);
     if pick % 2 == 0 {
-        let mut device = crate::tcp_device::TcpDevice::default();
-        let (mut id, _) = device.request(1, &[0x03, 0x00, 0x00, 0x00, 0x01]);
+        const READ_ONE: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x01];
+        let mut device = crate::tcp_device::TcpDevice::seeded(u64::from(pick));
+        let _ = device.request(1, &READ_ONE);
         for read in reads {
-            match device.bytes(id, read).0 {
-                crate::tcp_device::Heard::Answer { pdu, .. } => {
-                    assert!(pdu.len() <= 253, "a PDU of {} bytes", pdu.len());
-                    id = device.request(1, &[0x03, 0x00, 0x00, 0x00, 0x01]).0;
+            match device.bytes(read).0 {
+                crate::tcp_device::Heard::Answer { unit, pdu } => {
+                    // The one answer check held: only an answer that fits reaches a client.
+                    assert_eq!(crate::answer::check(1, &READ_ONE, unit, &pdu), Ok(()), "{pdu:02X?}");
+                    let _ = device.request(1, &READ_ONE);
                 }
-                crate::tcp_device::Heard::Broken => device.reset(),
+                crate::tcp_device::Heard::Broken => {
+                    device.reset();
+                    let _ = device.request(1, &READ_ONE);
+                }
                 crate::tcp_device::Heard::More => {}
             }
         }

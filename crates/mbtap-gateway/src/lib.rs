@@ -7,6 +7,7 @@
 //!
 //! - [`parse`]: option values (routes, units, function codes, unit maps), each error naming the
 //!   value.
+//! - [`answer`]: the one answer check every back puts each answer through.
 //! - [`admit`]: may this client do this — allow-lists, read-only, roles, broadcast rules, rate
 //!   limit, routes — a route or a typed [`admit::Refusal`].
 //! - [`queue`]: the fair per-client queue with a priority class and coalescing of twins.
@@ -21,6 +22,7 @@
 //! Messaging on TCP/IP v1.0b, MODBUS/TCP Security.
 
 pub mod admit;
+pub mod answer;
 pub mod breaker;
 pub mod cache;
 pub mod fuzzing;

@@ -8,15 +8,25 @@ use std::collections::{BTreeMap, VecDeque};
 /// A client (one TCP connection).
 pub type ClientId = u64;
 
-/// The client's queue is full: the request is refused (the caller answers exception 06,
-/// Server Device Busy, MAP v1.1b3 §7).
+/// No room: the request is refused (the caller answers exception 06, Server Device Busy,
+/// MAP v1.1b3 §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Full;
+pub enum Full {
+    /// The client already has its share waiting.
+    Client,
+    /// The line has its bound waiting, all clients together (issue 38: 3 000 UDP source ports
+    /// queued 95 358 requests, 79 min of line time).
+    Line,
+}
 
 /// Per-client FIFOs served in turn.
 #[derive(Debug)]
 pub struct FairQueue<T> {
     queues: BTreeMap<ClientId, VecDeque<T>>,
+    /// Requests waiting, all clients (kept, not summed: checked at every push).
+    waiting: usize,
+    /// The bound on `waiting`.
+    total: usize,
     /// The last client served: the next turn goes to the first client after it.
     last: Option<ClientId>,
     per_client: usize,
@@ -25,21 +35,40 @@ pub struct FairQueue<T> {
 }
 
 impl<T> FairQueue<T> {
+    /// `per_client` waiting requests per client, and no bound for all together.
     #[must_use]
     pub fn new(per_client: usize) -> Self {
-        Self { queues: BTreeMap::new(), last: None, per_client: per_client.max(1), passed_over: 0 }
+        Self::bounded(per_client, usize::MAX)
+    }
+
+    /// `per_client` waiting requests per client, `total` for all clients together.
+    #[must_use]
+    pub fn bounded(per_client: usize, total: usize) -> Self {
+        Self {
+            queues: BTreeMap::new(),
+            waiting: 0,
+            total: total.max(1),
+            last: None,
+            per_client: per_client.max(1),
+            passed_over: 0,
+        }
     }
 
     /// Queues `item` for `client`.
     ///
     /// # Errors
-    /// [`Full`] when the client already has `per_client` requests waiting.
+    /// [`Full::Client`] when the client already has `per_client` requests waiting,
+    /// [`Full::Line`] when all clients together have `total`.
     pub fn push(&mut self, client: ClientId, item: T) -> Result<(), Full> {
+        if self.waiting >= self.total {
+            return Err(Full::Line);
+        }
         let q = self.queues.entry(client).or_default();
         if q.len() >= self.per_client {
-            return Err(Full);
+            return Err(Full::Client);
         }
         q.push_back(item);
+        self.waiting += 1;
         Ok(())
     }
 
@@ -56,6 +85,7 @@ impl<T> FairQueue<T> {
         if q.is_empty() {
             self.queues.remove(&next);
         }
+        self.waiting = self.waiting.saturating_sub(1);
         self.last = Some(next);
         Some((next, item))
     }
@@ -81,6 +111,7 @@ impl<T> FairQueue<T> {
                 if q.is_empty() {
                     self.queues.remove(&c);
                 }
+                self.waiting = self.waiting.saturating_sub(1);
                 self.last = Some(c);
                 if others_waiting {
                     self.passed_over += 1;
@@ -110,18 +141,26 @@ impl<T> FairQueue<T> {
         for c in emptied {
             self.queues.remove(&c);
         }
+        self.waiting = self.waiting.saturating_sub(out.len());
         out
     }
 
     /// Drops everything `client` still has waiting; how many.
     pub fn remove_client(&mut self, client: ClientId) -> usize {
-        self.queues.remove(&client).map_or(0, |q| q.len())
+        let n = self.queues.remove(&client).map_or(0, |q| q.len());
+        self.waiting = self.waiting.saturating_sub(n);
+        n
+    }
+
+    /// Whether any waiting request satisfies `pred`.
+    pub fn any(&self, mut pred: impl FnMut(&T) -> bool) -> bool {
+        self.queues.values().flatten().any(&mut pred)
     }
 
     /// Requests waiting, all clients.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.queues.values().map(VecDeque::len).sum()
+        self.waiting
     }
 
     #[must_use]
@@ -217,12 +256,35 @@ mod tests {
         assert_eq!(q.len(), 3);
     }
 
+    /// Issue 38 (`udp_queue_flood.py`): every source port a client with its own 32, no bound
+    /// for them together. The line now has one; a client leaving gives its room back.
+    #[test]
+    fn udp_flood_the_line_bounds_all_clients_together() {
+        let mut q = FairQueue::bounded(32, 100);
+        for client in 0..10 {
+            for k in 0..10 {
+                q.push(client, k).unwrap();
+            }
+        }
+        assert_eq!(q.push(99, 0), Err(Full::Line));
+        assert_eq!(q.len(), 100);
+        assert_eq!(q.remove_client(3), 10);
+        assert!(q.pop().is_some());
+        assert_eq!(q.len(), 89);
+        for k in 0..11 {
+            q.push(99, k).unwrap();
+        }
+        assert_eq!(q.push(98, 0), Err(Full::Line));
+        let twins = q.take_heads(0, |&k| k == 0);
+        assert_eq!(q.len(), 100 - twins.len());
+    }
+
     #[test]
     fn a_full_client_is_refused_and_a_leaving_client_takes_its_requests() {
         let mut q = FairQueue::new(2);
         q.push(1, 'x').unwrap();
         q.push(1, 'y').unwrap();
-        assert_eq!(q.push(1, 'z'), Err(Full));
+        assert_eq!(q.push(1, 'z'), Err(Full::Client));
         q.push(2, 'k').unwrap();
         assert_eq!(q.remove_client(1), 2);
         assert_eq!(q.len(), 1);

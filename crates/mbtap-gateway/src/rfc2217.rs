@@ -14,6 +14,8 @@ const WONT: u8 = 252;
 const WILL: u8 = 251;
 const SB: u8 = 250;
 const SE: u8 = 240;
+/// Carriage return: NVT sends a bare one as CR NUL (RFC 854).
+const CR: u8 = 0x0D;
 /// Options: binary transmission (RFC 856), suppress go-ahead (RFC 858), COM port (RFC 2217).
 const BINARY: u8 = 0;
 const SGA: u8 = 3;
@@ -48,6 +50,9 @@ enum State {
     Iac,
     /// After IAC and a verb (WILL, WONT, DO, DONT): the option byte is next.
     Verb(u8),
+    /// After a CR on a stream the server sends as NVT text (it refused BINARY): a NUL next is
+    /// the CR's padding (RFC 854: "CR NUL" is a bare CR), dropped.
+    Cr,
     /// Inside a subnegotiation, skipped.
     Sub,
     SubIac,
@@ -63,12 +68,17 @@ pub struct Telnet {
     /// Options refused once (not refused again: a server that repeats itself must not make a
     /// loop of answers).
     refused: [bool; 256],
+    /// The server will not send in binary (WONT BINARY): what it sends is NVT text, a CR
+    /// followed by NUL (RFC 854), undone here.
+    pub nvt_in: bool,
+    /// The server will not receive binary (DONT BINARY): a CR we send goes as CR NUL.
+    pub nvt_out: bool,
 }
 
 impl Telnet {
     #[must_use]
     pub fn new(setup: LineSetup) -> Self {
-        Self { setup, state: State::Data, configured: false, refused: [false; 256] }
+        Self { setup, state: State::Data, configured: false, refused: [false; 256], nvt_in: false, nvt_out: false }
     }
 
     /// What the client says first: it will do the COM port option and binary both ways, and
@@ -94,10 +104,28 @@ impl Telnet {
         out
     }
 
-    /// The line's `bytes` as they go on the Telnet stream.
+    /// The line's `bytes` as they go on the Telnet stream: every FF doubled (RFC 854), and a
+    /// CR as CR NUL where the server refused binary reception (RFC 854's NVT; RFC 856).
     #[must_use]
-    pub fn escape(bytes: &[u8]) -> Vec<u8> {
-        escape(bytes)
+    pub fn escape_out(&self, bytes: &[u8]) -> Vec<u8> {
+        let mut out = escape(bytes);
+        if self.nvt_out {
+            let mut nvt = Vec::with_capacity(out.len() + 4);
+            for b in out {
+                nvt.push(b);
+                if b == CR {
+                    nvt.push(0);
+                }
+            }
+            out = nvt;
+        }
+        out
+    }
+
+    /// Whether the server refused binary transmission in either direction.
+    #[must_use]
+    pub fn binary_refused(&self) -> bool {
+        self.nvt_in || self.nvt_out
     }
 
     /// Takes what the server sent: the line's bytes are appended to `data`, what Telnet
@@ -105,8 +133,13 @@ impl Telnet {
     pub fn feed(&mut self, received: &[u8], data: &mut Vec<u8>, reply: &mut Vec<u8>) {
         for &b in received {
             self.state = match (self.state, b) {
-                (State::Data, IAC) => State::Iac,
-                (State::Data, b) => {
+                (State::Cr, 0) => State::Data,
+                (State::Data | State::Cr, IAC) => State::Iac,
+                (State::Data | State::Cr, CR) if self.nvt_in => {
+                    data.push(CR);
+                    State::Cr
+                }
+                (State::Cr | State::Data, b) => {
                     data.push(b);
                     State::Data
                 }
@@ -142,6 +175,10 @@ impl Telnet {
             // Our DO acknowledged (binary, go-ahead); anything else the server offers is declined.
             WILL if matches!(option, BINARY | SGA) => {}
             WILL => self.refuse(DONT, option, reply),
+            // Binary refused (issue 38: used anyway, and answers holding 0D came out wrong): the
+            // stream is NVT text that way, its CR NUL undone or made.
+            WONT if option == BINARY => self.nvt_in = true,
+            DONT if option == BINARY => self.nvt_out = true,
             _ => {}
         }
     }
@@ -194,8 +231,8 @@ mod tests {
 
     #[test]
     fn ff_is_doubled_going_out_and_undoubled_coming_in_and_commands_are_not_data() {
-        assert_eq!(Telnet::escape(&[0x01, 0xFF, 0x03]), [0x01, 0xFF, 0xFF, 0x03]);
         let mut t = Telnet::new(SETUP);
+        assert_eq!(t.escape_out(&[0x01, 0xFF, 0x03]), [0x01, 0xFF, 0xFF, 0x03]);
         let (mut data, mut reply) = (Vec::new(), Vec::new());
         // 01 FF (doubled), a subnegotiation answer (skipped), NOP, 03 — in two reads split
         // inside the subnegotiation.
@@ -203,6 +240,22 @@ mod tests {
         t.feed(&[0x25, 0x80, IAC, SE, IAC, 241, 0x03], &mut data, &mut reply);
         assert_eq!(data, [0x01, 0xFF, 0x03]);
         assert!(reply.is_empty());
+    }
+
+    /// Issue 38 (`rfc2217_probe.py` telnet-nobinary): a server refusing BINARY sends a CR as
+    /// CR NUL; the NUL was taken for a line byte and answers holding 0D failed.
+    #[test]
+    fn a_server_refusing_binary_is_read_and_written_as_nvt() {
+        let mut t = Telnet::new(SETUP);
+        let (mut data, mut reply) = (Vec::new(), Vec::new());
+        // Server: DO COM-PORT-OPTION, WONT BINARY, DONT BINARY.
+        t.feed(&[IAC, DO, COM_PORT_OPTION, IAC, WONT, BINARY, IAC, DONT, BINARY], &mut data, &mut reply);
+        assert!(t.binary_refused() && t.configured);
+        // An answer 01 03 02 0D 0A + CRC, its CR as CR NUL, split between the CR and the NUL.
+        t.feed(&[0x01, 0x03, 0x02, CR], &mut data, &mut reply);
+        t.feed(&[0x00, 0x0A, CR, 0x00, 0x00], &mut data, &mut reply);
+        assert_eq!(data, [0x01, 0x03, 0x02, CR, 0x0A, CR, 0x00]);
+        assert_eq!(t.escape_out(&[0x01, CR, 0xFF]), [0x01, CR, 0x00, 0xFF, 0xFF]);
     }
 
     #[test]

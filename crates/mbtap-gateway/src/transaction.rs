@@ -17,7 +17,9 @@ use std::time::Duration;
 use mbtap_core::analyzer::SerialMode;
 use mbtap_core::framer::LineSettings;
 use mbtap_proto::answer_end::{Verdict, judge_ascii, judge_rtu};
-use mbtap_proto::{ExceptionCode, answer_fits, encode_ascii, encode_rtu, parse_ascii};
+use mbtap_proto::{ExceptionCode, encode_ascii, encode_rtu, parse_ascii};
+
+use crate::answer::{Misfit, check};
 
 use crate::rules::GATEWAY_TARGET_FAILED;
 use crate::timeouts::Timeouts;
@@ -76,6 +78,16 @@ impl MasterConfig {
         Duration::from_nanos(self.line.t35_ns()) + self.turnaround
     }
 
+    /// The longest ADU the mode carries: RTU 256 bytes (Serial Line v1.02 §2.5.1.1), ASCII 513
+    /// characters (§2.5.2.1).
+    #[must_use]
+    pub fn max_adu(&self) -> usize {
+        match self.mode {
+            SerialMode::Rtu => 256,
+            SerialMode::Ascii => 513,
+        }
+    }
+
     /// The silence that ends an answer: RTU t3.5, plus one timer tick (reads come in 1 ms
     /// steps) and the adapter's latency; ASCII the 1 s inter-character timeout (Serial Line
     /// v1.02 §2.5.2.1).
@@ -120,8 +132,11 @@ pub enum Note {
     Timeout,
     /// A whole timeout waited in vain.
     WaitedInVain(Duration),
-    /// An answer to another request (late), dropped.
-    LateAnswer,
+    /// An answer to another request (late, or not fitting this one: [`crate::answer::check`]),
+    /// dropped.
+    LateAnswer(Misfit),
+    /// Bytes dropped unread because no answer can be that long: garbage.
+    Garbage(usize),
     /// Bytes the monitor should see: port 0 requests (what was heard in place of the
     /// request on a collision), port 1 answers.
     Heard { port: u8, bytes: Vec<u8> },
@@ -315,6 +330,13 @@ impl Transaction<'_> {
                     self.notes.push(Note::Heard { port: 1, bytes: got.to_vec() });
                 }
                 buf.extend_from_slice(got);
+                // Bounded (issue 38: a serial server streaming garbage grew this to gigabytes):
+                // no answer is longer than the longest ADU, so older bytes cannot begin it.
+                let cap = self.master.config.max_adu();
+                if let Some(excess) = buf.len().checked_sub(cap).filter(|&n| n > 0) {
+                    buf.drain(..excess);
+                    self.notes.push(Note::Garbage(excess));
+                }
                 *last = now;
                 self.judge(now, false)
             }
@@ -393,20 +415,25 @@ impl Transaction<'_> {
                 Verdict::Pending => break,
                 Verdict::Answer { len } => {
                     let frame = buf.get(..len).unwrap_or_default();
-                    let pdu = match config.mode {
-                        SerialMode::Rtu => frame.get(1..len.saturating_sub(2)).map(<[u8]>::to_vec),
+                    // The answer's unit and PDU, as its frame carries them.
+                    let heard = match config.mode {
+                        SerialMode::Rtu => frame
+                            .split_first()
+                            .and_then(|(&u, rest)| Some((u, rest.get(..rest.len().checked_sub(2)?)?.to_vec()))),
                         SerialMode::Ascii => {
                             let start = frame.iter().position(|&b| b == b':').unwrap_or(0);
-                            parse_ascii(frame.get(start..).unwrap_or_default()).ok().map(|f| f.pdu().to_vec())
+                            parse_ascii(frame.get(start..).unwrap_or_default())
+                                .ok()
+                                .map(|f| (f.unit(), f.pdu().to_vec()))
                         }
                     };
-                    if let Some(p) = &pdu
-                        && !answer_fits(self.pdu, p)
-                    {
+                    let misfit = heard.as_ref().and_then(|(u, p)| check(self.unit, self.pdu, *u, p).err());
+                    let pdu = heard.map(|(_, p)| p);
+                    if let Some(why) = misfit {
                         // Another request's answer (a late one after a timeout: another
                         // quantity, address or function): never this client's. Dropped,
                         // counted; the real answer may follow it.
-                        self.notes.push(Note::LateAnswer);
+                        self.notes.push(Note::LateAnswer(why));
                         buf.drain(..len);
                         silent = false;
                         if buf.is_empty() {
@@ -514,7 +541,9 @@ impl Transaction<'_> {
 
 /// After a timeout: listens up to the window (at most 1 s) for what the unit says late, ending
 /// at the silence after the last late byte; noise that never stops cannot hold the line longer
-/// than twice the window.
+/// than twice the window, and more bytes than the longest answer without a silence are no late
+/// answer but garbage: the listening ends there (issue 38: a serial server streaming garbage
+/// held its line 2 s after every timeout, and its clients waited 4 s for their 0x0B).
 #[derive(Debug, Clone)]
 pub struct LateListener {
     start: Duration,
@@ -522,6 +551,8 @@ pub struct LateListener {
     hard_stop: Duration,
     silence: Duration,
     last: Option<Duration>,
+    heard: usize,
+    max_adu: usize,
 }
 
 impl LateListener {
@@ -530,20 +561,38 @@ impl LateListener {
     pub fn new(config: &MasterConfig, window: Duration, now: Duration) -> Self {
         let window = window.min(Duration::from_secs(1));
         let silence = Duration::from_nanos(config.line.t35_ns()) + Duration::from_millis(1) + config.latency;
-        Self { start: now, until: now + window, hard_stop: now + window * 2, silence, last: None }
+        Self {
+            start: now,
+            until: now + window,
+            hard_stop: now + window * 2,
+            silence,
+            last: None,
+            heard: 0,
+            max_adu: config.max_adu(),
+        }
     }
 
     /// Read until this time; at it, stop.
     #[must_use]
     pub fn wait_until(&self) -> Duration {
+        if self.garbage() {
+            return self.last.unwrap_or(self.start);
+        }
         self.last.map_or(self.until, |t| (t + self.silence).min(self.hard_stop))
     }
 
-    /// Bytes arrived at `now`; true for the first late bytes (one late answer, counted once).
-    pub fn bytes(&mut self, now: Duration) -> bool {
+    /// `n` bytes arrived at `now`; true for the first late bytes (one late answer, counted once).
+    pub fn bytes(&mut self, now: Duration, n: usize) -> bool {
         let first = self.last.is_none();
         self.last = Some(now);
+        self.heard = self.heard.saturating_add(n);
         first
+    }
+
+    /// More bytes than the longest answer: not a late answer, and listening on is pointless.
+    #[must_use]
+    pub fn garbage(&self) -> bool {
+        self.heard > self.max_adu
     }
 
     /// When the line was last busy.
@@ -739,7 +788,7 @@ mod tests {
         let mut line = Line::with(&[(6, &late), (20, &answer)]);
         let (out, notes) = line.drive(&mut m, 1, &READ_TWO);
         assert_eq!(out.reply, Reply::Pdu(ANSWER_TWO.to_vec()));
-        assert_eq!(count(&notes, &Note::LateAnswer), 1);
+        assert_eq!(notes.iter().filter(|n| matches!(n, Note::LateAnswer(_))).count(), 1);
     }
 
     #[test]
@@ -834,15 +883,52 @@ mod tests {
         let m = master(SerialMode::Rtu, EchoMode::Off, 0);
         let mut l = LateListener::new(&m.config, TIMEOUT, ms(200));
         assert_eq!(l.wait_until(), ms(300));
-        assert!(l.bytes(ms(250)), "the first late bytes are one late answer");
-        assert!(!l.bytes(ms(251)));
+        assert!(l.bytes(ms(250), 4), "the first late bytes are one late answer");
+        assert!(!l.bytes(ms(251), 5));
         let silence = Duration::from_nanos(m.config.line.t35_ns()) + ms(1);
         assert_eq!(l.wait_until(), ms(251) + silence);
         assert_eq!(l.last(), ms(251));
         // Noise that never stops: held at most twice the window.
         let mut noisy = LateListener::new(&m.config, TIMEOUT, ms(0));
-        noisy.bytes(ms(199));
+        noisy.bytes(ms(199), 1);
         assert_eq!(noisy.wait_until(), ms(200));
+    }
+
+    /// Issue 38 (`garbage_stream.py`): a serial server streaming garbage held the line twice the
+    /// window after every timeout. More bytes than the longest answer end the listening.
+    #[test]
+    fn garbage_stream_ends_the_late_listener_at_once() {
+        let m = master(SerialMode::Rtu, EchoMode::Off, 0);
+        let mut l = LateListener::new(&m.config, TIMEOUT, ms(0));
+        l.bytes(ms(1), 200);
+        assert!(!l.garbage());
+        l.bytes(ms(2), 200);
+        assert!(l.garbage());
+        assert_eq!(l.wait_until(), ms(2), "nothing more to wait for");
+    }
+
+    /// Issue 38 (`garbage_stream.py`): the answer buffer grew to gigabytes while a server
+    /// streamed garbage that began with the unit's address. It now holds at most one ADU.
+    #[test]
+    fn garbage_stream_the_answer_buffer_holds_at_most_one_adu() {
+        /// A vendor request (function 0x41, MAP v1.1b3 §5: user-defined): its answer's length
+        /// is unknown, so only a silence ends it.
+        const VENDOR: [u8; 2] = [0x41, 0x00];
+        let mut m = master(SerialMode::Rtu, EchoMode::Off, 0);
+        let (mut t, _) = m.transaction(1, &VENDOR);
+        let mut step = t.sent(ms(0), true);
+        // 01 41 and then a stream with no silence: never a whole answer.
+        let mut garbage = vec![0x01, 0x41];
+        garbage.extend(std::iter::repeat_n(0x41, 10_000));
+        let mut dropped = 0;
+        for (i, chunk) in garbage.chunks(512).enumerate() {
+            step = t.bytes(ms(1 + i as u64 / 10), chunk);
+            dropped += t.take_notes().iter().map(|n| if let Note::Garbage(b) = n { *b } else { 0 }).sum::<usize>();
+        }
+        assert!(dropped >= 10_002 - 256, "{dropped} bytes dropped");
+        assert!(matches!(step, Step::WaitUntil(_)), "{step:?}");
+        assert_eq!(t.tick(TIMEOUT + ms(1)), Step::Done);
+        assert_eq!(t.outcome().map(|o| o.reply.clone()), Some(Reply::Gateway(GATEWAY_TARGET_FAILED)));
     }
 
     /// Regression (issue 26, found by the `gateway` fuzz target): bytes that stay pending after

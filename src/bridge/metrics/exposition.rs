@@ -103,6 +103,12 @@ impl Metrics {
             for (u, v) in m.units.iter().filter(|(_, v)| v.late_answers > 0) {
                 let _ = writeln!(s, "mbtap_bridge_late_answers_total{{unit=\"{u}\"}} {}", v.late_answers);
             }
+            counter(&mut s, "mbtap_bridge_misfit_answers_total", "Answers dropped by the answer check: they do not fit the request awaited (unit, function, length, echoed fields).");
+            for (r, n) in &m.misfits {
+                let _ = writeln!(s, "mbtap_bridge_misfit_answers_total{{reason=\"{r}\"}} {n}");
+            }
+            counter(&mut s, "mbtap_bridge_garbage_bytes_total", "Bytes from the line dropped unread: longer than any answer can be.");
+            let _ = writeln!(s, "mbtap_bridge_garbage_bytes_total {}", m.garbage_bytes);
             counter(&mut s, "mbtap_bridge_crc_errors_total", "Answers whose CRC or LRC failed.");
             for (u, v) in &m.units {
                 let _ = writeln!(s, "mbtap_bridge_crc_errors_total{{unit=\"{u}\"}} {}", v.crc_errors);

@@ -45,6 +45,10 @@ struct Inner {
     connections: u64,
     connections_open: i64,
     refused: BTreeMap<&'static str, u64>,
+    /// Answers the answer check dropped, by why (`mbtap_gateway::answer::Misfit::reason`).
+    misfits: BTreeMap<&'static str, u64>,
+    /// Bytes dropped unread: more than the longest answer.
+    garbage_bytes: u64,
     last_note: Option<String>,
     cache_hits: u64,
     cache_misses: u64,
@@ -127,6 +131,19 @@ impl Metrics {
     /// An answer from `unit` that fits another request than the one on the line: dropped.
     pub fn late_answer(&self, unit: u8) {
         self.with(|m| m.units.entry(unit).or_default().late_answers += 1);
+    }
+
+    /// An answer the answer check dropped (it does not fit the request awaited).
+    pub fn misfit(&self, unit: u8, why: mbtap_gateway::answer::Misfit) {
+        self.with(|m| {
+            m.units.entry(unit).or_default().late_answers += 1;
+            *m.misfits.entry(why.reason()).or_default() += 1;
+        });
+    }
+
+    /// Bytes dropped unread: a stream longer than any answer (garbage).
+    pub fn garbage(&self, bytes: usize) {
+        self.with(|m| m.garbage_bytes = m.garbage_bytes.saturating_add(bytes as u64));
     }
 
     pub fn echo_missing(&self, unit: u8) {
