@@ -372,16 +372,16 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         mqtt.mqtt.is_none() || monitor.is_some(),
         "--mqtt on the bridge publishes what its monitor hears: add --monitor (text, jsonl or tui)"
     );
-    // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
-    let (asks_tx, asks) = std::sync::mpsc::channel();
-    let writer = (opts.reverse.is_none()).then_some(asks_tx);
-    let publisher = crate::publish::mqtt::Mqtt::start_with(&mqtt, &source, profiles.clone(), true, writer)?;
     // Fails closed (issue 38): with roles, the broker's writes must be given one too — otherwise
     // anyone on the broker would pass under the plain listeners' rules.
     anyhow::ensure!(
         !mqtt.mqtt_writes || opts.tls.role.is_empty() || mqtt_role.is_some(),
         "--mqtt-writes with --role rules needs --mqtt-role NAME: the role whose rules judge the broker's writes (e.g. --role ops=functions:6,16 --mqtt-role ops); without one, anyone who can publish on the broker would write under the plain listeners' rules"
     );
+    // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
+    let (asks_tx, asks) = std::sync::mpsc::channel();
+    let writer = (opts.reverse.is_none()).then_some(asks_tx);
+    let publisher = crate::publish::mqtt::Mqtt::start_with(&mqtt, &source, profiles.clone(), true, writer)?;
     if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {
         let role = match &mqtt_role {
             None => None,

@@ -16,6 +16,8 @@ use mbtap_gateway::rfc2217::{self, LineSetup, Telnet};
 /// The most bytes one [`LineStream::clear_input`] drops before it returns: sixteen of the
 /// longest MBAP or RTU ADUs (260 bytes, Messaging on TCP/IP v1.0b §4.1).
 const CLEAR_LIMIT: usize = 16 * 260;
+/// The most a Telnet server may send before it agrees to the COM port option.
+const NEGOTIATION_LIMIT: usize = 64 * 1024;
 /// How long connecting to a serial server or a device may take.
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
 
@@ -112,7 +114,16 @@ impl LineStream {
                 tcp.write_all(&Telnet::greeting()).await.map_err(|e| format!("{addr}: {e}"))?;
                 let (mut pending, mut reply, mut buf) = (Vec::new(), Vec::new(), [0u8; 256]);
                 let deadline = tokio::time::Instant::now() + CONNECT_TIMEOUT;
+                let mut received = 0usize;
                 while !telnet.configured {
+                    // A server that talks without end before agreeing (an endless
+                    // subnegotiation) is no RFC 2217 server: given up at once, not read at full
+                    // speed until the timeout (issue 38: 97 % CPU).
+                    if received > NEGOTIATION_LIMIT {
+                        return Err(format!(
+                            "{addr} sent {received} bytes without agreeing to the COM port option (RFC 2217); not a serial server the bridge can set"
+                        ));
+                    }
                     let n = match tokio::time::timeout_at(deadline, tcp.read(&mut buf)).await {
                         Ok(Ok(n)) if n > 0 => n,
                         Ok(Ok(_)) => return Err(format!("{addr} closed the connection while negotiating")),
@@ -124,7 +135,10 @@ impl LineStream {
                             ));
                         }
                     };
+                    received = received.saturating_add(n);
                     telnet.feed(buf.get(..n).unwrap_or_default(), &mut pending, &mut reply);
+                    // Line bytes before the settings were heard at other settings: not kept.
+                    pending.clear();
                     if !reply.is_empty() {
                         tcp.write_all(&reply).await.map_err(|e| format!("{addr}: {e}"))?;
                         reply.clear();

@@ -106,3 +106,13 @@ fn help_lists_only_options_that_apply() {
         assert!(help(capture).contains("--link-type"), "{capture}");
     }
 }
+
+/// Issue 38: with `--role` rules and `--mqtt-writes` but no `--mqtt-role`, anyone who could
+/// publish on the broker wrote under the plain listeners' rules. The bridge refuses to start.
+#[test]
+fn mqtt_writes_with_roles_need_an_mqtt_role() {
+    let o =
+        bridge(&["--mqtt", "mqtt://127.0.0.1:9", "--monitor", "jsonl", "--mqtt-writes", "--role", "viewer=read-only"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--mqtt-role"), "{}", stderr(&o));
+}

@@ -8,6 +8,7 @@ mod common;
 mod agent;
 mod config;
 mod hardware;
+mod one_path;
 mod serial;
 mod serial_server;
 mod tls;

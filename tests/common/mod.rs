@@ -83,6 +83,7 @@ pub struct Bridge {
     pub tcp: Option<String>,
     pub rtu: Option<String>,
     pub tls: Option<String>,
+    pub udp: Option<String>,
     pub metrics: Option<String>,
     pub log: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
 }
@@ -94,8 +95,9 @@ pub fn bridge(args: &[&str]) -> Bridge {
         std::process::Command::new(BIN).arg("bridge").args(args).stderr(std::process::Stdio::piped()).spawn().unwrap();
     let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
     let wants = |flag: &str| args.contains(&flag);
-    let (mut tcp, mut rtu, mut tls, mut metrics) = (None, None, None, None);
+    let (mut tcp, mut rtu, mut tls, mut udp, mut metrics) = (None, None, None, None, None);
     while (wants("--listen") && tcp.is_none())
+        || (wants("--listen-udp") && udp.is_none())
         || (wants("--listen-rtu") && rtu.is_none())
         || (wants("--listen-tls") && tls.is_none())
         || (wants("--metrics") && metrics.is_none())
@@ -107,6 +109,8 @@ pub fn bridge(args: &[&str]) -> Bridge {
                 tcp = addr;
             } else if rest.contains("TLS") {
                 tls = addr;
+            } else if rest.contains("(Modbus UDP)") {
+                udp = addr;
             } else {
                 rtu = addr;
             }
@@ -121,7 +125,7 @@ pub fn bridge(args: &[&str]) -> Bridge {
             sink.lock().unwrap().push(l);
         }
     });
-    Bridge { child: Kill(child), tcp, rtu, tls, metrics, log }
+    Bridge { child: Kill(child), tcp, rtu, tls, udp, metrics, log }
 }
 
 /// GET /metrics.
