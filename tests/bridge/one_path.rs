@@ -15,10 +15,13 @@ const READ_TWO: [u8; 5] = [0x03, 0x00, 0x64, 0x00, 0x02];
 /// Write single register 10 = 25 (MAP v1.1b3 §6.6): function 06, address 000A, value 0019.
 const WRITE_10: [u8; 5] = [0x06, 0x00, 0x0A, 0x00, 0x19];
 
+/// How a test device answers a request: (unit, PDU) in, (unit, PDU) out or silence.
+type Answer = fn(u8, &[u8]) -> Option<(u8, Vec<u8>)>;
+
 /// A Modbus TCP device on a free loopback port: each request's (transaction id, unit, PDU) is
 /// answered with what `answer` makes of it (None: no answer). Serves connections one after
 /// another until the test ends.
-fn device(answer: fn(u8, &[u8]) -> Option<(u8, Vec<u8>)>) -> String {
+fn device(answer: Answer) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     std::thread::spawn(move || {
