@@ -66,6 +66,8 @@ pub struct Outbox {
     /// (until it does, nothing is born or published live: Sparkplug 3.0 edge nodes wait for their
     /// primary host).
     pub host: Option<(String, bool)>,
+    /// A retained command was ignored and said so (said once a session).
+    said_retained: bool,
     /// Sparkplug updates held in memory when there is no disk buffer (at most `memory_cap`,
     /// the oldest dropped and counted): forwarded as historical data like the disk's.
     pub(super) memory: std::collections::VecDeque<Vec<u8>>,
@@ -106,6 +108,7 @@ impl Outbox {
             profiles: Profiles::new(),
             refused_writes: 0,
             host: None,
+            said_retained: false,
             memory: std::collections::VecDeque::new(),
             memory_cap: 10_000,
         }
@@ -286,7 +289,9 @@ impl Outbox {
 
     /// A message arrived: a command to the Sparkplug node (NCMD), a write to one of its devices
     /// (DCMD), or a plain `…/set`.
-    pub(super) fn incoming(&mut self, topic: &str, payload: &[u8]) {
+    /// A message from the broker on a subscribed topic; `retained`: the broker kept it from
+    /// before this session.
+    pub(super) fn incoming(&mut self, topic: &str, payload: &[u8], retained: bool) {
         if let Some((state, online)) = self.host.as_mut()
             && topic == state.as_str()
         {
@@ -309,6 +314,18 @@ impl Outbox {
                     eprintln!("mbtap: mqtt: the primary host is offline: holding what is measured until it is back");
                 }
                 _ => {}
+            }
+            return;
+        }
+        if retained {
+            // A command is an act of now: a retained one would be carried out again at every
+            // start and reconnect by whoever once left it (issue 39; Sparkplug B 3.0 §6.4.13:
+            // NCMD/DCMD are published with retain false). Ignored, said once.
+            if !self.said_retained {
+                self.said_retained = true;
+                eprintln!(
+                    "mbtap: mqtt: a retained command on {topic} ignored (commands are carried out only when sent, never from what the broker kept); clear it with an empty retained message"
+                );
             }
             return;
         }
