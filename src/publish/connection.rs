@@ -46,7 +46,7 @@ pub async fn run(mut eventloop: EventLoop, outbox: Arc<Mutex<Outbox>>, connected
                 }
             }
             Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
-                lock(&outbox).incoming(&p.topic, &p.payload, p.retain)
+                lock(&outbox).incoming(&p.topic, &p.payload, p.retain);
             }
             Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
                 // The DISCONNECT may still sit in the write buffer behind the last
