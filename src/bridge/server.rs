@@ -24,6 +24,10 @@ const EVICT_AFTER_IDLE: Duration = Duration::from_secs(1);
 /// that address's oldest silent socket (issue 38: 500 silent sockets reset 20–55 % of new
 /// clients).
 const SILENT_PER_ADDRESS: usize = 16;
+/// A socket silent this long is an idle one: a client connects and asks at once. Younger ones
+/// are never evicted for their address's bound (64 clients of one SCADA host connecting at
+/// once are all silent for a moment).
+const SILENT_GRACE: Duration = Duration::from_millis(100);
 
 /// One open connection: when it opened, when it last sent a whole request, how to end it.
 #[derive(Debug)]
@@ -68,7 +72,9 @@ fn evict(table: &Table, from: Option<std::net::IpAddr>) -> bool {
     let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let silent = table
         .values()
-        .filter(|c| c.last_request.is_none() && from.is_none_or(|ip| c.ip == ip))
+        .filter(|c| {
+            c.last_request.is_none() && from.is_none_or(|ip| c.ip == ip && c.opened.elapsed() >= SILENT_GRACE)
+        })
         .min_by_key(|c| c.opened);
     let idlest = || {
         table
