@@ -72,9 +72,7 @@ fn evict(table: &Table, from: Option<std::net::IpAddr>) -> bool {
     let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let silent = table
         .values()
-        .filter(|c| {
-            c.last_request.is_none() && from.is_none_or(|ip| c.ip == ip && c.opened.elapsed() >= SILENT_GRACE)
-        })
+        .filter(|c| c.last_request.is_none() && from.is_none_or(|ip| c.ip == ip && c.opened.elapsed() >= SILENT_GRACE))
         .min_by_key(|c| c.opened);
     let idlest = || {
         table
