@@ -76,14 +76,7 @@ impl Port<'_> {
                 Err(_) => return Ok(None),
             };
             let (heard, dropped) = self.device.bytes(chunk.get(..n).unwrap_or_default());
-            for _ in 0..dropped.late {
-                shared.metrics.late_answer(unit);
-            }
-            if let Some(why) = dropped.misfit {
-                for _ in 0..dropped.misfits {
-                    shared.metrics.misfit(unit, why);
-                }
-            }
+            shared.metrics.answers_dropped(unit, &dropped);
             match heard {
                 Heard::More => {}
                 Heard::Answer { pdu, .. } => return Ok(Some(pdu)),

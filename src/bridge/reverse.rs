@@ -225,7 +225,7 @@ async fn forward(
             *tcp = None;
             continue;
         }
-        match tokio::time::timeout(opts.timeout, read_answer(s, device, metrics)).await {
+        match tokio::time::timeout(opts.timeout, read_answer(s, device, metrics, unit)).await {
             Ok(Ok(pdu)) => return Ok(pdu),
             Ok(Err(_)) => *tcp = None,
             Err(_) => {
@@ -294,7 +294,12 @@ async fn forward_rtu(opts: &ReverseOptions, s: &mut TcpStream, unit: u8, pdu: &[
 /// Reads MBAP frames until the answer to the request `device` awaits — matched by its
 /// transaction id and put through the core's answer check, as on the forward bridge's
 /// `tcp://` lines; what does not fit is dropped and counted.
-async fn read_answer(s: &mut TcpStream, device: &mut TcpDevice, metrics: &Metrics) -> std::io::Result<Vec<u8>> {
+async fn read_answer(
+    s: &mut TcpStream,
+    device: &mut TcpDevice,
+    metrics: &Metrics,
+    unit: u8,
+) -> std::io::Result<Vec<u8>> {
     let mut chunk = [0u8; 300];
     loop {
         let n = s.read(&mut chunk).await?;
@@ -302,11 +307,7 @@ async fn read_answer(s: &mut TcpStream, device: &mut TcpDevice, metrics: &Metric
             return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the server closed"));
         }
         let (heard, dropped) = device.bytes(chunk.get(..n).unwrap_or_default());
-        if let Some(why) = dropped.misfit {
-            for _ in 0..dropped.misfits {
-                metrics.misfit(0, why);
-            }
-        }
+        metrics.answers_dropped(unit, &dropped);
         match heard {
             Heard::More => {}
             Heard::Answer { pdu, .. } => return Ok(pdu),

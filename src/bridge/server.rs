@@ -13,29 +13,15 @@ use tokio::time::Instant;
 
 use super::connection::connection;
 pub use super::request::{Route, Routes, ServerOptions};
-use mbtap_gateway::admit::{Role, ip_allowed};
+use mbtap_gateway::admit::{Role, canonical, ip_allowed};
 use mbtap_gateway::queue::ClientId;
+use mbtap_gateway::seats::{self, Seat};
 
-/// When every slot is taken, a connection that has sent no request for this long gives its slot
-/// to the newcomer; one busier than that is never evicted.
-const EVICT_AFTER_IDLE: Duration = Duration::from_secs(1);
-/// Sockets one source address may hold open without having sent a whole request (TLS
-/// handshakes in progress included): a newcomer from an address at the bound takes the slot of
-/// that address's oldest silent socket (issue 38: 500 silent sockets reset 20–55 % of new
-/// clients).
-const SILENT_PER_ADDRESS: usize = 16;
-/// A socket silent this long is an idle one: a client connects and asks at once. Younger ones
-/// are never evicted for their address's bound (64 clients of one SCADA host connecting at
-/// once are all silent for a moment).
-const SILENT_GRACE: Duration = Duration::from_millis(100);
-
-/// One open connection: when it opened, when it last sent a whole request, how to end it.
+/// One open connection: its seat (address, when it opened, when it last sent a whole request:
+/// what the gateway core's [`seats`] decision reads) and how to end it.
 #[derive(Debug)]
 pub struct Conn {
-    /// The client's address (an IPv4-mapped IPv6 one as IPv4).
-    ip: std::net::IpAddr,
-    opened: Instant,
-    last_request: Option<Instant>,
+    seat: Seat,
     abort: tokio::task::AbortHandle,
 }
 
@@ -63,39 +49,22 @@ impl Drop for Cleanup {
     }
 }
 
-/// Ends one connection to make room: the oldest that never sent a whole request (a client
-/// connects and asks at once — within a millisecond on any network a Modbus client uses — so the
-/// oldest silent socket is an idle one), else the idlest quiet at least [`EVICT_AFTER_IDLE`].
-/// With `from`, only that address's silent sockets are candidates. False when nothing may go
-/// (then the newcomer is refused).
-fn evict(table: &Table, from: Option<std::net::IpAddr>) -> bool {
+/// Ends the connection the gateway core's [`seats`] decision names: for `ip`'s bound of silent
+/// sockets, or (None) to make room in a full table. False when none may go.
+fn evict(table: &Table, ip: Option<std::net::IpAddr>) -> bool {
     let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let silent = table
-        .values()
-        .filter(|c| c.last_request.is_none() && from.is_none_or(|ip| c.ip == ip && c.opened.elapsed() >= SILENT_GRACE))
-        .min_by_key(|c| c.opened);
-    let idlest = || {
-        table
-            .values()
-            .filter_map(|c| c.last_request.map(|l| (l, c)))
-            .filter(|(l, _)| l.elapsed() >= EVICT_AFTER_IDLE)
-            .min_by_key(|(l, _)| *l)
-            .map(|(_, c)| c)
+    let all = table.iter().map(|(k, c)| (*k, &c.seat));
+    let victim = match ip {
+        Some(ip) => seats::for_address(all, ip, now()),
+        None => seats::for_room(all, now()),
     };
-    let victim = if from.is_some() { silent } else { silent.or_else(idlest) };
-    match victim {
-        Some(c) => {
-            c.abort.abort();
-            true
-        }
-        None => false,
-    }
+    victim.and_then(|k| table.get(&k)).map(|c| c.abort.abort()).is_some()
 }
 
-/// How many sockets `ip` holds open that have not sent a whole request.
-fn silent_from(table: &Table, ip: std::net::IpAddr) -> usize {
-    let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    table.values().filter(|c| c.ip == ip && c.last_request.is_none()).count()
+/// The listeners' clock for the seat decisions: time since the first call.
+fn now() -> Duration {
+    static ORIGIN: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+    ORIGIN.get_or_init(Instant::now).elapsed()
 }
 
 /// How long a TLS client has to complete its handshake: a handshake is a few round trips.
@@ -123,11 +92,8 @@ pub async fn serve(
             metrics.refused("ip_not_allowed");
             continue;
         }
-        let ip = match peer.ip() {
-            std::net::IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(std::net::IpAddr::V6(v6), std::net::IpAddr::V4),
-            v4 @ std::net::IpAddr::V4(_) => v4,
-        };
-        if silent_from(&table, ip) >= SILENT_PER_ADDRESS && evict(&table, Some(ip)) {
+        let ip = canonical(peer.ip());
+        if evict(&table, Some(ip)) {
             metrics.refused("evicted_silent");
             tokio::task::yield_now().await;
         }
@@ -154,7 +120,7 @@ pub async fn serve(
             let _ = stream.set_nodelay(true);
             let seen = |c| {
                 if let Some(e) = table_for_task.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get_mut(&c) {
-                    e.last_request = Some(Instant::now());
+                    e.seat.last_request = Some(now());
                 }
             };
             match &tls {
@@ -192,7 +158,8 @@ pub async fn serve(
             }
             drop(cleanup);
         });
-        entries.insert(client, Conn { ip, opened: Instant::now(), last_request: None, abort: handle.abort_handle() });
+        let seat = Seat { ip, opened: now(), last_request: None };
+        entries.insert(client, Conn { seat, abort: handle.abort_handle() });
         drop(entries);
     }
 }

@@ -15,7 +15,7 @@ use mbtap_core::proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
 use tokio::net::UdpSocket;
 
 use super::request::{Client, Pending, Routes, ServerOptions, request};
-use mbtap_gateway::admit::{Role, ip_allowed};
+use mbtap_gateway::admit::{Role, canonical, ip_allowed};
 
 /// Senders remembered (their client id and rate-limit bucket); the oldest is forgotten beyond.
 const MAX_PEERS: usize = 1024;
@@ -51,10 +51,7 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Routes>, opts: Arc<ServerO
             }
         };
         // An IPv4-mapped IPv6 source is that IPv4 address: one client either way.
-        let source = match peer.ip() {
-            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(IpAddr::V6(v6), IpAddr::V4),
-            v4 @ IpAddr::V4(_) => v4,
-        };
+        let source = canonical(peer.ip());
         if !peers.contains_key(&source)
             && peers.len() >= MAX_PEERS
             && let Some(oldest) = peers.iter().min_by_key(|(_, p)| p.last).map(|(a, _)| *a)

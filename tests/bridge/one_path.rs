@@ -238,10 +238,8 @@ fn reconnections_to_a_tcp_device_are_counted() {
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn a_dead_unit_costs_one_timeout() {
-    let d = std::env::temp_dir().join(format!("mbtap-one-path-dead-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    let bus = d.join("bus");
-    let _sim = common::simulate(&bus, &[]);
+    let bus = super::serial::dir("one-path-dead").join("bus");
+    let _sim = super::serial::simulator(&bus, &[]);
     let b = common::bridge(&["--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0"]);
     let addr = b.tcp.as_deref().unwrap();
     let mut dead = connect(addr);

@@ -502,6 +502,19 @@ fn writable_registers_are_home_assistant_controls_that_write() {
     assert!(outcomes.iter().all(|o| o["ok"] == true), "{outcomes:#?}");
 }
 
+/// `watch` of the simulated MK4's `registers` every 200 ms, publishing under `prefix` and
+/// taking writes from the broker at `url`.
+fn watch_with_writes(bus: &std::path::Path, url: &str, prefix: &str, registers: &str) -> Kill {
+    let watch = Command::new(BIN)
+        .args(["watch", bus.to_str().unwrap(), "--device", "mk4", "--interval", "200ms", "--count", "100"])
+        .args(["--format", "jsonl", "--mqtt", url, "--mqtt-prefix", prefix, "--mqtt-writes", registers])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    Kill(watch)
+}
+
 /// Sends `payload` to `topic` with mosquitto_pub.
 fn publish(port: u16, topic: &str, payload: &str) {
     let ok = Command::new("mosquitto_pub")
@@ -524,15 +537,7 @@ fn writes_from_the_broker_reach_the_device_through_the_profile() {
     let sub = Sub::start(port, "w/#");
     let (_sim, bus) = simulator(&d);
     let url = format!("mqtt://127.0.0.1:{port}");
-    let watch = Command::new(BIN)
-        .args(["watch", bus.to_str().unwrap(), "--device", "mk4", "--interval", "200ms", "--count", "100"])
-        .args(["--format", "jsonl", "--mqtt", &url, "--mqtt-prefix", "w", "--mqtt-writes"])
-        .args(["holding:101..105"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let _watch = Kill(watch);
+    let _watch = watch_with_writes(&bus, &url, "w", "holding:101..105");
     sub.wait_for("the set points", |g| g.iter().any(|(t, _)| t == "w/unit/1/holding_registers/105"));
     // By address, a scaled value: 2.5 → raw 250.
     publish(port, "w/unit/1/holding_registers/105/set", "2.5");
@@ -681,15 +686,7 @@ fn a_retained_set_is_not_carried_out_at_start() {
     let sub = Sub::start(port, "r/#");
     let (_sim, bus) = simulator(&d);
     let url = format!("mqtt://127.0.0.1:{port}");
-    let watch = Command::new(BIN)
-        .args(["watch", bus.to_str().unwrap(), "--device", "mk4", "--interval", "200ms", "--count", "100"])
-        .args(["--format", "jsonl", "--mqtt", &url, "--mqtt-prefix", "r", "--mqtt-writes"])
-        .args(["holding:105"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let _watch = Kill(watch);
+    let _watch = watch_with_writes(&bus, &url, "r", "holding:105");
     sub.wait_for("the set point", |g| g.iter().any(|(t, _)| t == "r/unit/1/holding_registers/105"));
     // A set sent now is carried out, and it is the only write outcome: the retained one was not.
     publish(port, "r/unit/1/holding_registers/105/set", "2.5");

@@ -16,7 +16,8 @@ use mbtap_proto::{ExceptionCode, request_len_problem};
 use crate::BadValue;
 use crate::parse::{parse_function_codes, parse_units};
 use crate::rules::{
-    GATEWAY_PATH_UNAVAILABLE, ILLEGAL_DATA_VALUE, ILLEGAL_FUNCTION, SERVER_DEVICE_BUSY, broadcastable, read_only_safe,
+    GATEWAY_PATH_UNAVAILABLE, ILLEGAL_DATA_VALUE, ILLEGAL_FUNCTION, SERVER_DEVICE_BUSY, broadcastable,
+    forwardable_length, read_only_safe,
 };
 
 /// Why a request was refused. Each is answered with an exception and counted under its
@@ -196,16 +197,6 @@ impl Policy {
     }
 }
 
-/// Whether a request PDU is exactly as long as a slave that frames by structure reads it.
-/// Diagnostics (08) is framed by such slaves as sub-function and one data word for every
-/// sub-function — 0000 Return Query Data included (MAP v1.1b3 §6.8 lets its data run on; the
-/// slave does not know where it ends): a longer one would put its tail on the line as a frame
-/// of its own (issue 38: a write smuggled in an FC08/0000 under `--allow-function 8`).
-#[must_use]
-pub fn forwardable_length(pdu: &[u8]) -> bool {
-    !matches!(pdu.first(), Some(0x08)) || pdu.len() == 5
-}
-
 /// A token bucket: `rate` requests per second, bursts up to one second's worth.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RateLimit {
@@ -296,11 +287,7 @@ impl std::str::FromStr for IpNet {
 impl IpNet {
     #[must_use]
     pub fn contains(&self, ip: IpAddr) -> bool {
-        let ip = match ip {
-            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
-            v4 @ IpAddr::V4(_) => v4,
-        };
-        match (self.addr, ip) {
+        match (self.addr, canonical(ip)) {
             (IpAddr::V4(net), IpAddr::V4(ip)) => {
                 let mask = u32::MAX.checked_shl(32 - u32::from(self.prefix)).unwrap_or(0);
                 u32::from(net) & mask == u32::from(ip) & mask
@@ -311,6 +298,16 @@ impl IpNet {
             }
             _ => false,
         }
+    }
+}
+
+/// A client's address as its budgets and rules know it: an IPv4-mapped IPv6 address
+/// (`::ffff:10.0.0.5`, a dual-stack listener's view of an IPv4 client) is that IPv4 address.
+#[must_use]
+pub fn canonical(ip: IpAddr) -> IpAddr {
+    match ip {
+        IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
+        v4 @ IpAddr::V4(_) => v4,
     }
 }
 

@@ -16,6 +16,7 @@
 //!   for each unit.
 //! - [`transaction`]: one serial request with its echo, answer, retries and late answers, as a
 //!   state machine fed bytes and time.
+//! - [`seats`]: which open connection gives up its seat to a newcomer.
 //! - [`rules`]: the read-only allow-list and the exceptions the gateway answers with.
 //!
 //! Specs: MODBUS Application Protocol v1.1b3 (MAP), MODBUS over Serial Line v1.02, MODBUS
@@ -30,6 +31,7 @@ pub mod parse;
 pub mod queue;
 pub mod rfc2217;
 pub mod rules;
+pub mod seats;
 pub mod tcp_device;
 pub mod timeouts;
 pub mod transaction;

@@ -43,6 +43,16 @@ pub fn broadcastable(fc: u8) -> bool {
     matches!(fc, 0x05 | 0x06 | 0x0F | 0x10 | 0x15 | 0x16)
 }
 
+/// Whether a request PDU is exactly as long as a slave that frames by structure reads it.
+/// Diagnostics (08) is framed by such slaves as sub-function and one data word for every
+/// sub-function — 0000 Return Query Data included (MAP v1.1b3 §6.8 lets its data run on; the
+/// slave does not know where it ends): a longer one would put its tail on the line as a frame
+/// of its own (issue 38: a write smuggled in an FC08/0000 under `--allow-function 8`).
+#[must_use]
+pub fn forwardable_length(pdu: &[u8]) -> bool {
+    !matches!(pdu.first(), Some(0x08)) || pdu.len() == 5
+}
+
 /// The exception PDU the gateway answers `function` with (MAP v1.1b3 §7: the function code
 /// with its high bit set, then the code).
 #[must_use]

@@ -35,13 +35,12 @@ pub enum Heard {
 }
 
 /// What was dropped while the answer was awaited.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Dropped {
     /// Answers under another transaction id (late, duplicated, unsolicited).
     pub late: u32,
-    /// Answers under the awaited id that do not fit the request ([`check`]), the last one's why.
-    pub misfits: u32,
-    pub misfit: Option<Misfit>,
+    /// Answers under the awaited id that do not fit the request ([`check`]): why, each.
+    pub misfits: Vec<Misfit>,
 }
 
 /// Answers to other transaction ids than the one awaited (a late answer to a request that
@@ -117,8 +116,7 @@ impl TcpDevice {
                             return (answer, dropped);
                         }
                         Some(Err(why)) => {
-                            dropped.misfits += 1;
-                            dropped.misfit = Some(why);
+                            dropped.misfits.push(why);
                         }
                         None => dropped.late += 1,
                     }
@@ -213,12 +211,12 @@ mod tests {
         ];
         for (bytes, why) in misfits {
             let (heard, dropped) = d.bytes(&bytes);
-            assert_eq!((heard, dropped.misfits, dropped.misfit), (Heard::More, 1, Some(why)));
+            assert_eq!((heard, dropped.misfits), (Heard::More, vec![why]));
         }
         // One register more than asked: another client's request's answer.
         let longer = [hi, lo, 0x00, 0x00, 0x00, 0x09, 0x11, 0x03, 0x06, 0, 1, 0, 2, 0, 3];
         let (heard, dropped) = d.bytes(&longer);
-        assert_eq!((heard, dropped.misfit), (Heard::More, Some(Misfit::Length)));
+        assert_eq!((heard, dropped.misfits), (Heard::More, vec![Misfit::Length]));
         let (heard, _) = d.bytes(&answer_with(id, 0, 0));
         assert_eq!(heard, Heard::Answer { unit: 17, pdu: ANSWER_1[7..].to_vec() });
         // Taken once: the same id again is late.

@@ -141,6 +141,17 @@ impl Metrics {
         });
     }
 
+    /// What a Modbus TCP device's stream held besides the answer awaited: answers under other
+    /// transaction ids (late) and answers that do not fit, each counted.
+    pub fn answers_dropped(&self, unit: u8, dropped: &mbtap_gateway::tcp_device::Dropped) {
+        for _ in 0..dropped.late {
+            self.late_answer(unit);
+        }
+        for &why in &dropped.misfits {
+            self.misfit(unit, why);
+        }
+    }
+
     /// Bytes dropped unread: a stream longer than any answer (garbage).
     pub fn garbage(&self, bytes: usize) {
         self.with(|m| m.garbage_bytes = m.garbage_bytes.saturating_add(bytes as u64));

@@ -1,0 +1,94 @@
+//! Who gives up a seat when a newcomer connects: the listeners' one decision about open
+//! connections (plain, RTU over TCP and TLS share `--max-connections`). A client connects and
+//! asks at once; a socket that has sent no whole request (a TLS handshake in progress counts) is
+//! an idle one and goes first, the oldest of them whatever its age — a flood of young silent
+//! sockets must not reset newcomers (issue 38: 500 of them reset 20–55 %). Else the one idle
+//! longest, if idle at least [`EVICT_AFTER_IDLE`]; a client that keeps asking is never evicted.
+//! One source address may hold [`SILENT_PER_ADDRESS`] silent sockets. Time is an input (the
+//! shell's clock since an origin it picks).
+
+use std::net::IpAddr;
+use std::time::Duration;
+
+/// When every seat is taken, a connection that has sent no request for this long gives its seat
+/// to the newcomer; one busier than that is never evicted.
+pub const EVICT_AFTER_IDLE: Duration = Duration::from_secs(1);
+/// Sockets one source address may hold open without having sent a whole request: a newcomer
+/// from an address at the bound takes the seat of that address's oldest silent socket.
+pub const SILENT_PER_ADDRESS: usize = 16;
+/// A socket silent this long is idle: only then is it evicted for its address's bound (64
+/// clients of one SCADA host connecting at once are all silent for a moment).
+pub const SILENT_GRACE: Duration = Duration::from_millis(100);
+
+/// One open connection as the decision sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Seat {
+    /// The client's address, as [`crate::admit::canonical`] gives it.
+    pub ip: IpAddr,
+    pub opened: Duration,
+    /// When it last sent a whole request; None: never.
+    pub last_request: Option<Duration>,
+}
+
+/// The seat `ip`'s newcomer takes for its address's bound: that address's oldest silent seat
+/// idle at least [`SILENT_GRACE`], when it already holds [`SILENT_PER_ADDRESS`] silent ones.
+pub fn for_address<'a, K: Copy + 'a>(
+    seats: impl Iterator<Item = (K, &'a Seat)> + Clone,
+    ip: IpAddr,
+    now: Duration,
+) -> Option<K> {
+    let silent = seats.filter(|(_, s)| s.ip == ip && s.last_request.is_none());
+    if silent.clone().count() < SILENT_PER_ADDRESS {
+        return None;
+    }
+    silent.filter(|(_, s)| now.saturating_sub(s.opened) >= SILENT_GRACE).min_by_key(|(_, s)| s.opened).map(|(k, _)| k)
+}
+
+/// The seat a newcomer takes when all are taken: the oldest silent one, else the one idle
+/// longest (at least [`EVICT_AFTER_IDLE`]); None: all are busy, the newcomer is refused.
+pub fn for_room<'a, K: Copy + 'a>(seats: impl Iterator<Item = (K, &'a Seat)> + Clone, now: Duration) -> Option<K> {
+    let silent = seats.clone().filter(|(_, s)| s.last_request.is_none()).min_by_key(|(_, s)| s.opened);
+    silent.map(|(k, _)| k).or_else(|| {
+        seats
+            .filter_map(|(k, s)| s.last_request.map(|l| (k, l)))
+            .filter(|(_, l)| now.saturating_sub(*l) >= EVICT_AFTER_IDLE)
+            .min_by_key(|(_, l)| *l)
+            .map(|(k, _)| k)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
+
+    fn seat(ip: &str, opened: u64, last: Option<u64>) -> Seat {
+        Seat { ip: ip.parse().unwrap(), opened: ms(opened), last_request: last.map(ms) }
+    }
+
+    /// Issue 38 (`starve.py`): silent sockets younger than 200 ms filled the table and every
+    /// newcomer was refused. The oldest silent one makes room, whatever its age.
+    #[test]
+    fn starve_the_oldest_silent_seat_makes_room_whatever_its_age() {
+        let seats = [seat("10.0.0.1", 5, None), seat("10.0.0.1", 1, None), seat("10.0.0.2", 0, Some(9))];
+        let pick = for_room(seats.iter().enumerate(), ms(10));
+        assert_eq!(pick, Some(1));
+        // All busy and none idle a second: refused.
+        let busy = [seat("10.0.0.2", 0, Some(900))];
+        assert_eq!(for_room(busy.iter().enumerate(), ms(1000)), None);
+        assert_eq!(for_room(busy.iter().enumerate(), ms(1900)), Some(0));
+    }
+
+    #[test]
+    fn an_address_holds_at_most_its_share_of_silent_seats_once_idle() {
+        let mut seats: Vec<Seat> = (0..16).map(|i| seat("10.0.0.1", i, None)).collect();
+        seats.push(seat("10.0.0.2", 0, None));
+        let ip = "10.0.0.1".parse().unwrap();
+        assert_eq!(for_address(seats.iter().enumerate(), ip, ms(50)), None, "none idle 100 ms yet");
+        assert_eq!(for_address(seats.iter().enumerate(), ip, ms(200)), Some(0));
+        assert_eq!(for_address(seats.iter().take(15).enumerate(), ip, ms(200)), None, "under the bound");
+    }
+}
