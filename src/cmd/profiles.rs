@@ -374,7 +374,7 @@ fn export(args: &ExportArgs) -> anyhow::Result<ExitCode> {
         ExportFormat::Esphome => Target::Esphome,
         ExportFormat::Telegraf => Target::Telegraf,
     };
-    let e = mbtap_core::profile::export::export(&p, args.unit, target)?;
+    let e = mbtap_core::profile::export::export(&p, args.unit, target);
     match &args.output {
         Some(o) => std::fs::write(o, &e.text).with_context(|| format!("writing {}", o.display()))?,
         None => std::io::stdout().lock().write_all(e.text.as_bytes())?,

@@ -421,6 +421,79 @@ pub fn profile_import(data: &[u8]) {
     }
 }
 
+/// Any strings as a profile's device, name, register names and units (issue 39): exported to
+/// every target, each export parsed back as its tool reads it (YAML, TOML) and every name and
+/// unit read back equal — nothing a string holds can end a comment or a scalar early.
+///
+/// Returns how many names were checked (none when the strings make no loadable profile).
+///
+/// # Panics
+/// When an export does not parse or a string does not come back as written.
+pub fn export_escape(data: &[u8]) -> usize {
+    use crate::profile::escape::toml_str;
+    use crate::profile::export::{Target, export};
+    let text = String::from_utf8_lossy(data);
+    let mut parts = text.split('\u{1}');
+    let device = parts.next().unwrap_or_default();
+    let name = parts.next().unwrap_or_default();
+    let mut toml = format!("[profile]\nname = {}\ndevice = {}\n", toml_str(name), toml_str(device));
+    let mut wanted = Vec::new();
+    for (i, reg) in parts.take(8).enumerate() {
+        let (reg_name, unit) = reg.split_once('\u{2}').unwrap_or((reg, ""));
+        if reg_name.trim().is_empty() || wanted.iter().any(|(n, _)| n == reg_name) {
+            continue;
+        }
+        let _ = std::fmt::Write::write_fmt(
+            &mut toml,
+            format_args!("[[holding_registers]]\naddress = {}\nname = {}\n", i * 2, toml_str(reg_name)),
+        );
+        if !unit.is_empty() {
+            let _ = std::fmt::Write::write_fmt(&mut toml, format_args!("unit = {}\n", toml_str(unit)));
+        }
+        wanted.push((reg_name.to_owned(), unit.to_owned()));
+    }
+    let Ok(p) = crate::profile::load("fuzz.toml", &toml) else { return 0 };
+    let names: Vec<(String, Option<String>)> = p
+        .tables
+        .values()
+        .flat_map(|slots| slots.values())
+        .filter_map(|slot| p.defs.get(slot.def).map(|d| (slot.name.clone(), d.unit.clone())))
+        .collect();
+    for target in [Target::HomeAssistant, Target::Esphome, Target::Telegraf] {
+        let e = export(&p, 1, target);
+        let first = e.text.lines().next().unwrap_or_default();
+        assert!(
+            first.chars().all(|c| c == ' ' || c.is_ascii_graphic() || (!c.is_ascii() && c.is_alphanumeric())),
+            "{first:?}"
+        );
+        let back: serde_json::Value = if target == Target::Telegraf {
+            let v = toml::from_str::<toml::Value>(&e.text);
+            assert!(v.is_ok(), "TOML: {v:?}\n{}", e.text);
+            v.ok().and_then(|v| serde_json::to_value(v).ok()).unwrap_or_default()
+        } else {
+            let v = serde_norway::from_str::<serde_json::Value>(&e.text);
+            assert!(v.is_ok(), "YAML: {v:?}\n{}", e.text);
+            v.unwrap_or_default()
+        };
+        let list = match target {
+            Target::HomeAssistant => back["modbus"][0]["sensors"].clone(),
+            Target::Esphome => back["sensor"].clone(),
+            Target::Telegraf => back["inputs"]["modbus"][0]["holding_registers"].clone(),
+        };
+        let got: Vec<&str> =
+            list.as_array().map(|a| a.iter().filter_map(|x| x["name"].as_str()).collect()).unwrap_or_default();
+        for (n, unit) in &names {
+            assert!(got.contains(&n.as_str()), "{target:?}: {n:?} not read back from\n{}", e.text);
+            if let (Some(u), Target::HomeAssistant) = (unit, target) {
+                let found =
+                    list.as_array().is_some_and(|a| a.iter().any(|x| x["unit_of_measurement"].as_str() == Some(u)));
+                assert!(found, "unit {u:?} not read back\n{}", e.text);
+            }
+        }
+    }
+    names.len()
+}
+
 /// Any bytes as a SunSpec device's registers (issue 27): the chain walked from register 0 the
 /// way `read --device sunspec` walks it, every model decoded whatever its ID and length, and
 /// the bytes as a point name — never a panic.

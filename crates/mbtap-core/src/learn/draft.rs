@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use super::infer::{Guess, Kind};
 use super::{Learner, Unit};
 use crate::profile::Table;
-use crate::profile::import::{one_line, toml_str};
+use crate::profile::escape::{comment, toml_str};
 use crate::query::rows::short_table;
 
 const TABLES: [Table; 4] = [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters];
@@ -18,7 +18,7 @@ const TABLES: [Table; 4] = [Table::Coils, Table::DiscreteInputs, Table::HoldingR
 pub fn profile_toml(unit: u8, u: &Unit, source: &str, hints: &[super::hint::Hint]) -> String {
     let mut s = String::new();
     let _ =
-        writeln!(s, "# Drafted by `mbtap learn` from {} — check every entry before relying on it:", one_line(source));
+        writeln!(s, "# Drafted by `mbtap learn` from {} — check every entry before relying on it:", comment(source));
     let _ =
         writeln!(s, "# names are placeholders; each comment says what the traffic showed and how sure the guess is.");
     let _ = writeln!(s, "\n[profile]\nname = \"learned-unit-{unit}\"");
@@ -51,7 +51,7 @@ pub fn profile_toml(unit: u8, u: &Unit, source: &str, hints: &[super::hint::Hint
 
 fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit, hint: Option<&super::hint::Hint>) {
     let a = g.address;
-    let _ = writeln!(s, "\n# {} — {} (confidence {:.2})", g.kind.name(), one_line(&g.evidence), g.confidence);
+    let _ = writeln!(s, "\n# {} — {} (confidence {:.2})", g.kind.name(), comment(&g.evidence), g.confidence);
     // A hint fixes the scale of a number (not of text, labels or bits).
     let numeric = matches!(
         g.kind,
@@ -60,7 +60,7 @@ fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit, hint: Option<&super:
     let scale = match (hint, numeric) {
         (Some(h), true) => u.last_raw(table, g).map(|raw| {
             let (scale, said) = super::hint::scale_from(h.value, raw, matches!(g.kind, Kind::F32 { .. }));
-            let _ = writeln!(s, "# hint: {}", one_line(&said));
+            let _ = writeln!(s, "# hint: {}", comment(&said));
             scale
         }),
         (Some(h), false) => {
@@ -153,7 +153,7 @@ pub fn text(l: &Learner) -> String {
                     short_table(t),
                     g.address,
                     g.kind.name(),
-                    one_line(&g.evidence),
+                    comment(&g.evidence),
                     g.confidence
                 );
             }

@@ -360,10 +360,10 @@ impl Probe {
         let _ = writeln!(
             s,
             "# Skeleton by `mbtap probe` of unit {unit} at {} — read only; names are placeholders.",
-            crate::profile::import::one_line(target)
+            crate::profile::escape::comment(target)
         );
         if let Some(why) = &self.stopped {
-            let _ = writeln!(s, "# The probe stopped early: {}", crate::profile::import::one_line(why));
+            let _ = writeln!(s, "# The probe stopped early: {}", crate::profile::escape::comment(why));
         }
         let _ = writeln!(
             s,

@@ -13,8 +13,8 @@ use std::fmt::Write as _;
 use serde_json::{Value, json};
 
 use super::Table;
+use super::escape::{comment, toml_str, yaml_doc};
 use super::format::{ValueType, WordOrder};
-use super::import::toml_str;
 use super::model::Profile;
 
 /// The tools a profile exports to.
@@ -32,13 +32,6 @@ pub struct Exported {
     /// Registers left out, each with why.
     pub skipped: Vec<String>,
     pub written: usize,
-}
-
-/// Errors of an export.
-#[derive(Debug, thiserror::Error)]
-pub enum ExportError {
-    #[error("writing YAML: {0}")]
-    Yaml(String),
 }
 
 /// One thing a profile defines, at its first address (a date/time group as one entry per part:
@@ -128,31 +121,28 @@ const fn is_register(t: Table) -> bool {
     matches!(t, Table::HoldingRegisters | Table::InputRegisters)
 }
 
-/// Exports `p` (for unit `unit`) to `target`.
-///
-/// # Errors
-/// Only if the YAML serialiser fails.
-pub fn export(p: &Profile, unit: u8, target: Target) -> Result<Exported, ExportError> {
+/// Exports `p` (for unit `unit`) to `target`. Every string from the profile goes through the
+/// target's own quoting ([`super::escape`]): it stays a value whatever it holds.
+#[must_use]
+pub fn export(p: &Profile, unit: u8, target: Target) -> Exported {
     match target {
         Target::HomeAssistant => home_assistant(p, unit),
         Target::Esphome => esphome(p, unit),
-        Target::Telegraf => Ok(telegraf(p, unit)),
+        Target::Telegraf => telegraf(p, unit),
     }
 }
 
-fn yaml(v: &Value) -> Result<String, ExportError> {
-    serde_norway::to_string(v).map_err(|e| ExportError::Yaml(e.to_string()))
-}
-
+/// The file's first line: the device and profile names as comment text (no line break a YAML
+/// 1.1 or TOML reader knows can be in it).
 fn header(p: &Profile, what: &str) -> String {
     format!(
-        "# {what} for {} — exported by `mbtap profiles export` from profile {:?}.\n",
-        p.meta.device.replace(['\n', '\r'], " "),
-        p.meta.name
+        "# {what} for {} - exported by `mbtap profiles export` from profile \"{}\".\n",
+        comment(&p.meta.device),
+        comment(&p.meta.name)
     )
 }
 
-fn home_assistant(p: &Profile, unit: u8) -> Result<Exported, ExportError> {
+fn home_assistant(p: &Profile, unit: u8) -> Exported {
     let mut out = Exported::default();
     let (mut sensors, mut binary) = (Vec::new(), Vec::new());
     for it in items(p) {
@@ -220,8 +210,8 @@ fn home_assistant(p: &Profile, unit: u8) -> Result<Exported, ExportError> {
     }
     out.text = header(p, "Home Assistant `modbus:` configuration")
         + "# Set type/host/port for your site (or type: serial with port, baudrate, bytesize, parity, stopbits, method: rtu).\n"
-        + &yaml(&json!({ "modbus": [Value::Object(hub)] }))?;
-    Ok(out)
+        + &yaml_doc(&json!({ "modbus": [Value::Object(hub)] }));
+    out
 }
 
 /// An ESPHome node name: lower case letters, digits and hyphens.
@@ -232,7 +222,7 @@ fn node_name(s: &str) -> String {
     format!("mbtap-{}", if n.is_empty() { "device" } else { &n })
 }
 
-fn esphome(p: &Profile, unit: u8) -> Result<Exported, ExportError> {
+fn esphome(p: &Profile, unit: u8) -> Exported {
     let mut out = Exported::default();
     let (mut sensors, mut binary, mut text) = (Vec::new(), Vec::new(), Vec::new());
     for it in items(p) {
@@ -324,8 +314,8 @@ fn esphome(p: &Profile, unit: u8) -> Result<Exported, ExportError> {
     }
     out.text = header(p, "ESPHome configuration")
         + "# Set the board and the UART pins for your hardware (and flow_control_pin under modbus: for an RS-485 driver).\n"
-        + &yaml(&Value::Object(doc))?;
-    Ok(out)
+        + &yaml_doc(&Value::Object(doc));
+    out
 }
 
 fn telegraf(p: &Profile, unit: u8) -> Exported {
@@ -396,15 +386,15 @@ mod tests {
     fn every_target_writes_every_register_it_can_and_says_what_it_cannot() {
         let p = mk4();
         for target in [Target::HomeAssistant, Target::Esphome, Target::Telegraf] {
-            let e = export(&p, 1, target).expect("exports");
+            let e = export(&p, 1, target);
             assert!(e.written > 20, "{target:?}: {}", e.written);
             assert!(!e.text.is_empty());
         }
         // The YAML reads back as the data it was made from.
-        let ha = export(&p, 1, Target::HomeAssistant).expect("exports");
+        let ha = export(&p, 1, Target::HomeAssistant);
         let v: serde_norway::Value = serde_norway::from_str(&ha.text).expect("YAML");
         assert_eq!(v["modbus"][0]["sensors"][0]["slave"].as_u64(), Some(1));
-        let t = export(&p, 7, Target::Telegraf).expect("exports");
+        let t = export(&p, 7, Target::Telegraf);
         let v: toml::Value = toml::from_str(&t.text).expect("TOML");
         assert_eq!(v["inputs"]["modbus"][0]["slave_id"].as_integer(), Some(7));
     }

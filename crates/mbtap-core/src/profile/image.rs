@@ -125,12 +125,13 @@ impl RegisterImage {
     }
 
     /// The image as CSV: `unit,table,address,name,raw,value,unit_of_measure,t_ns,transaction`,
-    /// names and scaled values from the unit's profile when there is one.
+    /// names and scaled values from the unit's profile when there is one; text cells a spreadsheet
+    /// would run as a formula are neutralised ([`super::escape::csv_cell`]).
     #[must_use]
     pub fn to_csv(&self, profiles: &BTreeMap<u8, super::Profile>) -> String {
         let mut out = String::from("unit,table,address,name,raw,value,unit_of_measure,t_ns,transaction\n");
         for row in self.rows(profiles) {
-            let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+            let quote = |s: &str| super::escape::csv_cell(s);
             let _ = writeln!(
                 out,
                 "{},{},{},{},{},{},{},{},{}",
@@ -327,5 +328,21 @@ mod serve_tests {
         let img = image();
         assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 2, 1_500, Some(500)), Ok(vec![7, 8]));
         assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 2, 1_501, Some(500)), Err(GATEWAY_TARGET_FAILED));
+    }
+
+    /// Issue 39: a register named like a formula is written as text a spreadsheet shows, not runs
+    /// (round start: `=HYPERLINK(…)` went verbatim into the cell).
+    #[test]
+    fn formula_names_in_the_csv_image_are_neutralised() {
+        let img = image();
+        let profile = crate::profile::load(
+            "f.toml",
+            "[profile]\nname = \"f\"\ndevice = \"f\"\n[[holding_registers]]\naddress = 100\nname = \"=HYPERLINK(\\\"http://x\\\")\"\nunit = \"@SUM(A1)\"\n",
+        )
+        .expect("loads");
+        let csv = img.to_csv(&BTreeMap::from([(1, profile)]));
+        let row = csv.lines().find(|l| l.starts_with("1,holding_registers,100,")).expect("row");
+        assert!(row.contains(",\"'=HYPERLINK(\"\"http://x\"\")\","), "{row}");
+        assert!(row.contains(",\"'@SUM(A1)\","), "{row}");
     }
 }

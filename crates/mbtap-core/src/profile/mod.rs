@@ -4,6 +4,7 @@
 
 pub mod annotate;
 pub mod builtin;
+pub mod escape;
 pub mod export;
 pub mod format;
 pub mod image;

@@ -13,6 +13,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use crate::profile::Table;
+use crate::profile::escape::{comment, toml_str};
 use crate::profile::format::{Access, ValueType, WordOrder};
 
 /// One coil, input or register read from the source.
@@ -120,23 +121,23 @@ impl Imported {
     #[must_use]
     pub fn to_toml(&self, name: &str, device: &str, source: &str) -> String {
         let mut s = String::new();
-        let _ = writeln!(s, "# Imported by `mbtap profiles import` from {}.", one_line(source));
+        let _ = writeln!(s, "# Imported by `mbtap profiles import` from {}.", comment(source));
         for n in &self.notes {
-            let _ = writeln!(s, "# {}", one_line(n));
+            let _ = writeln!(s, "# {}", comment(n));
         }
         if !self.problems.is_empty() {
             let _ =
                 writeln!(s, "# {} row(s) or entries were not imported (see the import's output).", self.problems.len());
         }
         let _ = writeln!(s, "\n[profile]\nname = {}\ndevice = {}", toml_str(name), toml_str(device));
-        let _ = writeln!(s, "document = {}", toml_str(&format!("imported from {}", one_line(source))));
+        let _ = writeln!(s, "document = {}", toml_str(&format!("imported from {}", comment(source))));
         let mut points: Vec<&Point> = self.points.iter().collect();
         points.sort_by_key(|p| (p.table, p.address));
         for p in points {
             let _ = writeln!(
                 s,
                 "\n# {}\n[[{}]]\naddress = {}\nname = {}",
-                one_line(&p.origin),
+                comment(&p.origin),
                 p.table.name(),
                 p.address,
                 toml_str(&p.name)
@@ -187,28 +188,4 @@ pub const fn type_name(t: ValueType) -> &'static str {
         ValueType::String => "string",
         ValueType::Datetime => "datetime",
     }
-}
-
-/// A TOML basic string: quotes, backslashes and control characters escaped.
-#[must_use]
-pub fn toml_str(s: &str) -> String {
-    let mut out = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if c.is_control() => {
-                let _ = write!(out, "\\u{:04X}", u32::from(c));
-            }
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
-}
-
-/// Text for a one-line comment: control characters as spaces.
-#[must_use]
-pub fn one_line(s: &str) -> String {
-    s.chars().map(|c| if c.is_control() { ' ' } else { c }).collect()
 }
