@@ -74,6 +74,10 @@ pub struct ImportArgs {
     /// The workbook sheet to read (default: the first).
     #[arg(long)]
     pub sheet: Option<String>,
+    /// Replace a profile file that already exists (without it, an existing file is kept and
+    /// the import refused).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `profiles export`.
@@ -351,7 +355,15 @@ fn write_imported(
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         dir.join(format!("{name}.toml"))
     };
-    std::fs::write(&out, &toml).with_context(|| format!("writing {}", out.display()))?;
+    write_profile_file(&out, &toml, args.force)?;
+    if args.output.is_none() && mbtap_core::profile::builtin::get(&name).is_some() {
+        writeln!(
+            err,
+            "mbtap: warning: {name} is also a built-in profile, which is found first by that name; \
+             use the file ({}) or import again with another --name",
+            out.display()
+        )?;
+    }
     writeln!(
         err,
         "mbtap: wrote {} ({}): {} holding registers, {} input registers, {} coils, {} discrete inputs; {} skipped",
@@ -364,6 +376,34 @@ fn write_imported(
         all.problems.len()
     )?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// Writes a profile to `path` without ever writing through a link placed there: a new file is
+/// created exclusively (`O_EXCL` refuses an existing file or symlink); with `force`, the text goes
+/// to a new temporary file beside it that then replaces the path itself (a symlink is replaced,
+/// not followed).
+fn write_profile_file(path: &std::path::Path, text: &str, force: bool) -> anyhow::Result<()> {
+    let exclusive = |p: &std::path::Path| std::fs::OpenOptions::new().write(true).create_new(true).open(p);
+    if !force {
+        let mut f = match exclusive(path) {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => anyhow::bail!(
+                "{} already exists (a profile or a link): kept as it is; give --force to replace it, or another --name/-o",
+                path.display()
+            ),
+            Err(e) => return Err(e).with_context(|| format!("creating {}", path.display())),
+        };
+        return f.write_all(text.as_bytes()).with_context(|| format!("writing {}", path.display()));
+    }
+    let tmp = path.with_extension(format!("toml.new-{}", std::process::id()));
+    let mut f = exclusive(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    let written = f.write_all(text.as_bytes()).and_then(|()| f.sync_all());
+    drop(f);
+    if let Err(e) = written.and_then(|()| std::fs::rename(&tmp, path)) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("replacing {}", path.display()));
+    }
+    Ok(())
 }
 
 /// `profiles export`.

@@ -328,3 +328,56 @@ fn hostile_strings_stay_values_in_every_export() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `profiles import FILE --name NAME` into its own profile directory, with `extra` options.
+fn import_into(dir: &Path, name: &str, extra: &[&str]) -> Output {
+    let f = fixture("pump-modicon6.csv");
+    let mut args = vec!["profiles", "import", f.to_str().unwrap(), "--name", name];
+    args.extend_from_slice(extra);
+    Command::new(MBTAP).args(&args).env("MBTAP_PROFILE_DIR", dir).output().unwrap()
+}
+
+/// Issue 39: an import never replaces a profile without `--force` (round start: a hand-tuned
+/// profile of the same name was overwritten without a word), and never writes through a link
+/// placed in the profile directory — with `--force` the link itself is replaced.
+#[test]
+fn import_keeps_an_existing_profile_and_never_writes_through_a_link() {
+    let dir = std::env::temp_dir().join(format!("mbtap-import-force-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let mine = dir.join("pump.toml");
+    std::fs::write(&mine, "# hand-tuned\n").unwrap();
+    let o = import_into(&dir, "pump", &[]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("already exists") && err.contains("--force"), "{err}");
+    assert_eq!(std::fs::read_to_string(&mine).unwrap(), "# hand-tuned\n");
+    let o = import_into(&dir, "pump", &["--force"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read_to_string(&mine).unwrap().contains("[profile]"));
+
+    let outside = dir.join("outside.txt");
+    std::fs::write(&outside, "keep me\n").unwrap();
+    let link = dir.join("linked.toml");
+    std::os::unix::fs::symlink(&outside, &link).unwrap();
+    assert!(!import_into(&dir, "linked", &[]).status.success());
+    assert_eq!(std::fs::read_to_string(&outside).unwrap(), "keep me\n");
+    assert!(import_into(&dir, "linked", &["--force"]).status.success());
+    assert_eq!(std::fs::read_to_string(&outside).unwrap(), "keep me\n", "written through the link");
+    assert!(!std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 3, "no temporary file left");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 39: a name a built-in profile already has is written, and the user told that the
+/// built-in is what the name finds (round start: said nothing).
+#[test]
+fn an_import_named_like_a_built_in_is_said_to_be_shadowed() {
+    let dir = std::env::temp_dir().join(format!("mbtap-import-shadow-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let o = import_into(&dir, "mk4", &[]);
+    assert!(o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("also a built-in profile"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
