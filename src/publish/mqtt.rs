@@ -436,15 +436,20 @@ impl Mqtt {
                 mbtap_core::sparkplug::node::MAX_METRICS
             );
         }
-        let held = match &ob.spool {
+        let mut held = match &ob.spool {
             Some(s) if !s.is_empty() => format!("; {} held on disk for the next run ({} bytes)", ob.held, s.bytes()),
             Some(s) if s.dropped > 0 => format!("; {} held messages dropped (the buffer was full)", s.dropped),
             _ => String::new(),
         };
-        eprintln!(
-            "mbtap: mqtt: {} messages queued for the broker, {} dropped (queue full or broker away){held}",
-            ob.published, ob.dropped
-        );
+        let mut why = "queue full or broker away";
+        if let Some(s) = ob.spool.as_ref().filter(|s| s.unwritable > 0) {
+            why = "queue full, broker away, or the buffer could not be written";
+            held += &format!("; {} could not be written to the buffer", s.unwritable);
+        }
+        if let Some(s) = ob.spool.as_ref().filter(|s| s.aside > 0) {
+            held += &format!("; {} file(s) in the buffer left aside unread (said above)", s.aside);
+        }
+        eprintln!("mbtap: mqtt: {} messages queued for the broker, {} dropped ({why}){held}", ob.published, ob.dropped);
     }
 
     /// What became of a write the broker asked for: published on `PREFIX/unit/U/write` (plain;
