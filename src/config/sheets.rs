@@ -2,18 +2,47 @@
 //! are not UTF-8 kept as replacement characters) and XLSX/XLS/ODS through calamine — row and
 //! column numbers as the spreadsheet shows them, so a problem's "row 7, column C" is where the
 //! user looks.
+//!
+//! Bounded before anything is allocated (issue 39): a CSV over [`MAX_FILE_BYTES`] or a workbook
+//! that unpacks to more than [`MAX_UNPACKED_BYTES`] is refused unread; cells go into a compact
+//! [`Grid`] with its own row, column and text bounds; an XLSX sheet is read cell by cell, so a
+//! cell placed at XFD1048576 costs one cell, not a dense range of 17 billion.
 
+use std::io::Read as _;
 use std::path::Path;
 
 use anyhow::Context as _;
-use calamine::{Data, Reader as _};
+use calamine::{Data, DataRef, Reader as _};
+use mbtap_core::profile::import::grid::{Grid, MAX_COLUMNS, MAX_ROWS};
+
+/// The largest CSV read (64 MiB; the largest register sheet — every address of four tables at
+/// 200 bytes a row — is ~52 MB).
+pub const MAX_FILE_BYTES: u64 = 64 << 20;
+/// The most a workbook may unpack to, all its parts together (a zip bomb is refused by its
+/// directory before anything is unpacked).
+pub const MAX_UNPACKED_BYTES: u64 = 128 << 20;
+
+/// Said when a sheet is over a bound: which, and what to do.
+fn too_big(path: &Path, what: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{}: {what}; a register sheet is far smaller — export only the register table (or give --sheet), or split it",
+        path.display()
+    )
+}
 
 /// The rows of a CSV file.
 ///
 /// # Errors
-/// The file cannot be read, or a record cannot be parsed (with its line).
-pub fn read_csv(path: &Path) -> anyhow::Result<Vec<Vec<String>>> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+/// The file cannot be read, is over [`MAX_FILE_BYTES`] or the grid's bounds, or a record cannot
+/// be parsed (with its line).
+pub fn read_csv(path: &Path) -> anyhow::Result<Grid> {
+    let file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let len = file.metadata().with_context(|| format!("reading {}", path.display()))?.len();
+    if len > MAX_FILE_BYTES {
+        return Err(too_big(path, &format!("{len} bytes, over the {MAX_FILE_BYTES} a sheet may have")));
+    }
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    file.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes).with_context(|| format!("reading {}", path.display()))?;
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
     // The delimiter the first lines use most: European sheets use `;` (the comma is their
     // decimal point), exports from databases tabs.
@@ -24,12 +53,32 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Vec<Vec<String>>> {
     let delimiter = [b',', b';', b'\t'].into_iter().max_by_key(|&d| count(d)).unwrap_or(b',');
     let mut reader =
         csv::ReaderBuilder::new().has_headers(false).flexible(true).delimiter(delimiter).from_reader(bytes);
-    let mut rows = Vec::new();
-    for (i, record) in reader.byte_records().enumerate() {
-        let record = record.with_context(|| format!("{}: record {}", path.display(), i + 1))?;
-        rows.push(record.iter().map(|c| String::from_utf8_lossy(c).into_owned()).collect());
+    let mut grid = Grid::new();
+    let mut record = csv::ByteRecord::new();
+    let mut i = 0usize;
+    while reader.read_byte_record(&mut record).with_context(|| format!("{}: record {}", path.display(), i + 1))? {
+        i += 1;
+        grid.push_row(record.iter().map(String::from_utf8_lossy))
+            .map_err(|e| too_big(path, &format!("at record {i}: {e}")))?;
     }
-    Ok(rows)
+    Ok(grid)
+}
+
+/// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`], by its
+/// central directory (the sizes it declares; the reader stops at them).
+fn check_unpacked(path: &Path) -> anyhow::Result<()> {
+    let Ok(file) = std::fs::File::open(path) else { return Ok(()) };
+    // Not a zip (XLS is not): nothing to check here.
+    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(()) };
+    let mut total = 0u64;
+    for i in 0..zip.len() {
+        let size = zip.by_index_raw(i).map_or(0, |f| f.size());
+        total = total.saturating_add(size);
+    }
+    if total > MAX_UNPACKED_BYTES {
+        return Err(too_big(path, &format!("unpacks to {total} bytes, over the {MAX_UNPACKED_BYTES} read")));
+    }
+    Ok(())
 }
 
 /// A cell as text: whole numbers without `.0`, as the sheet shows them.
@@ -46,11 +95,68 @@ fn cell_text(d: &Data) -> String {
     }
 }
 
+/// A cell read by the streaming XLSX reader as text, like [`cell_text`].
+fn cell_ref_text(d: &DataRef<'_>) -> String {
+    match d {
+        DataRef::SharedString(s) => (*s).to_owned(),
+        DataRef::String(s) | DataRef::DateTimeIso(s) | DataRef::DurationIso(s) => s.clone(),
+        DataRef::Int(i) => cell_text(&Data::Int(*i)),
+        DataRef::Float(f) => cell_text(&Data::Float(*f)),
+        DataRef::Bool(b) => b.to_string(),
+        DataRef::DateTime(t) => t.as_f64().to_string(),
+        DataRef::Error(e) => format!("#{e:?}"),
+        DataRef::Empty => String::new(),
+    }
+}
+
+/// An XLSX sheet read cell by cell into rows: cells past [`MAX_COLUMNS`] counted, a row past
+/// [`MAX_ROWS`] refused — nothing is allocated for the empty space between cells.
+fn read_xlsx_cells<RS: std::io::Read + std::io::Seek>(
+    wb: &mut calamine::Xlsx<RS>,
+    name: &str,
+    path: &Path,
+) -> anyhow::Result<Grid> {
+    let mut cells =
+        wb.worksheet_cells_reader(name).with_context(|| format!("{}: reading sheet {name:?}", path.display()))?;
+    let mut grid = Grid::new();
+    let mut row: Vec<String> = Vec::new();
+    let mut at_row = 0usize;
+    let mut cut = 0u64;
+    while let Some(cell) = cells.next_cell().with_context(|| format!("{}: reading sheet {name:?}", path.display()))? {
+        let (r, c) = cell.get_position();
+        let (r, c) = (r as usize, c as usize);
+        if r >= MAX_ROWS {
+            return Err(too_big(path, &format!("a cell at row {} (over {MAX_ROWS} rows)", r + 1)));
+        }
+        if r < at_row {
+            // Rows out of order (a hand-made file): what was read is kept, the rest ignored.
+            continue;
+        }
+        while at_row < r {
+            grid.push_row(row.drain(..)).map_err(|e| too_big(path, &e.to_string()))?;
+            at_row += 1;
+        }
+        if c >= MAX_COLUMNS {
+            cut += 1;
+            continue;
+        }
+        if row.len() <= c {
+            row.resize(c + 1, String::new());
+        }
+        row[c] = cell_ref_text(cell.get_value());
+    }
+    grid.push_row(row.drain(..)).map_err(|e| too_big(path, &e.to_string()))?;
+    grid.cut_cells += cut;
+    Ok(grid)
+}
+
 /// The rows of a workbook's sheet `sheet` (by name), or its first.
 ///
 /// # Errors
-/// The workbook cannot be opened, or has no such sheet (the ones it has are named).
-pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Vec<Vec<String>>> {
+/// The workbook cannot be opened, unpacks to more than [`MAX_UNPACKED_BYTES`], is over the
+/// grid's bounds, or has no such sheet (the ones it has are named).
+pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
+    check_unpacked(path)?;
     let mut wb = calamine::open_workbook_auto(path).with_context(|| format!("opening {}", path.display()))?;
     let names = wb.sheet_names();
     let name = match sheet {
@@ -61,14 +167,24 @@ pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Vec<Vec
             .with_context(|| format!("{}: no sheet {s:?} (it has: {})", path.display(), names.join(", ")))?,
         None => names.first().cloned().with_context(|| format!("{}: no sheets", path.display()))?,
     };
+    if let calamine::Sheets::Xlsx(x) = &mut wb {
+        return read_xlsx_cells(x, &name, path);
+    }
+    // XLS, XLSB and ODS have no cell-by-cell reader: their range is read whole (an XLS is at
+    // most 65 536 × 256 cells; ODS and XLSB are bounded by what they unpack to, checked above).
     let range = wb.worksheet_range(&name).with_context(|| format!("{}: reading sheet {name:?}", path.display()))?;
     // The range starts at its first used cell; pad so rows and columns are the sheet's own.
     let (row0, col0) = range.start().map_or((0, 0), |(r, c)| (r as usize, c as usize));
-    let mut rows: Vec<Vec<String>> = vec![Vec::new(); row0];
-    for r in range.rows() {
-        let mut cells = vec![String::new(); col0];
-        cells.extend(r.iter().map(cell_text));
-        rows.push(cells);
+    if row0.saturating_add(range.height()) > MAX_ROWS {
+        return Err(too_big(path, &format!("{} rows, over {MAX_ROWS}", row0.saturating_add(range.height()))));
     }
-    Ok(rows)
+    let mut grid = Grid::new();
+    for _ in 0..row0 {
+        grid.push_row(std::iter::empty::<&str>()).map_err(|e| too_big(path, &e.to_string()))?;
+    }
+    for r in range.rows() {
+        let cells = std::iter::repeat_n(String::new(), col0.min(MAX_COLUMNS)).chain(r.iter().map(cell_text));
+        grid.push_row(cells).map_err(|e| too_big(path, &e.to_string()))?;
+    }
+    Ok(grid)
 }

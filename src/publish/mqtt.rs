@@ -9,6 +9,7 @@
 //! reconnects every second while the broker is away.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write as _;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -444,10 +445,10 @@ impl Mqtt {
         let mut why = "queue full or broker away";
         if let Some(s) = ob.spool.as_ref().filter(|s| s.unwritable > 0) {
             why = "queue full, broker away, or the buffer could not be written";
-            held += &format!("; {} could not be written to the buffer", s.unwritable);
+            let _ = write!(held, "; {} could not be written to the buffer", s.unwritable);
         }
         if let Some(s) = ob.spool.as_ref().filter(|s| s.aside > 0) {
-            held += &format!("; {} file(s) in the buffer left aside unread (said above)", s.aside);
+            let _ = write!(held, "; {} file(s) in the buffer left aside unread (said above)", s.aside);
         }
         eprintln!("mbtap: mqtt: {} messages queued for the broker, {} dropped ({why}){held}", ob.published, ob.dropped);
     }

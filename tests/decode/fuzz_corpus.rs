@@ -33,6 +33,9 @@ fn run_dir(dir: &Path) -> usize {
             "sunspec" => mbtap_core::fuzzing::sunspec,
             "spool" => mbtap_core::fuzzing::spool,
             "sparkplug" => mbtap_core::fuzzing::sparkplug,
+            "export_escape" => |d| {
+                mbtap_core::fuzzing::export_escape(d);
+            },
             "gateway" => mbtap_gateway::fuzzing::transaction,
             "gateway_transports" => mbtap_gateway::fuzzing::transports,
             other => panic!("{} names no fuzz target ({other})", target.display()),

@@ -162,6 +162,7 @@ pub fn framer(data: &[u8]) {
         let chunk = Chunk { port: PortId(0), t: Timestamp(t), bytes };
         fed += bytes.len();
         rtu.push(&chunk, &mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());
+        assert!(rtu.pending() <= crate::framer::rtu::MAX_PENDING, "the RTU framer holds {} bytes", rtu.pending());
         ascii.push(&chunk, &mut |_e: FrameEvent<'_>| {});
         if step % 7 == 0 {
             rtu.tick(Timestamp(t.wrapping_add(step)), &mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());
@@ -388,7 +389,7 @@ pub fn profile_import(data: &[u8]) {
     use crate::profile::import::{home_assistant, sheet};
     let Some((&mode, rest)) = data.split_first() else { return };
     let text = String::from_utf8_lossy(rest);
-    let rows: Vec<Vec<String>> = text.lines().map(|l| l.split(',').map(str::to_owned).collect()).collect();
+    let rows = crate::profile::import::grid::Grid::from_rows(text.lines().map(|l| l.split(',')));
     let table = [
         None,
         Some(crate::profile::Table::HoldingRegisters),
@@ -563,4 +564,18 @@ pub fn sparkplug(data: &[u8]) {
     let _ = node.update(&String::from_utf8_lossy(data), vec![sample], 5, 3);
     let _ = node.tick(u64::MAX, 4);
     node.offline();
+}
+
+#[cfg(test)]
+mod tests {
+    /// The fuzz target's seed (`fuzz/seeds/export_escape/hostile`): device with U+2028 and
+    /// U+0085 before YAML keys, registers `yes` (unit `kWh`), `1:20` (unit `=cmd`), `<<`, and
+    /// ` a<VT>b` (unit `V`), fields split by 0x01, name and unit by 0x02.
+    const HOSTILE_SEED: &[u8] =
+        b"meter\xe2\x80\xa8shell_command:\x01evil\xc2\x85x\x01yes\x02kWh\x011:20\x02=cmd\x01<<\x01 a\x0bb\x02V";
+
+    #[test]
+    fn every_export_of_hostile_strings_reads_back_as_written() {
+        assert!(super::export_escape(HOSTILE_SEED) >= 3);
+    }
 }

@@ -111,6 +111,18 @@ enum Flush {
 /// Bytes of garbage kept before the oldest are given up as noise, to bound memory.
 const MAX_GARBAGE: usize = 2 * RTU_MAX_LEN;
 
+/// How many bytes a candidate frame start may wait behind it for what decides it (a silence, a
+/// confirming frame, the end of a vendor frame). No RTU frame is longer than [`RTU_MAX_LEN`]
+/// (Serial Line v1.02 §2.5.1), so a candidate with this many bytes after it and still undecided
+/// is not a frame: on a line that never falls silent (a babbling device, a wrong baud rate) the
+/// bytes are decided by structure and the rest counted as noise, and what is held stays bounded
+/// (issue 39: it grew by ~25 bytes of memory per byte heard).
+const MAX_WAIT: usize = 4 * RTU_MAX_LEN;
+
+/// The most bytes the framer holds undecided after any push or tick: the garbage before a
+/// candidate and what the candidate waits for.
+pub const MAX_PENDING: usize = MAX_GARBAGE + MAX_WAIT;
+
 /// The RTU framer for one port.
 #[derive(Debug)]
 pub struct RtuFramer {
@@ -291,7 +303,11 @@ impl RtuFramer {
             if !flushing && self.wait_at == self.garbage && live_len - self.garbage < self.wait_for {
                 break;
             }
-            match self.try_frame_at(self.garbage, flushing) {
+            let decided = match self.try_frame_at(self.garbage, flushing) {
+                Try::NeedMore(_) if live_len - self.garbage > MAX_WAIT => Try::NotHere,
+                t => t,
+            };
+            match decided {
                 Try::Found(len, reading, alt) => {
                     self.frame_next_at = Some(self.timed.head + self.garbage);
                     self.emit_garbage(self.garbage, emit);
@@ -333,5 +349,37 @@ impl RtuFramer {
         if let Some(dropped) = self.timed.compact() {
             self.glitch_at = self.glitch_at.and_then(|g| g.checked_sub(dropped));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 39: random bytes with no silence the framer can know (64 KiB reads 1 ms apart, a
+    /// 16 ms adapter latency) stay bounded in what is held — the round's start held every byte
+    /// (~25 bytes of memory per byte) — and every byte still comes out exactly once.
+    #[test]
+    fn a_line_that_never_falls_silent_is_held_bounded() {
+        let mut framer = RtuFramer::new(PortId(0), FramerConfig::new(LineSettings::default(), 16_000_000));
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        let (mut fed, mut out, mut most) = (0usize, 0usize, 0usize);
+        for i in 0..32u64 {
+            let bytes: Vec<u8> = (0..65_536)
+                .map(|_| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    x.to_le_bytes()[0]
+                })
+                .collect();
+            fed += bytes.len();
+            let chunk = Chunk { port: PortId(0), t: Timestamp((i + 1) * 1_000_000), bytes: &bytes };
+            framer.push(&chunk, &mut |e: FrameEvent<'_>| out += e.bytes().len());
+            most = most.max(framer.pending());
+        }
+        assert!(most <= MAX_PENDING, "held {most} bytes undecided");
+        framer.finish(&mut |e: FrameEvent<'_>| out += e.bytes().len());
+        assert_eq!(fed, out);
     }
 }

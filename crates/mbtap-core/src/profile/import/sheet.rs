@@ -4,6 +4,7 @@
 
 pub use super::fields::Field;
 use super::fields::field_of;
+use super::grid::{Grid, Row};
 use super::notation::{
     modicon, norm, parse_access, parse_address, parse_scale, parse_table, parse_type, parse_word_order, unit_from_name,
 };
@@ -54,7 +55,7 @@ pub fn letter(i: usize) -> String {
 }
 
 /// Column `spec` (a letter, a 1-based number, or a header text found in `header`).
-fn column_of(spec: &str, header: Option<&[String]>) -> Option<usize> {
+fn column_of(spec: &str, header: Option<Row<'_>>) -> Option<usize> {
     let t = spec.trim();
     if let Ok(n) = t.parse::<usize>() {
         return n.checked_sub(1);
@@ -66,8 +67,8 @@ fn column_of(spec: &str, header: Option<&[String]>) -> Option<usize> {
 }
 
 /// The trimmed, non-empty text of cell `i` of `r`.
-fn cell_at(r: &[String], i: Option<usize>) -> Option<&str> {
-    i.and_then(|i| r.get(i)).map(|s| s.trim()).filter(|s| !s.is_empty())
+fn cell_at<'a>(r: &Row<'a>, i: Option<usize>) -> Option<&'a str> {
+    i.and_then(|i| r.get(i)).map(str::trim).filter(|s| !s.is_empty())
 }
 
 /// Rows searched for the header.
@@ -75,14 +76,14 @@ const HEADER_SEARCH: usize = 50;
 
 /// Reads `rows` (cells as text; row numbers in problems are 1-based, as a spreadsheet shows).
 #[must_use]
-pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
+pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
     let mut out = Imported::default();
     // The header: the first row naming an address column and at least one other.
     let header = rows
-        .iter()
+        .rows()
         .take(HEADER_SEARCH)
         .position(|r| {
-            let fields: Vec<Field> = r.iter().filter_map(|c| field_of(c)).collect();
+            let fields: Vec<Field> = r.iter().filter_map(field_of).collect();
             fields.contains(&Field::Address) && fields.len() >= 2
         })
         .or_else(|| {
@@ -94,11 +95,11 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
                 .filter(|t| t.parse::<usize>().is_err() && (t.len() > 3 || !t.chars().all(|c| c.is_ascii_alphabetic())))
                 .collect();
             (!texts.is_empty()).then_some(())?;
-            rows.iter().take(HEADER_SEARCH).position(|r| texts.iter().all(|t| r.iter().any(|c| norm(c) == *t)))
+            rows.rows().take(HEADER_SEARCH).position(|r| texts.iter().all(|t| r.iter().any(|c| norm(c) == *t)))
         });
     let mut columns: Vec<(Field, usize)> = Vec::new();
     if let Some(h) = header {
-        for (i, c) in rows[h].iter().enumerate() {
+        for (i, c) in rows.row(h).iter().enumerate() {
             if let Some(f) = field_of(c)
                 && !columns.iter().any(|(g, _)| *g == f)
             {
@@ -107,7 +108,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
         }
     }
     for (f, spec) in &opts.columns {
-        match column_of(spec, header.map(|h| rows[h].as_slice())) {
+        match column_of(spec, header.map(|h| rows.row(h))) {
             Some(i) => {
                 columns.retain(|(g, _)| g != f);
                 columns.push((*f, i));
@@ -142,11 +143,18 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
         None => format!("no header row; columns given: {}", described.join(", ")),
     });
     let first_data = header.map_or(0, |h| h + 1);
+    if rows.cut_cells > 0 {
+        out.notes.push(format!(
+            "{} cell(s) past column {} not read (a register sheet has a dozen columns)",
+            rows.cut_cells,
+            letter(super::grid::MAX_COLUMNS - 1)
+        ));
+    }
 
     // Modicon numbers are a property of the sheet: every address reads as one (5 or 6 digits,
     // the table's digit first, counted from 1) and the sheet names no table of its own.
     let addresses: Vec<_> =
-        rows[first_data..].iter().filter_map(|r| r.get(address_col).and_then(|a| parse_address(a).ok())).collect();
+        rows.rows().skip(first_data).filter_map(|r| r.get(address_col).and_then(|a| parse_address(a).ok())).collect();
     let use_modicon =
         col(Field::Table).is_none() && !addresses.is_empty() && addresses.iter().all(|&a| modicon(a).is_some());
     if use_modicon {
@@ -154,7 +162,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
             "addresses are Modicon register numbers (30001 = input register 0, 40001 = holding register 0)".into(),
         );
     }
-    for (i, r) in rows.iter().enumerate().skip(first_data) {
+    for (i, r) in rows.rows().enumerate().skip(first_data) {
         let at = format!("row {}", i + 1);
         if r.iter().all(|c| c.trim().is_empty()) {
             continue;
@@ -164,8 +172,8 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
             column: column.and_then(|f| col(f).map(|c| format!("column {} ({})", letter(c), f.key()))),
             why,
         };
-        let Some(addr_text) = cell_at(r, col(Field::Address)) else {
-            let text: Vec<&str> = r.iter().map(|c| c.trim()).filter(|c| !c.is_empty()).collect();
+        let Some(addr_text) = cell_at(&r, col(Field::Address)) else {
+            let text: Vec<&str> = r.iter().map(str::trim).filter(|c| !c.is_empty()).collect();
             out.problems.push(problem(
                 Some(Field::Address),
                 format!("no address (a section title or a note?): {:?}", text.join(" | ")),
@@ -184,7 +192,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
                 continue;
             }
         };
-        let row_table = match cell_at(r, col(Field::Table)).map(parse_table) {
+        let row_table = match cell_at(&r, col(Field::Table)).map(parse_table) {
             Some(Err(e)) => {
                 out.problems.push(problem(Some(Field::Table), e));
                 continue;
@@ -211,7 +219,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
                 continue;
             }
         };
-        let (value_type, type_len) = match cell_at(r, col(Field::Type)).map(parse_type) {
+        let (value_type, type_len) = match cell_at(&r, col(Field::Type)).map(parse_type) {
             Some(Err(e)) => {
                 out.problems.push(problem(Some(Field::Type), e));
                 continue;
@@ -220,7 +228,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
             None if matches!(table, Table::Coils | Table::DiscreteInputs) => (ValueType::Bool, None),
             None => (ValueType::U16, None),
         };
-        let length = match cell_at(r, col(Field::Length)).map(|l| l.trim_end_matches(".0").parse::<u16>()) {
+        let length = match cell_at(&r, col(Field::Length)).map(|l| l.trim_end_matches(".0").parse::<u16>()) {
             Some(Ok(n)) if n > 0 => Some(n),
             Some(_) => {
                 out.problems.push(problem(Some(Field::Length), "not a number of registers".into()));
@@ -235,7 +243,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
             ));
             continue;
         }
-        let word_order = match cell_at(r, col(Field::WordOrder)).map(parse_word_order) {
+        let word_order = match cell_at(&r, col(Field::WordOrder)).map(parse_word_order) {
             Some(Err(e)) => {
                 out.problems.push(problem(Some(Field::WordOrder), e));
                 continue;
@@ -243,7 +251,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
             Some(Ok(w)) => w,
             None => opts.word_order.unwrap_or_default(),
         };
-        let scale = match cell_at(r, col(Field::Scale)).map(parse_scale) {
+        let scale = match cell_at(&r, col(Field::Scale)).map(parse_scale) {
             Some(Err(e)) => {
                 out.problems.push(problem(Some(Field::Scale), e));
                 continue;
@@ -251,7 +259,7 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
             Some(Ok(s)) => s,
             None => None,
         };
-        let access = match cell_at(r, col(Field::Access)).map(parse_access) {
+        let access = match cell_at(&r, col(Field::Access)).map(parse_access) {
             Some(Err(e)) => {
                 out.problems.push(problem(Some(Field::Access), e));
                 continue;
@@ -259,10 +267,10 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
             Some(Ok(a)) => a,
             None => Access::Read,
         };
-        let (name, unit_in_name) = unit_from_name(cell_at(r, col(Field::Name)).unwrap_or(""));
+        let (name, unit_in_name) = unit_from_name(cell_at(&r, col(Field::Name)).unwrap_or(""));
         let name = if name.is_empty() { format!("reg_{}_{address}", table.word()) } else { name };
-        let unit = cell_at(r, col(Field::Unit)).map(str::to_owned).or(unit_in_name);
-        let description = cell_at(r, col(Field::Description)).map(str::to_owned).filter(|d| *d != name);
+        let unit = cell_at(&r, col(Field::Unit)).map(str::to_owned).or(unit_in_name);
+        let description = cell_at(&r, col(Field::Description)).map(str::to_owned).filter(|d| *d != name);
         out.add(Point {
             table,
             address,
@@ -284,8 +292,8 @@ pub fn parse_sheet(rows: &[Vec<String>], opts: &SheetOptions) -> Imported {
 mod tests {
     use super::*;
 
-    fn rows(text: &str) -> Vec<Vec<String>> {
-        text.lines().map(|l| l.split('|').map(|c| c.trim().to_owned()).collect()).collect()
+    fn rows(text: &str) -> Grid {
+        Grid::from_rows(text.lines().map(|l| l.split('|').map(str::trim)))
     }
 
     #[test]
