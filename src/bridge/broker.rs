@@ -49,6 +49,10 @@ pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Routes>, opts: Arc<ServerOp
     let handle = tokio::runtime::Handle::current();
     let _ = std::thread::Builder::new().name("broker-writes".into()).spawn(move || {
         for ask in asks {
+            if crate::signals::stop_requested() {
+                // Stopping: what still waits is not carried out (the bound keeps it short).
+                break;
+            }
             let outcome = handle.block_on(apply(&ask, &writes, &routes, &opts));
             writes.publisher.write_result(&ask, &outcome, crate::source::serial::now().0);
         }

@@ -379,7 +379,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         "--mqtt-writes with --role rules needs --mqtt-role NAME: the role whose rules judge the broker's writes (e.g. --role ops=functions:6,16 --mqtt-role ops); without one, anyone who can publish on the broker would write under the plain listeners' rules"
     );
     // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
-    let (asks_tx, asks) = std::sync::mpsc::channel();
+    let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);
     let writer = (opts.reverse.is_none()).then_some(asks_tx);
     let publisher = crate::publish::mqtt::Mqtt::start_with(&mqtt, &source, profiles.clone(), true, writer)?;
     if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {

@@ -47,7 +47,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let profiles: mbtap_core::profile::Profiles = profile.iter().map(|p| (unit, p.clone())).collect();
     // No health figures: watch hears only its own answers, not the bus.
     // Writes the broker asks for (`--mqtt-writes`) arrive here and are done between rounds.
-    let (asks_tx, asks) = std::sync::mpsc::channel();
+    /// Broker writes carried out between two rounds of reads.
+    const WRITES_PER_ROUND: usize = 4;
+    let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);
     let mqtt = crate::publish::mqtt::Mqtt::start_with(&args.mqtt, &m.target, profiles, false, Some(asks_tx))?;
     let rt = crate::cmd::runtime()?;
     let mut any_failed = false;
@@ -59,10 +61,25 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         while args.count.is_none_or(|c| round < c) {
             round += 1;
             if let Some(mq) = &mqtt {
-                while let Ok(ask) = asks.try_recv() {
+                // At most WRITES_PER_ROUND writes between two rounds, so polling goes on under a
+                // flood of sets; a stop asked for is honoured between two writes.
+                let mut stopped = false;
+                for ask in asks.try_iter().take(WRITES_PER_ROUND) {
+                    // The stop signal looked at without waiting (polled first, then given up).
+                    tokio::select! {
+                        biased;
+                        () = &mut stop => stopped = true,
+                        () = std::future::ready(()) => {}
+                    }
+                    if stopped {
+                        break;
+                    }
                     let outcome =
                         crate::master::remote::apply(&mut link, unit, &ask, profile.as_ref(), timeout, m.retries).await;
                     mq.write_result(&ask, &outcome, crate::source::serial::now().0);
+                }
+                if stopped {
+                    break;
                 }
             }
             let started = Instant::now();

@@ -15,7 +15,13 @@ use super::spool::Spool;
 /// (so a Sparkplug sequence number is handed to the connection in the order it was counted).
 async fn forwarder(outbox: Arc<Mutex<Outbox>>, connected: Arc<AtomicBool>) {
     loop {
-        let turn = if connected.load(Ordering::SeqCst) { lock(&outbox).forward_some() } else { Forward::Idle };
+        let turn = if connected.load(Ordering::SeqCst) {
+            let mut ob = lock(&outbox);
+            ob.subscribe_commands();
+            ob.forward_some()
+        } else {
+            Forward::Idle
+        };
         match turn {
             // The connection's task runs between two batches (one runtime thread for both).
             Forward::More => tokio::task::yield_now().await,
@@ -66,6 +72,12 @@ pub async fn run(mut eventloop: EventLoop, outbox: Arc<Mutex<Outbox>>, connected
                 }
                 let will = {
                     let mut ob = lock(&outbox);
+                    if let rumqttc::ConnectionError::MqttState(rumqttc::StateError::Deserialization(
+                        rumqttc::mqttbytes::Error::PayloadSizeLimitExceeded(bytes),
+                    )) = &e
+                    {
+                        ob.oversized_message(*bytes, super::mqtt::MAX_PACKET);
+                    }
                     ob.disconnected();
                     ob.will()
                 };

@@ -27,7 +27,7 @@ pub use super::mqtt_options::{MqttArgs, topic_level};
 use super::mqtt_options::{check_prefix, credentials, default_buffer_dir, hostname, parse_url};
 
 /// The largest MQTT packet sent or taken: a DBIRTH of a big device fits many times over.
-const MAX_PACKET: usize = 4 << 20;
+pub const MAX_PACKET: usize = 4 << 20;
 
 /// How long a Sparkplug node waits at start for its first session before it analyses on
 /// (holding what it measures meanwhile).
@@ -124,7 +124,7 @@ impl Mqtt {
         source: &str,
         profiles: Profiles,
         health: bool,
-        writes: Option<std::sync::mpsc::Sender<mbtap_core::query::remote::Ask>>,
+        writes: Option<std::sync::mpsc::SyncSender<mbtap_core::query::remote::Ask>>,
     ) -> anyhow::Result<Option<Arc<Self>>> {
         let Some(url) = &args.mqtt else { return Ok(None) };
         anyhow::ensure!(
@@ -430,6 +430,20 @@ impl Mqtt {
             let _ = done.recv_timeout(Duration::from_secs(2));
         }
         let ob = lock(&self.outbox);
+        if let Some(n) = ob.node.as_ref().filter(|n| n.rebirths_ignored > 0) {
+            eprintln!(
+                "mbtap: mqtt: {} rebirth commands not obeyed (at most one each {} s)",
+                n.rebirths_ignored,
+                mbtap_core::sparkplug::node::REBIRTH_MIN_MS / 1000
+            );
+        }
+        if ob.busy_writes > 0 {
+            eprintln!(
+                "mbtap: mqtt: {} writes from the broker dropped: {} already waited for the line",
+                ob.busy_writes,
+                super::outbox::COMMANDS_WAITING
+            );
+        }
         if let Some(n) = ob.node.as_ref().filter(|n| n.over_limit > 0) {
             eprintln!(
                 "mbtap: mqtt: {} values not published: their device already declares {} metrics (the most one Sparkplug birth carries here)",

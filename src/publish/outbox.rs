@@ -20,6 +20,10 @@ use rumqttc::{AsyncClient, LastWill, QoS};
 
 use super::spool::{Record, Spool};
 
+/// Writes from the broker that may wait for the line at once (watch and the bridge): a bound,
+/// so a flood of commands costs at most this many line writes.
+pub const COMMANDS_WAITING: usize = 32;
+
 /// Held records forwarded per turn before the connection gets to send them.
 const FORWARD_BATCH: usize = 64;
 
@@ -55,7 +59,7 @@ pub struct Outbox {
     /// Since when held messages are being forwarded, and how many were forwarded before.
     forward_start: Option<(std::time::Instant, u64)>,
     /// `--mqtt-writes`: where writes asked for go (the master that carries them out).
-    pub writes: Option<std::sync::mpsc::Sender<Ask>>,
+    pub writes: Option<std::sync::mpsc::SyncSender<Ask>>,
     /// The plain topic prefix (`…/unit/U/…/set` topics are under it).
     pub prefix: String,
     /// Profiles by unit, to find a DCMD metric's register.
@@ -68,6 +72,18 @@ pub struct Outbox {
     pub host: Option<(String, bool)>,
     /// A retained command was ignored and said so (said once a session).
     said_retained: bool,
+    /// Writes dropped because [`COMMANDS_WAITING`] already waited, since start.
+    pub busy_writes: u64,
+    /// Command topics not subscribed until then: a message over the packet limit came on one
+    /// (a retained one comes again at every subscription, and MQTT 3.1.1 has no way to refuse
+    /// it but to drop the connection), and how long the next pause lasts.
+    commands_paused: Option<(std::time::Instant, std::time::Duration)>,
+    /// The command topics are subscribed in this connection.
+    commands_subscribed: bool,
+    /// Messages over the packet limit the broker sent, since start.
+    pub oversized: u64,
+    /// A drop streak was said (cleared when a write is queued again).
+    said_busy: bool,
     /// Sparkplug updates held in memory when there is no disk buffer (at most `memory_cap`,
     /// the oldest dropped and counted): forwarded as historical data like the disk's.
     pub(super) memory: std::collections::VecDeque<Vec<u8>>,
@@ -109,6 +125,11 @@ impl Outbox {
             refused_writes: 0,
             host: None,
             said_retained: false,
+            busy_writes: 0,
+            said_busy: false,
+            commands_paused: None,
+            commands_subscribed: false,
+            oversized: 0,
             memory: std::collections::VecDeque::new(),
             memory_cap: 10_000,
         }
@@ -175,16 +196,8 @@ impl Outbox {
         if let Some((topic, _)) = &self.host {
             let _ = self.client.try_subscribe(topic.clone(), QoS::AtLeastOnce);
         }
-        if let Some(node) = self.node.as_mut() {
-            for t in node.command_topics() {
-                let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
-            }
-        }
-        if self.writes.is_some() && self.node.is_none() {
-            for t in [format!("{}/unit/+/set", self.prefix), format!("{}/unit/+/+/+/set", self.prefix)] {
-                let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
-            }
-        }
+        self.commands_subscribed = false;
+        self.subscribe_commands();
         if let Some(status) = self.status.clone() {
             // Retained, so a late subscriber sees it; replaces the will.
             self.publish_now(&status, QoS::AtLeastOnce, true, b"online".to_vec());
@@ -192,6 +205,43 @@ impl Outbox {
         if self.host_hears() {
             self.born();
         }
+    }
+
+    /// Subscribes to the command topics, unless a pause after an oversized message still runs.
+    /// Called at every connection and, while connected, as time passes (the pause ends).
+    pub(super) fn subscribe_commands(&mut self) {
+        if self.commands_subscribed || !self.connected {
+            return;
+        }
+        if self.commands_paused.is_some_and(|(until, _)| std::time::Instant::now() < until) {
+            return;
+        }
+        let mut topics = Vec::new();
+        if let Some(node) = self.node.as_ref() {
+            topics.extend(node.command_topics());
+        }
+        if self.writes.is_some() && self.node.is_none() {
+            topics.extend([format!("{}/unit/+/set", self.prefix), format!("{}/unit/+/+/+/set", self.prefix)]);
+        }
+        for t in topics {
+            let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
+        }
+        self.commands_subscribed = true;
+    }
+
+    /// The broker sent a message of `bytes` over the packet limit (the connection is lost with
+    /// it): commands are not subscribed for a while — 1 min, doubling to 30 min while it comes
+    /// again — so publishing goes on with one reconnection per pause, not one a second.
+    pub(super) fn oversized_message(&mut self, bytes: usize, limit: usize) {
+        const FIRST: std::time::Duration = std::time::Duration::from_secs(60);
+        const LONGEST: std::time::Duration = std::time::Duration::from_secs(30 * 60);
+        self.oversized += 1;
+        let pause = self.commands_paused.map_or(FIRST, |(_, p)| (p * 2).min(LONGEST));
+        self.commands_paused = Some((std::time::Instant::now() + pause, pause));
+        eprintln!(
+            "mbtap: mqtt: the broker sent a message of {bytes} bytes, over the {limit} taken (a retained command?): commands not taken for {} s, publishing goes on; clear it on the broker (an empty retained message on its topic)",
+            pause.as_secs()
+        );
     }
 
     /// Whether a primary host can hear: none configured, or its STATE says online.
@@ -348,11 +398,23 @@ impl Outbox {
     /// A write asked for: to the master, or refused.
     fn ask(&mut self, ask: Result<Ask, String>) {
         match (ask, &self.writes) {
-            (Ok(ask), Some(tx)) => {
-                if tx.send(ask).is_err() {
-                    self.refuse(None, "the master has stopped");
+            (Ok(ask), Some(tx)) => match tx.try_send(ask) {
+                Ok(()) => self.said_busy = false,
+                // A flood of sets (any publisher of an anonymous broker) must not become hours of
+                // line writes with the polling stopped: past the bound a write is dropped,
+                // counted and said once per streak — no answer is published for each, so the
+                // flood is not echoed back either.
+                Err(std::sync::mpsc::TrySendError::Full(_)) => {
+                    self.busy_writes += 1;
+                    if !self.said_busy {
+                        self.said_busy = true;
+                        eprintln!(
+                            "mbtap: mqtt: {COMMANDS_WAITING} writes from the broker already wait for the line: further ones dropped (counted) until they are done"
+                        );
+                    }
                 }
-            }
+                Err(std::sync::mpsc::TrySendError::Disconnected(_)) => self.refuse(None, "the master has stopped"),
+            },
             (Ok(ask), None) => {
                 let why = format!("{}: writes from the broker are off (start with --mqtt-writes)", ask.item.text);
                 self.refuse(Some(ask.unit), &why);

@@ -14,6 +14,17 @@ use super::payload::{DataType, Metric, Payload, PropertyKind, PropertySet, Prope
 pub const NAMESPACE: &str = "spBv1.0";
 /// The node metric a host sets to ask for a rebirth (§6.4.20, §8.3.1 `Node Control/Rebirth`).
 pub const REBIRTH: &str = "Node Control/Rebirth";
+
+/// The shortest time between two rebirths on command (ms): any client of the broker may publish
+/// an NCMD, and each rebirth republishes every device's birth; requests inside it are counted
+/// in [`EdgeNode::rebirths_ignored`], not obeyed (issue 39: 2 000 NCMDs made 4 000 births).
+pub const REBIRTH_MIN_MS: u64 = 5_000;
+
+/// How long a new device's metrics may keep growing before its DBIRTH goes out anyway (bus
+/// time): a device polled in several blocks is heard block by block, and a DBIRTH must declare
+/// every metric the device will report (Sparkplug B 3.0 §6.4.11, a new metric needs a new
+/// birth) — so its birth waits until its first block is heard again or this has passed.
+pub const BIRTH_SETTLE_NS: u64 = 2_000_000_000;
 /// The birth/death sequence metric (§6.4.19).
 pub const BD_SEQ: &str = "bdSeq";
 /// A unit not heard for this many of its usual poll periods is said dead (DDEATH)…
@@ -72,6 +83,8 @@ struct Device {
     alive: bool,
     /// DBIRTH sent in this session.
     born: bool,
+    /// Bus time the device was first heard: its birth waits until its metrics have settled.
+    first_ns: Option<u64>,
     last_ns: Option<u64>,
     gaps: VecDeque<u64>,
 }
@@ -91,6 +104,10 @@ pub struct EdgeNode {
     min_silence_ns: u64,
     /// Values not published because their device already declares [`MAX_METRICS`].
     pub over_limit: u64,
+    /// When the last rebirth on command was obeyed (ms since the epoch).
+    last_rebirth_ms: Option<u64>,
+    /// Rebirth commands not obeyed: within [`REBIRTH_MIN_MS`] of the last.
+    pub rebirths_ignored: u64,
 }
 
 impl EdgeNode {
@@ -107,6 +124,8 @@ impl EdgeNode {
             devices: BTreeMap::new(),
             min_silence_ns,
             over_limit: 0,
+            last_rebirth_ms: None,
+            rebirths_ignored: 0,
         }
     }
 
@@ -241,8 +260,14 @@ impl EdgeNode {
             }
         }
         dev.last_ns = Some(dev.last_ns.map_or(t_ns, |l| l.max(t_ns)));
+        let first_ns = *dev.first_ns.get_or_insert(t_ns);
+        // A device heard before (it died and came back, or a session began) is born at once
+        // with what it declared; a new one once its metrics have settled.
+        let known_before = !dev.metrics.is_empty();
         let came_back = !dev.alive;
         dev.alive = true;
+        let repeated = samples.iter().any(|s| dev.metrics.contains_key(&s.name));
+        let settled = repeated || t_ns.saturating_sub(first_ns) >= BIRTH_SETTLE_NS;
         let mut changed = Vec::new();
         let mut new_metric = false;
         for s in samples {
@@ -265,8 +290,17 @@ impl EdgeNode {
             return Emit::Hold(serde_json::to_vec(&held).unwrap_or_default());
         }
         let born = self.devices.get(&device).is_some_and(|d| d.born);
-        if !born || came_back || new_metric {
-            return Emit::Send(vec![self.dbirth(&device, now_ms)]);
+        if !born {
+            if settled || (came_back && known_before) {
+                return Emit::Send(vec![self.dbirth(&device, now_ms)]);
+            }
+            return Emit::Send(Vec::new());
+        }
+        if new_metric {
+            // Its birth did not declare this metric: the device dies and is born again with it
+            // (Sparkplug B 3.0 §6.4.11) — a host drops a DBIRTH that is not after a DDEATH.
+            let death = self.ddeath(&device, now_ms);
+            return Emit::Send(vec![death, self.dbirth(&device, now_ms)]);
         }
         if changed.is_empty() {
             return Emit::Send(Vec::new());
@@ -312,17 +346,39 @@ impl EdgeNode {
                 d.gaps.clear();
             }
             if self.online && born {
-                let seq = self.next_seq();
-                let p = Payload { timestamp: Some(now_ms), seq: Some(seq), ..Payload::default() };
-                out.push(Out {
-                    topic: self.topic("DDEATH", Some(&name)),
-                    payload: p.to_bytes(),
-                    qos: 0,
-                    retain: false,
-                });
+                out.push(self.ddeath(&name, now_ms));
+            }
+            if let Some(d) = self.devices.get_mut(&name) {
+                d.first_ns = None;
+            }
+        }
+        // A new device heard once and then not again within the settling time: born now.
+        if self.online {
+            let settled: Vec<String> = self
+                .devices
+                .iter()
+                .filter(|(_, d)| {
+                    d.alive
+                        && !d.born
+                        && !d.metrics.is_empty()
+                        && d.first_ns.is_some_and(|f| t_ns.saturating_sub(f) >= BIRTH_SETTLE_NS)
+                })
+                .map(|(n, _)| n.clone())
+                .collect();
+            for name in settled {
+                out.push(self.dbirth(&name, now_ms));
             }
         }
         out
+    }
+
+    fn ddeath(&mut self, device: &str, now_ms: u64) -> Out {
+        if let Some(d) = self.devices.get_mut(device) {
+            d.born = false;
+        }
+        let seq = self.next_seq();
+        let p = Payload { timestamp: Some(now_ms), seq: Some(seq), ..Payload::default() };
+        Out { topic: self.topic("DDEATH", Some(device)), payload: p.to_bytes(), qos: 0, retain: false }
     }
 
     /// Held updates forwarded in a new session: DDATA whose metrics are `is_historical` with
@@ -370,7 +426,15 @@ impl EdgeNode {
             .metrics
             .iter()
             .any(|m| m.name.as_deref() == Some(REBIRTH) && matches!(m.value, Some(Value::Boolean(true))));
-        if rebirth { self.online(now_ms) } else { Vec::new() }
+        if !rebirth {
+            return Vec::new();
+        }
+        if self.last_rebirth_ms.is_some_and(|last| now_ms.saturating_sub(last) < REBIRTH_MIN_MS) {
+            self.rebirths_ignored += 1;
+            return Vec::new();
+        }
+        self.last_rebirth_ms = Some(now_ms);
+        self.online(now_ms)
     }
 }
 
@@ -446,26 +510,34 @@ mod tests {
         assert_eq!(nbirth.seq, Some(0));
         assert_eq!(nbirth.metrics[0].name.as_deref(), Some(BD_SEQ));
         assert_eq!(nbirth.metrics[1].name.as_deref(), Some(REBIRTH));
-        // A new device: DBIRTH with every metric, its datatype and engineering unit.
-        let out = sends(n.update("mk4-1", vec![sample("Voltage", 230.5.into(), 5)], SEC, 1001));
+        // A new device heard block by block: its birth waits until its first block comes again,
+        // then declares every metric, its datatype and engineering unit.
+        assert!(sends(n.update("mk4-1", vec![sample("Voltage", 230.5.into(), 5)], SEC, 1001)).is_empty());
+        assert!(sends(n.update("mk4-1", vec![sample("Power", 1.into(), 5)], SEC + 1, 1001)).is_empty());
+        let out = sends(n.update("mk4-1", vec![sample("Voltage", 230.5.into(), 6)], 2 * SEC, 1002));
+        assert_eq!(out.len(), 1);
         assert_eq!(out[0].topic, "spBv1.0/plant/DBIRTH/pump_station/mk4-1");
         let dbirth = decode(&out[0]);
         assert_eq!(dbirth.seq, Some(1));
-        assert_eq!(dbirth.metrics[0].datatype, Some(DataType::Double.code()));
-        assert_eq!(dbirth.metrics[0].properties.as_ref().unwrap().keys, ["engUnit"]);
-        // Unchanged: nothing. Changed: DDATA with that metric only.
+        assert_eq!(dbirth.metrics.len(), 2, "both blocks in the one birth");
+        assert_eq!(dbirth.metrics[1].datatype, Some(DataType::Double.code()));
+        assert_eq!(dbirth.metrics[1].properties.as_ref().unwrap().keys, ["engUnit"]);
+        // Unchanged: nothing.
         assert!(sends(n.update("mk4-1", vec![sample("Voltage", 230.5.into(), 6)], 2 * SEC, 1002)).is_empty());
+        // A metric its birth did not declare: DDEATH, then a DBIRTH with it.
         let out = sends(n.update(
             "mk4-1",
             vec![sample("Voltage", 231.0.into(), 7), sample("Current", 4.into(), 7)],
             3 * SEC,
             1003,
         ));
-        assert_eq!(out[0].topic, "spBv1.0/plant/DBIRTH/pump_station/mk4-1", "a metric its birth did not declare");
+        let topics: Vec<&str> = out.iter().map(|o| o.topic.as_str()).collect();
+        assert_eq!(topics, ["spBv1.0/plant/DDEATH/pump_station/mk4-1", "spBv1.0/plant/DBIRTH/pump_station/mk4-1"]);
+        // Changed: DDATA with that metric only.
         let out = sends(n.update("mk4-1", vec![sample("Current", 5.into(), 8)], 4 * SEC, 1004));
         let ddata = decode(&out[0]);
         assert_eq!(out[0].topic, "spBv1.0/plant/DDATA/pump_station/mk4-1");
-        assert_eq!(ddata.seq, Some(3));
+        assert_eq!(ddata.seq, Some(4));
         assert_eq!(ddata.metrics.len(), 1);
         assert_eq!(ddata.metrics[0].value, Some(Value::Long(5)));
         assert_eq!(ddata.metrics[0].timestamp, Some(8));
@@ -478,11 +550,14 @@ mod tests {
         let mut last = None;
         for i in 0..300u64 {
             let out = sends(n.update("d", vec![sample("v", i.into(), i)], i * SEC / 100, i));
-            last = decode(&out[0]).seq;
-            assert!(last.unwrap() < 256);
+            if let Some(o) = out.first() {
+                last = decode(o).seq;
+                assert!(last.unwrap() < 256);
+            }
         }
-        // NBIRTH 0, DBIRTH 1, then 299 DDATA: 300 messages after the NBIRTH → seq 300 mod 256.
-        assert_eq!(last, Some(300 % 256));
+        // NBIRTH 0; the first value settles the device; DBIRTH 1 at the second, then 298 DDATA:
+        // 299 messages after the NBIRTH → seq 299 mod 256.
+        assert_eq!(last, Some(299 % 256));
     }
 
     #[test]
@@ -544,6 +619,27 @@ mod tests {
         assert_eq!(decode(&out[0]).seq, Some(0));
         assert!(n.command("spBv1.0/g/NCMD/other", &cmd.to_bytes(), 5).is_empty());
         assert!(n.command("spBv1.0/g/NCMD/n", b"\xFF\xFF garbage", 5).is_empty());
+        // Issue 39: a flood of rebirths is obeyed at most once per REBIRTH_MIN_MS.
+        for t in 6..1_000 {
+            assert!(n.command("spBv1.0/g/NCMD/n", &cmd.to_bytes(), t).is_empty());
+        }
+        assert_eq!(n.rebirths_ignored, 994);
+        assert_eq!(n.command("spBv1.0/g/NCMD/n", &cmd.to_bytes(), 5 + REBIRTH_MIN_MS).len(), 2);
+    }
+
+    /// Issue 39: a device heard once and then silent for the settling time is born by the tick
+    /// (its birth does not wait for a second poll forever).
+    #[test]
+    fn a_new_device_is_born_once_its_metrics_settle() {
+        let mut n = EdgeNode::new("g", "n", 60 * SEC);
+        n.online(0);
+        assert!(sends(n.update("d", vec![sample("a", 1.into(), 1)], SEC, 1)).is_empty());
+        assert!(sends(n.update("d", vec![sample("b", 1.into(), 1)], SEC + 100, 1)).is_empty());
+        assert!(n.tick(SEC + BIRTH_SETTLE_NS - 1, 2).is_empty());
+        let out = n.tick(SEC + BIRTH_SETTLE_NS, 2);
+        assert_eq!(out.len(), 1);
+        assert_eq!(decode(&out[0]).metrics.len(), 2);
+        assert!(n.tick(SEC + 2 * BIRTH_SETTLE_NS, 3).is_empty(), "born once");
     }
 
     #[test]
@@ -560,7 +656,8 @@ mod tests {
         let mut n = EdgeNode::new("g", "n", 60 * SEC);
         n.online(0);
         let samples: Vec<Sample> = (0..MAX_METRICS + 10).map(|i| sample(&format!("r{i}"), 1.into(), 1)).collect();
-        let out = sends(n.update("d", samples, SEC, 1));
+        assert!(sends(n.update("d", samples, SEC, 1)).is_empty());
+        let out = n.tick(SEC + BIRTH_SETTLE_NS, 1);
         assert_eq!(decode(&out[0]).metrics.len(), MAX_METRICS);
         assert_eq!(n.over_limit, 10);
     }
