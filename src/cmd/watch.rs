@@ -9,6 +9,10 @@ use anyhow::Context as _;
 
 use crate::master::{MasterArgs, MasterFormat, exec, link::Link, show};
 
+/// Broker writes carried out between two rounds of reads (`--mqtt-writes`): polling goes on
+/// under a flood of sets.
+const WRITES_PER_ROUND: usize = 4;
+
 /// Read values again and again: a live table on a terminal, JSON lines in a pipe.
 ///
 /// Example: `mbtap watch /dev/ttyUSB0 --device mk4 --interval 1s 430..433 "Operating mode"`.
@@ -47,8 +51,6 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let profiles: mbtap_core::profile::Profiles = profile.iter().map(|p| (unit, p.clone())).collect();
     // No health figures: watch hears only its own answers, not the bus.
     // Writes the broker asks for (`--mqtt-writes`) arrive here and are done between rounds.
-    /// Broker writes carried out between two rounds of reads.
-    const WRITES_PER_ROUND: usize = 4;
     let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);
     let mqtt = crate::publish::mqtt::Mqtt::start_with(&args.mqtt, &m.target, profiles, false, Some(asks_tx))?;
     let rt = crate::cmd::runtime()?;

@@ -437,10 +437,10 @@ impl Mqtt {
                 mbtap_core::sparkplug::node::REBIRTH_MIN_MS / 1000
             );
         }
-        if ob.busy_writes > 0 {
+        if ob.commands.busy_writes > 0 {
             eprintln!(
                 "mbtap: mqtt: {} writes from the broker dropped: {} already waited for the line",
-                ob.busy_writes,
+                ob.commands.busy_writes,
                 super::outbox::COMMANDS_WAITING
             );
         }

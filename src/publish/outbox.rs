@@ -24,6 +24,25 @@ use super::spool::{Record, Spool};
 /// so a flood of commands costs at most this many line writes.
 pub const COMMANDS_WAITING: usize = 32;
 
+/// What the outbox keeps about the broker's commands.
+#[derive(Debug, Default)]
+pub struct Commands {
+    /// Command topics not subscribed until then: a message over the packet limit came on one
+    /// (a retained one comes again at every subscription, and MQTT 3.1.1 has no way to refuse
+    /// it but to drop the connection), and how long the next pause lasts.
+    paused: Option<(std::time::Instant, std::time::Duration)>,
+    /// The command topics are subscribed in this connection.
+    subscribed: bool,
+    /// A retained command was said (once per run).
+    said_retained: bool,
+    /// A drop streak was said (cleared when a write is queued again).
+    said_busy: bool,
+    /// Writes dropped because [`COMMANDS_WAITING`] already waited, since start.
+    pub busy_writes: u64,
+    /// Messages over the packet limit the broker sent, since start.
+    pub oversized: u64,
+}
+
 /// Held records forwarded per turn before the connection gets to send them.
 const FORWARD_BATCH: usize = 64;
 
@@ -71,19 +90,8 @@ pub struct Outbox {
     /// primary host).
     pub host: Option<(String, bool)>,
     /// A retained command was ignored and said so (said once a session).
-    said_retained: bool,
-    /// Writes dropped because [`COMMANDS_WAITING`] already waited, since start.
-    pub busy_writes: u64,
-    /// Command topics not subscribed until then: a message over the packet limit came on one
-    /// (a retained one comes again at every subscription, and MQTT 3.1.1 has no way to refuse
-    /// it but to drop the connection), and how long the next pause lasts.
-    commands_paused: Option<(std::time::Instant, std::time::Duration)>,
-    /// The command topics are subscribed in this connection.
-    commands_subscribed: bool,
-    /// Messages over the packet limit the broker sent, since start.
-    pub oversized: u64,
-    /// A drop streak was said (cleared when a write is queued again).
-    said_busy: bool,
+    /// The broker's commands: subscriptions and what became of floods.
+    pub commands: Commands,
     /// Sparkplug updates held in memory when there is no disk buffer (at most `memory_cap`,
     /// the oldest dropped and counted): forwarded as historical data like the disk's.
     pub(super) memory: std::collections::VecDeque<Vec<u8>>,
@@ -124,12 +132,7 @@ impl Outbox {
             profiles: Profiles::new(),
             refused_writes: 0,
             host: None,
-            said_retained: false,
-            busy_writes: 0,
-            said_busy: false,
-            commands_paused: None,
-            commands_subscribed: false,
-            oversized: 0,
+            commands: Commands::default(),
             memory: std::collections::VecDeque::new(),
             memory_cap: 10_000,
         }
@@ -196,7 +199,7 @@ impl Outbox {
         if let Some((topic, _)) = &self.host {
             let _ = self.client.try_subscribe(topic.clone(), QoS::AtLeastOnce);
         }
-        self.commands_subscribed = false;
+        self.commands.subscribed = false;
         self.subscribe_commands();
         if let Some(status) = self.status.clone() {
             // Retained, so a late subscriber sees it; replaces the will.
@@ -210,10 +213,10 @@ impl Outbox {
     /// Subscribes to the command topics, unless a pause after an oversized message still runs.
     /// Called at every connection and, while connected, as time passes (the pause ends).
     pub(super) fn subscribe_commands(&mut self) {
-        if self.commands_subscribed || !self.connected {
+        if self.commands.subscribed || !self.connected {
             return;
         }
-        if self.commands_paused.is_some_and(|(until, _)| std::time::Instant::now() < until) {
+        if self.commands.paused.is_some_and(|(until, _)| std::time::Instant::now() < until) {
             return;
         }
         let mut topics = Vec::new();
@@ -226,18 +229,18 @@ impl Outbox {
         for t in topics {
             let _ = self.client.try_subscribe(t, QoS::AtLeastOnce);
         }
-        self.commands_subscribed = true;
+        self.commands.subscribed = true;
     }
 
     /// The broker sent a message of `bytes` over the packet limit (the connection is lost with
     /// it): commands are not subscribed for a while — 1 min, doubling to 30 min while it comes
     /// again — so publishing goes on with one reconnection per pause, not one a second.
     pub(super) fn oversized_message(&mut self, bytes: usize, limit: usize) {
-        const FIRST: std::time::Duration = std::time::Duration::from_secs(60);
-        const LONGEST: std::time::Duration = std::time::Duration::from_secs(30 * 60);
-        self.oversized += 1;
-        let pause = self.commands_paused.map_or(FIRST, |(_, p)| (p * 2).min(LONGEST));
-        self.commands_paused = Some((std::time::Instant::now() + pause, pause));
+        const FIRST: std::time::Duration = std::time::Duration::from_mins(1);
+        const LONGEST: std::time::Duration = std::time::Duration::from_mins(30);
+        self.commands.oversized += 1;
+        let pause = self.commands.paused.map_or(FIRST, |(_, p)| (p * 2).min(LONGEST));
+        self.commands.paused = Some((std::time::Instant::now() + pause, pause));
         eprintln!(
             "mbtap: mqtt: the broker sent a message of {bytes} bytes, over the {limit} taken (a retained command?): commands not taken for {} s, publishing goes on; clear it on the broker (an empty retained message on its topic)",
             pause.as_secs()
@@ -371,8 +374,8 @@ impl Outbox {
             // A command is an act of now: a retained one would be carried out again at every
             // start and reconnect by whoever once left it (issue 39; Sparkplug B 3.0 §6.4.13:
             // NCMD/DCMD are published with retain false). Ignored, said once.
-            if !self.said_retained {
-                self.said_retained = true;
+            if !self.commands.said_retained {
+                self.commands.said_retained = true;
                 eprintln!(
                     "mbtap: mqtt: a retained command on {topic} ignored (commands are carried out only when sent, never from what the broker kept); clear it with an empty retained message"
                 );
@@ -399,15 +402,15 @@ impl Outbox {
     fn ask(&mut self, ask: Result<Ask, String>) {
         match (ask, &self.writes) {
             (Ok(ask), Some(tx)) => match tx.try_send(ask) {
-                Ok(()) => self.said_busy = false,
+                Ok(()) => self.commands.said_busy = false,
                 // A flood of sets (any publisher of an anonymous broker) must not become hours of
                 // line writes with the polling stopped: past the bound a write is dropped,
                 // counted and said once per streak — no answer is published for each, so the
                 // flood is not echoed back either.
                 Err(std::sync::mpsc::TrySendError::Full(_)) => {
-                    self.busy_writes += 1;
-                    if !self.said_busy {
-                        self.said_busy = true;
+                    self.commands.busy_writes += 1;
+                    if !self.commands.said_busy {
+                        self.commands.said_busy = true;
                         eprintln!(
                             "mbtap: mqtt: {COMMANDS_WAITING} writes from the broker already wait for the line: further ones dropped (counted) until they are done"
                         );
