@@ -26,8 +26,14 @@ use super::discovery::{control, discovery, discovery_object};
 pub use super::mqtt_options::{MqttArgs, topic_level};
 use super::mqtt_options::{check_prefix, credentials, default_buffer_dir, hostname, parse_url};
 
-/// The largest MQTT packet sent or taken: a DBIRTH of a big device fits many times over.
+/// The largest MQTT packet sent: a DBIRTH of a big device fits many times over.
 pub const MAX_PACKET: usize = 4 << 20;
+/// The largest packet taken from the broker. Larger than anything mbtap acts on
+/// ([`super::outbox::MAX_COMMAND`]), so an oversized message on a command topic is read and
+/// dropped without losing the connection — MQTT 3.1.1 has no other way to refuse one, and a
+/// retained one would come again at every subscription (issue 39). Past this, the connection
+/// is lost with it and the command topics are paused instead (`Outbox::oversized_message`).
+pub const MAX_INCOMING: usize = 32 << 20;
 
 /// How long a Sparkplug node waits at start for its first session before it analyses on
 /// (holding what it measures meanwhile).
@@ -179,7 +185,7 @@ impl Mqtt {
         options.set_request_channel_capacity(args.mqtt_queue.max(1));
         // rumqttc refuses packets over 10 KiB by default and drops the connection over one: a
         // DBIRTH declaring a device's hundred metrics is bigger (MQTT allows 256 MiB, v3.1.1 §2.2.3).
-        options.set_max_packet_size(MAX_PACKET, MAX_PACKET);
+        options.set_max_packet_size(MAX_INCOMING, MAX_PACKET);
         if let Some((u, p)) = credentials(args)? {
             options.set_credentials(u, p);
         }
@@ -435,6 +441,13 @@ impl Mqtt {
                 "mbtap: mqtt: {} rebirth commands not obeyed (at most one each {} s)",
                 n.rebirths_ignored,
                 mbtap_core::sparkplug::node::REBIRTH_MIN_MS / 1000
+            );
+        }
+        if ob.commands.oversized > 0 {
+            eprintln!(
+                "mbtap: mqtt: {} messages from the broker dropped as too long (commands are at most {} bytes)",
+                ob.commands.oversized,
+                super::outbox::MAX_COMMAND
             );
         }
         if ob.commands.busy_writes > 0 {

@@ -24,6 +24,10 @@ use super::spool::{Record, Spool};
 /// so a flood of commands costs at most this many line writes.
 pub const COMMANDS_WAITING: usize = 32;
 
+/// The largest command payload acted on (a set's value, a DCMD's metrics, a host's STATE):
+/// larger ones are dropped, counted in [`Commands::oversized`] and said once.
+pub const MAX_COMMAND: usize = 64 << 10;
+
 /// What the outbox keeps about the broker's commands.
 #[derive(Debug, Default)]
 pub struct Commands {
@@ -345,6 +349,16 @@ impl Outbox {
     /// A message from the broker on a subscribed topic; `retained`: the broker kept it from
     /// before this session.
     pub(super) fn incoming(&mut self, topic: &str, payload: &[u8], retained: bool) {
+        if payload.len() > MAX_COMMAND {
+            self.commands.oversized += 1;
+            if self.commands.oversized == 1 {
+                eprintln!(
+                    "mbtap: mqtt: a message of {} bytes on {topic} dropped: commands are at most {MAX_COMMAND} bytes (said once; counted)",
+                    payload.len()
+                );
+            }
+            return;
+        }
         if let Some((state, online)) = self.host.as_mut()
             && topic == state.as_str()
         {

@@ -699,3 +699,33 @@ fn a_retained_set_is_not_carried_out_at_start() {
     assert_eq!(r.len(), 1, "{r:#?}");
     assert_eq!(r[0]["read_back"]["raw"], 250, "{r:#?}");
 }
+
+/// Issue 39 (`mqtt_watch_writes.py`): a retained message over the packet limit on the set topic
+/// made watch reconnect every second (an `offline` will each time) and carry out nothing until
+/// someone cleared it. It is read and dropped now; the connection stays, `online` is published
+/// once, and a set sent after it is carried out.
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn an_oversized_retained_message_neither_cuts_the_connection_nor_stops_commands() {
+    let d = dir("oversized-set");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    // 5 MiB, over the 4 MiB mbtap sends and far over the 64 KiB a command may be.
+    let big = d.join("big");
+    std::fs::write(&big, vec![b' '; 5 << 20]).unwrap();
+    let ok = Command::new("mosquitto_pub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-r", "-t", "o/unit/1/holding_registers/105/set"])
+        .args(["-f", big.to_str().unwrap()])
+        .status()
+        .expect("mosquitto_pub must be installed for this test");
+    assert!(ok.success());
+    let sub = Sub::start(port, "o/#");
+    let (_sim, bus) = simulator(&d);
+    let url = format!("mqtt://127.0.0.1:{port}");
+    let _watch = watch_with_writes(&bus, &url, "o", "holding:105");
+    sub.wait_for("the set point", |g| g.iter().any(|(t, _)| t == "o/unit/1/holding_registers/105"));
+    publish(port, "o/unit/1/holding_registers/105/set", "2.5");
+    sub.wait_for("the outcome of the set sent now", |g| g.iter().any(|(t, _)| t == "o/unit/1/write"));
+    let statuses: Vec<String> = sub.got().into_iter().filter(|(t, _)| t == "o/status").map(|(_, p)| p).collect();
+    assert!(!statuses.iter().any(|p| p == "offline"), "the connection was lost: {statuses:?}");
+}
