@@ -10,6 +10,34 @@ use mbtap_core::analyzer::SerialMode;
 use tokio_modbus::client::Context;
 use tokio_modbus::{Slave, prelude::rtu, prelude::tcp};
 
+/// After a timeout, the line is listened to for one more timeout before the next request:
+/// what comes then is the late answer to the request given up (or the tail of one), dropped —
+/// a late answer of the same shape as the next request's would otherwise be taken as its answer,
+/// its values shown under the next request's registers (issue 39, hostile round 3
+/// `watch_swap.sh`: 16 of 20 values under the wrong register). Listening stops early once
+/// bytes came and the line has been quiet for [`QUIET`].
+async fn drain_late_answer<S: tokio::io::AsyncRead + Unpin>(stream: &mut S, window: Duration) {
+    use tokio::io::AsyncReadExt as _;
+    /// Quiet after the late bytes that ends the listening: longer than any pause inside an
+    /// answer at 1200 baud (t3.5 is 32 ms there, Serial Line v1.02 §2.5.1.1).
+    const QUIET: Duration = Duration::from_millis(50);
+    let end = tokio::time::Instant::now() + window;
+    let mut buf = [0u8; 256];
+    let mut heard = false;
+    loop {
+        let now = tokio::time::Instant::now();
+        if now >= end {
+            return;
+        }
+        let wait = if heard { QUIET.min(end - now) } else { end - now };
+        match tokio::time::timeout(wait, stream.read(&mut buf)).await {
+            Ok(Ok(n)) if n > 0 => heard = true,
+            // Quiet after the late bytes, closed, an error, or the window over: done.
+            _ => return,
+        }
+    }
+}
+
 /// Where the device is.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Endpoint {
@@ -48,6 +76,8 @@ pub struct Link {
     line: mbtap_core::framer::LineSettings,
     connect_timeout: Duration,
     context: Option<Context>,
+    /// The last request timed out: listen for its late answer before the next one.
+    after_timeout: bool,
 }
 
 impl std::fmt::Debug for Link {
@@ -71,7 +101,13 @@ impl Link {
             mode == SerialMode::Rtu,
             "--mode ascii: read/write/watch speak RTU only (tokio-modbus has no ASCII client); to reach an ASCII line, run `mbtap bridge --mode ascii` and read through it over TCP"
         );
-        Ok(Self { endpoint: Endpoint::parse(target), line: settings, connect_timeout, context: None })
+        Ok(Self {
+            endpoint: Endpoint::parse(target),
+            line: settings,
+            connect_timeout,
+            context: None,
+            after_timeout: false,
+        })
     }
 
     /// The endpoint, for messages.
@@ -91,8 +127,14 @@ impl Link {
             let slave = Slave(unit);
             let ctx = match &self.endpoint {
                 Endpoint::Serial(path) => {
-                    let port = tokio_serial::SerialStream::open(&crate::source::serial::builder(path, self.line))
+                    let mut port = tokio_serial::SerialStream::open(&crate::source::serial::builder(path, self.line))
                         .with_context(|| format!("opening serial port {path}"))?;
+                    // Bytes the port holds from before (a late answer to another process's request)
+                    // are not an answer to ours: the input buffer is emptied at every open.
+                    let _ = tokio_serial::SerialPort::clear(&port, tokio_serial::ClearBuffer::Input);
+                    if std::mem::take(&mut self.after_timeout) {
+                        drain_late_answer(&mut port, self.connect_timeout).await;
+                    }
                     rtu::attach_slave(port, slave)
                 }
                 Endpoint::Tcp(a) => {
@@ -108,6 +150,10 @@ impl Link {
                         .await
                         .with_context(|| format!("connecting to {addr}: no answer within {:?}", self.connect_timeout))?
                         .with_context(|| format!("connecting to {addr}"))?;
+                    let mut stream = stream;
+                    if std::mem::take(&mut self.after_timeout) {
+                        drain_late_answer(&mut stream, self.connect_timeout).await;
+                    }
                     rtu::attach_slave(stream, slave)
                 }
             };
@@ -121,5 +167,6 @@ impl Link {
     /// Drops the connection; the next request opens a new one.
     pub fn reset(&mut self) {
         self.context = None;
+        self.after_timeout = true;
     }
 }
