@@ -88,6 +88,7 @@ impl std::fmt::Debug for Link {
             .field("line", &self.line)
             .field("connect_timeout", &self.connect_timeout)
             .field("open", &self.context.is_some())
+            .field("after_timeout", &self.after_timeout)
             .finish()
     }
 }
