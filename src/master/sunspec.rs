@@ -59,15 +59,26 @@ pub async fn discover(link: &mut Link, unit: u8, timeout: Duration, retries: u32
             Ok(m) if m == sunspec::MARKER => {
                 let mut found = Vec::new();
                 let mut at = base.checked_add(2);
+                let mut ended = false;
                 while let Some(a) = at {
                     let h = read_regs(link, unit, a, 2, timeout, retries)
                         .await
                         .map_err(|e| anyhow::anyhow!("reading the model header at {a}: {e}"))?;
                     let (id, len) = (h[0], h[1]);
                     at = sunspec::next_header(a, id, len, found.len());
+                    ended |= id == sunspec::END_ID;
                     if id != sunspec::END_ID {
                         found.push(Found { id, address: a, len });
                     }
+                }
+                if !ended {
+                    // Cut by the model bound or the address space, not by the end marker: what
+                    // follows is not the whole chain, and the user is told so (issue 39).
+                    eprintln!(
+                        "mbtap: unit {unit}: the SunSpec chain has no end marker within {} models (or runs past register 65535): only its first {} are used",
+                        sunspec::MAX_MODELS,
+                        found.len()
+                    );
                 }
                 return Ok(found);
             }

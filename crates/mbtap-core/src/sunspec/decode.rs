@@ -151,7 +151,11 @@ fn layout<'p>(points: &'p [PointDef], start: usize, block: &[u16]) -> Vec<(&'p P
 fn sf_of(name: &str, laid: &[(&PointDef, usize)], block: &[u16]) -> Option<Scale> {
     let &(p, at) = laid.iter().find(|(p, _)| p.name == name)?;
     Some(match raw_number(&p.kind, &block[at..at + usize::from(p.size.max(1))]) {
-        Some(Raw::Int(i)) => i16::try_from(i).map_or(Scale::Unknown, Scale::Factor),
+        // A scale factor outside −10…10 is not one (SunSpec Information Model Reference,
+        // `sunssf`): the point is shown without a value, never as "inf V" (issue 39).
+        Some(Raw::Int(i)) => {
+            i16::try_from(i).ok().filter(|k| (-10..=10).contains(k)).map_or(Scale::Unknown, Scale::Factor)
+        }
         _ => Scale::Unknown,
     })
 }
@@ -273,6 +277,24 @@ mod tests {
         assert_eq!(get("AphA").shown, None);
         // VA is an int16 at 0x8000: absent.
         assert_eq!(get("VA").shown, None);
+    }
+
+    /// Issue 39 (`ss_sfwild`): a scale factor outside SunSpec's −10…10 (here W_SF = 32767) is
+    /// not applied — the round's start showed "inf W".
+    #[test]
+    fn a_scale_factor_outside_ten_is_no_scale() {
+        let (found, mut block) = inverter_block();
+        let def = super::super::model(103).expect("known");
+        let mut at = 0;
+        for p in &def.points {
+            if p.name == "W_SF" {
+                block[at] = 32_767;
+            }
+            at += usize::from(p.size);
+        }
+        let values = decode_model(Some(def), found, &block);
+        let w = values.iter().find(|v| v.point == "W").expect("W");
+        assert_eq!(w.shown, None);
     }
 
     #[test]
