@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context as _;
-use mbtap_core::learn::diff::{Image, diff, parse_image_csv, parse_image_json};
+use mbtap_core::learn::diff::{Image, diff, parse_image_csv, parse_image_json_from};
 
 /// Which registers changed between two captures, register images (`replay --image` CSV or
 /// JSON) or probe dumps (`probe --format json` saved) — before and after a settings change or
@@ -36,20 +36,53 @@ pub enum Format {
     Jsonl,
 }
 
+/// The largest image file read: every address of the four tables as JSON rows is ~40 MB.
+const MAX_IMAGE_FILE: u64 = 64 << 20;
+
+/// Builds the image of a capture and says what was wrong with the capture (a corrupt block)
+/// on the way, as `replay` does.
+struct ImageSink<'a> {
+    image: mbtap_core::profile::image::RegisterImage,
+    path: &'a Path,
+}
+
+impl mbtap_core::analyzer::Sink for ImageSink<'_> {
+    fn event(&mut self, e: &mbtap_core::analyzer::Event<'_>) {
+        crate::output::update_image(&mut self.image, e);
+    }
+
+    fn warning(&mut self, message: &str) {
+        eprintln!("mbtap: {}: {}", self.path.display(), mbtap_core::report::format::printable(message));
+    }
+}
+
 /// The register image of a capture or an image file.
 fn load(path: &Path) -> anyhow::Result<Image> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or_default().to_ascii_lowercase();
-    let read = || std::fs::read_to_string(path).with_context(|| format!("{}: cannot read it", path.display()));
+    let open = || -> anyhow::Result<std::io::Take<std::fs::File>> {
+        let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read it", path.display()))?;
+        let len = f.metadata().map_or(0, |m| m.len());
+        anyhow::ensure!(
+            len <= MAX_IMAGE_FILE,
+            "{}: {len} bytes, over the {MAX_IMAGE_FILE} an image or probe dump of every address has; not read",
+            path.display()
+        );
+        Ok(std::io::Read::take(f, MAX_IMAGE_FILE))
+    };
     match ext.as_str() {
-        "json" => parse_image_json(&read()?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display())),
-        "csv" => parse_image_csv(&read()?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display())),
+        "json" => parse_image_json_from(open()?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display())),
+        "csv" => {
+            let mut text = String::new();
+            std::io::Read::read_to_string(&mut open()?, &mut text)
+                .with_context(|| format!("{}: cannot read it", path.display()))?;
+            parse_image_csv(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        }
         _ => {
             let input = crate::output::progress::open_capture(path, false)?;
-            let mut image = mbtap_core::profile::image::RegisterImage::default();
-            let mut sink = |e: &mbtap_core::analyzer::Event<'_>| crate::output::update_image(&mut image, e);
+            let mut sink = ImageSink { image: mbtap_core::profile::image::RegisterImage::default(), path };
             mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut sink)
                 .with_context(|| format!("reading {}", path.display()))?;
-            Ok(image.values.iter().map(|(&k, v)| (k, v.raw)).collect())
+            Ok(sink.image.values.iter().map(|(&k, v)| (k, v.raw)).collect())
         }
     }
 }
@@ -57,6 +90,16 @@ fn load(path: &Path) -> anyhow::Result<Image> {
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let profiles = crate::config::devices::load_devices(&args.devices)?;
     let (a, b) = (load(&args.before)?, load(&args.after)?);
+    // Nothing heard in an input is not "nothing changed": said, and exit 2 (cannot compare).
+    let empty: Vec<String> = [(&a, &args.before), (&b, &args.after)]
+        .iter()
+        .filter(|(i, _)| i.is_empty())
+        .map(|(_, p)| p.display().to_string())
+        .collect();
+    if !empty.is_empty() {
+        eprintln!("mbtap: no register value in {}: nothing to compare", empty.join(" nor in "));
+        return Ok(ExitCode::from(2));
+    }
     let (changes, same) = diff(&a, &b);
     let mut out = std::io::stdout().lock();
     let shown = |unit: u8, table, address: u16, raw: Option<u16>| -> String {

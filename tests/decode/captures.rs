@@ -180,3 +180,44 @@ fn learn_finds_float_pairs_and_their_word_order_on_real_meter_recordings() {
         assert_eq!(wide, expected, "{file}");
     }
 }
+
+/// Issue 39: `diff` of captures whose every block is corrupt said "0 differ, 0 the same" with
+/// exit 0 and dropped the reader's warning. The warning is said with the file, and "nothing to
+/// compare" exits 2.
+#[test]
+fn diff_of_unreadable_captures_says_so_and_does_not_claim_sameness() {
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let dir = std::env::temp_dir().join(format!("mbtap-diff-corrupt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A pcap header (magic, v2.4, snaplen 65535, linktype 147) and then a record header whose
+    // length (0xFFFFFFF0) no record can have: the rest is corrupt.
+    let mut pcap = vec![0xD4, 0xC3, 0xB2, 0xA1, 2, 0, 4, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0xFF, 0xFF, 0, 0, 147, 0, 0, 0];
+    pcap.extend_from_slice(&[0, 0, 0, 0, 0, 0, 0, 0, 0xF0, 0xFF, 0xFF, 0xFF, 0xF0, 0xFF, 0xFF, 0xFF]);
+    pcap.extend(std::iter::repeat_n(0xA5, 4096));
+    let f = dir.join("corrupt.pcap");
+    std::fs::write(&f, &pcap).unwrap();
+    let o = std::process::Command::new(bin).args(["diff", f.to_str().unwrap(), f.to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("nothing to compare"), "{err}");
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("0 the same"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 39: an image file is read row by row into four numbers each, and one larger than any
+/// image of every address is refused unread (a 100 MB dump took 2.1–3.7 GB as a JSON tree).
+#[test]
+fn diff_refuses_an_image_file_larger_than_any_image() {
+    let bin = env!("CARGO_BIN_EXE_mbtap");
+    let dir = std::env::temp_dir().join(format!("mbtap-diff-big-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let big = dir.join("big.json");
+    let f = std::fs::File::create(&big).unwrap();
+    // 65 MiB, sparse: over the 64 MiB read.
+    f.set_len(65 << 20).unwrap();
+    let o =
+        std::process::Command::new(bin).args(["diff", big.to_str().unwrap(), big.to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("not read"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

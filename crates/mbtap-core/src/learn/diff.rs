@@ -46,22 +46,75 @@ pub fn diff(a: &Image, b: &Image) -> (Vec<Change>, usize) {
 /// # Errors
 /// What is wrong and in which row.
 pub fn parse_image_json(text: &str) -> Result<Image, String> {
-    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
-    let rows = v.get("image").unwrap_or(&v).as_array().ok_or(
-        "expected an array of rows (as replay --image FILE.json writes) or a probe dump (probe --format json)",
-    )?;
+    parse_image_json_from(text.as_bytes())
+}
+
+/// One row of an image file: only the four fields compared; the others (names, values, times)
+/// are skipped as they are read, never held.
+#[derive(serde::Deserialize)]
+struct RowIn {
+    unit: Option<u64>,
+    table: Option<String>,
+    address: Option<u64>,
+    raw: Option<u64>,
+}
+
+/// A probe dump: its `image` rows; its other keys skipped.
+#[derive(serde::Deserialize)]
+struct DumpIn {
+    image: Vec<RowIn>,
+}
+
+/// [`parse_image_json`] from a reader: rows are read into four numbers each as they stream by,
+/// never into a JSON tree (issue 39: a 100 MB dump took 2.1–3.7 GB as one).
+///
+/// # Errors
+/// What is wrong and in which row, or where the JSON breaks (line and column).
+pub fn parse_image_json_from<R: std::io::Read>(reader: R) -> Result<Image, String> {
+    let mut reader = std::io::BufReader::new(reader);
+    let first = loop {
+        let buf = std::io::BufRead::fill_buf(&mut reader).map_err(|e| format!("cannot read it: {e}"))?;
+        let Some(&b) = buf.first() else { return Err("empty: expected an array of rows".into()) };
+        if b.is_ascii_whitespace() {
+            std::io::BufRead::consume(&mut reader, 1);
+            continue;
+        }
+        break b;
+    };
+    let rows: Vec<RowIn> = match first {
+        b'[' => serde_json::from_reader(reader).map_err(|e| format!("not an array of image rows: {e}"))?,
+        b'{' => {
+            serde_json::from_reader::<_, DumpIn>(reader)
+                .map_err(|e| format!("not a probe dump with an image: {e}"))?
+                .image
+        }
+        _ => {
+            return Err(
+                "expected an array of rows (as replay --image FILE.json writes) or a probe dump (probe --format json)"
+                    .into(),
+            );
+        }
+    };
     let mut out = Image::new();
     for (i, r) in rows.iter().enumerate() {
-        let field = |k: &str| r.get(k).ok_or_else(|| format!("row {}: no {k:?}", i + 1));
-        let unit = field("unit")?.as_u64().and_then(|u| u8::try_from(u).ok());
-        let table = field("table")?.as_str().and_then(table_word);
-        let address = field("address")?.as_u64().and_then(|a| u16::try_from(a).ok());
-        let raw = field("raw")?.as_u64().and_then(|a| u16::try_from(a).ok());
+        let unit = r.unit.and_then(|u| u8::try_from(u).ok());
+        let table = r.table.as_deref().and_then(table_word);
+        let address = r.address.and_then(|a| u16::try_from(a).ok());
+        let raw = r.raw.and_then(|a| u16::try_from(a).ok());
         match (unit, table, address, raw) {
             (Some(u), Some(t), Some(a), Some(v)) => {
                 out.insert((u, t, a), v);
             }
-            _ => return Err(format!("row {}: unit, table, address or raw out of range: {r}", i + 1)),
+            _ => {
+                return Err(format!(
+                    "row {}: unit, table, address or raw missing or out of range (unit {:?}, table {:?}, address {:?}, raw {:?})",
+                    i + 1,
+                    r.unit,
+                    r.table,
+                    r.address,
+                    r.raw
+                ));
+            }
         }
     }
     Ok(out)
