@@ -132,7 +132,7 @@ impl Spool {
                 Err(why) => {
                     aside += 1;
                     eprintln!(
-                        "mbtap: mqtt: {} {why}; left in place, not forwarded (move it away or remove it)",
+                        "mbtap: mqtt: {} skipped: it {why}; left in place, not forwarded (move it away or remove it)",
                         e.path().display()
                     );
                 }
@@ -260,7 +260,10 @@ impl Spool {
 
     fn set_aside(&mut self, path: &Path, why: &str) {
         self.aside += 1;
-        eprintln!("mbtap: mqtt: {} {why}; left in place, not forwarded (move it away or remove it)", path.display());
+        eprintln!(
+            "mbtap: mqtt: {} skipped: it {why}; left in place, not forwarded (move it away or remove it)",
+            path.display()
+        );
     }
 
     /// Forces what was appended to the disk.
