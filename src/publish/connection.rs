@@ -76,7 +76,7 @@ pub async fn run(mut eventloop: EventLoop, outbox: Arc<Mutex<Outbox>>, connected
                         rumqttc::mqttbytes::Error::PayloadSizeLimitExceeded(bytes),
                     )) = &e
                     {
-                        ob.oversized_message(*bytes, super::mqtt::MAX_INCOMING);
+                        ob.oversized_message(*bytes, super::outbox::MAX_INCOMING);
                     }
                     ob.disconnected();
                     ob.will()

@@ -28,12 +28,6 @@ use super::mqtt_options::{check_prefix, credentials, default_buffer_dir, hostnam
 
 /// The largest MQTT packet sent: a DBIRTH of a big device fits many times over.
 pub const MAX_PACKET: usize = 4 << 20;
-/// The largest packet taken from the broker. Larger than anything mbtap acts on
-/// ([`super::outbox::MAX_COMMAND`]), so an oversized message on a command topic is read and
-/// dropped without losing the connection — MQTT 3.1.1 has no other way to refuse one, and a
-/// retained one would come again at every subscription (issue 39). Past this, the connection
-/// is lost with it and the command topics are paused instead (`Outbox::oversized_message`).
-pub const MAX_INCOMING: usize = 32 << 20;
 
 /// How long a Sparkplug node waits at start for its first session before it analyses on
 /// (holding what it measures meanwhile).
@@ -185,7 +179,7 @@ impl Mqtt {
         options.set_request_channel_capacity(args.mqtt_queue.max(1));
         // rumqttc refuses packets over 10 KiB by default and drops the connection over one: a
         // DBIRTH declaring a device's hundred metrics is bigger (MQTT allows 256 MiB, v3.1.1 §2.2.3).
-        options.set_max_packet_size(MAX_INCOMING, MAX_PACKET);
+        options.set_max_packet_size(super::outbox::MAX_INCOMING, MAX_PACKET);
         if let Some((u, p)) = credentials(args)? {
             options.set_credentials(u, p);
         }

@@ -24,6 +24,13 @@ use super::spool::{Record, Spool};
 /// so a flood of commands costs at most this many line writes.
 pub const COMMANDS_WAITING: usize = 32;
 
+/// The largest packet taken from the broker. Larger than anything mbtap acts on
+/// ([`MAX_COMMAND`]), so an oversized message on a command topic is read and
+/// dropped without losing the connection — MQTT 3.1.1 has no other way to refuse one, and a
+/// retained one would come again at every subscription (issue 39). Past this, the connection
+/// is lost with it and the command topics are paused instead (`Outbox::oversized_message`).
+pub const MAX_INCOMING: usize = 32 << 20;
+
 /// The largest command payload acted on (a set's value, a DCMD's metrics, a host's STATE):
 /// larger ones are dropped, counted in [`Commands::oversized`] and said once.
 pub const MAX_COMMAND: usize = 64 << 10;
