@@ -106,9 +106,19 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let mut out = std::io::stdout().lock();
     let shown = match args.format {
         Format::Text => mbtap_core::report::format::printable(&mbtap_core::learn::draft::text(&learner)).into_owned(),
-        Format::Json => serde_json::to_string_pretty(&mbtap_core::learn::draft::json(&learner))? + "\n",
+        Format::Json => String::new(),
     };
-    match out.write_all(shown.as_bytes()) {
+    let written = if args.format == Format::Json {
+        // Streamed: a capture of many registers is never held as one JSON tree.
+        let mut w = std::io::BufWriter::new(&mut out);
+        serde_json::to_writer_pretty(&mut w, &mbtap_core::learn::draft::Json(&learner))
+            .map_err(std::io::Error::from)
+            .and_then(|()| w.write_all(b"\n"))
+            .and_then(|()| w.flush())
+    } else {
+        out.write_all(shown.as_bytes())
+    };
+    match written {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => return Err(e).context("writing the findings"),
         _ => {}
     }

@@ -168,46 +168,87 @@ fn ms(ns: u64) -> f64 {
 }
 
 /// The same as JSON: `{"transactions": N, "units": [{"unit", "functions", "blocks", "writes",
-/// "exceptions", "registers": [{"table", "address", "type", "width", "confidence", "evidence"}]}]}`.
+/// "exceptions", "registers": [{"table", "address", "type", "width", "confidence", "evidence"}]}]}`,
+/// serialised as it goes — one register's object at a time, never the whole tree (issue 39: a
+/// capture of 400 000 registers took 1.8 GB as one tree). `serde_json::to_value` of it gives the
+/// tree where one is wanted.
+#[derive(Debug, Clone, Copy)]
+pub struct Json<'a>(pub &'a Learner);
+
+/// One unit of [`Json`].
+struct UnitJson<'a>(u8, &'a Unit);
+
+/// A unit's register guesses, table by table.
+struct Registers<'a>(&'a Unit);
+
+impl serde::Serialize for Json<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap as _;
+        let mut m = s.serialize_map(Some(2))?;
+        m.serialize_entry("transactions", &self.0.transactions)?;
+        m.serialize_entry("units", &Units(self.0))?;
+        m.end()
+    }
+}
+
+struct Units<'a>(&'a Learner);
+
+impl serde::Serialize for Units<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.0.units.iter().map(|(&unit, u)| UnitJson(unit, u)))
+    }
+}
+
+impl serde::Serialize for UnitJson<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap as _;
+        let UnitJson(unit, u) = *self;
+        let blocks: Vec<serde_json::Value> = u
+            .blocks
+            .iter()
+            .map(|(&(t, first, q), b)| {
+                serde_json::json!({"table": t.name(), "first": first, "quantity": q, "polls": b.polls, "period_ns": b.period_ns()})
+            })
+            .collect();
+        let writes: Vec<serde_json::Value> = u
+            .writes
+            .iter()
+            .map(|(&(t, a), v)| serde_json::json!({"table": t.name(), "address": a, "values": v}))
+            .collect();
+        let exceptions: Vec<serde_json::Value> = u
+            .exceptions
+            .iter()
+            .map(|(&(t, first, q), c)| serde_json::json!({"table": t.name(), "first": first, "quantity": q, "code": c}))
+            .collect();
+        let mut m = s.serialize_map(Some(6))?;
+        m.serialize_entry("unit", &unit)?;
+        m.serialize_entry("functions", &u.functions)?;
+        m.serialize_entry("blocks", &blocks)?;
+        m.serialize_entry("writes", &writes)?;
+        m.serialize_entry("exceptions", &exceptions)?;
+        m.serialize_entry("registers", &Registers(u))?;
+        m.end()
+    }
+}
+
+impl serde::Serialize for Registers<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeSeq as _;
+        let mut seq = s.serialize_seq(None)?;
+        for t in self.0.tables() {
+            for g in self.0.guesses(t) {
+                seq.serialize_element(&serde_json::json!({
+                    "table": t.name(), "address": g.address, "type": g.kind.name(), "width": g.kind.width(),
+                    "confidence": g.confidence, "evidence": g.evidence,
+                }))?;
+            }
+        }
+        seq.end()
+    }
+}
+
+/// [`Json`] as a tree.
 #[must_use]
 pub fn json(l: &Learner) -> serde_json::Value {
-    let units: Vec<serde_json::Value> = l
-        .units
-        .iter()
-        .map(|(unit, u)| {
-            let registers: Vec<serde_json::Value> = u
-                .tables()
-                .into_iter()
-                .flat_map(|t| u.guesses(t).into_iter().map(move |g| (t, g)))
-                .map(|(t, g)| {
-                    serde_json::json!({
-                        "table": t.name(), "address": g.address, "type": g.kind.name(), "width": g.kind.width(),
-                        "confidence": g.confidence, "evidence": g.evidence,
-                    })
-                })
-                .collect();
-            let blocks: Vec<serde_json::Value> = u
-                .blocks
-                .iter()
-                .map(|(&(t, first, q), b)| {
-                    serde_json::json!({"table": t.name(), "first": first, "quantity": q, "polls": b.polls, "period_ns": b.period_ns()})
-                })
-                .collect();
-            let writes: Vec<serde_json::Value> = u
-                .writes
-                .iter()
-                .map(|(&(t, a), v)| serde_json::json!({"table": t.name(), "address": a, "values": v}))
-                .collect();
-            let exceptions: Vec<serde_json::Value> = u
-                .exceptions
-                .iter()
-                .map(|(&(t, first, q), c)| serde_json::json!({"table": t.name(), "first": first, "quantity": q, "code": c}))
-                .collect();
-            serde_json::json!({
-                "unit": unit, "functions": u.functions, "blocks": blocks, "writes": writes,
-                "exceptions": exceptions, "registers": registers,
-            })
-        })
-        .collect();
-    serde_json::json!({"transactions": l.transactions, "units": units})
+    serde_json::to_value(Json(l)).unwrap_or_default()
 }
