@@ -71,6 +71,32 @@ async fn once(link: &mut Link, unit: u8, op: Op<'_>) -> anyhow::Result<Result<Op
     Ok(r?.map_err(u8::from))
 }
 
+/// A failed request's error in words: a connection the device closed (reset, broken pipe, end of
+/// stream, or the `EINPROGRESS` a write on a socket closed underneath gives) is said as such —
+/// the raw OS text named neither what happened nor what comes next (issue 39, `p3_probe.sh`).
+fn link_error(unit: u8, e: &anyhow::Error) -> String {
+    use std::io::ErrorKind;
+    /// `EINPROGRESS` on Linux.
+    const EINPROGRESS: i32 = 115;
+    let text = format!("{e:#}");
+    // tokio-modbus wraps the I/O error in its own, which does not always name it as a source:
+    // its text is looked at too.
+    let closed =
+        e.chain().filter_map(|c| c.downcast_ref::<std::io::Error>()).any(|io| {
+            matches!(
+                io.kind(),
+                ErrorKind::ConnectionReset | ErrorKind::BrokenPipe | ErrorKind::UnexpectedEof | ErrorKind::NotConnected
+            ) || io.raw_os_error() == Some(EINPROGRESS)
+        }) || [format!("os error {EINPROGRESS})"), "Broken pipe".into(), "Connection reset".into(), "early eof".into()]
+            .iter()
+            .any(|t| text.contains(t.as_str()));
+    if closed {
+        format!("unit {unit}: the device closed the connection ({text}); the next request opens a new one")
+    } else {
+        text
+    }
+}
+
 /// Whether `got` values can answer `read`: registers exactly, bits padded to whole bytes
 /// (MAP v1.1b3 §6.1–6.4).
 fn fits(read: Read, got: usize) -> bool {
@@ -103,7 +129,7 @@ pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retr
             Ok(Ok(Err(code))) => Answer::Exception(code),
             Ok(Err(e)) => {
                 link.reset();
-                Answer::Failed(format!("{e:#}"))
+                Answer::Failed(link_error(unit, &e))
             }
             Err(_) => {
                 // A late answer must not be taken for the next request's: start afresh.
@@ -164,5 +190,20 @@ mod tests {
         let bits = Read { target: 0, table: Table::Coils, address: 0, quantity: 10 };
         assert!(fits(bits, 16) && fits(bits, 10));
         assert!(!fits(bits, 8) && !fits(bits, 24));
+    }
+}
+
+#[cfg(test)]
+mod link_error_tests {
+    use super::*;
+
+    /// Issue 39 (`p3_probe.sh`): a device closing its connection after each request was said as
+    /// "Operation now in progress (os error 115)" alone.
+    #[test]
+    fn a_closed_connection_is_said_as_such() {
+        let e = anyhow::Error::from(std::io::Error::from_raw_os_error(115));
+        assert!(link_error(1, &e).contains("the device closed the connection"), "{}", link_error(1, &e));
+        let e = anyhow::anyhow!("no route");
+        assert_eq!(link_error(1, &e), "no route");
     }
 }

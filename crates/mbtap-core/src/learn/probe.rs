@@ -282,10 +282,12 @@ impl Probe {
                 ));
             }
             Reply::NoAnswer(why) => {
-                self.stopped = Some(format!(
-                    "{}: {why}; stopped (some devices ignore reads of addresses they lack: narrow --range, or lower --rate)",
-                    span()
-                ));
+                let advice = if why.contains("closed the connection") {
+                    "the device ends its connection after each request, so a probe over one connection cannot go on"
+                } else {
+                    "some devices ignore reads of addresses they lack: narrow --range, or lower --rate"
+                };
+                self.stopped = Some(format!("{}: {why}; stopped ({advice})", span()));
             }
         }
     }
