@@ -147,11 +147,10 @@ impl Link {
                 }
                 Endpoint::RtuOverTcp(a) => {
                     let addr = resolve(a).await?;
-                    let stream = tokio::time::timeout(self.connect_timeout, tokio::net::TcpStream::connect(addr))
+                    let mut stream = tokio::time::timeout(self.connect_timeout, tokio::net::TcpStream::connect(addr))
                         .await
                         .with_context(|| format!("connecting to {addr}: no answer within {:?}", self.connect_timeout))?
                         .with_context(|| format!("connecting to {addr}"))?;
-                    let mut stream = stream;
                     if std::mem::take(&mut self.after_timeout) {
                         drain_late_answer(&mut stream, self.connect_timeout).await;
                     }

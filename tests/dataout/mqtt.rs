@@ -667,6 +667,17 @@ fn the_brokers_writes_through_the_bridge_pass_its_rules() {
     }
 }
 
+/// A retained message on `topic` (the payload given by `payload`: `-m TEXT` or `-f FILE`), left
+/// on the broker before the command under test starts.
+fn publish_retained(port: u16, topic: &str, payload: &[&str]) {
+    let ok = Command::new("mosquitto_pub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-r", "-t", topic])
+        .args(payload)
+        .status()
+        .expect("mosquitto_pub must be installed for this test");
+    assert!(ok.success());
+}
+
 /// Issue 38/39 (`mqtt_watch_writes.py`, `mqtt_bridge_writes.py`): a retained `…/set` left on the
 /// broker by anyone was carried out again at every start and reconnect. A retained command is
 /// ignored (said once); a set sent now is carried out.
@@ -677,12 +688,7 @@ fn a_retained_set_is_not_carried_out_at_start() {
     let port = free_port();
     let _broker = broker(&d, port);
     // Left before watch starts: retained, 2.7 for holding 105 (raw 270).
-    let ok = Command::new("mosquitto_pub")
-        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-r", "-t", "r/unit/1/holding_registers/105/set"])
-        .args(["-m", "2.7"])
-        .status()
-        .expect("mosquitto_pub must be installed for this test");
-    assert!(ok.success());
+    publish_retained(port, "r/unit/1/holding_registers/105/set", &["-m", "2.7"]);
     let sub = Sub::start(port, "r/#");
     let (_sim, bus) = simulator(&d);
     let url = format!("mqtt://127.0.0.1:{port}");
@@ -713,12 +719,7 @@ fn an_oversized_retained_message_neither_cuts_the_connection_nor_stops_commands(
     // 5 MiB, over the 4 MiB mbtap sends and far over the 64 KiB a command may be.
     let big = d.join("big");
     std::fs::write(&big, vec![b' '; 5 << 20]).unwrap();
-    let ok = Command::new("mosquitto_pub")
-        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-r", "-t", "o/unit/1/holding_registers/105/set"])
-        .args(["-f", big.to_str().unwrap()])
-        .status()
-        .expect("mosquitto_pub must be installed for this test");
-    assert!(ok.success());
+    publish_retained(port, "o/unit/1/holding_registers/105/set", &["-f", big.to_str().unwrap()]);
     let sub = Sub::start(port, "o/#");
     let (_sim, bus) = simulator(&d);
     let url = format!("mqtt://127.0.0.1:{port}");
