@@ -3,16 +3,19 @@
 //! own: a malformed header, a flood, a dribbling or idle client ends only that connection.
 
 use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 use super::request::{Client, Pending, Routes, ServerOptions, request};
 use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
 use mbtap_core::proto::{encode_rtu, encode_tcp};
 use mbtap_gateway::admit::Role;
+use mbtap_gateway::giveup::GiveUp;
 use mbtap_gateway::queue::ClientId;
 
 /// A pause that ends an RTU-over-TCP frame of unknown length.
@@ -30,7 +33,7 @@ pub(super) async fn connection<S>(
     stream: S,
     peer: SocketAddr,
     client: ClientId,
-    routes: &Routes,
+    routes: &Arc<Routes>,
     opts: &ServerOptions,
     seen: &(dyn Fn(ClientId) + Sync),
     role: Role<'_>,
@@ -40,24 +43,65 @@ pub(super) async fn connection<S>(
     // `--priority high=ip:…`: the whole connection's requests.
     let mut client = Client::new(client, role, peer, routes, opts);
     let (mut rd, mut wr) = tokio::io::split(stream);
-    let (tx, mut rx) = mpsc::channel::<Pending>(64);
+    let (tx, mut rx) = mpsc::channel::<(u64, Pending)>(64);
+    // Requests numbered as they come; the writer says how many have their answers written, the
+    // reader which ones the client gave up on (`mbtap_gateway::giveup`).
+    let answered = Arc::new(AtomicU64::new(0));
+    let (give_up, mut given_up) = watch::channel(0u64);
     let rtu = opts.rtu_over_tcp;
-    let writer = tokio::spawn(async move {
-        let mut out = Vec::with_capacity(300);
-        while let Some(p) = rx.recv().await {
-            let (transaction_id, unit) = (p.transaction_id, p.unit);
-            let Some(pdu) = p.answer_pdu().await else { continue };
-            out.clear();
-            if rtu {
-                encode_rtu(unit, &pdu, &mut out);
-            } else {
-                encode_tcp(transaction_id, unit, &pdu, &mut out);
+    let writer = {
+        let (answered, counts) = (Arc::clone(&answered), Arc::clone(routes));
+        tokio::spawn(async move {
+            let mut out = Vec::with_capacity(300);
+            while let Some((seq, p)) = rx.recv().await {
+                let (transaction_id, unit) = (p.transaction_id, p.unit);
+                let abandoned = |below: &u64| *below > seq;
+                let pdu = if abandoned(&given_up.borrow()) {
+                    // Dropping it closes its reply: the line skips it if it has not started.
+                    None
+                } else {
+                    tokio::select! {
+                        biased;
+                        pdu = p.answer_pdu() => Some(pdu),
+                        () = async {
+                            // The reader gone (the connection ends): answers still go out.
+                            if given_up.wait_for(abandoned).await.is_err() {
+                                std::future::pending::<()>().await;
+                            }
+                        } => None,
+                    }
+                };
+                answered.store(seq + 1, Ordering::Release);
+                let Some(pdu) = pdu else {
+                    counts.server.abandoned(1);
+                    continue;
+                };
+                let Some(pdu) = pdu else { continue };
+                out.clear();
+                if rtu {
+                    encode_rtu(unit, &pdu, &mut out);
+                } else {
+                    encode_tcp(transaction_id, unit, &pdu, &mut out);
+                }
+                if wr.write_all(&out).await.is_err() {
+                    break;
+                }
             }
-            if wr.write_all(&out).await.is_err() {
-                break;
-            }
+        })
+    };
+    let mut patience = GiveUp::new();
+    let mut next_seq = 0u64;
+    let born = Instant::now();
+    // Numbers a request, notes whether the client gave up on the older ones, and hands it to
+    // the writer; false once the writer is gone.
+    let mut hand_on = async |pending: Pending| {
+        let seq = next_seq;
+        next_seq += 1;
+        if let Some(below) = patience.asked(seq, born.elapsed(), answered.load(Ordering::Acquire)) {
+            let _ = give_up.send(below);
         }
-    });
+        tx.send((seq, pending)).await.is_ok()
+    };
     let mut buf = Vec::with_capacity(600);
     let mut chunk = [0u8; 1024];
     let mut rtu_frames = mbtap_core::sim::RequestAssembler::default();
@@ -83,7 +127,7 @@ pub(super) async fn connection<S>(
                     last_request = Instant::now();
                     seen(client.id);
                     let pending = request(&mut client, 0, f.unit, f.pdu, routes, opts);
-                    if tx.send(pending).await.is_err() {
+                    if !hand_on(pending).await {
                         break;
                     }
                 }
@@ -132,7 +176,7 @@ pub(super) async fn connection<S>(
             last_request = Instant::now();
             seen(client.id);
             let pending = request(&mut client, transaction_id, unit, pdu, routes, opts);
-            if tx.send(pending).await.is_err() {
+            if !hand_on(pending).await {
                 break 'read;
             }
         }

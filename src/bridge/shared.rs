@@ -163,7 +163,9 @@ impl LineShared {
     /// own is waiting, or nothing is (then the next to arrive decides).
     pub(super) fn may_take_late_answer(&self, unit: u8) -> bool {
         let q = self.queue();
-        q.is_empty() || q.any(|j| j.unit == unit)
+        // A request its client gave up on (its reply closed) never reaches the line: not counted.
+        let live = |j: &Job| !j.reply.is_closed();
+        !q.any(live) || q.any(|j| j.unit == unit && live(j))
     }
 
     /// The client left: its requests that have not started are dropped.

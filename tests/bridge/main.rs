@@ -7,6 +7,7 @@ mod common;
 
 mod agent;
 mod config;
+mod gave_up;
 mod hardware;
 mod one_path;
 mod serial;

@@ -11,17 +11,17 @@ use std::time::Duration;
 use crate::common::{self, call, counter};
 
 /// Read holding registers 100–101 (MAP v1.1b3 §6.3): function 03, address 0064, quantity 0002.
-const READ_TWO: [u8; 5] = [0x03, 0x00, 0x64, 0x00, 0x02];
+pub(crate) const READ_TWO: [u8; 5] = [0x03, 0x00, 0x64, 0x00, 0x02];
 /// Write single register 10 = 25 (MAP v1.1b3 §6.6): function 06, address 000A, value 0019.
 const WRITE_10: [u8; 5] = [0x06, 0x00, 0x0A, 0x00, 0x19];
 
 /// How a test device answers a request: (unit, PDU) in, (unit, PDU) out or silence.
-type Answer = fn(u8, &[u8]) -> Option<(u8, Vec<u8>)>;
+pub(crate) type Answer = fn(u8, &[u8]) -> Option<(u8, Vec<u8>)>;
 
 /// A Modbus TCP device on a free loopback port: each request's (transaction id, unit, PDU) is
 /// answered with what `answer` makes of it (None: no answer). Serves connections one after
 /// another until the test ends.
-fn device(answer: Answer) -> String {
+pub(crate) fn device(answer: Answer) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     std::thread::spawn(move || {
@@ -54,7 +54,7 @@ fn device(answer: Answer) -> String {
 }
 
 /// The honest answer to a read of holding registers: each value 1000 + its address.
-fn honest(pdu: &[u8]) -> Vec<u8> {
+pub(crate) fn honest(pdu: &[u8]) -> Vec<u8> {
     let (addr, qty) = (u16::from_be_bytes([pdu[1], pdu[2]]), u16::from_be_bytes([pdu[3], pdu[4]]));
     let mut out = vec![pdu[0], u8::try_from(qty * 2).unwrap()];
     for a in addr..addr + qty {
@@ -63,14 +63,14 @@ fn honest(pdu: &[u8]) -> Vec<u8> {
     out
 }
 
-fn bridge_to(device: &str, extra: &[&str]) -> common::Bridge {
+pub(crate) fn bridge_to(device: &str, extra: &[&str]) -> common::Bridge {
     let serial = format!("tcp://{device}");
     let mut args = vec!["--serial", serial.as_str(), "--listen", "127.0.0.1:0", "--metrics", "127.0.0.1:0"];
     args.extend_from_slice(extra);
     common::bridge(&args)
 }
 
-fn connect(addr: &str) -> TcpStream {
+pub(crate) fn connect(addr: &str) -> TcpStream {
     let s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
     s

@@ -34,6 +34,12 @@ impl Metrics {
             for (r, n) in &m.refused {
                 let _ = writeln!(s, "mbtap_bridge_refused_total{{reason=\"{r}\"}} {n}");
             }
+            counter(
+                &mut s,
+                "mbtap_bridge_abandoned_total",
+                "Requests a client gave up on (it asked again, unanswered, after its own timeout): their answers withheld.",
+            );
+            let _ = writeln!(s, "mbtap_bridge_abandoned_total {}", m.abandoned);
             s
         })
     }
@@ -130,7 +136,7 @@ impl Metrics {
                 "# HELP mbtap_bridge_queue_depth Requests waiting for the line.\n# TYPE mbtap_bridge_queue_depth gauge\nmbtap_bridge_queue_depth {}",
                 m.queue_depth
             );
-            counter(&mut s, "mbtap_bridge_dropped_total", "Queued requests dropped because their client left.");
+            counter(&mut s, "mbtap_bridge_dropped_total", "Queued requests dropped because their client left or gave up on them.");
             let _ = writeln!(s, "mbtap_bridge_dropped_total {}", m.dropped);
             counter(&mut s, "mbtap_bridge_port_reopened_total", "Times the serial port was reopened.");
             let _ = writeln!(s, "mbtap_bridge_port_reopened_total {}", m.reopened);

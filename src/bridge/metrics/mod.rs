@@ -45,6 +45,8 @@ struct Inner {
     connections: u64,
     connections_open: i64,
     refused: BTreeMap<&'static str, u64>,
+    /// Requests a client gave up on (`mbtap_gateway::giveup`): answers withheld.
+    abandoned: u64,
     /// Answers the answer check dropped, by why (`mbtap_gateway::answer::Misfit::reason`).
     misfits: BTreeMap<&'static str, u64>,
     /// Bytes dropped unread: more than the longest answer.
@@ -191,7 +193,7 @@ impl Metrics {
         self.with(|m| m.queue_depth = depth);
     }
 
-    /// A queued request dropped because its client left.
+    /// A queued request dropped because its client left or gave up on it.
     pub fn dropped(&self) {
         self.with(|m| m.dropped += 1);
     }
@@ -214,6 +216,11 @@ impl Metrics {
     /// Something refused: `reason` is a stable snake_case label.
     pub fn refused(&self, reason: &'static str) {
         self.with(|m| *m.refused.entry(reason).or_default() += 1);
+    }
+
+    /// `n` requests their clients gave up on: their answers withheld.
+    pub fn abandoned(&self, n: u64) {
+        self.with(|m| m.abandoned += n);
     }
 
     /// Keeps the latest event worth telling (a port lost).
