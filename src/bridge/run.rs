@@ -43,6 +43,8 @@ pub struct BridgeOptions {
     pub reverse: Option<ReverseOptions>,
     /// The Modbus/TCP Security listener, when asked for.
     pub tls: crate::bridge::tls::TlsArgs,
+    /// `--role` rules, parsed once: the TLS listener's and the broker's (`--mqtt-role`).
+    pub roles: Arc<crate::bridge::tls::Roles>,
     /// `--mqtt-writes`: writes from the broker, through the same admission as clients'.
     pub broker_writes: Option<Arc<crate::bridge::broker::BrokerWrites>>,
 }
@@ -177,7 +179,7 @@ pub async fn bridge<W: Write>(
         }
         if let Some(addr) = &opts.tls.listen_tls {
             // Files are read (and checked) before listening: a bad certificate stops the start.
-            let tls = crate::bridge::tls::Tls::start(&opts.tls)?;
+            let tls = crate::bridge::tls::Tls::start(&opts.tls, Arc::clone(&opts.roles))?;
             let listener =
                 TcpListener::bind(addr).await.with_context(|| format!("--listen-tls: listening on {addr}"))?;
             let local = listener.local_addr().with_context(|| format!("--listen-tls: listening on {addr}"))?;

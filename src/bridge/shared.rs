@@ -10,7 +10,7 @@ use tokio::sync::{Notify, oneshot};
 use tokio::time::Instant;
 
 use super::metrics::Metrics;
-use mbtap_gateway::cache::{Cache, Poll, Rule, read_overlaps_write, written_range};
+use mbtap_gateway::cache::{Cache, Poll, Rule, WriteId};
 use mbtap_gateway::queue::{ClientId, FairQueue, Full};
 use mbtap_gateway::transaction::Reply;
 
@@ -29,19 +29,19 @@ pub struct Job {
     pub write: Option<WriteGuard>,
 }
 
-/// Writes queued or on the line, not yet done: (id, unit, request PDU).
-type PendingWrites = Arc<Mutex<Vec<(u64, u8, Vec<u8>)>>>;
-
-/// One write among [`PendingWrites`]; removed when dropped.
+/// A write's place among the cache's writes not yet done; ended when dropped, however the
+/// job ends (answered, failed, dropped unsent).
 #[derive(Debug)]
 pub struct WriteGuard {
-    set: PendingWrites,
-    id: u64,
+    line: std::sync::Weak<LineShared>,
+    id: WriteId,
 }
 
 impl Drop for WriteGuard {
     fn drop(&mut self) {
-        self.set.lock().unwrap_or_else(PoisonError::into_inner).retain(|(id, ..)| *id != self.id);
+        if let Some(line) = self.line.upgrade() {
+            line.cache().write_ends(self.id);
+        }
     }
 }
 
@@ -52,11 +52,8 @@ pub struct LineShared {
     pub(super) wake: Notify,
     pub metrics: Metrics,
     /// Answers from memory (`--cache`), filled and invalidated by the line, read by the
-    /// connections before they queue.
+    /// connections before they queue; it keeps the writes not yet done.
     cache: Mutex<Cache>,
-    /// Writes not yet done: reads they may change are not answered from the cache.
-    pending_writes: PendingWrites,
-    next_write: std::sync::atomic::AtomicU64,
     /// The gateway core's time zero: its clock is the time since.
     origin: Instant,
 }
@@ -70,8 +67,6 @@ impl LineShared {
             wake: Notify::new(),
             metrics: Metrics::default(),
             cache: Mutex::new(Cache::new(cache)),
-            pending_writes: PendingWrites::default(),
-            next_write: std::sync::atomic::AtomicU64::new(0),
             origin: Instant::now(),
         })
     }
@@ -87,21 +82,10 @@ impl LineShared {
     }
 
     /// Registers a write to `unit` before it is queued (none for a request that writes
-    /// nothing the cache holds); the job carries the guard.
-    pub fn write_pending(&self, unit: u8, pdu: &[u8]) -> Option<WriteGuard> {
-        written_range(pdu)?;
-        let id = self.next_write.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        self.pending_writes.lock().unwrap_or_else(PoisonError::into_inner).push((id, unit, pdu.to_vec()));
-        Some(WriteGuard { set: Arc::clone(&self.pending_writes), id })
-    }
-
-    /// Whether a write not yet done may change what `pdu` reads from `unit`.
-    fn read_behind_write(&self, unit: u8, pdu: &[u8]) -> bool {
-        self.pending_writes
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .iter()
-            .any(|(_, u, w)| read_overlaps_write(unit, pdu, *u, w))
+    /// nothing the cache holds, or without a cache); the job carries the guard.
+    pub fn write_pending(self: &Arc<Self>, unit: u8, pdu: &[u8]) -> Option<WriteGuard> {
+        let id = self.cache().write_begins(unit, pdu)?;
+        Some(WriteGuard { line: Arc::downgrade(self), id })
     }
 
     pub(super) fn cache(&self) -> std::sync::MutexGuard<'_, Cache> {
@@ -115,8 +99,7 @@ impl LineShared {
         if !cache.is_on() {
             return None;
         }
-        // A read queued behind a write it overlaps waits for the write (read your own write).
-        let answer = if self.read_behind_write(unit, pdu) { None } else { cache.lookup(unit, pdu, self.now()) };
+        let answer = cache.lookup(unit, pdu, self.now());
         drop(cache);
         self.metrics.cache(answer.is_some());
         answer

@@ -183,11 +183,11 @@ impl Tls {
     /// do not load, and saying so).
     ///
     /// # Errors
-    /// As [`acceptor`], and roles that do not parse.
-    pub fn start(args: &TlsArgs) -> anyhow::Result<Self> {
+    /// As [`acceptor`].
+    pub fn start(args: &TlsArgs, roles: Arc<Roles>) -> anyhow::Result<Self> {
         let tls = Self {
             acceptor: Arc::new(RwLock::new(acceptor(args)?)),
-            roles: Arc::new(parse_roles(&args.role)?),
+            roles,
             revoked: Arc::new(tokio::sync::watch::channel(Arc::new(revoked(args)?)).0),
         };
         let (slot, list, args) = (Arc::clone(&tls.acceptor), Arc::clone(&tls.revoked), args.clone());

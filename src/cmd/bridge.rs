@@ -363,6 +363,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         metrics,
         duration,
         reverse,
+        roles: std::sync::Arc::new(crate::bridge::tls::parse_roles(&tls.role)?),
         tls,
         broker_writes: None,
     };
@@ -386,8 +387,9 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         let role = match &mqtt_role {
             None => None,
             Some(name) => Some(
-                crate::bridge::tls::parse_roles(&opts.tls.role)?
-                    .remove(name.as_str())
+                opts.roles
+                    .get(name.as_str())
+                    .cloned()
                     .with_context(|| format!("--mqtt-role {name:?}: no --role {name}=… defines it"))?,
             ),
         };

@@ -94,12 +94,20 @@ impl Poll {
     }
 }
 
-/// The cache of one line.
+/// The cache of one line, and the writes queued or on the line that it must not answer past.
 #[derive(Debug, Default)]
 pub struct Cache {
     rules: Vec<Rule>,
     values: BTreeMap<(u8, Table, u16), (u16, Duration)>,
+    /// Writes begun and not yet done, by id: a read they may change is not answered from
+    /// memory (issue 24: a client pipelining "write h101, read h101" read the old value).
+    writes: BTreeMap<WriteId, (u8, Vec<u8>)>,
+    next_write: u64,
 }
+
+/// A write among those not yet done ([`Cache::write_begins`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct WriteId(u64);
 
 /// A read request's table, address and quantity, when it is one.
 fn read_of(pdu: &[u8]) -> Option<(Table, u16, u16)> {
@@ -112,7 +120,25 @@ fn read_of(pdu: &[u8]) -> Option<(Table, u16, u16)> {
 impl Cache {
     #[must_use]
     pub fn new(rules: Vec<Rule>) -> Self {
-        Self { rules, values: BTreeMap::new() }
+        Self { rules, ..Self::default() }
+    }
+
+    /// A write `pdu` to `unit` is queued: until [`Self::write_ends`], no read it may change is
+    /// answered from memory. `None` when the cache is off or `pdu` writes nothing it holds.
+    pub fn write_begins(&mut self, unit: u8, pdu: &[u8]) -> Option<WriteId> {
+        if !self.is_on() {
+            return None;
+        }
+        written_range(pdu)?;
+        let id = WriteId(self.next_write);
+        self.next_write = self.next_write.wrapping_add(1);
+        self.writes.insert(id, (unit, pdu.to_vec()));
+        Some(id)
+    }
+
+    /// The write is done (answered, failed, or dropped unsent).
+    pub fn write_ends(&mut self, id: WriteId) {
+        self.writes.remove(&id);
     }
 
     /// Whether there are rules at all.
@@ -130,10 +156,13 @@ impl Cache {
     }
 
     /// The answer from memory to `pdu` for `unit` at `now`, when every register it reads is
-    /// covered and fresh.
+    /// covered and fresh, and no write not yet done may change it (read your own write).
     #[must_use]
     pub fn lookup(&self, unit: u8, pdu: &[u8], now: Duration) -> Option<Vec<u8>> {
         let (table, address, quantity) = read_of(pdu)?;
+        if self.writes.values().any(|(u, w)| read_overlaps_write(unit, pdu, *u, w)) {
+            return None;
+        }
         let mut values = Vec::with_capacity(usize::from(quantity));
         for i in 0..quantity {
             let a = address.checked_add(i)?;
@@ -248,6 +277,22 @@ mod tests {
         c.invalidate(1, &[0x06, 0x00, 0x01, 0x00, 0x07]);
         assert_eq!(c.lookup(1, &READ, t0), None);
         assert_eq!(c.lookup(1, &[0x03, 0x00, 0x00, 0x00, 0x01], t0), Some(vec![0x03, 0x02, 0x00, 0x0A]));
+    }
+
+    /// Issue 24, the decision moved into the core (issue 38: the shell kept these writes).
+    #[test]
+    fn a_read_behind_a_write_not_yet_done_is_not_answered_from_memory() {
+        let t0 = Duration::from_secs(10);
+        let mut c = Cache::new(vec![parse_rule("1:holding:0-9=1s").unwrap()]);
+        c.fill(1, &READ, &ANSWER, t0);
+        // Write single register 1 = 7 (06 0001 0007), queued.
+        let w = c.write_begins(1, &[0x06, 0x00, 0x01, 0x00, 0x07]).unwrap();
+        assert_eq!(c.lookup(1, &READ, t0), None, "the write may change register 1");
+        assert!(c.write_begins(1, &READ).is_none(), "a read writes nothing");
+        c.write_ends(w);
+        assert_eq!(c.lookup(1, &READ, t0), Some(ANSWER.to_vec()), "this test does not invalidate");
+        let off = &mut Cache::new(Vec::new());
+        assert!(off.write_begins(1, &[0x06, 0x00, 0x01, 0x00, 0x07]).is_none(), "no cache, nothing kept");
     }
 
     #[test]
