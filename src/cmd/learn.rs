@@ -74,7 +74,9 @@ fn listen(args: &Args) -> anyhow::Result<mbtap_core::learn::Learner> {
         duration: args.duration,
     };
     let mut writer = crate::output::EventWriter::new(std::io::sink(), crate::output::EventFormat::Summary);
-    writer.learn = Some(crate::output::learn_draft::LiveDraft::new(args.output.clone(), port));
+    let mut draft = crate::output::learn_draft::LiveDraft::new(args.output.clone(), port);
+    draft.learner.only = args.unit;
+    writer.learn = Some(draft);
     crate::cmd::runtime()?.block_on(crate::source::sniff::sniff(opts, &mut writer, &mut std::io::stderr()))?;
     Ok(writer.learn.take().map(|l| l.learner).unwrap_or_default())
 }
@@ -90,12 +92,16 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         );
         let input = crate::output::progress::open_capture(&args.capture, true)?;
         let mut learner = mbtap_core::learn::Learner::default();
+        learner.only = args.unit;
         mbtap_core::replay::replay_into(input, args.line.overrides(), &mut learner)
             .with_context(|| format!("reading {}", args.capture.display()))?;
         learner
     };
     if let Some(u) = args.unit {
         learner.units.retain(|&k, _| k == u);
+    }
+    if let Some(note) = mbtap_core::learn::draft::not_kept_note(&learner) {
+        eprintln!("mbtap: {note}");
     }
     anyhow::ensure!(
         !learner.units.is_empty(),

@@ -115,11 +115,36 @@ fn entry(s: &mut String, table: Table, g: &Guess, u: &Unit, hint: Option<&super:
     }
 }
 
+/// What was heard and not learned past the learner's bounds, when anything was: what to do.
+#[must_use]
+pub fn not_kept_note(l: &Learner) -> Option<String> {
+    let mut parts = Vec::new();
+    if l.not_kept_registers > 0 {
+        parts.push(format!(
+            "{} values of registers past the first {} kept",
+            l.not_kept_registers,
+            super::MAX_REGISTERS
+        ));
+    }
+    if l.not_kept_other > 0 {
+        parts.push(format!(
+            "{} reads, exceptions or writes of blocks and addresses past the first {} kept",
+            l.not_kept_other,
+            super::MAX_OTHER
+        ));
+    }
+    (!parts.is_empty())
+        .then(|| format!("{} were heard and not learned: learn one unit at a time (--unit N)", parts.join(" and ")))
+}
+
 /// The findings for people: per unit, the blocks polled, writes, exceptions and each guess.
 #[must_use]
 pub fn text(l: &Learner) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "learned from {} answered transactions", l.transactions);
+    if let Some(note) = not_kept_note(l) {
+        let _ = writeln!(s, "{note}");
+    }
     for (unit, u) in &l.units {
         let functions: Vec<String> = u.functions.iter().map(|f| format!("{f:02X}")).collect();
         let _ = writeln!(s, "\nunit {unit}: functions {}", functions.join(", "));
@@ -167,7 +192,7 @@ fn ms(ns: u64) -> f64 {
     ns as f64 / 1e6
 }
 
-/// The same as JSON: `{"transactions": N, "units": [{"unit", "functions", "blocks", "writes",
+/// The same as JSON: `{"transactions": N, "not_kept": {"registers", "other"}, "units": [{"unit", "functions", "blocks", "writes",
 /// "exceptions", "registers": [{"table", "address", "type", "width", "confidence", "evidence"}]}]}`,
 /// serialised as it goes — one register's object at a time, never the whole tree (issue 39: a
 /// capture of 400 000 registers took 1.8 GB as one tree). `serde_json::to_value` of it gives the
@@ -184,8 +209,12 @@ struct Registers<'a>(&'a Unit);
 impl serde::Serialize for Json<'_> {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         use serde::ser::SerializeMap as _;
-        let mut m = s.serialize_map(Some(2))?;
+        let mut m = s.serialize_map(Some(3))?;
         m.serialize_entry("transactions", &self.0.transactions)?;
+        m.serialize_entry(
+            "not_kept",
+            &serde_json::json!({"registers": self.0.not_kept_registers, "other": self.0.not_kept_other}),
+        )?;
         m.serialize_entry("units", &Units(self.0))?;
         m.end()
     }
@@ -203,23 +232,20 @@ impl serde::Serialize for UnitJson<'_> {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         use serde::ser::SerializeMap as _;
         let UnitJson(unit, u) = *self;
-        let blocks: Vec<serde_json::Value> = u
-            .blocks
-            .iter()
-            .map(|(&(t, first, q), b)| {
+        // Each element built and written in turn: never all of a unit's blocks as one tree.
+        let blocks = Each(|| {
+            u.blocks.iter().map(|(&(t, first, q), b)| {
                 serde_json::json!({"table": t.name(), "first": first, "quantity": q, "polls": b.polls, "period_ns": b.period_ns()})
             })
-            .collect();
-        let writes: Vec<serde_json::Value> = u
-            .writes
-            .iter()
-            .map(|(&(t, a), v)| serde_json::json!({"table": t.name(), "address": a, "values": v}))
-            .collect();
-        let exceptions: Vec<serde_json::Value> = u
-            .exceptions
-            .iter()
-            .map(|(&(t, first, q), c)| serde_json::json!({"table": t.name(), "first": first, "quantity": q, "code": c}))
-            .collect();
+        });
+        let writes = Each(|| {
+            u.writes.iter().map(|(&(t, a), v)| serde_json::json!({"table": t.name(), "address": a, "values": v}))
+        });
+        let exceptions = Each(|| {
+            u.exceptions.iter().map(
+                |(&(t, first, q), c)| serde_json::json!({"table": t.name(), "first": first, "quantity": q, "code": c}),
+            )
+        });
         let mut m = s.serialize_map(Some(6))?;
         m.serialize_entry("unit", &unit)?;
         m.serialize_entry("functions", &u.functions)?;
@@ -228,6 +254,19 @@ impl serde::Serialize for UnitJson<'_> {
         m.serialize_entry("exceptions", &exceptions)?;
         m.serialize_entry("registers", &Registers(u))?;
         m.end()
+    }
+}
+
+/// A sequence serialised from a fresh iterator, one element at a time.
+struct Each<F>(F);
+
+impl<F, I> serde::Serialize for Each<F>
+where
+    F: Fn() -> I,
+    I: Iterator<Item = serde_json::Value>,
+{
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq((self.0)())
     }
 }
 

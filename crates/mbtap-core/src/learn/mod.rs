@@ -3,7 +3,8 @@
 //! functions it uses; the answers over time give each register's type ([`infer`]); exceptions
 //! 02 mark addresses the device does not have. Pure: transactions in (PDUs and times), a
 //! report and a draft profile out. Memory grows with the registers heard, never with the
-//! length of the capture ([`stats`]).
+//! length of the capture ([`stats`]), and the registers kept are bounded too
+//! ([`MAX_REGISTERS`], [`MAX_OTHER`]): a capture naming more is learned in part, and says so.
 
 pub mod diff;
 pub mod draft;
@@ -13,6 +14,7 @@ pub mod probe;
 pub mod stats;
 pub mod truth;
 
+use std::collections::btree_map::Entry;
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::profile::Table;
@@ -89,11 +91,27 @@ impl Unit {
     }
 }
 
+/// Registers and adjacent pairs kept, all units together: each costs up to ~0.5 KB once heard
+/// [`stats::RECENT`] times, so this keeps the learner under ~35 MB whatever the capture (issue
+/// 39: a capture of 400 000 distinct registers took 248 MB). A real bus polls far fewer.
+pub const MAX_REGISTERS: usize = 65_536;
+/// Blocks, exception ranges and written addresses kept, all units together.
+pub const MAX_OTHER: usize = 32_768;
+
 /// Everything learned, per unit.
 #[derive(Debug, Clone, Default)]
 pub struct Learner {
     pub units: BTreeMap<u8, Unit>,
     pub transactions: u64,
+    /// Only this unit is learned (`learn --unit`): the others cost nothing.
+    pub only: Option<u8>,
+    /// Registers (and pairs) and other entries kept, against [`MAX_REGISTERS`], [`MAX_OTHER`].
+    kept_registers: usize,
+    kept_other: usize,
+    /// Values of registers (and pairs), and reads, exceptions and writes of other entries,
+    /// heard but not kept past those bounds (counted each time they are heard).
+    pub not_kept_registers: u64,
+    pub not_kept_other: u64,
 }
 
 fn word(b: &[u8], at: usize) -> Option<u16> {
@@ -105,11 +123,22 @@ impl Learner {
     /// `unit`, at `t_ns`. Anything else (broadcasts, unanswered requests) is ignored.
     pub fn observe(&mut self, unit: u8, request: &[u8], response: &[u8], t_ns: u64) {
         let (Some(&fc), Some(&rfc)) = (request.first(), response.first()) else { return };
-        if unit == 0 {
+        if unit == 0 || self.only.is_some_and(|only| only != unit) {
             return;
         }
         self.transactions += 1;
-        let u = self.units.entry(unit).or_default();
+        let Self { units, kept_registers, kept_other, not_kept_registers, not_kept_other, .. } = self;
+        // Whether a new entry may be kept: one more within `bound`, or counted as not kept.
+        let room = |kept: &mut usize, bound: usize, not_kept: &mut u64| {
+            if *kept < bound {
+                *kept += 1;
+                true
+            } else {
+                *not_kept += 1;
+                false
+            }
+        };
+        let u = units.entry(unit).or_default();
         u.functions.insert(fc);
         // A read: block, exception, and the values it returned (MAP v1.1b3 §6.1–6.4).
         if let Some(table) = table_read_by(fc)
@@ -117,12 +146,31 @@ impl Learner {
             && quantity > 0
         {
             if rfc == fc | 0x80 {
-                u.exceptions.insert((table, first, quantity), response.get(1).copied().unwrap_or(0));
+                let code = response.get(1).copied().unwrap_or(0);
+                match u.exceptions.entry((table, first, quantity)) {
+                    Entry::Occupied(mut e) => {
+                        e.insert(code);
+                    }
+                    Entry::Vacant(e) => {
+                        if room(kept_other, MAX_OTHER, not_kept_other) {
+                            e.insert(code);
+                        }
+                    }
+                }
                 return;
             }
-            let b = u.blocks.entry((table, first, quantity)).or_insert(Block { first_t_ns: t_ns, ..Block::default() });
-            b.polls += 1;
-            b.last_t_ns = t_ns;
+            match u.blocks.entry((table, first, quantity)) {
+                Entry::Occupied(mut e) => {
+                    let b = e.get_mut();
+                    b.polls += 1;
+                    b.last_t_ns = t_ns;
+                }
+                Entry::Vacant(e) => {
+                    if room(kept_other, MAX_OTHER, not_kept_other) {
+                        e.insert(Block { polls: 1, first_t_ns: t_ns, last_t_ns: t_ns });
+                    }
+                }
+            }
             let data = response.get(2..).unwrap_or_default();
             let mut prev: Option<u16> = None;
             for i in 0..quantity {
@@ -134,9 +182,23 @@ impl Learner {
                     word(data, i * 2)
                 };
                 let Some(v) = v else { break };
-                u.regs.entry((table, a)).or_default().push(v);
+                match u.regs.entry((table, a)) {
+                    Entry::Occupied(mut e) => e.get_mut().push(v),
+                    Entry::Vacant(e) => {
+                        if room(kept_registers, MAX_REGISTERS, not_kept_registers) {
+                            e.insert(RegStat::default()).push(v);
+                        }
+                    }
+                }
                 if let (false, Some(p), Some(before)) = (is_bits(table), prev, a.checked_sub(1)) {
-                    u.pairs.entry((table, before)).or_default().push(p, v);
+                    match u.pairs.entry((table, before)) {
+                        Entry::Occupied(mut e) => e.get_mut().push(p, v),
+                        Entry::Vacant(e) => {
+                            if room(kept_registers, MAX_REGISTERS, not_kept_registers) {
+                                e.insert(PairStat::default()).push(p, v);
+                            }
+                        }
+                    }
                 }
                 prev = Some(v);
             }
@@ -144,7 +206,15 @@ impl Learner {
         }
         // Writes (MAP v1.1b3 §6.5, 6.6, 6.11, 6.12): setpoints and commands.
         let mut wrote = |table: Table, a: u16, v: u16| {
-            let w = u.writes.entry((table, a)).or_default();
+            let w = match u.writes.entry((table, a)) {
+                Entry::Occupied(e) => e.into_mut(),
+                Entry::Vacant(e) => {
+                    if !room(kept_other, MAX_OTHER, not_kept_other) {
+                        return;
+                    }
+                    e.insert(Vec::new())
+                }
+            };
             w.insert(0, v);
             w.truncate(8);
         };
@@ -181,5 +251,54 @@ impl crate::analyzer::Sink for Learner {
         {
             self.observe(t.unit, req, resp, t.t_start.0);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Read one holding register at `a` (MAP v1.1b3 §6.3: 03, address, quantity 0001) and its
+    /// answer (03, byte count 02, the value).
+    fn read_one(a: u16, v: u16) -> ([u8; 5], [u8; 4]) {
+        let [ah, al] = a.to_be_bytes();
+        let [vh, vl] = v.to_be_bytes();
+        ([0x03, ah, al, 0x00, 0x01], [0x03, 0x02, vh, vl])
+    }
+
+    /// Issue 39: a capture of 400 000 distinct registers took 248 MB; what is kept is bounded
+    /// now, and what was not kept is counted and said.
+    #[test]
+    fn a_capture_of_more_registers_than_kept_is_learned_in_part_and_says_so() {
+        let mut l = Learner::default();
+        for k in 0..=u32::try_from(MAX_REGISTERS).unwrap() {
+            let unit = if k < 65_536 { 1 } else { 2 };
+            let (q, r) = read_one(u16::try_from(k % 65_536).unwrap(), 7);
+            l.observe(unit, &q, &r, u64::from(k));
+        }
+        let kept: usize = l.units.values().map(|u| u.regs.len()).sum();
+        let blocks: usize = l.units.values().map(|u| u.blocks.len()).sum();
+        assert_eq!((kept, blocks), (MAX_REGISTERS, MAX_OTHER));
+        assert_eq!(l.not_kept_registers, 1);
+        assert_eq!(l.not_kept_other, u64::try_from(MAX_REGISTERS + 1 - MAX_OTHER).unwrap());
+        let note = draft::not_kept_note(&l).unwrap();
+        assert!(note.contains("--unit N") && note.contains("65536"), "{note}");
+        assert!(draft::text(&l).contains(&note));
+        // What was kept still learns: a kept register heard again is counted, not refused.
+        let (q, r) = read_one(0, 8);
+        l.observe(1, &q, &r, 1);
+        assert_eq!(l.units[&1].regs[&(Table::HoldingRegisters, 0)].samples, 2);
+        assert_eq!(l.not_kept_registers, 1);
+    }
+
+    #[test]
+    fn learning_one_unit_keeps_nothing_of_the_others() {
+        let mut l = Learner { only: Some(5), ..Learner::default() };
+        let (q, r) = read_one(10, 1);
+        l.observe(4, &q, &r, 0);
+        l.observe(5, &q, &r, 0);
+        assert_eq!(l.units.keys().copied().collect::<Vec<_>>(), [5]);
+        assert_eq!(l.transactions, 1);
+        assert!(draft::not_kept_note(&l).is_none());
     }
 }
