@@ -30,8 +30,10 @@ turnaround-ms = 0.0
 # allow-broadcast = true  # let writes to unit 0 through to every device (refused otherwise)
 # broadcast-reply = true  # answer broadcast writes at once, for SCADA that insists
 
-# Safety.
-read-only = false
+# Safety. The sample starts closed to writes: every client on the network may read, none may
+# write (exception 01, counted). To let your SCADA write, name its addresses in allow-ip and set
+# read-only = false.
+read-only = true
 # allow-function = ["3", "4"]
 # allow-ip = ["10.0.0.0/24", "127.0.0.1"]
 max-connections = 64

@@ -523,7 +523,8 @@ mod tests {
         assert_eq!(b.serial.as_deref(), Some("/dev/ttyUSB0"));
         assert_eq!(b.listen.as_deref(), Some("0.0.0.0:502"));
         assert_eq!(b.timeout_ms, 800);
-        assert!(!b.read_only);
+        // Issue 42: the packaged sample opened a writable gateway to the whole network.
+        assert!(b.read_only, "the sample starts closed to writes");
     }
 
     #[test]
