@@ -346,7 +346,7 @@ fn write_imported(
         );
     }
     // What is written must load like a hand-written profile: checked before it is kept.
-    mbtap_core::profile::load(&name, &toml)
+    mbtap_core::profile::import::load_back(&name, &toml)
         .context("the imported profile does not load (a bug: please report it with the sheet)")?;
     let out = if let Some(o) = &args.output {
         o.clone()
