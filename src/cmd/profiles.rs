@@ -291,7 +291,7 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             ),
             ImportFormat::Sunspec => anyhow::bail!("--format sunspec reads a device: give --from"),
             ImportFormat::HomeAssistant => {
-                let yaml = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+                let yaml = crate::config::sheets::read_yaml(file)?;
                 let (imported, unit) =
                     mbtap_core::profile::import::home_assistant::parse_home_assistant(&yaml, args.unit)
                         .with_context(|| format!("reading {}", file.display()))?;

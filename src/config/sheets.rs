@@ -22,6 +22,38 @@ pub const MAX_FILE_BYTES: u64 = 64 << 20;
 /// directory before anything is unpacked).
 pub const MAX_UNPACKED_BYTES: u64 = 128 << 20;
 
+/// The largest Home Assistant YAML read (32 MiB: twice a file naming every address of two tables;
+/// a real `modbus:` configuration is kilobytes). The YAML reader's tree takes ~30 bytes per byte.
+pub const MAX_YAML_BYTES: u64 = 32 << 20;
+
+/// A Home Assistant YAML file, refused unread past [`MAX_YAML_BYTES`] (issue 39: a 200 MB file of
+/// nested mappings was read whole before anything looked at it).
+///
+/// # Errors
+/// The file cannot be read, is too big, or is not UTF-8.
+pub fn read_yaml(path: &Path) -> anyhow::Result<String> {
+    let file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let len = file.metadata().with_context(|| format!("reading {}", path.display()))?.len();
+    let too_big = |n: u64| {
+        anyhow::anyhow!(
+            "{}: {n} bytes, over the {MAX_YAML_BYTES} a Home Assistant `modbus:` file may have; give only the `modbus:` part",
+            path.display()
+        )
+    };
+    if len > MAX_YAML_BYTES {
+        return Err(too_big(len));
+    }
+    let mut text = String::with_capacity(usize::try_from(len).unwrap_or(0));
+    let n = file
+        .take(MAX_YAML_BYTES + 1)
+        .read_to_string(&mut text)
+        .with_context(|| format!("reading {} (as UTF-8 text)", path.display()))?;
+    if u64::try_from(n).unwrap_or(u64::MAX) > MAX_YAML_BYTES {
+        return Err(too_big(u64::try_from(n).unwrap_or(u64::MAX)));
+    }
+    Ok(text)
+}
+
 /// Said when a sheet is over a bound: which, and what to do.
 fn too_big(path: &Path, what: &str) -> anyhow::Error {
     anyhow::anyhow!(

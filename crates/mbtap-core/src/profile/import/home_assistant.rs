@@ -18,6 +18,71 @@ pub enum HaError {
     NoHubs,
     #[error("entries for several devices ({0}): choose one with --unit")]
     SeveralUnits(String),
+    #[error(
+        "line {line}: nested deeper than {MAX_DEPTH} levels, the import's recursion limit — not a Home Assistant `modbus:` configuration (one nests about 6); nothing imported"
+    )]
+    TooDeep { line: usize },
+}
+
+/// Nesting a Home Assistant file may have (it has about 6: `modbus:`, a hub, `sensors:`, an
+/// entry, a key): deeper is refused before the YAML reader sees it (issue 39: 100 000 nested `[`
+/// took 30–40 s, 20 000 nested mappings 210 MB).
+pub const MAX_DEPTH: usize = 64;
+
+/// Refuses `yaml` nested deeper than [`MAX_DEPTH`] in flow collections (`[`, `{` where a value
+/// begins, outside quotes and comments) or in block indentation (each deeper indentation, and
+/// each `- ` opening a sequence on a line, one level). One pass, bounded work per byte.
+fn check_depth(yaml: &str) -> Result<(), HaError> {
+    let mut indents: Vec<usize> = Vec::new();
+    let mut flow = 0usize;
+    for (n, line) in yaml.lines().enumerate() {
+        let too_deep = || HaError::TooDeep { line: n + 1 };
+        let body = line.trim_start_matches(' ');
+        if flow == 0 && !body.is_empty() && !body.starts_with('#') {
+            let indent = line.len() - body.len();
+            while indents.last().is_some_and(|&top| top > indent) {
+                indents.pop();
+            }
+            if indents.last().is_none_or(|&top| top < indent) {
+                indents.push(indent);
+            }
+            // `- - - x`: each dash opens a sequence one level deeper.
+            let dashes = body.split_inclusive(' ').take_while(|w| *w == "- ").count();
+            if indents.len() + dashes > MAX_DEPTH {
+                return Err(too_deep());
+            }
+        }
+        // Inside a quoted scalar (its quote), inside a plain one (brackets there are text).
+        let (mut quote, mut plain, mut prev) = (None::<char>, false, ' ');
+        for c in body.chars() {
+            let opens = matches!(prev, ' ' | ':' | ',' | '[' | '{' | '-');
+            match (quote, c) {
+                (Some(q), c) if c == q && !(q == '"' && prev == '\\') => quote = None,
+                (Some(_), _) => {}
+                (None, '#') if prev == ' ' => break,
+                (None, ':') => plain = false,
+                (None, ',' | ']' | '}') if flow > 0 => {
+                    plain = false;
+                    if c != ',' {
+                        flow -= 1;
+                    }
+                }
+                _ if plain => {}
+                (None, '"' | '\'') if opens => quote = Some(c),
+                (None, '[' | '{') if opens => {
+                    flow += 1;
+                    if flow > MAX_DEPTH {
+                        return Err(too_deep());
+                    }
+                }
+                (None, ' ' | '-' | '?' | '|' | '>') => {}
+                (None, _) => plain = true,
+            }
+            // An escaped backslash escapes nothing after it.
+            prev = if quote.is_some() && c == '\\' && prev == '\\' { ' ' } else { c };
+        }
+    }
+    Ok(())
 }
 
 /// The hubs in a document: under `modbus:`, a list of hubs, or one hub.
@@ -57,6 +122,7 @@ fn text(v: Option<&Value>) -> Option<String> {
 /// # Errors
 /// Not YAML, no hubs, or several devices and no `unit`.
 pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u8), HaError> {
+    check_depth(yaml)?;
     let doc: Value = serde_norway::from_str(yaml).map_err(|e| HaError::Yaml(e.to_string()))?;
     let hubs = hubs(&doc);
     if hubs.is_empty() {
@@ -243,5 +309,26 @@ modbus:
         assert_eq!(parse_home_assistant(two, Some(2)).unwrap().0.points.len(), 1);
         assert!(matches!(parse_home_assistant("a: [", None), Err(HaError::Yaml(_))));
         assert!(matches!(parse_home_assistant("sensor: []", None), Err(HaError::NoHubs)));
+    }
+
+    /// Issue 39 (`gen_yaml.py` deep_seq, deep_map): 100 000 nested `[` took 30 s, 20 000 nested
+    /// mappings 210 MB; both are refused before the YAML reader, naming the line.
+    #[test]
+    fn nesting_deeper_than_any_home_assistant_file_is_refused_at_once() {
+        let deep_seq = format!("modbus: {}{}\n", "[".repeat(100_000), "]".repeat(100_000));
+        assert!(matches!(parse_home_assistant(&deep_seq, None), Err(HaError::TooDeep { line: 1 })));
+        let deep_map: String = std::iter::once("modbus:\n".to_owned())
+            .chain((0..20_000).map(|i| format!("{}k{i}:\n", " ".repeat(i + 1))))
+            .collect();
+        let e = parse_home_assistant(&deep_map, None).unwrap_err();
+        assert!(matches!(e, HaError::TooDeep { line } if line <= MAX_DEPTH + 1), "{e}");
+        assert!(e.to_string().contains("nothing imported"), "{e}");
+        let dashes = format!("modbus:\n{}x\n", "- ".repeat(100));
+        assert!(matches!(parse_home_assistant(&dashes, None), Err(HaError::TooDeep { line: 2 })));
+        // Brackets inside quotes, plain scalars and comments are no nesting.
+        let fine = CONFIG.replace("Grid voltage", &format!("\"{}\"", "[".repeat(200)))
+            + &format!("# {}\nx: a{}\n", "{".repeat(200), "[".repeat(200));
+        check_depth(&fine).unwrap();
+        check_depth(CONFIG).unwrap();
     }
 }
