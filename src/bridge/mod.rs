@@ -5,7 +5,8 @@
 //! [`line`] (the serial master: drives the core's transaction machine), [`port`] (the serial
 //! port and its settings, reopened when lost),
 //! [`shared`] (what the line and the connections share: queue, cache, pending writes),
-//! [`server`] (the TCP listeners: accepting, limits, eviction), [`connection`] (one TCP client,
+//! [`server`] (the TCP listeners: accepting, limits, eviction), [`watched`] (a socket noting when
+//! it last brought bytes in, for eviction), [`connection`] (one TCP client,
 //! on its own), [`request`] (each request through admission, cache and queue), [`udp`] (Modbus
 //! UDP clients),
 //! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`reverse`] (an RTU slave on
@@ -28,3 +29,4 @@ pub mod server;
 pub mod shared;
 pub mod tls;
 pub mod udp;
+pub mod watched;

@@ -22,6 +22,8 @@ use mbtap_gateway::seats::{self, Seat};
 #[derive(Debug)]
 pub struct Conn {
     seat: Seat,
+    /// When its socket last brought bytes in ([`super::watched`]).
+    last_byte: super::watched::LastByte,
     abort: tokio::task::AbortHandle,
 }
 
@@ -53,7 +55,12 @@ impl Drop for Cleanup {
 /// sockets, or (None) to make room in a full table. False when none may go.
 fn evict(table: &Table, ip: Option<std::net::IpAddr>) -> bool {
     let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let all = table.iter().map(|(k, c)| (*k, &c.seat));
+    // The seats as they are now: each with when its socket last brought bytes in.
+    let now_seats: Vec<(ClientId, Seat)> = table
+        .iter()
+        .map(|(k, c)| (*k, Seat { last_byte: super::watched::last_byte(&c.last_byte), ..c.seat }))
+        .collect();
+    let all = now_seats.iter().map(|(k, s)| (*k, s));
     let victim = match ip {
         Some(ip) => seats::for_address(all, ip, now()),
         None => seats::for_room(all, now()),
@@ -113,11 +120,13 @@ pub async fn serve(
         let client = NEXT_CLIENT.fetch_add(1, Ordering::Relaxed);
         let (routes, opts, table_for_task, tls) =
             (Arc::clone(&routes), Arc::clone(&opts), Arc::clone(&table), tls.clone());
+        let last_byte = super::watched::LastByte::default();
+        let _ = stream.set_nodelay(true);
+        let stream = super::watched::Watched { inner: stream, last: Arc::clone(&last_byte), clock: now };
         // Registered before the task runs, so its cleanup always finds (and removes) it.
         let mut entries = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         let handle = tokio::spawn(async move {
             let cleanup = Cleanup { client, routes: Arc::clone(&routes), table: Arc::clone(&table_for_task) };
-            let _ = stream.set_nodelay(true);
             let seen = |c| {
                 if let Some(e) = table_for_task.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get_mut(&c) {
                     e.seat.last_request = Some(now());
@@ -158,8 +167,8 @@ pub async fn serve(
             }
             drop(cleanup);
         });
-        let seat = Seat { ip, opened: now(), last_request: None };
-        entries.insert(client, Conn { seat, abort: handle.abort_handle() });
+        let seat = Seat { ip, opened: now(), last_request: None, last_byte: None };
+        entries.insert(client, Conn { seat, last_byte, abort: handle.abort_handle() });
         drop(entries);
     }
 }

@@ -1,8 +1,10 @@
 //! Who gives up a seat when a newcomer connects: the listeners' one decision about open
 //! connections (plain, RTU over TCP and TLS share `--max-connections`). A client connects and
 //! asks at once; a socket that has sent no whole request (a TLS handshake in progress counts) is
-//! an idle one and goes first, the oldest of them whatever its age — a flood of young silent
-//! sockets must not reset newcomers (issue 38: 500 of them reset 20–55 %). Else the one idle
+//! a silent one and goes first, the one stalled longest (its last byte, or its opening, oldest)
+//! whatever its age — a flood of young silent sockets must not reset newcomers (issue 38: 500 of
+//! them reset 20–55 %), and a handshake still under way outlasts sockets that stopped talking
+//! (`tls_flood.py`: the oldest silent socket was now and then a TLS client mid-handshake). Else the one idle
 //! longest, if idle at least [`EVICT_AFTER_IDLE`]; a client that keeps asking is never evicted.
 //! One source address may hold [`SILENT_PER_ADDRESS`] silent sockets. Time is an input (the
 //! shell's clock since an origin it picks).
@@ -28,10 +30,19 @@ pub struct Seat {
     pub opened: Duration,
     /// When it last sent a whole request; None: never.
     pub last_request: Option<Duration>,
+    /// When it last sent any byte; None: never.
+    pub last_byte: Option<Duration>,
 }
 
-/// The seat `ip`'s newcomer takes for its address's bound: that address's oldest silent seat
-/// idle at least [`SILENT_GRACE`], when it already holds [`SILENT_PER_ADDRESS`] silent ones.
+impl Seat {
+    /// Since when a silent seat has said nothing: its last byte, or its opening.
+    fn stalled_since(&self) -> Duration {
+        self.last_byte.unwrap_or(self.opened).max(self.opened)
+    }
+}
+
+/// The seat `ip`'s newcomer takes for its address's bound: that address's silent seat stalled
+/// longest, stalled at least [`SILENT_GRACE`], when it already holds [`SILENT_PER_ADDRESS`] silent ones.
 pub fn for_address<'a, K: Copy + 'a>(
     seats: impl Iterator<Item = (K, &'a Seat)> + Clone,
     ip: IpAddr,
@@ -41,13 +52,16 @@ pub fn for_address<'a, K: Copy + 'a>(
     if silent.clone().count() < SILENT_PER_ADDRESS {
         return None;
     }
-    silent.filter(|(_, s)| now.saturating_sub(s.opened) >= SILENT_GRACE).min_by_key(|(_, s)| s.opened).map(|(k, _)| k)
+    silent
+        .filter(|(_, s)| now.saturating_sub(s.stalled_since()) >= SILENT_GRACE)
+        .min_by_key(|(_, s)| s.stalled_since())
+        .map(|(k, _)| k)
 }
 
-/// The seat a newcomer takes when all are taken: the oldest silent one, else the one idle
-/// longest (at least [`EVICT_AFTER_IDLE`]); None: all are busy, the newcomer is refused.
+/// The seat a newcomer takes when all are taken: the silent one stalled longest, else the one
+/// idle longest (at least [`EVICT_AFTER_IDLE`]); None: all are busy, the newcomer is refused.
 pub fn for_room<'a, K: Copy + 'a>(seats: impl Iterator<Item = (K, &'a Seat)> + Clone, now: Duration) -> Option<K> {
-    let silent = seats.clone().filter(|(_, s)| s.last_request.is_none()).min_by_key(|(_, s)| s.opened);
+    let silent = seats.clone().filter(|(_, s)| s.last_request.is_none()).min_by_key(|(_, s)| s.stalled_since());
     silent.map(|(k, _)| k).or_else(|| {
         seats
             .filter_map(|(k, s)| s.last_request.map(|l| (k, l)))
@@ -66,7 +80,21 @@ mod tests {
     }
 
     fn seat(ip: &str, opened: u64, last: Option<u64>) -> Seat {
-        Seat { ip: ip.parse().unwrap(), opened: ms(opened), last_request: last.map(ms) }
+        Seat { ip: ip.parse().unwrap(), opened: ms(opened), last_request: last.map(ms), last_byte: None }
+    }
+
+    /// Issue 38 (`round3/tls_flood.py`, one address for the flood and the good clients): a TLS
+    /// client mid-handshake was now and then the oldest silent socket and was reset. A socket
+    /// that is still talking outlasts those that stalled, whatever their ages.
+    #[test]
+    fn a_handshake_under_way_outlasts_sockets_that_stalled() {
+        let handshaking = Seat { last_byte: Some(ms(99)), ..seat("127.0.0.1", 10, None) };
+        let seats = [handshaking, seat("127.0.0.1", 40, None), seat("127.0.0.1", 60, None)];
+        assert_eq!(for_room(seats.iter().enumerate(), ms(100)), Some(1), "the one stalled since 40 ms");
+        let mut flood: Vec<Seat> = (0..16).map(|i| seat("127.0.0.1", 20 + i, None)).collect();
+        flood.insert(0, handshaking);
+        let ip = "127.0.0.1".parse().unwrap();
+        assert_eq!(for_address(flood.iter().enumerate(), ip, ms(150)), Some(1));
     }
 
     /// Issue 38 (`starve.py`): silent sockets younger than 200 ms filled the table and every
