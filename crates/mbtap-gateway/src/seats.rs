@@ -1,8 +1,8 @@
 //! Who gives up a seat when a newcomer connects: the listeners' one decision about open
 //! connections (plain, RTU over TCP and TLS share `--max-connections`). A client connects and
 //! asks at once; a socket that has sent no whole request (a TLS handshake in progress counts) is
-//! a silent one and goes first, the one stalled longest (its last byte, or its opening, oldest)
-//! whatever its age — a flood of young silent sockets must not reset newcomers (issue 38: 500 of
+//! a silent one and goes first — one that never sent a byte before one that did, then the one
+//! stalled longest (its last byte, or its opening, oldest) whatever its age — a flood of young silent sockets must not reset newcomers (issue 38: 500 of
 //! them reset 20–55 %), and a handshake still under way outlasts sockets that stopped talking
 //! (`tls_flood.py`: the oldest silent socket was now and then a TLS client mid-handshake). Else the one idle
 //! longest, if idle at least [`EVICT_AFTER_IDLE`]; a client that keeps asking is never evicted.
@@ -39,10 +39,16 @@ impl Seat {
     fn stalled_since(&self) -> Duration {
         self.last_byte.unwrap_or(self.opened).max(self.opened)
     }
+
+    /// The order silent seats go in: those that never sent a byte first, then the one stalled
+    /// longest (a flood of fresh mute sockets is younger than a handshake waiting on its peer).
+    fn eviction_key(&self) -> (bool, Duration) {
+        (self.last_byte.is_some(), self.stalled_since())
+    }
 }
 
-/// The seat `ip`'s newcomer takes for its address's bound: that address's silent seat stalled
-/// longest, stalled at least [`SILENT_GRACE`], when it already holds [`SILENT_PER_ADDRESS`] silent ones.
+/// The seat `ip`'s newcomer takes for its address's bound: that address's silent seat (mute
+/// before talking, then stalled longest), stalled at least [`SILENT_GRACE`], when it already holds [`SILENT_PER_ADDRESS`] silent ones.
 pub fn for_address<'a, K: Copy + 'a>(
     seats: impl Iterator<Item = (K, &'a Seat)> + Clone,
     ip: IpAddr,
@@ -54,14 +60,15 @@ pub fn for_address<'a, K: Copy + 'a>(
     }
     silent
         .filter(|(_, s)| now.saturating_sub(s.stalled_since()) >= SILENT_GRACE)
-        .min_by_key(|(_, s)| s.stalled_since())
+        .min_by_key(|(_, s)| s.eviction_key())
         .map(|(k, _)| k)
 }
 
-/// The seat a newcomer takes when all are taken: the silent one stalled longest, else the one
+/// The seat a newcomer takes when all are taken: a silent one (mute before talking, then stalled
+/// longest), else the one
 /// idle longest (at least [`EVICT_AFTER_IDLE`]); None: all are busy, the newcomer is refused.
 pub fn for_room<'a, K: Copy + 'a>(seats: impl Iterator<Item = (K, &'a Seat)> + Clone, now: Duration) -> Option<K> {
-    let silent = seats.clone().filter(|(_, s)| s.last_request.is_none()).min_by_key(|(_, s)| s.stalled_since());
+    let silent = seats.clone().filter(|(_, s)| s.last_request.is_none()).min_by_key(|(_, s)| s.eviction_key());
     silent.map(|(k, _)| k).or_else(|| {
         seats
             .filter_map(|(k, s)| s.last_request.map(|l| (k, l)))
@@ -91,6 +98,13 @@ mod tests {
         let handshaking = Seat { last_byte: Some(ms(99)), ..seat("127.0.0.1", 10, None) };
         let seats = [handshaking, seat("127.0.0.1", 40, None), seat("127.0.0.1", 60, None)];
         assert_eq!(for_room(seats.iter().enumerate(), ms(100)), Some(1), "the one stalled since 40 ms");
+        // Waiting on its peer since 20 ms, it still outlasts a mute socket opened at 95 ms.
+        let waiting = Seat { last_byte: Some(ms(20)), ..seat("127.0.0.1", 10, None) };
+        let seats = [waiting, seat("127.0.0.1", 95, None)];
+        assert_eq!(for_room(seats.iter().enumerate(), ms(100)), Some(1), "the mute one goes first");
+        let half_hello = Seat { last_byte: Some(ms(30)), ..seat("127.0.0.1", 29, None) };
+        let seats = [Seat { last_byte: Some(ms(60)), ..waiting }, half_hello];
+        assert_eq!(for_room(seats.iter().enumerate(), ms(100)), Some(1), "stalled since 30 ms before 60 ms");
         let mut flood: Vec<Seat> = (0..16).map(|i| seat("127.0.0.1", 20 + i, None)).collect();
         flood.insert(0, handshaking);
         let ip = "127.0.0.1".parse().unwrap();
