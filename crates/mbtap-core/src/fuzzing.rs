@@ -410,6 +410,9 @@ pub fn profile_import(data: &[u8]) {
         let toml = i.to_toml("fuzz", "fuzz \"device\"", "fuzz\ninput");
         let loaded = crate::profile::load("imported.toml", &toml);
         assert!(loaded.is_ok(), "an import that does not load: {loaded:?}\n{toml}");
+        // The import's load-back in parts agrees with the whole load.
+        let parts = crate::profile::import::load_back("imported.toml", &toml);
+        assert!(parts.is_ok(), "loads whole, not in parts: {parts:?}\n{toml}");
         if let Ok(p) = loaded {
             for target in [
                 crate::profile::export::Target::HomeAssistant,
