@@ -45,7 +45,13 @@ fn main() {
         LineSettings { baud: 19_200, parity: Parity::Even, ..LineSettings::default() },
         LineSettings { baud: 115_200, parity: Parity::None, ..LineSettings::default() },
     ];
-    let models = [Observation::PerByte, Observation::FIFO_16550, Observation::USB_1MS, Observation::USB_16MS];
+    let models = [
+        Observation::PerByte,
+        Observation::PER_BYTE_JITTER,
+        Observation::FIFO_16550,
+        Observation::USB_1MS,
+        Observation::USB_16MS,
+    ];
     println!("{transactions} transactions per cell; no latency given to the framer\n");
     println!(
         "| observation | line | glitch | healthy: wrong findings | slow unit 17 named | slow: wrong timing findings | latency worked with |"

@@ -171,9 +171,10 @@ pub struct OutputArgs {
     #[arg(long, value_name = "SECONDS")]
     pub report_every: Option<f64>,
     /// Draft a register map from what is heard, as `mbtap learn` does, and keep it up to date
-    /// in this file (rewritten every 10 s of line time and at the end; `NAME-unit-N.toml` per
-    /// unit when several are heard).
-    #[arg(long, value_name = "DRAFT.toml")]
+    /// (rewritten every 10 s of line time and at the end): in this file, the first unit's
+    /// profile; or, given a directory (ending in `/`, or one that exists), `learned-unit-N.toml`
+    /// there for every unit heard.
+    #[arg(long, value_name = "DRAFT.toml|DIR/")]
     pub learn: Option<std::path::PathBuf>,
     #[command(flatten)]
     pub publish: crate::publish::PublishArgs,
@@ -278,8 +279,10 @@ pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result
         writer.health = Some(mbtap_core::health::Health::new(writer.profiles.clone()));
     }
     if let Some(path) = &o.learn {
-        writer.learn =
-            Some(crate::output::learn_draft::LiveDraft::new(Some(path.clone()), "the line mbtap listened to".into()));
+        use crate::output::learn_draft::DraftTo;
+        let dir = path.as_os_str().to_string_lossy().ends_with('/') || path.is_dir();
+        let to = if dir { DraftTo::Dir(path.clone()) } else { DraftTo::File(path.clone()) };
+        writer.learn = Some(crate::output::learn_draft::LiveDraft::new(Some(to), "the line mbtap listened to".into()));
     }
     Ok(writer)
 }

@@ -1,7 +1,7 @@
 //! `mbtap learn CAPTURE|PORT`: a register map drafted from what a recorded or a live line says
 //! ([`mbtap_core::learn`]): the blocks the master polls, its writes, the exceptions, and each
-//! register's likely type with its evidence; `-o DRAFT.toml` writes a profile per unit that
-//! `profiles check` accepts. A live line is heard through the sniffer's loop
+//! register's likely type with its evidence; `-o DRAFT.toml` writes one unit's profile and
+//! `--dir DIR` one per unit, each one `profiles check` accepts. A live line is heard through the sniffer's loop
 //! ([`crate::source::sniff`]) until `--duration` or Ctrl-C.
 
 use std::io::Write as _;
@@ -16,7 +16,8 @@ use crate::args::CaptureLineArgs;
 /// each register's likely type (constant, counter, enumeration, bits, signed, 32-bit integers
 /// and floats in either word order, text) with the evidence for it.
 ///
-/// Example: `mbtap learn site.pcapng -o meter.toml`, then `mbtap profiles check meter.toml` and
+/// Example: `mbtap learn site.pcapng -o meter.toml` (one unit heard, or `--unit 7`; `--dir
+/// drafts/` for one profile per unit), then `mbtap profiles check meter.toml` and
 /// `mbtap replay site.pcapng --device 7=meter.toml`; `mbtap learn /dev/ttyUSB0 --duration
 /// 10min -o meter.toml` listens (the drafts rewritten every 10 s while it does).
 #[derive(Debug, clap::Args)]
@@ -30,9 +31,13 @@ pub struct Args {
     pub duration: Option<std::time::Duration>,
     #[command(flatten)]
     pub line: CaptureLineArgs,
-    /// Write the draft profile here (one unit heard), or `NAME-unit-N.toml` beside it per unit.
-    #[arg(short, long, value_name = "DRAFT.toml")]
+    /// Write the draft profile here: one unit's (a profile describes one device; with several
+    /// units heard, give --unit N, or --dir).
+    #[arg(short, long, value_name = "DRAFT.toml", conflicts_with = "dir")]
     pub output: Option<PathBuf>,
+    /// Write a draft profile per unit heard into this directory (`learned-unit-N.toml`).
+    #[arg(long, value_name = "DIR")]
+    pub dir: Option<PathBuf>,
     /// Only this unit.
     #[arg(long)]
     pub unit: Option<u8>,
@@ -61,6 +66,12 @@ fn is_port(path: &std::path::Path) -> bool {
         || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
+/// Where the drafts go: `-o FILE` or `--dir DIR`.
+fn target(args: &Args) -> Option<crate::output::learn_draft::DraftTo> {
+    use crate::output::learn_draft::DraftTo;
+    args.output.clone().map(DraftTo::File).or_else(|| args.dir.clone().map(DraftTo::Dir))
+}
+
 /// Listens to `args.capture` as a port, the learner fed as the sniffer hears.
 fn listen(args: &Args) -> anyhow::Result<mbtap_core::learn::Learner> {
     let (mode, settings, latency_ns) = args.line.line.overrides().resolve();
@@ -74,7 +85,7 @@ fn listen(args: &Args) -> anyhow::Result<mbtap_core::learn::Learner> {
         duration: args.duration,
     };
     let mut writer = crate::output::EventWriter::new(std::io::sink(), crate::output::EventFormat::Summary);
-    let mut draft = crate::output::learn_draft::LiveDraft::new(args.output.clone(), port);
+    let mut draft = crate::output::learn_draft::LiveDraft::new(target(args), port);
     draft.learner.only = args.unit;
     writer.learn = Some(draft);
     crate::cmd::runtime()?.block_on(crate::source::sniff::sniff(opts, &mut writer, &mut std::io::stderr()))?;
@@ -128,9 +139,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => return Err(e).context("writing the findings"),
         _ => {}
     }
-    if let Some(path) = &args.output {
+    if let Some(to) = target(args) {
         let source = args.capture.display().to_string();
-        for (unit, file) in crate::output::learn_draft::write_drafts(&learner, path, &source, &args.hint)? {
+        for (unit, file) in crate::output::learn_draft::write_drafts(&learner, &to, &source, &args.hint)? {
             eprintln!(
                 "mbtap: draft profile of unit {unit} written to {} (check it: mbtap profiles check)",
                 file.display()

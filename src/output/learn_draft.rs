@@ -1,6 +1,6 @@
 //! Draft profiles written while listening (`sniff --learn DRAFT.toml`, also `tap`, `replay`,
-//! `demo`) and by `mbtap learn -o`: one file for one unit heard, `NAME-unit-N.toml` beside it
-//! per unit for several. While listening the drafts are rewritten every [`EVERY_NS`] of line
+//! `demo`) and by `mbtap learn -o FILE` (one unit's profile: a profile describes one device)
+//! or `--dir DIR` (one `learned-unit-N.toml` per unit). While listening the drafts are rewritten every [`EVERY_NS`] of line
 //! time and at the end, each write atomic (a temporary file renamed), so a reader never sees
 //! half a draft.
 
@@ -13,35 +13,68 @@ use mbtap_core::learn::Learner;
 /// How often the drafts are rewritten while listening, in line time.
 pub const EVERY_NS: u64 = 10_000_000_000;
 
-/// The file for `unit` when `many` units were heard.
-#[must_use]
-pub fn file_for(path: &Path, unit: u8, many: bool) -> PathBuf {
-    if many {
-        let stem = path.file_stem().map_or_else(|| "draft".into(), |s| s.to_string_lossy().into_owned());
-        path.with_file_name(format!("{stem}-unit-{unit}.toml"))
-    } else {
-        path.to_path_buf()
+/// Where drafts go: one file holding one unit's profile (`-o`), or a directory holding one
+/// `learned-unit-N.toml` per unit (`learn --dir`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DraftTo {
+    File(PathBuf),
+    Dir(PathBuf),
+}
+
+impl DraftTo {
+    /// The file for `unit`.
+    #[must_use]
+    pub fn file_for(&self, unit: u8) -> PathBuf {
+        match self {
+            Self::File(path) => path.clone(),
+            Self::Dir(dir) => dir.join(format!("learned-unit-{unit}.toml")),
+        }
     }
 }
 
-/// Writes a draft per unit of `learner` for `path`; the files written.
+/// Why `-o FILE` cannot hold the drafts of several units (issue 40: it wrote
+/// `NAME-unit-N.toml` files nobody asked for instead).
+fn one_file_for_many(path: &Path, units: &[u8]) -> String {
+    let shown: Vec<String> = units.iter().map(u8::to_string).collect();
+    format!(
+        "{}: a profile describes one device, and {} units were heard ({}); give --unit N for one of them, \
+         or --dir DIR for a profile per unit (DIR/learned-unit-N.toml)",
+        path.display(),
+        units.len(),
+        shown.join(", ")
+    )
+}
+
+/// Writes one file atomically (a temporary file renamed).
+fn write_atomic(file: &Path, text: &str) -> anyhow::Result<()> {
+    let tmp = file.with_extension("toml.tmp");
+    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, file).with_context(|| format!("writing {}", file.display()))
+}
+
+/// Writes the drafts of `learner` to `to`; the files written.
 ///
 /// # Errors
-/// A file that could not be written, named.
+/// Several units heard and one file asked for (said, with what to do instead); a file or the
+/// directory that could not be written, named.
 pub fn write_drafts(
     learner: &Learner,
-    path: &Path,
+    to: &DraftTo,
     source: &str,
     hints: &[mbtap_core::learn::hint::Hint],
 ) -> anyhow::Result<Vec<(u8, PathBuf)>> {
-    let many = learner.units.len() > 1;
+    match to {
+        DraftTo::File(path) if learner.units.len() > 1 => {
+            let units: Vec<u8> = learner.units.keys().copied().collect();
+            anyhow::bail!("{}", one_file_for_many(path, &units))
+        }
+        DraftTo::Dir(dir) => std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?,
+        DraftTo::File(_) => {}
+    }
     let mut written = Vec::new();
     for (unit, u) in &learner.units {
-        let file = file_for(path, *unit, many);
-        let tmp = file.with_extension("toml.tmp");
-        std::fs::write(&tmp, mbtap_core::learn::draft::profile_toml(*unit, u, source, hints))
-            .with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, &file).with_context(|| format!("writing {}", file.display()))?;
+        let file = to.file_for(*unit);
+        write_atomic(&file, &mbtap_core::learn::draft::profile_toml(*unit, u, source, hints))?;
         written.push((*unit, file));
     }
     Ok(written)
@@ -52,29 +85,46 @@ pub fn write_drafts(
 pub struct LiveDraft {
     pub learner: Learner,
     /// Where the drafts go; `None`: kept in memory only (`mbtap learn PORT` without `-o`).
-    pub path: Option<PathBuf>,
+    pub to: Option<DraftTo>,
     pub source: String,
     last_write_ns: Option<u64>,
-    /// The drafts so far went to `path` itself (one unit heard): when a second unit is heard,
-    /// that file gives way to one per unit.
-    wrote_single: bool,
+    /// One file asked for and a second unit heard: that file keeps the first unit's draft,
+    /// and the others are said once at the end (a listening session is not ended for it).
+    pub left_out: Vec<u8>,
 }
 
 impl LiveDraft {
     #[must_use]
-    pub fn new(path: Option<PathBuf>, source: String) -> Self {
-        Self { learner: Learner::default(), path, source, last_write_ns: None, wrote_single: false }
+    pub fn new(to: Option<DraftTo>, source: String) -> Self {
+        Self { learner: Learner::default(), to, source, last_write_ns: None, left_out: Vec::new() }
     }
 
     fn write(&mut self) -> anyhow::Result<Vec<(u8, PathBuf)>> {
-        let Some(path) = &self.path else { return Ok(Vec::new()) };
-        let written = write_drafts(&self.learner, path, &self.source, &[])?;
-        let single = written.len() == 1;
-        if !single && self.wrote_single {
-            std::fs::remove_file(path).with_context(|| format!("removing {}", path.display()))?;
+        let Some(to) = &self.to else { return Ok(Vec::new()) };
+        if let DraftTo::File(path) = to
+            && let Some((&first, u)) = self.learner.units.iter().next()
+        {
+            self.left_out = self.learner.units.keys().copied().filter(|&k| k != first).collect();
+            write_atomic(path, &mbtap_core::learn::draft::profile_toml(first, u, &self.source, &[]))?;
+            return Ok(vec![(first, path.clone())]);
         }
-        self.wrote_single = single;
-        Ok(written)
+        write_drafts(&self.learner, to, &self.source, &[])
+    }
+
+    /// What to say of the units heard but not written (one file asked for), if any.
+    #[must_use]
+    pub fn left_out_note(&self) -> Option<String> {
+        let Some(DraftTo::File(path)) = &self.to else { return None };
+        let first = self.learner.units.keys().next()?;
+        (!self.left_out.is_empty()).then(|| {
+            let shown: Vec<String> = self.left_out.iter().map(u8::to_string).collect();
+            format!(
+                "{}: the draft of unit {first} only (a profile describes one device); units {} were heard too \
+                 and not drafted — `mbtap learn --dir DIR` drafts one profile per unit",
+                path.display(),
+                shown.join(", ")
+            )
+        })
     }
 
     /// Takes an event (at line time `t_ns`); rewrites the drafts when they are due.

@@ -194,6 +194,9 @@ impl<W: Write> EventWriter<W> {
                     for (unit, file) in files {
                         eprintln!("mbtap: draft profile of unit {unit} written to {}", file.display());
                     }
+                    if let Some(note) = l.left_out_note() {
+                        eprintln!("mbtap: {note}");
+                    }
                 }
                 Err(err) => r = r.and(Err(io::Error::other(format!("{err:#}")))),
             }

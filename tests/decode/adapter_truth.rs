@@ -83,6 +83,20 @@ fn regression_issue_25_the_slow_unit_is_named_alone_through_a_fifo_and_a_16_ms_t
     }
 }
 
+/// Issue 40 (a regression of issue 25's margins): a unit pausing 2 characters inside its
+/// answers at 9600 8E1 (2.3 ms of silence; t1.5 is 1.72 ms), read one byte per read up to 0.2 ms
+/// late, got no finding — the resolution was the latency plus a character (1.4 ms). Where every
+/// read holds one byte only the delays' spread is uncertain: the unit is named, no other.
+#[test]
+fn regression_issue_40_a_two_character_pause_read_byte_by_byte_names_the_unit() {
+    let cfg = TrafficConfig { slow_unit_chars: 2, ..tight_bus(L9600, 0.0, Some(17)) };
+    let r = report(&cfg, Observation::PER_BYTE_JITTER);
+    assert_eq!(timing_findings(&r), [("gap_inside_frame", Some(17))], "{}", r.text());
+    // The healthy bus through the same reads: nothing.
+    let r = report(&tight_bus(L9600, 0.0, None), Observation::PER_BYTE_JITTER);
+    assert_eq!(timing_findings(&r), [], "{}", r.text());
+}
+
 #[test]
 fn regression_issue_25_pauses_the_reads_cannot_resolve_are_said_once_not_blamed() {
     // 30 characters at 115200 are 2.6 ms: nothing a 16 ms timer can show.

@@ -85,9 +85,19 @@ fn learn_drafts_profiles_that_load() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Issue 40: `-o FILE` holds one profile; several units heard, it is refused with what to
+    // do (it wrote `draft-unit-N.toml` files nobody asked for), and nothing is written.
     let draft = dir.join("draft.toml");
     let o = std::process::Command::new(bin)
         .args(["learn", capture.to_str().unwrap(), "-o", draft.to_str().unwrap(), "--format", "json"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--unit N") && err.contains("--dir DIR"), "{err}");
+    assert!(!draft.exists() && !dir.join("draft-unit-1.toml").exists());
+    let drafts = dir.join("drafts");
+    let o = std::process::Command::new(bin)
+        .args(["learn", capture.to_str().unwrap(), "--dir", drafts.to_str().unwrap(), "--format", "json"])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -97,7 +107,7 @@ fn learn_drafts_profiles_that_load() {
     assert!(units.iter().all(|u| !u["blocks"].as_array().unwrap().is_empty()), "{report}");
     for u in units {
         let n = u["unit"].as_u64().unwrap();
-        let file = dir.join(format!("draft-unit-{n}.toml"));
+        let file = drafts.join(format!("learned-unit-{n}.toml"));
         let check =
             std::process::Command::new(bin).args(["profiles", "check", file.to_str().unwrap()]).output().unwrap();
         assert!(check.status.success(), "{}: {}", file.display(), String::from_utf8_lossy(&check.stderr));
@@ -179,6 +189,82 @@ fn learn_finds_float_pairs_and_their_word_order_on_real_meter_recordings() {
         let expected: Vec<(u64, String)> = expected.iter().map(|&(a, t)| (a, t.to_owned())).collect();
         assert_eq!(wide, expected, "{file}");
     }
+}
+
+/// The registers `learn` drafts for unit 1 of a capture: address → type.
+fn learned(file: &str) -> std::collections::BTreeMap<u64, String> {
+    let path = format!("{}/captures/{file}", env!("CARGO_MANIFEST_DIR"));
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["learn", &path, "--format", "json"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{file}: {}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    report["units"][0]["registers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| (r["address"].as_u64().unwrap(), r["type"].as_str().unwrap().to_owned()))
+        .collect()
+}
+
+/// The pairs of a meter's blocks that are ever non-zero, from its frame list (`NAME.txt` beside
+/// the capture): every answer's registers, pairs from each block's first address.
+fn non_zero_pairs(txt: &str, first_of: &dyn Fn(usize) -> u64) -> std::collections::BTreeSet<u64> {
+    let path = format!("{}/captures/{txt}", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(path).unwrap();
+    let frames: Vec<Vec<u8>> = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| l.split_whitespace().map(|b| u8::from_str_radix(b, 16).unwrap()).collect())
+        .collect();
+    let mut out = std::collections::BTreeSet::new();
+    // Requests and answers alternate; answers are unit, function, byte count, data, CRC.
+    for (k, answer) in frames.iter().skip(1).step_by(2).enumerate() {
+        let data = &answer[3..answer.len() - 2];
+        for (i, w) in data.chunks(4).enumerate() {
+            if w.iter().any(|&b| b != 0) {
+                out.insert(first_of(k) + 2 * i as u64);
+            }
+        }
+    }
+    out
+}
+
+/// Issue 40, a three-phase meter (FC04 blocks of 82 and 60 registers, 64 polls, every value a
+/// float high word first; `captures/rtu-shape-three-phase-floats.txt`): pair by pair, `learn`
+/// drafted 1 of its 43 non-zero floats right — constants as two u16 (13.09 = 0x4151 0x70A4),
+/// voltages as u32 "carries", 0x4516 1000…4000 as a constant and a u16, 12.0 over a zero low
+/// word as u16, two 0.7 as the text "?333?333". Judged by block: all 43, and nothing else joined.
+#[test]
+fn regression_issue_40_learn_types_every_float_of_a_three_phase_meter_by_its_blocks() {
+    let learned = learned("rtu-shape-three-phase-floats.pcapng");
+    let floats = non_zero_pairs("rtu-shape-three-phase-floats.txt", &|k| if k % 2 == 0 { 0 } else { 200 });
+    assert_eq!(floats.len(), 43);
+    for a in &floats {
+        assert_eq!(learned.get(a).map(String::as_str), Some("f32 high word first"), "input {a}: {learned:?}");
+    }
+    // Constant, moving, carrying, zero-low-word and printable-looking cases by name.
+    for a in [6, 8, 0, 12, 34, 30, 32] {
+        assert!(floats.contains(&a), "{a}");
+    }
+    let wide: Vec<&u64> = learned.iter().filter(|(_, t)| t.contains("word first")).map(|(a, _)| a).collect();
+    assert_eq!(wide.len(), floats.len(), "{learned:?}");
+}
+
+/// Issue 40, a single-phase meter tapped for two polls (FC03 at 0x2000 and 0x4000, floats high
+/// word first, zeros between them): the frequency 0x4248 0x3333 (50.05 Hz) at 8206/8207 was
+/// joined as 8205/8206 low word first (50.0), against every other pair of the same answer.
+#[test]
+fn regression_issue_40_learn_keeps_a_blocks_word_order_and_alignment_on_two_polls() {
+    let learned = learned("rtu-shape-single-phase-floats.pcapng");
+    let floats = non_zero_pairs("rtu-shape-single-phase-floats.txt", &|k| if k % 2 == 0 { 0x2000 } else { 0x4000 });
+    assert_eq!(floats.len(), 9);
+    assert!(floats.contains(&8206));
+    for a in &floats {
+        assert_eq!(learned.get(a).map(String::as_str), Some("f32 high word first"), "holding {a}: {learned:?}");
+    }
+    assert!(!learned.get(&8205).is_some_and(|t| t.contains("word first")), "{learned:?}");
 }
 
 /// Issue 39: `diff` of captures whose every block is corrupt said "0 differ, 0 the same" with

@@ -248,7 +248,8 @@ fn sniff_duration_holds_while_the_port_is_gone() {
 
 /// Issue 28: `sniff --learn` drafts a register map from a live line and keeps it up to date:
 /// the drafts are there while it still listens (rewritten every 10 s of line time), one per
-/// unit heard, and each loads as a profile.
+/// unit heard in the directory given (issue 40: a file holds one unit's profile), and each
+/// loads as a profile.
 #[test]
 #[ignore = "needs a pseudo-terminal with `mbtap simulate --poll`; .ci/run runs this with --ignored"]
 fn sniff_learn_keeps_draft_profiles_up_to_date_while_listening() {
@@ -256,18 +257,18 @@ fn sniff_learn_keeps_draft_profiles_up_to_date_while_listening() {
     std::fs::create_dir_all(&dir).unwrap();
     let line = dir.join("line");
     let _sim = common::simulate(&line, &["--poll"]);
-    let draft = dir.join("site.toml");
+    let drafts = dir.join("site");
     let mut sniff = Command::new(BIN)
         .args(["sniff", line.to_str().unwrap(), "--parity", "even", "--format", "summary", "--duration", "14"])
-        .args(["--learn", draft.to_str().unwrap()])
+        .args(["--learn", &format!("{}/", drafts.display())])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     // While it listens: the first drafts are written with the first transactions heard.
     let start = Instant::now();
-    let unit1 = dir.join("site-unit-1.toml");
-    while !unit1.exists() && !draft.exists() {
+    let unit1 = drafts.join("learned-unit-1.toml");
+    while !unit1.exists() {
         assert!(start.elapsed() < Duration::from_secs(12), "no draft while listening");
         assert!(sniff.try_wait().unwrap().is_none(), "sniff ended early");
         std::thread::sleep(Duration::from_millis(100));
@@ -277,13 +278,11 @@ fn sniff_learn_keeps_draft_profiles_up_to_date_while_listening() {
     std::io::Read::read_to_string(&mut sniff.stderr.take().unwrap(), &mut err).unwrap();
     assert!(status.success(), "{err}");
     for unit in [1, 5, 17] {
-        let file = dir.join(format!("site-unit-{unit}.toml"));
+        let file = drafts.join(format!("learned-unit-{unit}.toml"));
         assert!(err.contains(&format!("draft profile of unit {unit} written to {}", file.display())), "{err}");
         let check = Command::new(BIN).args(["profiles", "check", file.to_str().unwrap()]).output().unwrap();
         assert!(check.status.success(), "{}", String::from_utf8_lossy(&check.stderr));
     }
-    // One file per unit: the single-unit draft of the first seconds gave way.
-    assert!(!draft.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -302,7 +302,7 @@ impl Health {
             what.push(format!("{fast} apparent silence(s) shorter than t3.5 between frames"));
         }
         vec![format!(
-            "timing: {} are within what these reads cannot resolve: timing faults shorter than {ms:.1} ms (the observer's latency, a sixteenth more and a character) cannot be seen through them; use an adapter that timestamps each byte, or give the adapter's latency with --latency-ms",
+            "timing: {} are within what these reads cannot resolve: timing faults shorter than {ms:.1} ms (the observer's latency, a sixteenth more, and a character where a read holds several bytes) cannot be seen through them; use an adapter that timestamps each byte, or give the adapter's latency with --latency-ms",
             what.join(" and ")
         )]
     }

@@ -90,10 +90,7 @@ fn join(a: u16, b: u16, high_first: bool) -> u32 {
     (u32::from(hi) << 16) | u32::from(lo)
 }
 
-fn plausible_float(bits: u32) -> bool {
-    let f = f32::from_bits(bits);
-    f == 0.0 || (f.is_normal() && (1e-4..=1e8).contains(&f.abs()))
-}
+use super::layout::{Layout, plausible_float};
 
 /// How the high word's steps of one agree with the low word: (carries, contradictions).
 /// A carry is the high word moving by one while the low word wraps the other way (up by one as
@@ -134,6 +131,16 @@ fn roughness(v: &[f64]) -> f64 {
     v.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>() / (v.len() - 1) as f64 / (hi - lo)
 }
 
+/// Whether a series of floats (as bits) moves smoothly: the median change between two samples
+/// under 5 % of the value. A series of one sample is smooth.
+fn smooth(values: &[u32]) -> bool {
+    let f: Vec<f64> = values.iter().map(|&v| f64::from(f32::from_bits(v))).collect();
+    let mut rel: Vec<f64> =
+        f.windows(2).map(|w| (w[1] - w[0]).abs() / (w[0].abs().max(w[1].abs()).max(1e-9))).collect();
+    rel.sort_by(f64::total_cmp);
+    rel.get(rel.len() / 2).is_none_or(|&m| m < 0.05)
+}
+
 /// A float in this word order, and how well it fits: every sample a plausible number, several
 /// values, moving smoothly (the median change under 5 % of the value), its low word varying
 /// like a mantissa's, and where the high word steps by one, a carry (never a contradiction
@@ -151,11 +158,7 @@ fn float_fit(pair: &PairStat, high_first: bool) -> Option<u32> {
     if lows.len() < ENOUGH {
         return None;
     }
-    let f: Vec<f64> = values.iter().map(|&v| f64::from(f32::from_bits(v))).collect();
-    let mut rel: Vec<f64> =
-        f.windows(2).map(|w| (w[1] - w[0]).abs() / (w[0].abs().max(w[1].abs()).max(1e-9))).collect();
-    rel.sort_by(f64::total_cmp);
-    if rel.get(rel.len() / 2).copied().unwrap_or(1.0) >= 0.05 {
+    if !smooth(&values) {
         return None;
     }
     let (yes, no) = carries(&words);
@@ -262,18 +265,41 @@ fn single(address: u16, r: &RegStat) -> Guess {
 }
 
 /// Guesses for one table's registers: `regs` by address, `pair(a)` the joint samples of `a` and
-/// `a + 1` when they were read together.
-pub fn guess_table<'a>(regs: &[(u16, &'a RegStat)], pair: &dyn Fn(u16) -> Option<&'a PairStat>) -> Vec<Guess> {
+/// `a + 1` when they were read together, `layout` the table's float layout when its blocks agree
+/// on one ([`Layout::decide`]): there a pair where the layout starts one is read in the
+/// layout's word order by its bits, however still it sat, and no float is joined across the
+/// layout's pairs.
+pub fn guess_table<'a>(
+    regs: &[(u16, &'a RegStat)],
+    pair: &dyn Fn(u16) -> Option<&'a PairStat>,
+    layout: Option<&Layout>,
+) -> Vec<Guess> {
     let mut out = Vec::new();
     let mut i = 0;
     while let Some(&(a, r)) = regs.get(i) {
+        let start = layout.and_then(|l| l.starts_at(a));
         // A run of text: consecutive addresses, every sample printable.
         let run = regs[i..]
             .iter()
             .enumerate()
             .take_while(|(k, (addr, reg))| usize::from(*addr) == usize::from(a) + k && texty(reg))
             .count();
-        if run >= 2 {
+        // Printable words that the layout reads as floats pair by pair, each a short decimal
+        // (0x3F33 0x3333 is "?333" and 0.7), are floats: a rating or a factor stored as a float
+        // is a round number, where text read as a float has a mantissa of many digits
+        // ("ABCD" is 12.141422).
+        let floats_too = layout.is_some_and(|l| {
+            start == Some(true)
+                && run % 2 == 0
+                && (0..run / 2).all(|k| {
+                    u16::try_from(2 * k)
+                        .ok()
+                        .and_then(|k| a.checked_add(k))
+                        .and_then(pair)
+                        .is_some_and(|p| super::layout::floats_in(p, l.high_first) && round_floats(p, l.high_first))
+                })
+        });
+        if run >= 2 && !floats_too {
             let part: Vec<&RegStat> = regs[i..i + run].iter().map(|(_, r)| *r).collect();
             let text = text_of(&part);
             let registers = u16::try_from(run).unwrap_or(u16::MAX);
@@ -286,10 +312,25 @@ pub fn guess_table<'a>(regs: &[(u16, &'a RegStat)], pair: &dyn Fn(u16) -> Option
             i += run;
             continue;
         }
-        if let Some((g, score)) = wide_at(regs, pair, i) {
+        if let (Some(l), Some(true)) = (layout, start)
+            && let Some(g) = laid_out(regs, pair, i, l)
+        {
+            out.push(g);
+            i += 2;
+            continue;
+        }
+        // Where the layout has no pair start, a float decided by its bits alone (a short series)
+        // would straddle two of the layout's: only a series may show one there.
+        let allowed = |g: &Guess, start: Option<bool>| {
+            start != Some(false)
+                || !matches!(g.kind, Kind::F32 { .. })
+                || pair(g.address).is_some_and(|p| usize::try_from(p.samples).unwrap_or(usize::MAX) >= ENOUGH)
+        };
+        if let Some((g, score)) = wide_at(regs, pair, i).filter(|(g, _)| allowed(g, start)) {
             // The pair starting one register later may be the real one (this register being a
             // value of its own): the better evidence wins.
-            let later = wide_at(regs, pair, i + 1).map_or(0, |(_, s)| s);
+            let later_start = layout.and_then(|l| l.starts_at(a.saturating_add(1)));
+            let later = wide_at(regs, pair, i + 1).filter(|(g, _)| allowed(g, later_start)).map_or(0, |(_, s)| s);
             if later <= score {
                 out.push(g);
                 i += 2;
@@ -300,6 +341,58 @@ pub fn guess_table<'a>(regs: &[(u16, &'a RegStat)], pair: &dyn Fn(u16) -> Option
         i += 1;
     }
     out
+}
+
+/// Whether every sample of `p` in this word order is a float of at most five significant
+/// digits (its shortest decimal form): a value a person set or a device rounded.
+fn round_floats(p: &PairStat, high_first: bool) -> bool {
+    p.recent.iter().all(|&(x, y)| {
+        let shown = f32::from_bits(join(x, y, high_first)).to_string();
+        let digits: String = shown.chars().filter(char::is_ascii_digit).collect();
+        digits.trim_start_matches('0').trim_end_matches('0').len() <= 5
+    })
+}
+
+/// The pair at `regs[i]`, `regs[i + 1]`, where the table's layout starts one, as a float in the
+/// layout's word order: every sample a plausible number (not all zero) and, if it moved, moving
+/// smoothly. A pair that never changed is typed by its bits and the layout.
+fn laid_out<'a>(
+    regs: &[(u16, &'a RegStat)],
+    pair: &dyn Fn(u16) -> Option<&'a PairStat>,
+    i: usize,
+    l: &Layout,
+) -> Option<Guess> {
+    let &(a, r) = regs.get(i)?;
+    let &(b, r2) = regs.get(i + 1)?;
+    if u32::from(b) != u32::from(a) + 1 {
+        return None;
+    }
+    let p = pair(a)?;
+    let h = l.high_first;
+    let values: Vec<u32> = ordered(p, h).iter().map(|&(hi, lo)| (u32::from(hi) << 16) | u32::from(lo)).collect();
+    let still = r.changes == 0 && r2.changes == 0;
+    if !super::layout::floats_in(p, h) || !(still || smooth(&values)) {
+        return None;
+    }
+    let last = values.last().map(|&v| f32::from_bits(v)).unwrap_or_default();
+    // Both word orders plausible (0x4120 0x4120): the layout alone decides, said so.
+    let by_bits = super::layout::bits_order(p) == Some(h);
+    let c = confidence(p.samples, r.changes.max(r2.changes));
+    Some(Guess {
+        address: a,
+        kind: Kind::F32 { high_first: h },
+        confidence: if by_bits { c } else { c.min(0.3) },
+        evidence: format!(
+            "{} joint samples, every one a plausible float {} ({}last {last}){}; the table's blocks read as floats \
+             this way ({} pairs decided by their bits, {} against)",
+            p.samples,
+            if h { "high word first" } else { "low word first" },
+            if still { "never changed, " } else { "moving smoothly, " },
+            if by_bits { "" } else { " — the other word order is plausible too" },
+            l.votes,
+            l.against,
+        ),
+    })
 }
 
 /// The pair at `regs[i]`, `regs[i + 1]` (adjacent addresses, read together, at least one

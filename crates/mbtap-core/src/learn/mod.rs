@@ -10,6 +10,7 @@ pub mod diff;
 pub mod draft;
 pub mod hint;
 pub mod infer;
+pub mod layout;
 pub mod probe;
 pub mod stats;
 pub mod truth;
@@ -22,19 +23,42 @@ use crate::query::{is_bits, table_read_by};
 use infer::Guess;
 use stats::{PairStat, RegStat};
 
+/// Gaps between polls kept per block, for its period.
+const GAPS: usize = 32;
+
 /// A block the master reads: how often, and when last.
 #[derive(Debug, Clone, Default)]
 pub struct Block {
+    /// Polls heard, answered or not (an unanswered poll is still one of the master's).
     pub polls: u64,
     pub first_t_ns: u64,
     pub last_t_ns: u64,
+    /// The last [`GAPS`] gaps between two polls.
+    gaps: std::collections::VecDeque<u64>,
 }
 
 impl Block {
-    /// The mean time between two polls, when it was polled more than once.
+    fn new(t_ns: u64) -> Self {
+        Self { polls: 1, first_t_ns: t_ns, last_t_ns: t_ns, gaps: std::collections::VecDeque::new() }
+    }
+
+    /// One more poll at `t_ns`.
+    fn polled(&mut self, t_ns: u64) {
+        self.polls += 1;
+        if self.gaps.len() == GAPS {
+            self.gaps.pop_front();
+        }
+        self.gaps.push_back(t_ns.saturating_sub(self.last_t_ns));
+        self.last_t_ns = t_ns;
+    }
+
+    /// The median time between two polls (as `report`'s "polled every" takes it: a poll
+    /// unanswered or skipped once does not stretch it), when it was polled more than once.
     #[must_use]
     pub fn period_ns(&self) -> Option<u64> {
-        (self.polls > 1).then(|| self.last_t_ns.saturating_sub(self.first_t_ns) / (self.polls - 1))
+        let mut g: Vec<u64> = self.gaps.iter().copied().collect();
+        g.sort_unstable();
+        g.get(g.len() / 2).copied()
     }
 }
 
@@ -58,7 +82,12 @@ impl Unit {
     pub fn guesses(&self, table: Table) -> Vec<Guess> {
         let regs: Vec<(u16, &RegStat)> =
             self.regs.range((table, 0)..=(table, u16::MAX)).map(|(&(_, a), r)| (a, r)).collect();
-        infer::guess_table(&regs, &|a| self.pairs.get(&(table, a)))
+        let pair = |a| self.pairs.get(&(table, a));
+        let blocks: Vec<(u16, u16)> =
+            self.blocks.keys().filter(|&&(t, _, _)| t == table).map(|&(_, first, q)| (first, q)).collect();
+        let heard = |a| self.regs.contains_key(&(table, a));
+        let layout = layout::Layout::decide(&blocks, &pair, &heard);
+        infer::guess_table(&regs, &pair, layout.as_ref())
     }
 
     /// The last value of what `g` covers, as its type reads it (a 32-bit pair combined in its
@@ -119,6 +148,17 @@ fn word(b: &[u8], at: usize) -> Option<u16> {
 }
 
 impl Learner {
+    /// A request of `unit` at `t_ns` that got no answer (or none that could be read): a poll of
+    /// a block already known counts for its period, nothing else is learned.
+    pub fn unanswered(&mut self, unit: u8, request: &[u8], t_ns: u64) {
+        if let (Some(u), Some(table)) = (self.units.get_mut(&unit), request.first().and_then(|&fc| table_read_by(fc)))
+            && let (Some(first), Some(quantity)) = (word(request, 1), word(request, 3))
+            && let Some(b) = u.blocks.get_mut(&(table, first, quantity))
+        {
+            b.polled(t_ns);
+        }
+    }
+
     /// One answered transaction: the request and response PDUs (function code first) of
     /// `unit`, at `t_ns`. Anything else (broadcasts, unanswered requests) is ignored.
     pub fn observe(&mut self, unit: u8, request: &[u8], response: &[u8], t_ns: u64) {
@@ -146,6 +186,9 @@ impl Learner {
             && quantity > 0
         {
             if rfc == fc | 0x80 {
+                if let Some(b) = u.blocks.get_mut(&(table, first, quantity)) {
+                    b.polled(t_ns);
+                }
                 let code = response.get(1).copied().unwrap_or(0);
                 match u.exceptions.entry((table, first, quantity)) {
                     Entry::Occupied(mut e) => {
@@ -160,14 +203,10 @@ impl Learner {
                 return;
             }
             match u.blocks.entry((table, first, quantity)) {
-                Entry::Occupied(mut e) => {
-                    let b = e.get_mut();
-                    b.polls += 1;
-                    b.last_t_ns = t_ns;
-                }
+                Entry::Occupied(mut e) => e.get_mut().polled(t_ns),
                 Entry::Vacant(e) => {
                     if room(kept_other, MAX_OTHER, not_kept_other) {
-                        e.insert(Block { polls: 1, first_t_ns: t_ns, last_t_ns: t_ns });
+                        e.insert(Block::new(t_ns));
                     }
                 }
             }
@@ -246,10 +285,12 @@ impl Learner {
 /// The learner as an analyzer sink: every answered transaction, its frames as on the wire.
 impl crate::analyzer::Sink for Learner {
     fn event(&mut self, event: &crate::analyzer::Event<'_>) {
-        if let crate::analyzer::Event::Transaction(t) = event
-            && let (Some(req), Some(resp)) = (t.request_pdu, t.response_pdu)
-        {
-            self.observe(t.unit, req, resp, t.t_start.0);
+        if let crate::analyzer::Event::Transaction(t) = event {
+            match (t.request_pdu, t.response_pdu) {
+                (Some(req), Some(resp)) => self.observe(t.unit, req, resp, t.t_start.0),
+                (Some(req), None) => self.unanswered(t.unit, req, t.t_start.0),
+                _ => {}
+            }
         }
     }
 }

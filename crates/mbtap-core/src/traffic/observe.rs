@@ -8,6 +8,10 @@ use super::generate::Wire;
 pub enum Observation {
     /// Every byte its own read, at the time its stop bit ended.
     PerByte,
+    /// Every byte its own read, returned up to `jitter_ns` after its stop bit ended (a program
+    /// reading byte by byte on a busy machine: each wake-up late by its own amount), never
+    /// before the read of the byte before it.
+    PerByteJitter { jitter_ns: u64 },
     /// One packet per frame (or noise burst), at its end: what gap-cutting sniffers write.
     PerFrame,
     /// 16550-style FIFO: a read when `trigger` bytes are waiting, or after `timeout_chars`
@@ -19,6 +23,8 @@ pub enum Observation {
 }
 
 impl Observation {
+    /// Byte by byte, up to 0.2 ms late: the per-byte capture of issue 40.
+    pub const PER_BYTE_JITTER: Self = Self::PerByteJitter { jitter_ns: 200_000 };
     /// The 16550's common setting: 14-byte trigger, 4-character timeout.
     pub const FIFO_16550: Self = Self::Fifo { trigger: 14, timeout_chars: 4 };
     /// FTDI with a 1 ms latency timer.
@@ -31,6 +37,7 @@ impl Observation {
     pub const fn name(self) -> &'static str {
         match self {
             Self::PerByte => "per-byte timestamps",
+            Self::PerByteJitter { .. } => "per-byte reads, up to 0.2 ms late",
             Self::PerFrame => "one packet per frame",
             Self::Fifo { .. } => "16550 FIFO (14 B / 4 chars)",
             Self::Usb { latency_ns: 1_000_000, .. } => "USB latency 1 ms",
@@ -44,6 +51,7 @@ impl Observation {
     pub const fn latency_ns(self, char_ns: u64) -> u64 {
         match self {
             Self::PerByte | Self::PerFrame => 0,
+            Self::PerByteJitter { jitter_ns } => jitter_ns,
             Self::Fifo { timeout_chars, .. } => timeout_chars * char_ns,
             Self::Usb { latency_ns, .. } => latency_ns,
         }
@@ -62,6 +70,20 @@ pub fn observe(wire: &Wire, model: Observation, char_ns: u64) -> Vec<ChunkSpan> 
     match model {
         Observation::PerByte => {
             out.extend((0..n).map(|i| (wire.end_ns[i], i..i + 1)));
+        }
+        Observation::PerByteJitter { jitter_ns } => {
+            let mut last = 0;
+            for i in 0..n {
+                // A fixed pseudo-random delay per byte (splitmix64 of its index): the same wire
+                // gives the same reads.
+                let mut z = (i as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
+                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+                z ^= z >> 31;
+                let t = (wire.end_ns[i] + z % jitter_ns.max(1)).max(last);
+                last = t;
+                out.push((t, i..i + 1));
+            }
         }
         Observation::PerFrame => {
             out.extend(wire.truth.iter().map(|t| (wire.end_ns[t.end - 1], t.start..t.end)));
