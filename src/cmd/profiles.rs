@@ -62,6 +62,11 @@ pub struct ImportArgs {
     /// The word order of 32-bit values where the sheet does not say.
     #[arg(long, value_enum)]
     pub word_order: Option<WordOrderArg>,
+    /// The type of registers where the sheet does not say (no type column, or an empty cell):
+    /// `f32`, `u32`, `i16`, `string(8)`, … as a type column would give it. Without it and
+    /// without a type column, registers are u16 and the import says so.
+    #[arg(long = "type", value_name = "TYPE", value_parser = parse_type_arg)]
+    pub value_type: Option<(mbtap_core::profile::format::ValueType, Option<u16>)>,
     /// The profile's name (default: the first file's name).
     #[arg(long)]
     pub name: Option<String>,
@@ -234,6 +239,11 @@ fn detect(path: &std::path::Path) -> anyhow::Result<ImportFormat> {
     })
 }
 
+/// `--type TYPE`, read as a sheet's type column would read it.
+fn parse_type_arg(s: &str) -> Result<(mbtap_core::profile::format::ValueType, Option<u16>), String> {
+    mbtap_core::profile::import::notation::parse_type(s)
+}
+
 /// `profiles import`: the sheets read, the profile written and loaded back, what was skipped said.
 fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
     let columns = match &args.columns {
@@ -252,6 +262,7 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             WordOrderArg::HighFirst => mbtap_core::profile::format::WordOrder::HighFirst,
             WordOrderArg::LowFirst => mbtap_core::profile::format::WordOrder::LowFirst,
         }),
+        value_type: args.value_type,
     };
     let mut all = mbtap_core::profile::import::Imported::default();
     let mut err = std::io::stderr().lock();
@@ -340,10 +351,17 @@ fn write_imported(
     let counts = all.counts();
     let count = |t| counts.get(&t).copied().unwrap_or(0);
     if all.points.is_empty() {
-        anyhow::bail!(
-            "nothing imported: {} row(s) or entries skipped (listed above); check the header row or give --columns",
-            all.problems.len()
-        );
+        // The hint names the fix the problems point to (issue 42: "check the header row or give
+        // --columns" where every row wanted --table).
+        let said = |what: &str| all.problems.iter().any(|p| p.why.contains(what));
+        let hint = if said("give --table") {
+            "the sheet does not say which table: give --table holding|input|coils|discrete"
+        } else if said("no header row") {
+            "give the columns with --columns address=B,name=A,…"
+        } else {
+            "fix the rows named above, or give --columns, --table, --type"
+        };
+        anyhow::bail!("nothing imported ({} problem(s), listed above): {hint}", all.problems.len());
     }
     // What is written must load like a hand-written profile: checked before it is kept.
     mbtap_core::profile::import::load_back(&name, &toml)

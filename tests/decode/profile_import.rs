@@ -100,6 +100,27 @@ fn an_energy_meter_sheet_with_modicon_numbers_and_floats() {
     assert!(text.contains("Phase 1 line to neutral volts = 230.5 V"), "{text}");
 }
 
+/// Issue 42: a sheet with no type column (the vendor says "all registers are floats" in
+/// prose), headed `Input Register Address`: it was "no header row naming an address column",
+/// and with the header fixed it came in as u16 without a word. The header is read, the u16
+/// reading is said as a warning naming --type, and `--type f32` makes floats of it. Without
+/// --table the closing hint names --table, not --columns.
+#[test]
+fn regression_issue_42_a_sheet_without_a_type_column_says_so_and_takes_type() {
+    let (p, err) = import("floats-no-type.csv", &["--table", "input"]);
+    assert!(err.contains("no type column") && err.contains("--type f32"), "{err}");
+    let text = annotate(&p.path, &read(0x04, 0, &[0x4366, 0x1999]));
+    assert!(text.contains("Voltage = 17254"), "{text}");
+    let (p, err) = import("floats-no-type.csv", &["--table", "input", "--type", "f32"]);
+    assert!(!err.contains("no type column"), "{err}");
+    let text = annotate(&p.path, &read(0x04, 0, &f32_words(230.1)));
+    assert!(text.contains("Voltage = 230.1"), "{text}");
+    let f = fixture("floats-no-type.csv");
+    let out = run(&["profiles", "import", f.to_str().unwrap(), "-o", "/dev/null"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("give --table holding|input"), "{err}");
+}
+
 #[test]
 fn a_german_sheet_with_semicolons_hex_h_addresses_and_divisor_scales() {
     let (p, _) = import("inverter-german-hex-h.csv", &["--table", "holding"]);

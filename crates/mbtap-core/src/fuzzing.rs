@@ -401,7 +401,8 @@ pub fn profile_import(data: &[u8]) {
     } else {
         Vec::new()
     };
-    let mut imported = vec![sheet::parse_sheet(&rows, &sheet::SheetOptions { columns, table, word_order: None })];
+    let mut imported =
+        vec![sheet::parse_sheet(&rows, &sheet::SheetOptions { columns, table, word_order: None, value_type: None })];
     if let Ok((i, _)) = home_assistant::parse_home_assistant(&text, Some(mode)) {
         imported.push(i);
     }

@@ -172,5 +172,48 @@ pub(super) fn field_of(cell: &str) -> Option<Field> {
     }
     let exact = |n: &str| Field::ALL.into_iter().find(|f| f.headers().contains(&n));
     // `Address (Register)`, `Scale [x]`: the words before a bracket.
-    exact(n).or_else(|| exact(n.split(['(', '[']).next().unwrap_or("").trim()))
+    let before_bracket = n.split(['(', '[']).next().unwrap_or("").trim();
+    exact(n).or_else(|| exact(before_bracket)).or_else(|| address_like(before_bracket).then_some(Field::Address))
+}
+
+/// Words that, in a header ending with "address", name the device rather than the register
+/// (`Slave Address`, `IP address`, `通讯地址`).
+const NOT_REGISTER: [&str; 12] =
+    ["slave", "device", "unit", "station", "node", "server", "ip", "mac", "geräte", "通讯", "从站", "设备"];
+
+/// A header naming a register's address in words the list does not hold (issue 42: `Input
+/// Register Address`, `PDU address`, `Modbus-Adresse`): its last word is an address, and no
+/// word says it is a device's.
+fn address_like(n: &str) -> bool {
+    let words: Vec<&str> = n.split([' ', '/']).filter(|w| !w.is_empty()).collect();
+    let Some(last) = words.last() else { return false };
+    let address = matches!(*last, "address" | "addr" | "adr" | "adresse" | "adress")
+        || last.ends_with("adresse")
+        || last.ends_with("地址");
+    address && !words.iter().any(|w| NOT_REGISTER.iter().any(|x| w.starts_with(x)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 42: `Input Register Address` was not an address column ("no header row naming an
+    /// address column"); other wordings of the register's address are, a device's is not.
+    #[test]
+    fn regression_issue_42_headers_naming_a_registers_address_in_other_words() {
+        for h in [
+            "Input Register Address",
+            "Holding register address (dec)",
+            "PDU address",
+            "Modbus-Adresse",
+            "Register Addr.",
+            "起始地址",
+        ] {
+            assert_eq!(field_of(h), Some(Field::Address), "{h}");
+        }
+        for h in ["Slave Address", "IP address", "Device address", "通讯地址", "Unit addr"] {
+            assert_eq!(field_of(h), None, "{h}");
+        }
+        assert_eq!(field_of("Start Address"), Some(Field::Address));
+    }
 }

@@ -21,6 +21,9 @@ pub struct SheetOptions {
     pub table: Option<Table>,
     /// The word order of 32-bit values where the sheet does not say.
     pub word_order: Option<WordOrder>,
+    /// The type of registers where the sheet does not say (`--type f32`: the vendor's prose
+    /// says "all registers are floats"), with a string's length.
+    pub value_type: Option<(ValueType, Option<u16>)>,
 }
 
 /// Parses `address=B,name=A,type=D` (`--columns`).
@@ -142,6 +145,15 @@ pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
         Some(h) => format!("header on row {}: {}", h + 1, described.join(", ")),
         None => format!("no header row; columns given: {}", described.join(", ")),
     });
+    // Nothing is guessed silently (issue 42: a sheet of floats with no type column, the type
+    // said in the vendor's prose, came in as u16 without a word).
+    if col(Field::Type).is_none() && opts.value_type.is_none() {
+        out.notes.push(
+            "warning: no type column — every register is read as u16 (coils and discrete inputs as bits); \
+             if the document says otherwise (\"all values are floats\"), give --type f32 (and --word-order)"
+                .into(),
+        );
+    }
     let first_data = header.map_or(0, |h| h + 1);
     if rows.cut_cells > 0 {
         out.notes.push(format!(
@@ -226,7 +238,7 @@ pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
             }
             Some(Ok(t)) => t,
             None if matches!(table, Table::Coils | Table::DiscreteInputs) => (ValueType::Bool, None),
-            None => (ValueType::U16, None),
+            None => opts.value_type.unwrap_or((ValueType::U16, None)),
         };
         let length = match cell_at(&r, col(Field::Length)).map(|l| l.trim_end_matches(".0").parse::<u16>()) {
             Some(Ok(n)) if n > 0 => Some(n),
