@@ -20,7 +20,8 @@ pub enum Command {
     /// List the built-in profiles.
     List,
     /// Load a profile file and report the first problem with file:line:column, or a summary.
-    Check { file: PathBuf },
+    /// A built-in name, a user profile's name (as `profiles import` leaves it), or a file.
+    Check { file: String },
     /// Print every address a profile (a built-in name or a file) defines, per table.
     Show { profile: String },
     /// Make a profile from a vendor register sheet (CSV, XLSX) or Home Assistant `modbus:` YAML.
@@ -175,20 +176,26 @@ fn list() -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// A profile file loaded, its first problem with file:line:column or a summary.
-fn check(file: &std::path::Path) -> anyhow::Result<ExitCode> {
+/// A profile loaded — by name or file, as every command finds it (issue 42: the name
+/// `profiles import` said was usable failed here with "os error 2") — its first problem with
+/// file:line:column, or a summary counting entries as import counts them, and the registers
+/// they cover.
+fn check(spec: &str) -> anyhow::Result<ExitCode> {
     let mut out = std::io::stdout().lock();
-    let p = load_profile_file(file)?;
-    let count = |t| p.addresses(t).count();
+    let p = resolve_profile(spec)?;
+    let count = |t| {
+        let entries = p.addresses(t).filter(|&a| p.slot(t, a).is_some_and(|(slot, _)| slot.part == 0)).count();
+        let registers = p.addresses(t).count();
+        if entries == registers { format!("{entries}") } else { format!("{entries} ({registers} registers)") }
+    };
     let line = format!(
-        "{}: ok — {} ({}): {} coils, {} discrete inputs, {} holding registers, {} input registers, {} reserved ranges",
-        file.display(),
+        "{spec}: ok — {} ({}): {} holding registers, {} input registers, {} coils, {} discrete inputs, {} reserved ranges",
         p.meta.name,
         p.meta.device,
-        count(Table::Coils),
-        count(Table::DiscreteInputs),
         count(Table::HoldingRegisters),
         count(Table::InputRegisters),
+        count(Table::Coils),
+        count(Table::DiscreteInputs),
         p.reserved.len()
     );
     writeln!(out, "{}", printable(&line))?;

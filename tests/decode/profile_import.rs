@@ -121,6 +121,24 @@ fn regression_issue_42_a_sheet_without_a_type_column_says_so_and_takes_type() {
     assert!(!out.status.success() && err.contains("give --table holding|input"), "{err}");
 }
 
+/// Issue 42: after `profiles import` into the profile directory ("usable by name at once"),
+/// `profiles check NAME` failed with "No such file or directory (os error 2)" where `show` and
+/// `export` took the name; and it counted the registers a float covers (21) where import had
+/// counted entries (13). One resolver, one count.
+#[test]
+fn regression_issue_42_an_imported_profile_is_checked_by_name_with_import_s_count() {
+    let name = format!("issue42-{}", std::process::id());
+    let f = fixture("floats-no-type.csv");
+    let out = run(&["profiles", "import", f.to_str().unwrap(), "--table", "input", "--type", "f32", "--name", &name]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("3 input registers"), "{err}");
+    let check = run(&["profiles", "check", &name]);
+    let said = String::from_utf8_lossy(&check.stdout);
+    let _ = std::fs::remove_file(std::env::temp_dir().join(format!("{name}.toml")));
+    assert!(check.status.success(), "{}", String::from_utf8_lossy(&check.stderr));
+    assert!(said.contains("3 (6 registers) input registers"), "{said}");
+}
+
 #[test]
 fn a_german_sheet_with_semicolons_hex_h_addresses_and_divisor_scales() {
     let (p, _) = import("inverter-german-hex-h.csv", &["--table", "holding"]);
