@@ -165,6 +165,7 @@ fn ingest_1000_transactions(bencher: Bencher) {
                 response_pdu: resp_pdu.as_deref(),
                 t_start: *t_start,
                 latency_ns: *latency_ns,
+                latency_resolution_ns: 0,
                 input_ended: false,
             };
             m.event(&Event::Transaction(&t));

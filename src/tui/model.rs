@@ -201,7 +201,12 @@ impl Model {
                     function: Some(t.function),
                     request: t.request.map(Into::into),
                     response: t.response.map(Into::into),
-                    latency_ns: t.latency_ns,
+                    // The one rule every output shows latency by: a 0 or a figure under what the
+                    // reads resolve is not shown as a latency.
+                    latency_ns: match t.shown_latency() {
+                        mbtap_core::pairing::ShownLatency::Measured(l) => Some(l),
+                        _ => None,
+                    },
                     summary,
                     timing,
                 });

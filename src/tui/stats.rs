@@ -161,6 +161,7 @@ mod tests {
             response_pdu: None,
             t_start: Timestamp(at_ms * 1_000_000),
             latency_ns: latency_ms.map(|l| l * 1_000_000),
+            latency_resolution_ns: 0,
             input_ended: false,
         }
     }

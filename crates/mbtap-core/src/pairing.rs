@@ -76,9 +76,44 @@ pub struct Transaction<'a> {
     /// End of the request to start of the response; `None` without one, or when the reads'
     /// timing cannot resolve it (request and answer delivered in one read).
     pub latency_ns: Option<u64>,
+    /// What the reads of the answer resolve (its frame's `resolution_ns`; 0: exact): a
+    /// latency below it is no measurement ([`Transaction::shown_latency`]).
+    pub latency_resolution_ns: u64,
     /// The input ended (end of file, the sniffer stopped) while this request still waited:
     /// "no response" only as far as anyone heard — the answer may have come.
     pub input_ended: bool,
+}
+
+/// A transaction's latency as every output shows it — text, JSON lines and the terminal UI
+/// decide by this one rule (issue 42: "latency 0.000 ms" beside rows saying "not measurable").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShownLatency {
+    /// Measured: at least what the reads resolve, and above zero.
+    Measured(u64),
+    /// Shorter than what the reads resolve (ns): only "under" that can be said.
+    Under(u64),
+    /// The answer came in one read with the request: its start is not known.
+    OneRead,
+    /// The reads place the answer's start right at the request's end: a latency of 0 is no
+    /// device's, it is where the reads' timing ran out.
+    NotMeasurable,
+    /// No answer to measure.
+    None,
+}
+
+impl Transaction<'_> {
+    /// The latency as it may be shown.
+    #[must_use]
+    pub fn shown_latency(&self) -> ShownLatency {
+        let answered = self.response.is_some() && matches!(self.outcome, Outcome::Ok | Outcome::Exception(_));
+        match self.latency_ns {
+            Some(l) if l > 0 && l >= self.latency_resolution_ns => ShownLatency::Measured(l),
+            Some(_) if self.latency_resolution_ns > 0 => ShownLatency::Under(self.latency_resolution_ns),
+            Some(_) if answered => ShownLatency::NotMeasurable,
+            None if answered => ShownLatency::OneRead,
+            _ => ShownLatency::None,
+        }
+    }
 }
 
 /// Pairing settings.
@@ -280,6 +315,7 @@ impl Pairing {
                         response_pdu: None,
                         t_start: f.t_start,
                         latency_ns: None,
+                        latency_resolution_ns: 0,
                         input_ended: false,
                     });
                 } else {
@@ -311,6 +347,7 @@ impl Pairing {
                     response_pdu: f.check_ok.then_some(pdu),
                     t_start: f.t_start,
                     latency_ns: None,
+                    latency_resolution_ns: 0,
                     input_ended: false,
                 });
                 Role::Response
@@ -361,6 +398,7 @@ impl Pairing {
             t_start: p.t_start,
             // Not measurable when the answer began inside a read: its start time is a guess.
             latency_ns: response.filter(|f| f.gap_before_known).map(|f| f.t_start.since(p.t_end)),
+            latency_resolution_ns: response.map_or(0, |f| f.resolution_ns),
             input_ended: false,
         }
     }
@@ -377,6 +415,33 @@ fn clean(pdu: &[u8], hint: DirectionHint) -> bool {
 
 #[cfg(test)]
 mod tests {
+
+    /// Issue 42: "latency 0.000 ms" was shown beside rows saying "not measurable"; a latency is
+    /// shown only where it is above zero and at least what the reads resolve, else its bound or
+    /// "not measurable" — one rule for text, JSON and the terminal UI.
+    #[test]
+    fn regression_issue_42_a_latency_is_shown_only_where_the_reads_resolve_it() {
+        const RESPONSE: &[u8] = &[0x01, 0x03, 0x02, 0x00, 0x07];
+        let t = |latency_ns, latency_resolution_ns| Transaction {
+            outcome: Outcome::Ok,
+            unit: 1,
+            function: 3,
+            request: None,
+            response: Some(RESPONSE),
+            request_pdu: None,
+            response_pdu: None,
+            t_start: Timestamp(0),
+            latency_ns,
+            latency_resolution_ns,
+            input_ended: false,
+        };
+        assert_eq!(t(Some(5_000_000), 0).shown_latency(), ShownLatency::Measured(5_000_000));
+        assert_eq!(t(Some(5_000_000), 1_400_000).shown_latency(), ShownLatency::Measured(5_000_000));
+        assert_eq!(t(Some(8_000_000), 17_000_000).shown_latency(), ShownLatency::Under(17_000_000));
+        assert_eq!(t(Some(0), 0).shown_latency(), ShownLatency::NotMeasurable);
+        assert_eq!(t(None, 0).shown_latency(), ShownLatency::OneRead);
+        assert_eq!(Transaction { response: None, ..t(None, 0) }.shown_latency(), ShownLatency::None);
+    }
     use super::*;
 
     /// Read holding register 100 (function 03, address 0x0064, quantity 1), RTU with CRC.

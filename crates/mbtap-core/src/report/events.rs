@@ -9,7 +9,7 @@ use serde_json::{Map, Value as J, json};
 use super::fields::{Field, Value, request_fields, response_fields};
 use crate::analyzer::Event;
 use crate::framer::ObserverEstimate;
-use crate::pairing::{Outcome, Role, Transaction};
+use crate::pairing::{Outcome, Role, ShownLatency, Transaction};
 use crate::proto::{DecodedPdu, DirectionHint, FunctionCode, Pdu, PduDecode, decode_pdu};
 use crate::report::format::{clock_us, hex_compact, hex_spaced};
 
@@ -148,10 +148,19 @@ fn transaction_text(t: &Transaction<'_>) -> String {
     if let Outcome::WrongUnit(u) = t.outcome {
         let _ = write!(line, " (answered by unit {u})");
     }
-    if let Some(l) = t.latency_ns {
-        let _ = write!(line, " latency {}.{:03} ms", l / 1_000_000, (l / 1000) % 1000);
-    } else if t.response.is_some() && matches!(t.outcome, Outcome::Ok | Outcome::Exception(_)) {
-        line.push_str(" latency not measurable (request and answer in one read)");
+    let ms = |l: u64| format!("{}.{:03} ms", l / 1_000_000, (l / 1000) % 1000);
+    match t.shown_latency() {
+        ShownLatency::Measured(l) => {
+            let _ = write!(line, " latency {}", ms(l));
+        }
+        ShownLatency::Under(r) => {
+            let _ = write!(line, " latency under {} (not measurable finer through these reads)", ms(r));
+        }
+        ShownLatency::OneRead => line.push_str(" latency not measurable (request and answer in one read)"),
+        ShownLatency::NotMeasurable => {
+            line.push_str(" latency not measurable (the reads place the answer at the request's end)");
+        }
+        ShownLatency::None => {}
     }
     if t.input_ended {
         line.push_str(" (input ended while waiting)");
@@ -241,15 +250,20 @@ pub fn json(e: &Event<'_>) -> J {
                 }
                 _ => {}
             }
-            if t.latency_ns.is_none()
-                && t.response.is_some()
-                && matches!(t.outcome, Outcome::Ok | Outcome::Exception(_))
-            {
-                // Request and answer came in one read: no latency rather than an invented 0.
-                m.insert("latency_measurable".into(), json!(false));
-            }
-            if let Some(l) = t.latency_ns {
-                m.insert("latency_ns".into(), json!(l));
+            // Not measurable: no latency rather than an invented 0; under the resolution: the
+            // bound, not the figure.
+            match t.shown_latency() {
+                ShownLatency::Measured(l) => {
+                    m.insert("latency_ns".into(), json!(l));
+                }
+                ShownLatency::Under(r) => {
+                    m.insert("latency_measurable".into(), json!(false));
+                    m.insert("latency_under_ns".into(), json!(r));
+                }
+                ShownLatency::NotMeasurable | ShownLatency::OneRead => {
+                    m.insert("latency_measurable".into(), json!(false));
+                }
+                ShownLatency::None => {}
             }
             if let Some(r) = t.request {
                 m.insert("request_hex".into(), json!(hex_compact(r)));
