@@ -40,6 +40,16 @@ fn dir(sender: Sender) -> Option<u8> {
     }
 }
 
+/// The directions a frame from `sender` may have (either, after damage), without allocating:
+/// this is asked of every frame that checks.
+fn dirs(sender: Sender) -> &'static [u8] {
+    match dir(sender) {
+        Some(0) => &[0],
+        Some(_) => &[1],
+        None => &[0, 1],
+    }
+}
+
 /// The learned lengths of one port.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct LearnedLengths {
@@ -115,9 +125,9 @@ impl LearnedLengths {
     /// the same vendor function with the same length all day (issue 25: a corrupted request and
     /// the frame after it checked as one 21-byte "frame" of a function seen 7 and 14 bytes long).
     pub(crate) fn contradicts(&self, unit: u8, fc: u8, sender: Sender, len: usize) -> bool {
-        let dirs: Vec<u8> = dir(sender).map_or_else(|| vec![0, 1], |d| vec![d]);
+        let dirs = dirs(sender);
         let mut firm = 0;
-        for d in &dirs {
+        for d in dirs {
             let Some(slots) = self.seen.get(&(unit, fc, *d)) else { return false };
             let total: u64 = slots.iter().map(|&(_, n)| u64::from(n)).sum();
             let Some(&(l, n)) = slots.iter().max_by_key(|&&(_, n)| n) else { return false };
@@ -138,7 +148,7 @@ impl LearnedLengths {
     pub(crate) fn choose_among(&self, unit: u8, fc: u8, sender: Sender, candidates: &[usize]) -> Option<usize> {
         // The length each direction was (nearly) always seen with (nobody can say who sent a
         // frame after damage: then either direction's).
-        let dirs: Vec<u8> = dir(sender).map_or_else(|| vec![0, 1], |d| vec![d]);
+        let dirs = dirs(sender);
         let mut fits = Vec::new();
         for slots in dirs.iter().filter_map(|d| self.seen.get(&(unit, fc, *d))) {
             let total: u64 = slots.iter().map(|&(_, n)| u64::from(n)).sum();

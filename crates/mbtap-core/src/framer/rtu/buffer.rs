@@ -64,13 +64,19 @@ impl TimedBuffer {
                 }
                 None => (u64::MAX, u64::MAX),
             };
-            let at = self.buf.len();
             self.buf.extend_from_slice(bytes);
-            self.end.extend((0..n as u64).map(|i| e0.saturating_add(i.saturating_mul(c))));
-            self.gap_lb.resize(at + n, 0);
-            self.gap_ub.resize(at + n, u64::MAX);
-            self.gap_lb[at] = lb;
-            self.gap_ub[at] = ub;
+            // The run of end times, by addition (this is per byte of every read: issue 40's
+            // replay speed); saturating as before, so a clock at its end cannot wrap.
+            let mut e = e0;
+            self.end.reserve(n);
+            for _ in 0..n {
+                self.end.push(e);
+                e = e.saturating_add(c);
+            }
+            self.gap_lb.push(lb);
+            self.gap_ub.push(ub);
+            self.gap_lb.extend(std::iter::repeat_n(0, n - 1));
+            self.gap_ub.extend(std::iter::repeat_n(u64::MAX, n - 1));
             self.last_end = self.end.last().copied();
         }
         self.last_read = self.last_read.max(t);

@@ -417,9 +417,15 @@ impl RtuFramer {
         // and set to `u64::MAX`).
         let starts_read = |i: usize| self.timed.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
         let (mut before_last, mut last) = (None::<u64>, None::<u64>);
-        for i in (a + 1..b).filter(|&i| starts_read(i)) {
-            before_last = before_last.max(last);
-            last = Some(self.timed.end[i].saturating_sub(c).saturating_sub(self.timed.end[i - 1]));
+        // Over slices, so the scan of a frame in one read is a bare comparison per byte.
+        let (Some(ub), Some(end)) = (self.timed.gap_ub.get(a + 1..b), self.timed.end.get(a..b)) else {
+            return (None, None);
+        };
+        for (&g, w) in ub.iter().zip(end.windows(2)) {
+            if g != u64::MAX {
+                before_last = before_last.max(last);
+                last = Some(w[1].saturating_sub(c).saturating_sub(w[0]));
+            }
         }
         let every = before_last.max(last);
         let last_read_spills = b < self.timed.buf.len() && !starts_read(b);
