@@ -14,7 +14,9 @@ pub(super) fn discovery_object(r: &Row) -> String {
 /// A Home Assistant discovery message for `r`: (node id, object id, component, config).
 /// Keys without a value are left out (issue 31: `"manufacturer": null` for a profile without a
 /// vendor, which Home Assistant's schema refuses: a string or no key); coils and discrete inputs
-/// are binary sensors with the raw 1/0 as their state, not numeric sensors.
+/// are binary sensors with the raw 1/0 as their state, not numeric sensors. A known unit is
+/// spelled as Home Assistant does, with its device and state class (issue 42); the device names
+/// no `via_device` (issue 42: it named a bridge device no config announced).
 ///
 /// Writable registers are sensors here too; [`control`] makes them controls when writes from the
 /// broker are on (a control whose commands nothing executes would mislead).
@@ -29,7 +31,6 @@ pub fn discovery(
     let mut device = serde_json::json!({
         "identifiers": [format!("{node}_u{}", r.unit)],
         "name": format!("{} (unit {})", profile.map_or("Modbus device", |p| p.meta.device.as_str()), r.unit),
-        "via_device": node,
     });
     if let Some(d) = device.as_object_mut() {
         if let Some(vendor) = profile.and_then(|p| p.meta.vendor.clone()) {
@@ -55,8 +56,19 @@ pub fn discovery(
             o.insert("payload_off".into(), "0".into());
         } else {
             o.insert("value_template".into(), "{{ value_json.value }}".into());
-            if let Some(u) = &r.unit_of_measure {
-                o.insert("unit_of_measurement".into(), u.clone().into());
+            // Home Assistant's spelling and classes (long-term statistics, the Energy dashboard).
+            match r.unit_of_measure.as_deref().map(|u| (u, mbtap_core::profile::ha_classes::ha_class(u))) {
+                Some((_, Some(c))) => {
+                    o.insert("unit_of_measurement".into(), c.unit.into());
+                    if let Some(d) = c.device_class {
+                        o.insert("device_class".into(), d.into());
+                    }
+                    o.insert("state_class".into(), c.state_class.into());
+                }
+                Some((u, None)) => {
+                    o.insert("unit_of_measurement".into(), u.into());
+                }
+                None => {}
             }
         }
     }
@@ -112,6 +124,22 @@ pub fn control(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 42: no config had a device or state class (no long-term statistics, nothing for
+    /// the Energy dashboard), and `via_device` named a device no config announced. The MK4's
+    /// voltage (input 430, `V`) is a voltage measurement, and no config names a `via_device`.
+    #[test]
+    fn regression_issue_42_discovery_gives_classes_and_no_unannounced_via_device() {
+        use mbtap_core::profile::Table;
+        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
+        let regs = mbtap_core::query::rows::rows(1, Table::InputRegisters, 430, &[2304], Some(&mk4));
+        let (_, _, component, config) = discovery("mbtap/site", &regs[0], Some(&mk4), "t");
+        assert_eq!(component, "sensor");
+        assert_eq!(config["unit_of_measurement"], "V", "{config}");
+        assert_eq!(config["device_class"], "voltage", "{config}");
+        assert_eq!(config["state_class"], "measurement", "{config}");
+        assert!(config["device"].get("via_device").is_none(), "{config}");
+    }
 
     /// Issue 31: the MKZP (a profile without a vendor) was announced with `"manufacturer":
     /// null`, which Home Assistant's schema refuses, and coils as numeric sensors.

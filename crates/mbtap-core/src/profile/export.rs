@@ -142,6 +142,24 @@ fn header(p: &Profile, what: &str) -> String {
     )
 }
 
+/// A sensor's unit as Home Assistant and ESPHome spell it, with its device and state class
+/// when the unit is known ([`super::ha_classes`]); an unknown unit as written.
+fn insert_unit(e: &mut serde_json::Map<String, Value>, unit: Option<&str>) {
+    let Some(u) = unit else { return };
+    match super::ha_classes::ha_class(u) {
+        Some(c) => {
+            e.insert("unit_of_measurement".into(), json!(c.unit));
+            if let Some(d) = c.device_class {
+                e.insert("device_class".into(), json!(d));
+            }
+            e.insert("state_class".into(), json!(c.state_class));
+        }
+        None => {
+            e.insert("unit_of_measurement".into(), json!(u));
+        }
+    }
+}
+
 fn home_assistant(p: &Profile, unit: u8) -> Exported {
     let mut out = Exported::default();
     let (mut sensors, mut binary) = (Vec::new(), Vec::new());
@@ -190,9 +208,7 @@ fn home_assistant(p: &Profile, unit: u8) -> Exported {
                 e.insert("scale".into(), json!(k));
             }
             e.insert("precision".into(), json!(decimals(d)));
-            if let Some(u) = &d.unit {
-                e.insert("unit_of_measurement".into(), json!(u));
-            }
+            insert_unit(&mut e, d.unit.as_deref());
         }
         sensors.push(Value::Object(e));
         out.written += 1;
@@ -275,9 +291,7 @@ fn esphome(p: &Profile, unit: u8) -> Exported {
             _ => "U_WORD",
         };
         e.insert("value_type".into(), json!(value_type));
-        if let Some(u) = &d.unit {
-            e.insert("unit_of_measurement".into(), json!(u));
-        }
+        insert_unit(&mut e, d.unit.as_deref());
         e.insert("accuracy_decimals".into(), json!(decimals(d)));
         if let Some(k) = d.scale {
             e.insert("filters".into(), json!([{ "multiply": k }]));

@@ -7,6 +7,7 @@ pub mod builtin;
 pub mod escape;
 pub mod export;
 pub mod format;
+pub mod ha_classes;
 pub mod image;
 pub mod import;
 pub mod loader;

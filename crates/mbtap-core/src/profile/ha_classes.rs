@@ -1,0 +1,91 @@
+//! A value's unit as Home Assistant spells it, with the device class and state class that go
+//! with it (issue 42: none of the demo's 92 discovery configs had either, so Home Assistant kept
+//! no long-term statistics and the Energy dashboard offered nothing; sheet units passed through
+//! as written — `Volts`, `kWH` — where Home Assistant knows only `V`, `kWh`).
+//!
+//! The classes are Home Assistant's `SensorDeviceClass` and `SensorStateClass` values; each unit
+//! here is one that class accepts. An energy unit is `total_increasing` (a meter's register
+//! only grows, and the Energy dashboard takes exactly those); every other known unit is a
+//! `measurement`. A unit not known keeps its text and gets no class: nothing is guessed. (Flow
+//! rates get no device class: `volume_flow_rate` is missing from Home Assistant releases its
+//! schema check here refused it with.)
+
+/// What Home Assistant is told of a value with a known unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HaClass {
+    /// The unit as Home Assistant spells it.
+    pub unit: &'static str,
+    pub device_class: Option<&'static str>,
+    pub state_class: &'static str,
+}
+
+const fn m(unit: &'static str, device_class: Option<&'static str>) -> HaClass {
+    HaClass { unit, device_class, state_class: "measurement" }
+}
+
+const fn total(unit: &'static str, device_class: Option<&'static str>) -> HaClass {
+    HaClass { unit, device_class, state_class: "total_increasing" }
+}
+
+/// The unit spellings known (lower case, no spaces) and what they are.
+const KNOWN: &[(&[&str], HaClass)] = &[
+    (&["v", "volt", "volts", "vac", "vdc"], m("V", Some("voltage"))),
+    (&["mv", "millivolt", "millivolts"], m("mV", Some("voltage"))),
+    (&["a", "amp", "amps", "ampere", "amperes"], m("A", Some("current"))),
+    (&["ma", "milliamp", "milliamps"], m("mA", Some("current"))),
+    (&["w", "watt", "watts"], m("W", Some("power"))),
+    (&["kw", "kilowatt", "kilowatts"], m("kW", Some("power"))),
+    (&["va"], m("VA", Some("apparent_power"))),
+    (&["kva"], m("kVA", Some("apparent_power"))),
+    (&["var"], m("var", Some("reactive_power"))),
+    (&["kvar"], m("kvar", Some("reactive_power"))),
+    (&["wh"], total("Wh", Some("energy"))),
+    (&["kwh"], total("kWh", Some("energy"))),
+    (&["mwh"], total("MWh", Some("energy"))),
+    (&["varh"], total("varh", None)),
+    (&["kvarh"], total("kvarh", None)),
+    (&["vah"], total("VAh", None)),
+    (&["kvah"], total("kVAh", None)),
+    (&["hz", "hertz"], m("Hz", Some("frequency"))),
+    (&["°c", "℃", "degc", "degreesc", "celsius", "°celsius"], m("°C", Some("temperature"))),
+    (&["°f", "℉", "degf", "degreesf", "fahrenheit"], m("°F", Some("temperature"))),
+    (&["%", "percent"], m("%", None)),
+    (&["bar"], m("bar", Some("pressure"))),
+    (&["mbar"], m("mbar", Some("pressure"))),
+    (&["pa"], m("Pa", Some("pressure"))),
+    (&["kpa"], m("kPa", Some("pressure"))),
+    (&["hpa"], m("hPa", Some("pressure"))),
+    (&["psi"], m("psi", Some("pressure"))),
+    (&["m³/h", "m3/h", "m^3/h"], m("m³/h", None)),
+    (&["l/min", "lpm"], m("L/min", None)),
+    (&["s", "sec", "second", "seconds"], m("s", Some("duration"))),
+    (&["ms"], m("ms", Some("duration"))),
+    (&["min", "minutes"], m("min", Some("duration"))),
+    (&["h", "hr", "hours"], m("h", Some("duration"))),
+    (&["rpm", "r/min", "1/min"], m("rpm", None)),
+];
+
+/// Home Assistant's unit and classes for `unit` as a profile or sheet writes it, when known.
+#[must_use]
+pub fn ha_class(unit: &str) -> Option<HaClass> {
+    let key: String = unit.trim().chars().filter(|c| !c.is_whitespace()).collect::<String>().to_lowercase();
+    KNOWN.iter().find(|(names, _)| names.contains(&key.as_str())).map(|&(_, c)| c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 42: sheet spellings become Home Assistant's units, with the classes the Energy
+    /// dashboard and long-term statistics need; an unknown unit is kept and gets no class.
+    #[test]
+    fn regression_issue_42_units_are_spelled_as_home_assistant_does_with_their_classes() {
+        assert_eq!(ha_class("Volts"), Some(m("V", Some("voltage"))));
+        assert_eq!(ha_class("kWH"), Some(total("kWh", Some("energy"))));
+        assert_eq!(ha_class(" kw "), Some(m("kW", Some("power"))));
+        assert_eq!(ha_class("°C").map(|c| c.device_class), Some(Some("temperature")));
+        assert_eq!(ha_class("m3/h").map(|c| c.unit), Some("m³/h"));
+        assert_eq!(ha_class("l"), None);
+        assert_eq!(ha_class("furlongs"), None);
+    }
+}
