@@ -384,6 +384,7 @@ impl Pairing {
         }
     }
 
+    #[inline]
     fn finish<'a>(p: &'a Pending, outcome: Outcome, response: Option<(&Frame<'a>, &'a [u8])>) -> Transaction<'a> {
         let response_pdu = response.filter(|(f, _)| f.check_ok).map(|(_, pdu)| pdu);
         let response = response.map(|(f, _)| f);

@@ -51,6 +51,7 @@ impl<'a> Frame<'a> {
     /// CRC already), ASCII's decoded from its hex into `scratch`. `None` when the bytes are too
     /// short to hold both, or not ASCII hex. The one place a frame's bytes are split: pairing,
     /// reports, annotation and the UI read the PDU that comes with the frame and its transaction.
+    #[inline]
     pub fn unit_pdu<'s>(&self, scratch: &'s mut Vec<u8>) -> Option<(u8, &'s [u8])>
     where
         'a: 's,

@@ -54,13 +54,22 @@ fn dirs(sender: Sender) -> &'static [u8] {
 #[derive(Debug, Clone, Default)]
 pub(crate) struct LearnedLengths {
     seen: BTreeMap<(u8, u8, u8), [(u16, u32); PER_KEY]>,
+    /// The function codes with a key in `seen`, as bits: the question asked of every frame
+    /// that checks is answered without a map lookup for the functions never learned (the
+    /// standard ones, whose lengths their structure fixes; issue 40's replay speed).
+    functions: [u64; 4],
     /// Off: nothing is learned (to measure what learning does).
     on: bool,
 }
 
 impl LearnedLengths {
+    /// Whether any length of function `fc` is kept (of any unit, either direction).
+    fn knows(&self, fc: u8) -> bool {
+        self.functions[usize::from(fc / 64)] & (1 << (fc % 64)) != 0
+    }
+
     pub(crate) fn new(on: bool) -> Self {
-        Self { seen: BTreeMap::new(), on }
+        Self { seen: BTreeMap::new(), functions: [0; 4], on }
     }
 
     /// A length a device's profile declares for `unit`'s function `fc` (`request` or answer):
@@ -71,6 +80,7 @@ impl LearnedLengths {
         if !self.seen.contains_key(&key) && self.seen.len() >= MAX_KEYS {
             return;
         }
+        self.functions[usize::from(key.1 / 64)] |= 1 << (key.1 % 64);
         let slots = self.seen.entry(key).or_default();
         if let Some(s) = slots.iter_mut().find(|(l, n)| *l == len && *n > 0) {
             s.1 = s.1.saturating_add(FIRM * 4);
@@ -101,6 +111,7 @@ impl LearnedLengths {
         if !self.seen.contains_key(&key) && self.seen.len() >= MAX_KEYS {
             return;
         }
+        self.functions[usize::from(key.1 / 64)] |= 1 << (key.1 % 64);
         let slots = self.seen.entry(key).or_default();
         if let Some(s) = slots.iter_mut().find(|(l, n)| *l == len && *n > 0) {
             s.1 = s.1.saturating_add(1);
@@ -125,6 +136,9 @@ impl LearnedLengths {
     /// the same vendor function with the same length all day (issue 25: a corrupted request and
     /// the frame after it checked as one 21-byte "frame" of a function seen 7 and 14 bytes long).
     pub(crate) fn contradicts(&self, unit: u8, fc: u8, sender: Sender, len: usize) -> bool {
+        if !self.knows(fc) {
+            return false;
+        }
         let dirs = dirs(sender);
         let mut firm = 0;
         for d in dirs {
@@ -146,6 +160,9 @@ impl LearnedLengths {
     /// `00 00` checks at three), the one this unit's function from `sender` was (nearly) always
     /// seen with.
     pub(crate) fn choose_among(&self, unit: u8, fc: u8, sender: Sender, candidates: &[usize]) -> Option<usize> {
+        if !self.knows(fc) {
+            return None;
+        }
         // The length each direction was (nearly) always seen with (nobody can say who sent a
         // frame after damage: then either direction's).
         let dirs = dirs(sender);

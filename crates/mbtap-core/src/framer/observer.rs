@@ -189,6 +189,11 @@ pub(crate) struct ObserverLearner {
     senders: Box<[SenderSamples]>,
     /// Each sender's figure, where it has one (kept apart so the port's figure is cheap).
     figures: Box<[Option<u64>]>,
+    /// The slots that have a figure, in the order they got it: the port's figure is taken over
+    /// these, not over all 257 (issue 40: the walk cost replay a percent).
+    active: Vec<usize>,
+    /// Whether any sender has [`SETTLED`] batches (it stays so: batches only grow).
+    settled: bool,
     /// Reads by size (the last slot: that many bytes or more), for the typical read.
     read_sizes: [u64; READ_SIZES],
 }
@@ -202,6 +207,8 @@ impl ObserverLearner {
             estimate: ObserverEstimate { configured_latency_ns, learning, char_ns, ..ObserverEstimate::default() },
             senders: vec![SenderSamples::default(); SENDERS].into_boxed_slice(),
             figures: vec![None; SENDERS].into_boxed_slice(),
+            active: Vec::new(),
+            settled: false,
             read_sizes: [0; READ_SIZES],
         }
     }
@@ -240,21 +247,27 @@ impl ObserverLearner {
         self.estimate.split_frames = self.estimate.split_frames.saturating_add(1);
         let slot = sender.slot();
         let figure = self.senders[slot].add(delay_ns)?;
-        self.figures[slot] = Some(figure);
+        if self.figures[slot].replace(figure).is_none() {
+            self.active.push(slot);
+        }
+        self.settled |= self.senders[slot].batches >= SETTLED;
         // The lower median across the senders that have a figure — from those with a median of
         // at least [`SETTLED`] batches where any has one: a sender's first batch may hold its
         // one pause of the day (issue 25: on a short capture, two units' single batches with a
         // slow answer each made the port's figure 6.5 ms behind per-byte timestamps).
-        let settled = self.senders.iter().any(|s| s.batches >= SETTLED);
-        let mut all: Vec<u64> = self
-            .figures
-            .iter()
-            .zip(self.senders.iter())
-            .filter(|(_, s)| !settled || s.batches >= SETTLED)
-            .filter_map(|(f, _)| *f)
-            .collect();
+        let mut all = [0u64; SENDERS];
+        let mut n = 0;
+        for &k in &self.active {
+            if let Some(f) = self.figures[k]
+                && (!self.settled || self.senders[k].batches >= SETTLED)
+            {
+                all[n] = f;
+                n += 1;
+            }
+        }
+        let all = &mut all[..n];
         all.sort_unstable();
-        let learned = all[(all.len() - 1) / 2];
+        let learned = *all.get(n.saturating_sub(1) / 2)?;
         self.estimate.learned_latency_ns = Some(learned);
         self.estimate.senders_learned = all.len();
         Some(learned)

@@ -64,6 +64,16 @@ impl TimedBuffer {
                 }
                 None => (u64::MAX, u64::MAX),
             };
+            if let [b] = bytes {
+                // One byte per read (per-byte timestamps, a slow line): four pushes.
+                self.buf.push(*b);
+                self.end.push(e0);
+                self.gap_lb.push(lb);
+                self.gap_ub.push(ub);
+                self.last_end = Some(e0);
+                self.last_read = self.last_read.max(t);
+                return;
+            }
             self.buf.extend_from_slice(bytes);
             // The run of end times, by addition (this is per byte of every read: issue 40's
             // replay speed); saturating as before, so a clock at its end cannot wrap.

@@ -346,11 +346,10 @@ impl RtuFramer {
         let check_ok = reading.is_some();
         let a = self.timed.head;
         let b = a + len;
-        let inner_gap = self.timed.gap_lb[a + 1..b].iter().copied().max().unwrap_or(0);
         let ub = self.timed.gap_ub[a];
         let short_gap_before_ns = (self.after_frame && ub < self.t35).then_some(ub);
         let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
-        let (every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
+        let (inner_gap, every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
         let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.t15));
         emit(FrameEvent::Frame(Frame {
             port: self.port,
@@ -410,18 +409,23 @@ impl RtuFramer {
     /// made healthy frames look paused). For learning the observer's delay it is kept (the
     /// first of the pair returned): that errs high, towards fewer findings, and a glitchy
     /// line's frames always share their last read with their glitch. One pass over the frame
-    /// gives both: `(every boundary, the boundaries the gap evidence may use)`.
-    pub(super) fn apparent_inner_silence(&self, a: usize, b: usize) -> (Option<u64>, Option<u64>) {
+    /// gives all three: `(the longest silence the reads prove inside it, every boundary, the
+    /// boundaries the gap evidence may use)`.
+    pub(super) fn apparent_inner_silence(&self, a: usize, b: usize) -> (u64, Option<u64>, Option<u64>) {
         let c = self.char_ns;
         // A read began at `i` where the gap before it is bounded (inside a read it is unknown
         // and set to `u64::MAX`).
         let starts_read = |i: usize| self.timed.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
         let (mut before_last, mut last) = (None::<u64>, None::<u64>);
-        // Over slices, so the scan of a frame in one read is a bare comparison per byte.
-        let (Some(ub), Some(end)) = (self.timed.gap_ub.get(a + 1..b), self.timed.end.get(a..b)) else {
-            return (None, None);
+        // One pass over slices, the frame's longest proven gap with it (issue 40: two scans of
+        // every frame cost replay its speed).
+        let t = &self.timed;
+        let (Some(lb), Some(ub), Some(end)) = (t.gap_lb.get(a + 1..b), t.gap_ub.get(a + 1..b), t.end.get(a..b)) else {
+            return (0, None, None);
         };
-        for (&g, w) in ub.iter().zip(end.windows(2)) {
+        let mut inner_gap = 0;
+        for ((&l, &g), w) in lb.iter().zip(ub).zip(end.windows(2)) {
+            inner_gap = inner_gap.max(l);
             if g != u64::MAX {
                 before_last = before_last.max(last);
                 last = Some(w[1].saturating_sub(c).saturating_sub(w[0]));
@@ -429,7 +433,7 @@ impl RtuFramer {
         }
         let every = before_last.max(last);
         let last_read_spills = b < self.timed.buf.len() && !starts_read(b);
-        (every, if last_read_spills { before_last } else { every })
+        (inner_gap, every, if last_read_spills { before_last } else { every })
     }
 
     /// How far an apparent silence before a frame fell short of t3.5 after the previous frame.
