@@ -34,6 +34,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { port, line, output, record, duration } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
+    let record_path = record.clone();
     let opts = crate::source::sniff::SniffOptions {
         port,
         mode,
@@ -48,10 +49,15 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if output.format == EventFormatArg::Tui {
         let source = opts.port.clone();
         let ui = crate::args::tui_source(&output, settings, false)?;
-        return ui.run(&source, move |writer, err| {
+        let recorded = opts.record.clone();
+        let ended = ui.run(&source, move |writer, err| {
             writer.taps = taps;
             runtime()?.block_on(crate::source::sniff::sniff(opts, writer, err))
         });
+        if let Some(note) = recorded.as_deref().and_then(crate::source::record::ended_note) {
+            eprintln!("mbtap: {note}");
+        }
+        return ended;
     }
     let stdout = io::stdout();
     let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
@@ -64,6 +70,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         writer.finish()?;
     }
     publishing.finish();
+    if let Some(note) = record_path.as_deref().and_then(crate::source::record::ended_note) {
+        eprintln!("mbtap: {note}");
+    }
     result?;
     Ok(ExitCode::SUCCESS)
 }

@@ -37,6 +37,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { port, link, line, output, record, duration } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
+    let record_path = record.clone();
     let opts = crate::source::tap::TapOptions {
         port,
         link,
@@ -52,10 +53,15 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if output.format == EventFormatArg::Tui {
         let source = format!("{} ⇄ {}", opts.port, opts.link.display());
         let ui = crate::args::tui_source(&output, settings, false)?;
-        return ui.run(&source, move |writer, err| {
+        let recorded = opts.record.clone();
+        let ended = ui.run(&source, move |writer, err| {
             writer.taps = taps;
             runtime()?.block_on(crate::source::tap::tap(opts, writer, err))
         });
+        if let Some(note) = recorded.as_deref().and_then(crate::source::record::ended_note) {
+            eprintln!("mbtap: {note}");
+        }
+        return ended;
     }
     let stdout = io::stdout();
     let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
@@ -64,6 +70,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // The summary is written even when the recording failed; the exit status says it did.
     writer.finish()?;
     publishing.finish();
+    if let Some(note) = record_path.as_deref().and_then(crate::source::record::ended_note) {
+        eprintln!("mbtap: {note}");
+    }
     result?;
     Ok(ExitCode::SUCCESS)
 }

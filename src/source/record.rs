@@ -95,6 +95,14 @@ impl Recorder {
     }
 }
 
+/// What a session that recorded says as it ends (issue 42: quitting the terminal UI of a
+/// `--record` session said nothing — not where the file was, nor what it held).
+#[must_use]
+pub fn ended_note(path: &Path) -> Option<String> {
+    let len = std::fs::metadata(path).ok()?.len();
+    Some(format!("recorded to {} ({len} bytes); play it back with: mbtap replay {}", path.display(), path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

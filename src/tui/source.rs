@@ -37,7 +37,7 @@ impl TuiSource {
             writer.profiles = profiles;
             writer.lang = lang;
             writer.tui = Some(std::sync::Arc::clone(&feeder) as std::sync::Arc<dyn crate::output::UiFeed>);
-            let mut notices = NoticeWriter(feeder);
+            let mut notices = NoticeWriter::new(feeder);
             produce(&mut writer, &mut notices)
         })?;
         Ok(ExitCode::SUCCESS)

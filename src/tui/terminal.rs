@@ -70,21 +70,79 @@ impl Shared {
 }
 
 /// The producer's messages (what it would print on stderr), shown on the status line: the
-/// terminal belongs to the UI.
+/// terminal belongs to the UI. A message arrives in pieces (`writeln!` writes each formatted
+/// part apart): the line is shown once it is whole (issue 42: the status line showed only the
+/// last piece of one, a stray `)`).
 #[derive(Debug)]
-pub struct NoticeWriter(pub Arc<Shared>);
+pub struct NoticeWriter {
+    shared: Arc<Shared>,
+    /// The start of a line whose end has not come yet (bounded: a line longer is cut).
+    partial: String,
+}
+
+/// The longest part of a line kept while waiting for its end.
+const NOTICE_MAX: usize = 4096;
+
+impl NoticeWriter {
+    #[must_use]
+    pub fn new(shared: Arc<Shared>) -> Self {
+        Self { shared, partial: String::new() }
+    }
+}
 
 impl Write for NoticeWriter {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let text = String::from_utf8_lossy(buf);
-        if let Some(line) = text.lines().map(str::trim).rfind(|l| !l.is_empty()) {
-            self.0.model().notice = Some(line.trim_start_matches("mbtap: ").to_owned());
+        let mut last = None;
+        for c in text.chars() {
+            if c == '\n' {
+                let line = std::mem::take(&mut self.partial);
+                if !line.trim().is_empty() {
+                    last = Some(line);
+                }
+            } else if self.partial.len() < NOTICE_MAX {
+                self.partial.push(c);
+            }
+        }
+        if let Some(line) = last {
+            self.shared.model().notice = Some(line.trim().trim_start_matches("mbtap: ").to_owned());
         }
         Ok(buf.len())
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod notice_tests {
+    use super::*;
+
+    /// Issue 42: the status line began with a stray `)` — the last piece `writeln!` wrote of
+    /// "sniffing PORT at … (reads trusted to …)" taken for the whole message.
+    #[test]
+    fn regression_issue_42_a_message_written_in_pieces_is_shown_whole() {
+        let line = mbtap_core::framer::LineSettings {
+            baud: 19_200,
+            data_bits: 8,
+            parity: mbtap_core::framer::Parity::Even,
+            stop_bits: 1,
+        };
+        let model = super::super::model::Model::new(
+            mbtap_core::profile::Profiles::new(),
+            mbtap_core::profile::annotate::Lang::En,
+            line,
+            100,
+        );
+        let shared = Shared::new(model);
+        let mut w = NoticeWriter::new(shared.clone());
+        let (port, line, trust) = ("/dev/ttyUSB0", "19200 8E1", "reads trusted to 1000 µs");
+        let _ = writeln!(w, "mbtap: sniffing {port} at {line} ({trust})");
+        assert_eq!(
+            shared.model().notice.as_deref(),
+            Some("sniffing /dev/ttyUSB0 at 19200 8E1 (reads trusted to 1000 µs)")
+        );
     }
 }
 

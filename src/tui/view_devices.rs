@@ -11,15 +11,18 @@ use super::model::Model;
 use super::style::{clock, duration};
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &App, model: &Model) {
-    let shown = u16::try_from(app.findings.len().min(6)).unwrap_or(6);
+    // The table takes what its units need (a header, borders, a row each), the findings the
+    // rest, wrapped (issue 42: six of ten findings, cut at the right, under a mostly empty
+    // devices pane).
+    let units = u16::try_from(model.devices.len().saturating_sub(app.device_offset)).unwrap_or(u16::MAX);
     let [bus, table, findings] =
-        Layout::vertical([Constraint::Length(1), Constraint::Min(3), Constraint::Length(shown.max(1) + 2)]).areas(area);
+        Layout::vertical([Constraint::Length(1), Constraint::Max(units.max(1).saturating_add(3)), Constraint::Min(3)])
+            .areas(area);
     let lines: Vec<ratatui::text::Line<'_>> = if app.findings.is_empty() {
         vec![ratatui::text::Line::styled("none — the bus looks healthy", Style::new().fg(Color::Green))]
     } else {
         app.findings
             .iter()
-            .take(6)
             .map(|f| {
                 let who = f.unit.map_or_else(|| "bus".to_owned(), |u| format!("unit {u}"));
                 ratatui::text::Line::from(vec![
@@ -30,7 +33,10 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &App, model: &Model) {
             .collect()
     };
     let title = format!(" findings ({}; mbtap report for the evidence) ", app.findings.len());
-    frame.render_widget(Paragraph::new(lines).block(Block::bordered().title(title)), findings);
+    frame.render_widget(
+        Paragraph::new(lines).wrap(ratatui::widgets::Wrap { trim: true }).block(Block::bordered().title(title)),
+        findings,
+    );
     let b = &model.bus;
     let pct = |v: Option<f64>| v.map_or_else(|| "–".to_owned(), |v| format!("{v:.1} %"));
     let line = format!(

@@ -24,6 +24,9 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
         }
     }
     app.traffic_offset = app.traffic_offset.min(total.saturating_sub(height));
+    // The status column as wide as the longest status shown (issue 42: `ok gap <t3.5` was cut
+    // to `<t3.`), between 6 and 20 columns.
+    let mut status_width = 6u16;
     let rows: Vec<Row<'_>> = app
         .visible()
         .iter()
@@ -46,6 +49,7 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
             if r.timing.two_lengths {
                 status.push_str(" len?");
             }
+            status_width = status_width.max(u16::try_from(status.chars().count()).unwrap_or(20).min(20));
             let style =
                 if Some(i) == selected { status_style(r).add_modifier(Modifier::REVERSED) } else { status_style(r) };
             let mut cells = vec![Cell::from(clock(r.t_ns))];
@@ -79,7 +83,7 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
     widths.extend([
         Constraint::Length(11),
         Constraint::Length(15),
-        Constraint::Length(11),
+        Constraint::Length(status_width),
         Constraint::Length(7),
         Constraint::Min(10),
     ]);
