@@ -113,6 +113,9 @@ fn regression_issue_42_a_sheet_without_a_type_column_says_so_and_takes_type() {
     assert!(text.contains("Voltage = 17254"), "{text}");
     let (p, err) = import("floats-no-type.csv", &["--table", "input", "--type", "f32"]);
     assert!(!err.contains("no type column"), "{err}");
+    // Units as Home Assistant spells them: `Volts` → `V`, `kWH` → `kWh`.
+    let toml = std::fs::read_to_string(&p.path).unwrap();
+    assert!(toml.contains("unit = \"V\"") && toml.contains("unit = \"kWh\"") && !toml.contains("Volts"), "{toml}");
     let text = annotate(&p.path, &read(0x04, 0, &f32_words(230.1)));
     assert!(text.contains("Voltage = 230.1"), "{text}");
     let f = fixture("floats-no-type.csv");
@@ -169,7 +172,8 @@ fn an_xlsx_with_merged_title_section_rows_and_chinese_headers() {
 fn six_digit_modicon_numbers_units_in_names_and_powers_of_ten() {
     let (p, _) = import("pump-modicon6.csv", &[]);
     let text = annotate(&p.path, &read(0x03, 0, &[125]));
-    assert!(text.contains("Flow = 12.5 m3/h"), "{text}");
+    // `m3/h` in the header, `m³/h` as Home Assistant spells it (issue 42).
+    assert!(text.contains("Flow = 12.5 m³/h"), "{text}");
     let text = annotate(&p.path, &read(0x04, 0, &[0xFFF6]));
     assert!(text.contains("Motor temperature = -1.0 °C"), "{text}");
 }
@@ -260,8 +264,10 @@ fn imported_profiles_are_listed_with_where_they_came_from() {
 #[ignore = "needs homeassistant and esphome (CI installs them)"]
 fn exports_are_accepted_by_home_assistant_esphome_and_telegraf() {
     let (imported, _) = import("ha-modbus.yaml", &[]);
+    // Issue 42: an energy meter's sheet (kWh: `device_class: energy`, `total_increasing`).
+    let (meter, _) = import("energy-meter-modicon.csv", &[]);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/export_check.py");
-    for profile in ["mk4", "mkzp", "display", imported.path.to_str().unwrap()] {
+    for profile in ["mk4", "mkzp", "display", imported.path.to_str().unwrap(), meter.path.to_str().unwrap()] {
         for (format, ext) in [("home-assistant", "yaml"), ("esphome", "yaml"), ("telegraf", "conf")] {
             let out = std::env::temp_dir().join(format!("mbtap-export-{}-{format}.{ext}", std::process::id()));
             let o =

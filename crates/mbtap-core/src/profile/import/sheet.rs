@@ -281,7 +281,12 @@ pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
         };
         let (name, unit_in_name) = unit_from_name(cell_at(&r, col(Field::Name)).unwrap_or(""));
         let name = if name.is_empty() { format!("reg_{}_{address}", table.word()) } else { name };
-        let unit = cell_at(&r, col(Field::Unit)).map(str::to_owned).or(unit_in_name);
+        // Spelled as Home Assistant and the exports want it (`Volts` → `V`, `kWH` → `kWh`,
+        // issue 42); a unit not known is kept as written.
+        let unit = cell_at(&r, col(Field::Unit))
+            .map(str::to_owned)
+            .or(unit_in_name)
+            .map(|u| crate::profile::ha_classes::ha_class(&u).map_or(u, |c| c.unit.to_owned()));
         let description = cell_at(&r, col(Field::Description)).map(str::to_owned).filter(|d| *d != name);
         out.add(Point {
             table,
