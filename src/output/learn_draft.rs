@@ -149,3 +149,38 @@ impl LiveDraft {
         self.write()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A read of holding register 0 (MAP v1.1b3 §6.3: 03, address 0000, quantity 0001) and its
+    /// answer (03, byte count 02, value 0007).
+    const READ: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x01];
+    const ANSWER: [u8; 4] = [0x03, 0x02, 0x00, 0x07];
+
+    /// Issue 40: `-o FILE` with several units wrote `NAME-unit-N.toml` files instead of the file
+    /// named. Once: refused, saying what to do; while listening: the file holds the first unit's
+    /// draft and the others are said at the end; a directory holds one per unit.
+    #[test]
+    fn regression_issue_40_one_file_holds_one_unit_and_a_directory_holds_each() {
+        let dir = std::env::temp_dir().join(format!("mbtap-drafts-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut l = Learner::default();
+        l.observe(1, &READ, &ANSWER, 0);
+        l.observe(5, &READ, &ANSWER, 1);
+        let file = dir.join("meter.toml");
+        let e = write_drafts(&l, &DraftTo::File(file.clone()), "test", &[]).unwrap_err().to_string();
+        assert!(e.contains("2 units were heard (1, 5)") && e.contains("--unit N") && e.contains("--dir DIR"), "{e}");
+        assert!(!file.exists());
+        let written = write_drafts(&l, &DraftTo::Dir(dir.join("d")), "test", &[]).unwrap();
+        assert_eq!(written.iter().map(|(u, _)| *u).collect::<Vec<_>>(), [1, 5]);
+        assert!(dir.join("d/learned-unit-5.toml").exists());
+        let mut live = LiveDraft::new(Some(DraftTo::File(file.clone())), "test".into());
+        live.learner = l;
+        assert_eq!(live.finish().unwrap(), [(1, file.clone())]);
+        let note = live.left_out_note().unwrap();
+        assert!(note.contains("unit 1 only") && note.contains("units 5 were heard too"), "{note}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
