@@ -1,9 +1,12 @@
 //! Connections of the spy server under the bridge's rules (issue 24): a connection silent for
-//! the idle timeout is closed, and when every place is taken the newcomer gets the place of a
-//! socket that never sent a byte (after a short grace) or of the idlest one, instead of being
-//! refused while idle sockets hold every place. tokio-modbus runs each connection's
-//! request loop itself; the stream it is given ([`Watched`]) keeps the time of the last byte
-//! read and ends (EOF) when it idles out or is evicted.
+//! the idle timeout is closed, and when every place is taken the gateway's one seat decision
+//! ([`mbtap_gateway::seats::for_room`], issue 38) says whose place the newcomer takes — a socket
+//! that never sent a byte, then the one stalled longest, else the idlest — instead of being
+//! refused while idle sockets hold every place. (It had a rule of its own, a 200 ms grace for
+//! silent sockets, which issue 38 found lets a flood of young silent sockets starve newcomers.)
+//! tokio-modbus runs each connection's request loop itself; the stream it is given
+//! ([`Watched`]) keeps the time of the last byte read and ends (EOF) when it idles out or is
+//! evicted.
 
 use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -37,14 +40,19 @@ impl Conn {
     }
 }
 
-/// The open connections (weak: a connection that ended leaves by itself).
-#[derive(Debug, Default)]
-pub struct Table(Mutex<Vec<std::sync::Weak<Conn>>>);
+/// The open connections (weak: a connection that ended leaves by itself), and the origin of
+/// the times the seat decision is given.
+#[derive(Debug)]
+pub struct Table {
+    conns: Mutex<Vec<std::sync::Weak<Conn>>>,
+    origin: Instant,
+}
 
-/// A connection that never sent a byte gives its place after this long.
-pub const FIRST_REQUEST_GRACE: Duration = Duration::from_millis(200);
-/// A connection quiet this long gives its place to a newcomer when the table is full.
-pub const EVICT_AFTER_IDLE: Duration = Duration::from_secs(1);
+impl Default for Table {
+    fn default() -> Self {
+        Self { conns: Mutex::new(Vec::new()), origin: Instant::now() }
+    }
+}
 
 impl Table {
     /// A new connection's state, registered.
@@ -55,32 +63,34 @@ impl Table {
             evicted: AtomicBool::new(false),
             waker: Mutex::new(None),
         });
-        let mut t = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut t = self.conns.lock().unwrap_or_else(PoisonError::into_inner);
         t.retain(|w| w.strong_count() > 0);
         t.push(Arc::downgrade(&c));
         c
     }
 
-    /// Ends one connection to make room: the oldest that never sent a byte within
-    /// [`FIRST_REQUEST_GRACE`], else the idlest quiet for [`EVICT_AFTER_IDLE`]. False when every
-    /// connection is busy.
+    /// Ends one connection to make room, the one the gateway's seat decision names (the spy
+    /// server sees bytes, not requests: a byte stands for both). False when every connection is
+    /// busy.
     pub fn evict_idlest(&self, now: Instant) -> bool {
-        let t = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        let t = self.conns.lock().unwrap_or_else(PoisonError::into_inner);
         let live: Vec<Arc<Conn>> =
             t.iter().filter_map(std::sync::Weak::upgrade).filter(|c| !c.evicted.load(Ordering::SeqCst)).collect();
         drop(t);
-        let silent = live
+        let since = |i: Instant| i.saturating_duration_since(self.origin);
+        let seats: Vec<mbtap_gateway::seats::Seat> = live
             .iter()
-            .filter(|c| c.last_read().is_none() && now.saturating_duration_since(c.opened) >= FIRST_REQUEST_GRACE)
-            .min_by_key(|c| c.opened);
-        let idlest = || {
-            live.iter()
-                .filter_map(|c| c.last_read().map(|l| (l, c)))
-                .filter(|(l, _)| now.saturating_duration_since(*l) >= EVICT_AFTER_IDLE)
-                .min_by_key(|(l, _)| *l)
-                .map(|(_, c)| c)
-        };
-        match silent.or_else(idlest) {
+            .map(|c| {
+                let last = c.last_read().map(since);
+                mbtap_gateway::seats::Seat {
+                    ip: std::net::IpAddr::V4(std::net::Ipv4Addr::UNSPECIFIED),
+                    opened: since(c.opened),
+                    last_request: last,
+                    last_byte: last,
+                }
+            })
+            .collect();
+        match mbtap_gateway::seats::for_room(seats.iter().enumerate(), since(now)).and_then(|i| live.get(i)) {
             Some(c) => {
                 c.evict();
                 true
@@ -152,16 +162,19 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn a_silent_socket_gives_its_place_then_the_idlest() {
         let t = Table::default();
-        let quiet = t.open();
-        tokio::time::advance(Duration::from_millis(100)).await;
-        assert!(!t.evict_idlest(Instant::now()), "within the grace");
-        tokio::time::advance(Duration::from_millis(150)).await;
+        let older = t.open();
+        tokio::time::advance(Duration::from_millis(10)).await;
+        let _young = t.open();
+        // Issue 38's rule, the bridge's: a silent socket gives its place at once, whatever its
+        // age (a 200 ms grace let a flood of young silent sockets starve newcomers), the one
+        // opened first before younger ones.
         assert!(t.evict_idlest(Instant::now()));
-        assert!(quiet.evicted.load(Ordering::SeqCst));
+        assert!(older.evicted.load(Ordering::SeqCst));
+        let _ = t.evict_idlest(Instant::now());
         let busy = t.open();
         *busy.last_read.lock().unwrap_or_else(PoisonError::into_inner) = Some(Instant::now());
         assert!(!t.evict_idlest(Instant::now()), "busy: the newcomer is refused");
-        tokio::time::advance(EVICT_AFTER_IDLE).await;
+        tokio::time::advance(mbtap_gateway::seats::EVICT_AFTER_IDLE).await;
         assert!(t.evict_idlest(Instant::now()));
     }
 
