@@ -95,17 +95,61 @@ impl Recorder {
     }
 }
 
-/// What a session that recorded says as it ends (issue 42: quitting the terminal UI of a
-/// `--record` session said nothing — not where the file was, nor what it held).
+/// Valid frames seen while reading a capture back.
+struct ValidFrames(u64);
+
+impl mbtap_core::analyzer::Sink for ValidFrames {
+    fn event(&mut self, e: &mbtap_core::analyzer::Event<'_>) {
+        if let mbtap_core::analyzer::Event::Frame { frame, .. } = e
+            && frame.check_ok
+        {
+            self.0 += 1;
+        }
+    }
+
+    fn warning(&mut self, _: &str) {}
+}
+
+/// Recordings up to this size are read back for their frame count as a session ends (a few
+/// hundredths of a second at replay's speed); a longer one is said by its size alone.
+const COUNT_UP_TO: u64 = 64 << 20;
+
+/// What a session that recorded says as it ends: where the file is and what it holds (issue
+/// 42: quitting the terminal UI of a `--record` session said nothing — not where the file was,
+/// nor how many frames).
 #[must_use]
 pub fn ended_note(path: &Path) -> Option<String> {
     let len = std::fs::metadata(path).ok()?.len();
-    Some(format!("recorded to {} ({len} bytes); play it back with: mbtap replay {}", path.display(), path.display()))
+    let frames = (len <= COUNT_UP_TO)
+        .then(|| {
+            let file = std::fs::File::open(path).ok()?;
+            let mut count = ValidFrames(0);
+            let overrides = mbtap_core::line_args::LineOverrides::default();
+            mbtap_core::replay::replay_into(std::io::BufReader::new(file), overrides, &mut count).ok()?;
+            Some(format!("{} valid frames, ", count.0))
+        })
+        .flatten()
+        .unwrap_or_default();
+    Some(format!(
+        "recorded to {} ({frames}{len} bytes); play it back with: mbtap replay {}",
+        path.display(),
+        path.display()
+    ))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 42: a `--record` session ending said nothing of its file. It says where, how many
+    /// valid frames (as a replay counts them: the Display's examples are 8) and how big.
+    #[test]
+    fn regression_issue_42_a_recording_is_said_with_its_frames_when_it_ends() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/display-examples-rtu.pcapng");
+        let note = ended_note(&path).unwrap();
+        assert!(note.contains("(8 valid frames, ") && note.contains("mbtap replay "), "{note}");
+        assert_eq!(ended_note(Path::new("/nonexistent/x.pcapng")), None);
+    }
 
     /// Issue 15: a full disk ended `sniff` and `tap`; the message did not name the file.
     #[test]
