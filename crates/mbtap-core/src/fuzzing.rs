@@ -490,6 +490,8 @@ pub fn export_escape(data: &[u8]) -> usize {
         for (n, unit) in &names {
             assert!(got.contains(&n.as_str()), "{target:?}: {n:?} not read back from\n{}", e.text);
             if let (Some(u), Target::HomeAssistant) = (unit, target) {
+                // A known unit goes out as Home Assistant spells it (issue 42), any other as written.
+                let u = crate::profile::ha_classes::ha_class(u).map_or(u.as_str(), |c| c.unit);
                 let found =
                     list.as_array().is_some_and(|a| a.iter().any(|x| x["unit_of_measurement"].as_str() == Some(u)));
                 assert!(found, "unit {u:?} not read back\n{}", e.text);

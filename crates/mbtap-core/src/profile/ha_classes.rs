@@ -58,17 +58,26 @@ const KNOWN: &[(&[&str], HaClass)] = &[
     (&["psi"], m("psi", Some("pressure"))),
     (&["m³/h", "m3/h", "m^3/h"], m("m³/h", None)),
     (&["l/min", "lpm"], m("L/min", None)),
+    (&["rpm", "r/min", "1/min"], m("rpm", None)),
+];
+
+/// Units of time, matched in their exact case: `S` is siemens and `H` henry, not seconds and
+/// hours (a fuzzed sheet's `H` came back as `h`).
+const TIME: &[(&[&str], HaClass)] = &[
     (&["s", "sec", "second", "seconds"], m("s", Some("duration"))),
     (&["ms"], m("ms", Some("duration"))),
     (&["min", "minutes"], m("min", Some("duration"))),
     (&["h", "hr", "hours"], m("h", Some("duration"))),
-    (&["rpm", "r/min", "1/min"], m("rpm", None)),
 ];
 
 /// Home Assistant's unit and classes for `unit` as a profile or sheet writes it, when known.
 #[must_use]
 pub fn ha_class(unit: &str) -> Option<HaClass> {
-    let key: String = unit.trim().chars().filter(|c| !c.is_whitespace()).collect::<String>().to_lowercase();
+    let exact: String = unit.trim().chars().filter(|c| !c.is_whitespace()).collect();
+    if let Some(&(_, c)) = TIME.iter().find(|(names, _)| names.contains(&exact.as_str())) {
+        return Some(c);
+    }
+    let key = exact.to_lowercase();
     KNOWN.iter().find(|(names, _)| names.contains(&key.as_str())).map(|&(_, c)| c)
 }
 
@@ -86,6 +95,10 @@ mod tests {
         assert_eq!(ha_class("°C").map(|c| c.device_class), Some(Some("temperature")));
         assert_eq!(ha_class("m3/h").map(|c| c.unit), Some("m³/h"));
         assert_eq!(ha_class("l"), None);
+        // Time in its exact case only: `S` is siemens, `H` henry.
+        assert_eq!(ha_class("h").map(|c| c.unit), Some("h"));
+        assert_eq!(ha_class("H"), None);
+        assert_eq!(ha_class("S"), None);
         assert_eq!(ha_class("furlongs"), None);
     }
 }
