@@ -8,89 +8,10 @@ use std::collections::BTreeSet;
 
 use super::stats::{PairStat, RegStat};
 
-/// The type a guess gives.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Kind {
-    /// Never changed while heard.
-    Constant,
-    /// Only counts up (and wraps at 65 536).
-    Counter,
-    /// A few distinct small values: the values seen.
-    Enum(Vec<u16>),
-    /// Changes flip single bits: the bits that ever changed.
-    Bits(u16),
-    /// A signed 16-bit value: it wraps around zero.
-    I16,
-    /// Any other 16-bit value.
-    U16,
-    /// Two registers: an unsigned 32-bit value (`counter` when it only grew).
-    U32 { high_first: bool, counter: bool },
-    /// Two registers: a signed 32-bit value.
-    I32 { high_first: bool },
-    /// Two registers: an IEEE-754 float.
-    F32 { high_first: bool },
-    /// A run of registers holding text, two characters each.
-    Text { registers: u16, text: String },
-}
+pub use super::kind::{Guess, Kind};
 
-impl Kind {
-    /// Registers this guess covers.
-    #[must_use]
-    pub fn width(&self) -> u16 {
-        match self {
-            Self::U32 { .. } | Self::I32 { .. } | Self::F32 { .. } => 2,
-            Self::Text { registers, .. } => *registers,
-            _ => 1,
-        }
-    }
-
-    /// A short stable name (`f32 low word first`), for text and JSON.
-    #[must_use]
-    pub fn name(&self) -> String {
-        let order = |h: bool| if h { "high word first" } else { "low word first" };
-        match self {
-            Self::Constant => "constant".into(),
-            Self::Counter => "counter".into(),
-            Self::Enum(_) => "enum".into(),
-            Self::Bits(_) => "bits".into(),
-            Self::I16 => "i16".into(),
-            Self::U16 => "u16".into(),
-            Self::U32 { high_first, counter } => {
-                format!("{} {}", if *counter { "u32 counter" } else { "u32" }, order(*high_first))
-            }
-            Self::I32 { high_first } => format!("i32 {}", order(*high_first)),
-            Self::F32 { high_first } => format!("f32 {}", order(*high_first)),
-            Self::Text { .. } => "string".into(),
-        }
-    }
-}
-
-/// One guess: where, what, how sure, and why.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Guess {
-    pub address: u16,
-    pub kind: Kind,
-    /// 0–1: how much evidence there was (samples and changes).
-    pub confidence: f64,
-    pub evidence: String,
-}
-
-/// Samples a series needs before its shape is trusted.
-const ENOUGH: usize = 8;
-
-#[allow(clippy::cast_precision_loss)]
-fn confidence(samples: u64, changes: u64) -> f64 {
-    let s = (samples as f64 / 32.0).min(1.0);
-    let c = if changes == 0 { 0.5 } else { (changes as f64 / 8.0).min(1.0) };
-    (s * c * 100.0).round() / 100.0
-}
-
-fn join(a: u16, b: u16, high_first: bool) -> u32 {
-    let (hi, lo) = if high_first { (a, b) } else { (b, a) };
-    (u32::from(hi) << 16) | u32::from(lo)
-}
-
-use super::layout::{Layout, plausible_float};
+use super::layout::{Layout, laid_out, plausible_float, round_floats};
+use super::series::{ENOUGH, confidence, join, ordered, smooth};
 
 /// How the high word's steps of one agree with the low word: (carries, contradictions).
 /// A carry is the high word moving by one while the low word wraps the other way (up by one as
@@ -117,10 +38,6 @@ fn carries(words: &[(u16, u16)]) -> (u32, u32) {
     (yes, no)
 }
 
-fn ordered(pair: &PairStat, high_first: bool) -> Vec<(u16, u16)> {
-    pair.recent.iter().map(|&(a, b)| if high_first { (a, b) } else { (b, a) }).collect()
-}
-
 /// Mean absolute step of a series, over its span: 0 for a constant, about 1/3 for noise.
 #[allow(clippy::cast_precision_loss)]
 fn roughness(v: &[f64]) -> f64 {
@@ -129,16 +46,6 @@ fn roughness(v: &[f64]) -> f64 {
         return 0.0;
     }
     v.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>() / (v.len() - 1) as f64 / (hi - lo)
-}
-
-/// Whether a series of floats (as bits) moves smoothly: the median change between two samples
-/// under 5 % of the value. A series of one sample is smooth.
-fn smooth(values: &[u32]) -> bool {
-    let f: Vec<f64> = values.iter().map(|&v| f64::from(f32::from_bits(v))).collect();
-    let mut rel: Vec<f64> =
-        f.windows(2).map(|w| (w[1] - w[0]).abs() / (w[0].abs().max(w[1].abs()).max(1e-9))).collect();
-    rel.sort_by(f64::total_cmp);
-    rel.get(rel.len() / 2).is_none_or(|&m| m < 0.05)
 }
 
 /// A float in this word order, and how well it fits: every sample a plausible number, several
@@ -343,58 +250,6 @@ pub fn guess_table<'a>(
     out
 }
 
-/// Whether every sample of `p` in this word order is a float of at most five significant
-/// digits (its shortest decimal form): a value a person set or a device rounded.
-fn round_floats(p: &PairStat, high_first: bool) -> bool {
-    p.recent.iter().all(|&(x, y)| {
-        let shown = f32::from_bits(join(x, y, high_first)).to_string();
-        let digits: String = shown.chars().filter(char::is_ascii_digit).collect();
-        digits.trim_start_matches('0').trim_end_matches('0').len() <= 5
-    })
-}
-
-/// The pair at `regs[i]`, `regs[i + 1]`, where the table's layout starts one, as a float in the
-/// layout's word order: every sample a plausible number (not all zero) and, if it moved, moving
-/// smoothly. A pair that never changed is typed by its bits and the layout.
-fn laid_out<'a>(
-    regs: &[(u16, &'a RegStat)],
-    pair: &dyn Fn(u16) -> Option<&'a PairStat>,
-    i: usize,
-    l: &Layout,
-) -> Option<Guess> {
-    let &(a, r) = regs.get(i)?;
-    let &(b, r2) = regs.get(i + 1)?;
-    if u32::from(b) != u32::from(a) + 1 {
-        return None;
-    }
-    let p = pair(a)?;
-    let h = l.high_first;
-    let values: Vec<u32> = ordered(p, h).iter().map(|&(hi, lo)| (u32::from(hi) << 16) | u32::from(lo)).collect();
-    let still = r.changes == 0 && r2.changes == 0;
-    if !super::layout::floats_in(p, h) || !(still || smooth(&values)) {
-        return None;
-    }
-    let last = values.last().map(|&v| f32::from_bits(v)).unwrap_or_default();
-    // Both word orders plausible (0x4120 0x4120): the layout alone decides, said so.
-    let by_bits = super::layout::bits_order(p) == Some(h);
-    let c = confidence(p.samples, r.changes.max(r2.changes));
-    Some(Guess {
-        address: a,
-        kind: Kind::F32 { high_first: h },
-        confidence: if by_bits { c } else { c.min(0.3) },
-        evidence: format!(
-            "{} joint samples, every one a plausible float {} ({}last {last}){}; the table's blocks read as floats \
-             this way ({} pairs decided by their bits, {} against)",
-            p.samples,
-            if h { "high word first" } else { "low word first" },
-            if still { "never changed, " } else { "moving smoothly, " },
-            if by_bits { "" } else { " — the other word order is plausible too" },
-            l.votes,
-            l.against,
-        ),
-    })
-}
-
 /// The pair at `regs[i]`, `regs[i + 1]` (adjacent addresses, read together, at least one
 /// moving) as one 32-bit value, with its score.
 fn wide_at<'a>(
@@ -505,11 +360,7 @@ mod tests {
     use super::*;
 
     fn pair(samples: &[(u16, u16)]) -> PairStat {
-        let mut p = PairStat::default();
-        for &(a, b) in samples {
-            p.push(a, b);
-        }
-        p
+        PairStat::of(samples)
     }
 
     /// Issue 28, real recordings hold a few polls: the order a float's words come in is decided

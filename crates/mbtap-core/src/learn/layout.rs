@@ -8,11 +8,14 @@
 //! alignment is then the one whose pairs read as floats in that order.
 //!
 //! A table whose votes disagree (a device mixing word orders, or no float at all) gets no
-//! layout, and its pairs are judged one by one as before ([`super::infer`]).
+//! layout, and its pairs are judged one by one as before ([`super::infer`]). Where it has one,
+//! [`laid_out`] types the pair at each of its starts.
 
 use std::collections::BTreeMap;
 
-use super::stats::PairStat;
+use super::kind::{Guess, Kind};
+use super::series::{confidence, join, ordered, smooth};
+use super::stats::{PairStat, RegStat};
 
 /// An IEEE-754 single a meter would report: zero, or a normal number from 1e-4 to 1e8 in
 /// magnitude. A float's high word outside 0x38D1–0x4CBE (or its negative twin) reads as a
@@ -131,16 +134,64 @@ impl Layout {
     }
 }
 
+/// Whether every sample of `p` in this word order is a float of at most five significant
+/// digits (its shortest decimal form): a value a person set or a device rounded.
+pub(super) fn round_floats(p: &PairStat, high_first: bool) -> bool {
+    p.recent.iter().all(|&(x, y)| {
+        let shown = f32::from_bits(join(x, y, high_first)).to_string();
+        let digits: String = shown.chars().filter(char::is_ascii_digit).collect();
+        digits.trim_start_matches('0').trim_end_matches('0').len() <= 5
+    })
+}
+
+/// The pair at `regs[i]`, `regs[i + 1]`, where the table's layout starts one, as a float in the
+/// layout's word order: every sample a plausible number (not all zero) and, if it moved, moving
+/// smoothly. A pair that never changed is typed by its bits and the layout.
+pub(super) fn laid_out<'a>(
+    regs: &[(u16, &'a RegStat)],
+    pair: &dyn Fn(u16) -> Option<&'a PairStat>,
+    i: usize,
+    l: &Layout,
+) -> Option<Guess> {
+    let &(a, r) = regs.get(i)?;
+    let &(b, r2) = regs.get(i + 1)?;
+    if u32::from(b) != u32::from(a) + 1 {
+        return None;
+    }
+    let p = pair(a)?;
+    let h = l.high_first;
+    let values: Vec<u32> = ordered(p, h).iter().map(|&(hi, lo)| (u32::from(hi) << 16) | u32::from(lo)).collect();
+    let still = r.changes == 0 && r2.changes == 0;
+    if !floats_in(p, h) || !(still || smooth(&values)) {
+        return None;
+    }
+    let last = values.last().map(|&v| f32::from_bits(v)).unwrap_or_default();
+    // Both word orders plausible (0x4120 0x4120): the layout alone decides, said so.
+    let by_bits = bits_order(p) == Some(h);
+    let c = confidence(p.samples, r.changes.max(r2.changes));
+    Some(Guess {
+        address: a,
+        kind: Kind::F32 { high_first: h },
+        confidence: if by_bits { c } else { c.min(0.3) },
+        evidence: format!(
+            "{} joint samples, every one a plausible float {} ({}last {last}){}; the table's blocks read as floats \
+             this way ({} pairs decided by their bits, {} against)",
+            p.samples,
+            if h { "high word first" } else { "low word first" },
+            if still { "never changed, " } else { "moving smoothly, " },
+            if by_bits { "" } else { " — the other word order is plausible too" },
+            l.votes,
+            l.against,
+        ),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn pair(samples: &[(u16, u16)]) -> PairStat {
-        let mut p = PairStat::default();
-        for &(a, b) in samples {
-            p.push(a, b);
-        }
-        p
+        PairStat::of(samples)
     }
 
     /// Issue 40: a single-phase meter's block of floats high word first, two of them zero. Pair

@@ -10,8 +10,10 @@ pub mod diff;
 pub mod draft;
 pub mod hint;
 pub mod infer;
+mod kind;
 pub mod layout;
 pub mod probe;
+mod series;
 pub mod stats;
 pub mod truth;
 

@@ -97,6 +97,16 @@ pub struct PairStat {
 }
 
 impl PairStat {
+    /// The joint samples `samples`, in order (tests and examples build series this way).
+    #[must_use]
+    pub fn of(samples: &[(u16, u16)]) -> Self {
+        let mut p = Self::default();
+        for &(a, b) in samples {
+            p.push(a, b);
+        }
+        p
+    }
+
     pub fn push(&mut self, first: u16, second: u16) {
         self.samples += 1;
         if self.recent.len() == RECENT {
