@@ -8,7 +8,7 @@
 //! [`server`] (the TCP listeners: accepting, limits, eviction), [`watched`] (a socket noting when
 //! it last brought bytes in, for eviction), [`connection`] (one TCP client,
 //! on its own), [`request`] (each request through admission, cache and queue), [`udp`] (Modbus
-//! UDP clients),
+//! UDP clients), [`emulated`] (devices emulated in this process in place of a line),
 //! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`reverse`] (an RTU slave on
 //! the serial side, a Modbus TCP client behind), [`run`] (starts them all), [`config`] (the
 //! configuration file), [`modes`] (the command line's enums), [`broker`] (writes from the MQTT
@@ -18,6 +18,7 @@ pub mod broker;
 pub mod config;
 pub mod connection;
 pub mod device;
+pub mod emulated;
 pub mod line;
 pub mod metrics;
 pub mod modes;

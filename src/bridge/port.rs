@@ -47,6 +47,8 @@ pub struct LineOptions {
     /// How late the adapter may deliver a byte (a USB adapter's latency timer): added to the
     /// silence that ends an answer of unknown length.
     pub latency: Duration,
+    /// Devices emulated in this process answer instead of a port (`simulate --listen`).
+    pub emulated: Option<std::sync::Arc<crate::source::emulated::Emulated>>,
 }
 
 impl LineOptions {

@@ -49,6 +49,62 @@ pub struct BridgeOptions {
     pub broker_writes: Option<Arc<crate::bridge::broker::BrokerWrites>>,
 }
 
+impl BridgeOptions {
+    /// The bridge's fronts before emulated devices (`simulate --listen`): one line answering
+    /// every unit from `emulated`, under the bridge's default limits (64 connections, 32
+    /// requests waiting per client, idle connections closed after 5 minutes) and its one
+    /// admission; broadcast writes reach the devices, as on a line.
+    #[must_use]
+    pub fn emulating(
+        emulated: Arc<crate::source::emulated::Emulated>,
+        line: mbtap_core::framer::LineSettings,
+        mode: mbtap_core::analyzer::SerialMode,
+        duration: Option<Duration>,
+        listen: Option<String>,
+        listen_rtu: Option<String>,
+        listen_udp: Option<String>,
+    ) -> Self {
+        let line = LineOptions {
+            port: "emulated".to_owned(),
+            line,
+            mode,
+            timeout: Duration::from_secs(1),
+            timeout_mode: mbtap_gateway::timeouts::TimeoutMode::Fixed,
+            unit_timeouts: std::collections::BTreeMap::new(),
+            echo: mbtap_gateway::transaction::EchoMode::default(),
+            rs485: crate::source::rs485::Rs485Args::default(),
+            cache: Vec::new(),
+            polls: Vec::new(),
+            retries: 0,
+            turnaround: Duration::ZERO,
+            broadcast_reply: false,
+            latency: Duration::ZERO,
+            emulated: Some(emulated),
+        };
+        Self {
+            lines: vec![(1..=247, line)],
+            listen,
+            listen_rtu,
+            listen_udp,
+            server: ServerOptions {
+                rtu_over_tcp: false,
+                policy: mbtap_gateway::admit::Policy { broadcast: true, ..Default::default() },
+                allow_ips: Vec::new(),
+                max_connections: 64,
+                idle_timeout: Duration::from_mins(5),
+                rate_limit: None,
+            },
+            queue_per_client: 32,
+            metrics: None,
+            duration,
+            reverse: None,
+            tls: crate::bridge::tls::TlsArgs::default(),
+            roles: Arc::default(),
+            broker_writes: None,
+        }
+    }
+}
+
 /// What the bridge serves, for the metrics endpoint and the notes on stderr.
 enum Served {
     Lines(Arc<Routes>),
@@ -139,18 +195,22 @@ pub async fn bridge<W: Write>(
             let total = opts.server.max_connections.saturating_mul(opts.queue_per_client);
             let shared = LineShared::new(opts.queue_per_client, total, line_opts.cache.clone());
             let monitor = monitoring.then(|| monitor_tx.clone());
-            tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
+            if let Some(emulated) = &line_opts.emulated {
+                tokio::spawn(super::emulated::run(Arc::clone(emulated), Arc::clone(&shared)));
+            } else {
+                tokio::spawn(line::run(line_opts.clone(), Arc::clone(&shared), monitor));
+                let _ = writeln!(
+                    err,
+                    "mbtap: serial line {} at {} {} for units {}–{}",
+                    line_opts.port,
+                    line_opts.line,
+                    line_opts.mode.name(),
+                    units.start(),
+                    units.end()
+                );
+            }
             tokio::spawn(super::shared::poll(line_opts.polls.clone(), Arc::clone(&shared)));
             routes.push(Route { units: units.clone(), line: shared });
-            let _ = writeln!(
-                err,
-                "mbtap: serial line {} at {} {} for units {}–{}",
-                line_opts.port,
-                line_opts.line,
-                line_opts.mode.name(),
-                units.start(),
-                units.end()
-            );
         }
         let routes = Arc::new(Routes { lines: routes, server: Metrics::default() });
         // The admission policy routes by the lines' units, in the order they were given.

@@ -320,6 +320,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             std::time::Duration::from_nanos(latency_ns)
         },
         port,
+        emulated: None,
     };
     let mut lines = Vec::new();
     for r in &routes {

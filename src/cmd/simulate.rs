@@ -1,35 +1,58 @@
-//! `mbtap simulate`: simulated devices on a pseudo-terminal for a Modbus master, or the whole
-//! line (master too) for a listener (the I/O: [`crate::source::simulate`]).
+//! `mbtap simulate`: emulated devices — from profiles or recordings — on a pseudo-terminal for
+//! a Modbus master, behind the bridge's Modbus TCP/UDP listeners, or the whole line (master
+//! too) for a listener (the I/O: [`crate::source::simulate`], [`crate::bridge::emulated`]).
 
+use std::fmt::Write as _;
 use std::io;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use mbtap_core::framer::LineSettings;
 
 use crate::args::{FaultArg, LineArgs, fault_list};
+use crate::source::emulate_from;
 
 #[derive(Debug, clap::Args)]
 // Command-line switches are bools by nature; each is an independent option, not a state.
 #[allow(clippy::struct_excessive_bools)]
-/// Simulated devices on a pseudo-terminal: point a Modbus master (or mbtap) at --link.
+/// Emulated devices: point a Modbus master (or mbtap) at --link, or a Modbus TCP client at --listen.
 pub struct Args {
-    /// Where to create the pseudo-terminal link for the master.
-    #[arg(long, default_value = "/tmp/mbtap-bus")]
-    pub link: PathBuf,
-    /// A simulated slave, `NAME@ADDRESS` (repeatable; default: mk4@1 display@5 mkzp@17).
-    #[arg(long = "device", value_name = "NAME@ADDRESS")]
+    /// Where to create the pseudo-terminal link for the master (default /tmp/mbtap-bus when no
+    /// --listen is given).
+    #[arg(long)]
+    pub link: Option<PathBuf>,
+    /// A device from a profile, `PROFILE@ADDRESS`: built-in (mk4, display, mkzp), a user or
+    /// imported profile's name, or a profile file (repeatable; default: mk4@1 display@5 mkzp@17).
+    #[arg(long = "device", value_name = "PROFILE@ADDRESS")]
     pub devices: Vec<String>,
+    /// Every unit a recording (pcap/pcapng) showed answering, answering as it did: the values
+    /// last heard, the exceptions it gave, its identity answers and its latency;
+    /// `CAPTURE@1,5` for some of its units (repeatable).
+    #[arg(long = "from", value_name = "CAPTURE[@UNITS]")]
+    pub from: Vec<String>,
+    /// Serve the devices to Modbus TCP clients here (`127.0.0.1:1502`; port 0 picks one), through
+    /// the bridge's admission, queue and limits.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen: Option<String>,
+    /// Serve them as RTU frames over TCP here.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen_rtu: Option<String>,
+    /// Serve them to Modbus UDP clients here.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub listen_udp: Option<String>,
     #[command(flatten)]
     pub line: LineArgs,
     /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
     #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
     pub duration: Option<std::time::Duration>,
-    /// A slave's time from the end of a request to its answer, ms.
-    #[arg(long, default_value_t = 3.0)]
-    pub turnaround_ms: f64,
-    /// Take the line's time when answering: requests end when their characters would
-    /// have crossed the line, answers leave at the character rate.
+    /// A device's time from the end of a request to its answer, ms (default: a recording's
+    /// own median, 3 ms for a profile's device).
+    #[arg(long)]
+    pub turnaround_ms: Option<f64>,
+    /// Take the line's time when answering: requests end when their characters would have
+    /// crossed the line, answers leave at the character rate.
     #[arg(long)]
     pub paced: bool,
     /// Echo every byte the master sends back to it before the answer, as a half-duplex adapter
@@ -38,7 +61,7 @@ pub struct Args {
     pub echo: bool,
     /// Play the master too: poll the devices and put the whole line on the pseudo-terminal,
     /// paced at the line's character rate, for a listener (`mbtap sniff LINK`).
-    #[arg(long)]
+    #[arg(long, conflicts_with_all = ["from", "listen", "listen_rtu", "listen_udp"])]
     pub poll: bool,
     /// With --poll: inject a fault into every fourth transaction (repeatable).
     #[arg(long = "fault", value_enum, requires = "poll")]
@@ -54,30 +77,97 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { link, devices, line, duration, turnaround_ms, paced, echo, poll, faults, heard_at, follow_baud } = args;
-    anyhow::ensure!(
-        turnaround_ms.is_finite() && turnaround_ms >= 0.0,
-        "--turnaround-ms {turnaround_ms}: expected 0 or more"
-    );
+    let Args {
+        link,
+        devices,
+        from,
+        listen,
+        listen_rtu,
+        listen_udp,
+        line,
+        duration,
+        turnaround_ms,
+        paced,
+        echo,
+        poll,
+        faults,
+        heard_at,
+        follow_baud,
+    } = args;
+    if let Some(ms) = turnaround_ms {
+        anyhow::ensure!(ms.is_finite() && ms >= 0.0, "--turnaround-ms {ms}: expected 0 or more");
+    }
     let (mode, settings, _) = line.overrides().resolve();
-    let specs: Vec<String> = if devices.is_empty() {
+    let specs: Vec<String> = if devices.is_empty() && from.is_empty() {
         crate::source::simulate::DEFAULT_DEVICES.iter().map(|(n, a)| format!("{n}@{a}")).collect()
     } else {
         devices
     };
-    let devices = specs.iter().map(|d| crate::source::simulate::parse_device(d)).collect::<anyhow::Result<_>>()?;
+    let mut emulated: Vec<mbtap_core::sim::Device> =
+        specs.iter().map(|d| emulate_from::parse_device(d)).collect::<anyhow::Result<_>>()?;
+    let mut notes = String::new();
+    for spec in &from {
+        emulated.extend(emulate_from::from_capture(spec, &mut notes)?);
+    }
+    refuse_two_on_one_address(&emulated)?;
+    for d in &emulated {
+        if let mbtap_core::sim::Device::Profile(s) = d {
+            let _ = writeln!(notes, "mbtap: simulating {} at address {}", s.profile().meta.name, s.address());
+        }
+    }
+    eprint!("{notes}");
+    let shared = Arc::new(crate::source::emulated::Emulated {
+        devices: Mutex::new(emulated),
+        started: Instant::now(),
+        turnaround: turnaround_ms.map(|ms| Duration::from_secs_f64(ms / 1000.0)),
+        usual_turnaround: crate::source::simulate::DEFAULT_TURNAROUND,
+    });
+    let listening = listen.is_some() || listen_rtu.is_some() || listen_udp.is_some();
+    let link = link.or_else(|| (!listening).then(|| PathBuf::from("/tmp/mbtap-bus")));
     let opts = crate::source::simulate::SimulateOptions {
-        link,
-        devices,
+        link: link.clone(),
+        devices: Arc::clone(&shared),
         line: settings,
         mode,
         duration,
-        turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         paced,
         echo,
         poll: poll.then(|| crate::source::simulate::PollOptions { faults: fault_list(&faults), heard_at, follow_baud }),
     };
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
-    rt.block_on(crate::source::simulate::simulate(opts, &mut io::stderr()))?;
+    rt.block_on(async move {
+        let served = async {
+            if !listening {
+                return std::future::pending().await;
+            }
+            let bridge = crate::bridge::run::BridgeOptions::emulating(
+                shared, settings, mode, duration, listen, listen_rtu, listen_udp,
+            );
+            crate::bridge::run::bridge::<io::Sink>(bridge, None, &mut io::stderr()).await
+        };
+        let on_pty = async {
+            match &link {
+                Some(path) => crate::source::simulate::simulate(opts, path, &mut io::stderr()).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            r = served => r,
+            r = on_pty => r,
+        }
+    })?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// Two devices on one address would both answer: refused before anything is served.
+fn refuse_two_on_one_address(devices: &[mbtap_core::sim::Device]) -> anyhow::Result<()> {
+    let mut seen = std::collections::BTreeSet::new();
+    for d in devices {
+        anyhow::ensure!(
+            seen.insert(d.address()),
+            "two devices at address {}: each address answers once on a line (give another PROFILE@ADDRESS, or CAPTURE@UNITS to leave one out)",
+            d.address()
+        );
+    }
+    Ok(())
 }

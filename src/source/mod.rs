@@ -4,6 +4,8 @@
 //! `simulate`, writes bytes a peer reads).
 
 pub mod demo;
+pub mod emulate_from;
+pub mod emulated;
 pub mod link;
 pub mod play;
 pub mod pty;

@@ -6,7 +6,7 @@
 //! is heard after a turnaround delay. Values move with the host clock ([`mbtap_core::sim::world`]).
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -19,7 +19,13 @@ use mbtap_core::framer::LineSettings;
 use mbtap_core::proto::{encode_ascii, encode_rtu};
 use mbtap_core::sim::bus::VirtualBus;
 use mbtap_core::sim::uart::Listener;
-use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame, Slave, world};
+use mbtap_core::sim::{AsciiRequestAssembler, Device, RequestAssembler, RequestFrame, Slave};
+
+use super::emulated::Emulated;
+
+/// A profile device's time from a request to its answer when none is given (the MK4 document
+/// gives no figure; a few milliseconds is typical of such controllers).
+pub const DEFAULT_TURNAROUND: Duration = Duration::from_millis(3);
 
 /// Frames requests in the line's mode.
 enum Assembler {
@@ -51,16 +57,15 @@ impl Assembler {
 }
 
 /// Simulation settings.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct SimulateOptions {
-    pub link: PathBuf,
-    /// `(profile name, address)` of each slave.
-    pub devices: Vec<(mbtap_core::profile::Profile, u8)>,
+    /// The pseudo-terminal to serve on (None: only the listeners).
+    pub link: Option<PathBuf>,
+    /// The devices, shared with the listeners (`--listen`) when there are any.
+    pub devices: Arc<Emulated>,
     pub line: LineSettings,
     pub mode: SerialMode,
     pub duration: Option<Duration>,
-    /// A slave's time from a request to its answer.
-    pub turnaround: Duration,
     /// Answer mode: take the line's time — a request ends when its characters would have
     /// crossed the line, and the answer leaves at the character rate (in 1 ms batches).
     pub paced: bool,
@@ -86,23 +91,6 @@ pub struct PollOptions {
 /// The default line: all three built-in devices at the addresses used throughout the docs.
 pub const DEFAULT_DEVICES: [(&str, u8); 3] = [("mk4", 1), ("display", 5), ("mkzp", 17)];
 
-/// Parses `NAME@ADDRESS` (`mk4@1`).
-///
-/// # Errors
-/// When the form, the address (1–247) or the profile name is wrong, saying which.
-pub fn parse_device(spec: &str) -> anyhow::Result<(mbtap_core::profile::Profile, u8)> {
-    let (name, address) =
-        spec.split_once('@').with_context(|| format!("device {spec:?}: expected NAME@ADDRESS, e.g. mk4@1"))?;
-    let address: u8 = address
-        .parse()
-        .ok()
-        .filter(|a| (1..=247).contains(a))
-        .with_context(|| format!("device {spec:?}: the address must be 1–247 (Serial Line v1.02 §2.2)"))?;
-    let profile = mbtap_core::profile::builtin::get(name)
-        .with_context(|| format!("device {spec:?}: no built-in profile {name:?}; built in: mk4, mkzp, display"))??;
-    Ok((profile, address))
-}
-
 /// Silence after which buffered bytes end a frame: t3.5, at least 1.75 ms above 19200 baud
 /// (Serial Line v1.02 §2.5.1.1), plus slack for the pseudo-terminal and the timer's 1 ms steps.
 fn silence(line: LineSettings) -> Duration {
@@ -113,37 +101,44 @@ fn silence(line: LineSettings) -> Duration {
 ///
 /// # Errors
 /// When the pseudo-terminal or the link cannot be created.
-pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Result<()> {
+pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -> anyhow::Result<()> {
     let (mut master_side, slave) = SerialStream::pair().context("creating a pseudo-terminal")?;
     let slave_path = slave.name().context("the pseudo-terminal has no name")?;
     // Our handle on the far end holds an exclusive lock: let it go so the master can open it.
     drop(slave);
-    super::link::make(&opts.link, &slave_path)?;
-    let mut slaves: Vec<Slave> = opts.devices.into_iter().map(|(p, a)| Slave::new(Arc::new(p), a)).collect();
-    for s in &slaves {
-        let _ = writeln!(err, "mbtap: simulating {} at address {}", s.profile().meta.name, s.address());
-    }
+    super::link::make(link, &slave_path)?;
     let _ = writeln!(
         err,
         "mbtap: open {} ({slave_path}) at {} {} as the master's serial port",
-        opts.link.display(),
+        link.display(),
         opts.line,
         opts.mode.name()
     );
 
     if let Some(poll) = opts.poll {
+        // The built-in master polls what a profile describes (a recording has no poll plan).
+        let (slaves, turnaround) = {
+            let devices = opts.devices.devices.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let slaves: Vec<Slave> = devices
+                .iter()
+                .filter_map(|d| match d {
+                    Device::Profile(s) => Some(s.clone()),
+                    Device::Recorded(_) => None,
+                })
+                .collect();
+            (slaves, opts.devices.turnaround.unwrap_or(DEFAULT_TURNAROUND))
+        };
         let mut bus = VirtualBus::new(slaves, opts.line);
         bus.faults = poll.faults;
         bus.ascii = opts.mode == SerialMode::Ascii;
-        bus.turnaround_ns = u64::try_from(opts.turnaround.as_nanos()).unwrap_or(u64::MAX);
+        bus.turnaround_ns = u64::try_from(turnaround.as_nanos()).unwrap_or(u64::MAX);
         let listener = Listener::new(opts.line, poll.heard_at.unwrap_or(opts.line));
         let follow = poll.follow_baud.then_some(opts.line);
         let result = drive_line(&mut master_side, bus, listener, follow, opts.duration).await;
-        super::link::remove(&opts.link, &slave_path);
+        super::link::remove(link, &slave_path);
         return result;
     }
-    let started = Instant::now();
-    let deadline = opts.duration.map(|d| started + d);
+    let deadline = opts.duration.map(|d| Instant::now() + d);
     let gap = silence(opts.line);
     let mut assembler = match opts.mode {
         SerialMode::Rtu => Assembler::Rtu(RequestAssembler::default()),
@@ -191,41 +186,32 @@ pub async fn simulate(opts: SimulateOptions, err: &mut dyn Write) -> anyhow::Res
             }
             Err(_) => requests.extend(assembler.silence()),
         }
-        let t = started.elapsed().as_secs_f64();
         // Paced: a request is over when its characters would have crossed the line.
         let heard = if requests.is_empty() { None } else { request_start.take() };
         for request in requests {
-            for s in &mut slaves {
-                world::step(s, t);
-                if let Some(pdu) = s.handle(request.unit, &request.pdu) {
-                    // A slave answers after a turnaround (the MK4 document gives no figure;
-                    // a few milliseconds is typical of such controllers).
-                    if let (true, Some((first, count))) = (opts.paced, heard) {
-                        let ended = first + char_time * u32::try_from(count).unwrap_or(u32::MAX);
-                        tokio::time::sleep_until(ended + opts.turnaround).await;
-                    } else if !opts.turnaround.is_zero() {
-                        tokio::time::sleep(opts.turnaround).await;
-                    }
-                    out.clear();
-                    match opts.mode {
-                        SerialMode::Rtu => encode_rtu(request.unit, &pdu, &mut out),
-                        SerialMode::Ascii => encode_ascii(request.unit, &pdu, &mut out),
-                    }
-                    if opts.paced {
-                        write_paced(&mut master_side, &out, char_time).await?;
-                    } else {
-                        AsyncWriteExt::write_all(&mut master_side, &out)
-                            .await
-                            .context("writing a response to the pseudo-terminal")?;
-                    }
-                    let _ = AsyncWriteExt::flush(&mut master_side).await;
-                    // Only one slave answers an address (two on one address is a fault to inject).
-                    break;
-                }
+            let Some((pdu, wait)) = opts.devices.answer(request.unit, &request.pdu) else { continue };
+            if let (true, Some((first, count))) = (opts.paced, heard) {
+                let ended = first + char_time * u32::try_from(count).unwrap_or(u32::MAX);
+                tokio::time::sleep_until(ended + wait).await;
+            } else if !wait.is_zero() {
+                tokio::time::sleep(wait).await;
             }
+            out.clear();
+            match opts.mode {
+                SerialMode::Rtu => encode_rtu(request.unit, &pdu, &mut out),
+                SerialMode::Ascii => encode_ascii(request.unit, &pdu, &mut out),
+            }
+            if opts.paced {
+                write_paced(&mut master_side, &out, char_time).await?;
+            } else {
+                AsyncWriteExt::write_all(&mut master_side, &out)
+                    .await
+                    .context("writing a response to the pseudo-terminal")?;
+            }
+            let _ = AsyncWriteExt::flush(&mut master_side).await;
         }
     }
-    super::link::remove(&opts.link, &slave_path);
+    super::link::remove(link, &slave_path);
     let _ = master_side.clear(tokio_serial::ClearBuffer::All);
     Ok(())
 }

@@ -5,6 +5,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod emulate;
 mod interop_master;
 mod interop_mbpoll;
 mod interop_pymodbus;

@@ -3,14 +3,19 @@
 //! response PDU (or silence) out, time an input; the pseudo-terminal sits at the edge
 //! (`simulate_cmd`).
 
+pub mod answers;
 pub mod ascii_requests;
 pub mod bus;
+pub mod device;
+pub mod recorded;
 pub mod rtu_requests;
 pub mod slave;
 pub mod uart;
 pub mod world;
 
 pub use ascii_requests::AsciiRequestAssembler;
+pub use device::Device;
+pub use recorded::{RecordedDevice, Recorder};
 pub use rtu_requests::{RequestAssembler, RequestFrame};
 pub use slave::Slave;
 

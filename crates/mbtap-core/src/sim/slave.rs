@@ -11,15 +11,7 @@ use crate::proto::{EXCEPTION_FLAG, ExceptionCode, Request, parse_request};
 /// Broadcast address: every slave acts, none answers (Serial Line v1.02 §2.2).
 pub const BROADCAST: u8 = 0;
 
-/// Largest quantities a request may ask for (MAP v1.1b3 §6.1–§6.4, §6.11, §6.12).
-const MAX_READ_BITS: u16 = 2000; // 0x07D0
-const MAX_READ_REGISTERS: u16 = 125; // 0x007D
-const MAX_WRITE_BITS: u16 = 1968; // 0x07B0
-const MAX_WRITE_REGISTERS: u16 = 123; // 0x007B
-
-/// Single-coil write values: ON and OFF (MAP v1.1b3 §6.5); anything else is exception 03.
-const COIL_ON: u16 = 0xFF00;
-const COIL_OFF: u16 = 0x0000;
+use super::answers::{COIL_OFF, COIL_ON, MAX_WRITE_BITS, MAX_WRITE_REGISTERS, write_echo};
 
 /// A slave on the simulated line.
 #[derive(Debug, Clone)]
@@ -180,7 +172,7 @@ impl Slave {
     /// Every address of `[address, address + quantity)` in the table's map (MAP v1.1b3 §7: 02).
     fn check_mapped(&self, table: Table, address: u16, quantity: u16) -> Result<(), ExceptionCode> {
         // Callers have refused quantity 0; the end must not run past 65535 either.
-        let end = address.checked_add(quantity.saturating_sub(1)).ok_or(ExceptionCode::IllegalDataAddress)?;
+        let end = super::answers::last_address(address, quantity)?;
         if (address..=end).all(|a| self.memory.contains_key(&(table, a))) {
             Ok(())
         } else {
@@ -222,19 +214,11 @@ impl Slave {
     }
 
     fn read_bits(&self, table: Table, function: u8, address: u16, quantity: u16) -> Result<Vec<u8>, ExceptionCode> {
-        if quantity == 0 || quantity > MAX_READ_BITS {
+        if quantity == 0 || quantity > super::answers::MAX_READ_BITS {
             return Err(ExceptionCode::IllegalDataValue);
         }
         self.check_mapped(table, address, quantity)?;
-        let mut packed = vec![0u8; usize::from(quantity).div_ceil(8)];
-        for i in 0..quantity {
-            if self.get(table, address + i).unwrap_or(0) != 0 {
-                packed[usize::from(i / 8)] |= 1 << (i % 8);
-            }
-        }
-        let mut out = vec![function, u8::try_from(packed.len()).map_err(|_| ExceptionCode::IllegalDataValue)?];
-        out.extend_from_slice(&packed);
-        Ok(out)
+        super::answers::read_bits(function, quantity, |i| self.get(table, address + i).unwrap_or(0))
     }
 
     fn read_registers(
@@ -244,24 +228,12 @@ impl Slave {
         address: u16,
         quantity: u16,
     ) -> Result<Vec<u8>, ExceptionCode> {
-        if quantity == 0 || quantity > MAX_READ_REGISTERS {
+        if quantity == 0 || quantity > super::answers::MAX_READ_REGISTERS {
             return Err(ExceptionCode::IllegalDataValue);
         }
         self.check_mapped(table, address, quantity)?;
-        let mut out = vec![function, u8::try_from(quantity * 2).map_err(|_| ExceptionCode::IllegalDataValue)?];
-        for i in 0..quantity {
-            out.extend_from_slice(&self.get(table, address + i).unwrap_or(0).to_be_bytes());
-        }
-        Ok(out)
+        super::answers::read_registers(function, quantity, |i| self.get(table, address + i).unwrap_or(0))
     }
-}
-
-/// The response to 0x0F / 0x10: function, start address, quantity (MAP v1.1b3 §6.11, §6.12).
-fn write_echo(function: u8, address: u16, quantity: u16) -> Vec<u8> {
-    let mut out = vec![function];
-    out.extend_from_slice(&address.to_be_bytes());
-    out.extend_from_slice(&quantity.to_be_bytes());
-    out
 }
 
 #[cfg(test)]

@@ -1,0 +1,69 @@
+//! A line whose devices are emulated in this process (`mbtap simulate --listen`): the bridge's
+//! fronts (Modbus TCP, RTU over TCP, UDP, TLS) and their one admission, queue, cache and
+//! metrics, with the devices of [`mbtap_core::sim::device`] behind them instead of a port.
+//! Every answer still passes the gateway core's one answer check: an emulated device that
+//! answered what was not asked is a defect to count, never a reply to forward.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+pub use crate::source::emulated::Emulated;
+use mbtap_gateway::rules::GATEWAY_TARGET_FAILED;
+use mbtap_gateway::transaction::Reply;
+
+use super::shared::{Job, LineShared};
+
+/// Runs the emulated line forever, answering the clients' requests in the queue's order.
+pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
+    loop {
+        let Some((client, job)) = shared.next() else {
+            shared.wake.notified().await;
+            continue;
+        };
+        if job.reply.is_closed() {
+            shared.metrics.dropped();
+            continue;
+        }
+        let twins = shared.twins(client, &job);
+        shared.cache().invalidate(job.unit, &job.pdu);
+        shared.metrics.request(job.unit);
+        let started = Instant::now();
+        let reply = match emulated.answer(job.unit, &job.pdu) {
+            Some((pdu, wait)) => {
+                if !wait.is_zero() {
+                    tokio::time::sleep(wait).await;
+                }
+                match mbtap_gateway::answer::check(job.unit, &job.pdu, job.unit, &pdu) {
+                    Ok(()) => Reply::Pdu(pdu),
+                    Err(why) => {
+                        shared.metrics.misfit(job.unit, why);
+                        Reply::Gateway(GATEWAY_TARGET_FAILED)
+                    }
+                }
+            }
+            None if job.unit == mbtap_core::sim::slave::BROADCAST => Reply::Silence,
+            // No emulated device at that address: as a line where nobody answers (MAP v1.1b3 §7, 0B).
+            None => Reply::Gateway(GATEWAY_TARGET_FAILED),
+        };
+        if let Reply::Pdu(pdu) = &reply {
+            shared.metrics.response(job.unit, pdu);
+            if pdu.first().is_some_and(|f| f & 0x80 == 0) {
+                shared.cache().fill(job.unit, &job.pdu, pdu, shared.now());
+            }
+        }
+        shared.metrics.line_time("normal", started.elapsed());
+        for twin in twins {
+            let _ = twin.reply.send(reply.clone());
+        }
+        answer(&shared, job, reply);
+    }
+}
+
+/// Hands `reply` to the job's client, counting a gateway exception.
+fn answer(shared: &LineShared, job: Job, reply: Reply) {
+    if let Reply::Gateway(code) = reply {
+        shared.metrics.gateway_exception(job.unit, code);
+    }
+    shared.metrics.latency(job.unit, job.queued.elapsed());
+    let _ = job.reply.send(reply);
+}

@@ -1,0 +1,138 @@
+//! What `mbtap simulate` emulates, from what the user names: a profile at an address
+//! (`--device PROFILE@UNIT`: built-in, user, imported or a file) or every unit a recording
+//! showed answering (`--from CAPTURE`, `--from CAPTURE@UNITS`), each said on stderr with what
+//! it will answer and what it will refuse.
+
+use std::collections::BTreeSet;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::Context;
+use mbtap_core::profile::Table;
+use mbtap_core::sim::{Device, Recorder, Slave};
+
+/// Parses `PROFILE@ADDRESS` (`mk4@1`, `./meter.toml@3`, an imported profile's name).
+///
+/// # Errors
+/// When the form, the address (1–247) or the profile is wrong, saying which.
+pub fn parse_device(spec: &str) -> anyhow::Result<Device> {
+    let (name, address) =
+        spec.rsplit_once('@').with_context(|| format!("device {spec:?}: expected PROFILE@ADDRESS, e.g. mk4@1"))?;
+    let address: u8 = address
+        .parse()
+        .ok()
+        .filter(|a| (1..=247).contains(a))
+        .with_context(|| format!("device {spec:?}: the address must be 1–247 (Serial Line v1.02 §2.2)"))?;
+    let profile = crate::config::devices::resolve_profile(name).with_context(|| format!("device {spec:?}"))?;
+    Ok(Device::Profile(Slave::new(Arc::new(profile), address)))
+}
+
+/// Every unit `spec` (`CAPTURE` or `CAPTURE@UNITS`, units as `1,5,17` or `1-4`) showed
+/// answering, each a device answering as it did; `notes` gets one paragraph per device.
+///
+/// # Errors
+/// The capture cannot be read; no unit answered in it; a unit asked for is not in it.
+pub fn from_capture(spec: &str, notes: &mut String) -> anyhow::Result<Vec<Device>> {
+    let (path, wanted) = split_units(spec)?;
+    let input = crate::output::progress::open_capture(path, false)?;
+    let mut recorder = Recorder::default();
+    mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut recorder)
+        .with_context(|| format!("--from {}: reading the capture", path.display()))?;
+    for w in &recorder.warnings {
+        let _ = writeln!(notes, "mbtap: --from {}: {w}", path.display());
+    }
+    let mut devices = recorder.devices();
+    let silent = recorder.silent_units();
+    anyhow::ensure!(
+        !devices.is_empty(),
+        "--from {}: no unit answered in this capture ({}): nothing to emulate; record the line while the devices answer",
+        path.display(),
+        if silent.is_empty() {
+            "no requests either".to_owned()
+        } else {
+            format!("units {} were asked and never answered", join(silent.iter()))
+        }
+    );
+    if let Some(wanted) = &wanted {
+        let heard: BTreeSet<u8> = devices.iter().map(mbtap_core::sim::RecordedDevice::address).collect();
+        let missing: Vec<u8> = wanted.iter().copied().filter(|u| !heard.contains(u)).collect();
+        anyhow::ensure!(
+            missing.is_empty(),
+            "--from {}: unit {} did not answer in this capture; units that did: {}",
+            path.display(),
+            join(missing.iter()),
+            join(heard.iter())
+        );
+        devices.retain(|d| wanted.contains(&d.address()));
+    }
+    for d in &devices {
+        describe(path, d, notes);
+    }
+    Ok(devices.into_iter().map(Device::Recorded).collect())
+}
+
+/// `CAPTURE@1,5` → the path and the units; a path that exists as given is taken whole (a file
+/// name may hold `@`).
+fn split_units(spec: &str) -> anyhow::Result<(&Path, Option<BTreeSet<u8>>)> {
+    if Path::new(spec).exists() {
+        return Ok((Path::new(spec), None));
+    }
+    let Some((path, units)) = spec.rsplit_once('@') else {
+        anyhow::bail!("--from {spec}: no such file");
+    };
+    anyhow::ensure!(Path::new(path).exists(), "--from {spec}: no such file {path}");
+    let units = mbtap_gateway::parse::parse_units(units)
+        .with_context(|| format!("--from {spec}: after @, the units to emulate (1,5,17 or 1-4)"))?;
+    Ok((Path::new(path), Some(units.into_iter().collect())))
+}
+
+fn join<'a>(units: impl Iterator<Item = &'a u8>) -> String {
+    units.map(u8::to_string).collect::<Vec<_>>().join(", ")
+}
+
+/// `unit 17 (from site.pcapng): holding registers 100–139, input registers 430–441 as last
+/// heard; 2 requests refused as recorded; answers after 4.1 ms (median of 80); anything
+/// else: exception 02`.
+fn describe(path: &Path, d: &mbtap_core::sim::RecordedDevice, notes: &mut String) {
+    let mut held = Vec::new();
+    for (table, n) in d.counts() {
+        if n > 0 {
+            held.push(format!("{n} {}", table_name(table)));
+        }
+    }
+    let refused = d.refusals().count();
+    let latency = d.latency.map_or_else(
+        || "answers at once (the recording's reads could not time it)".to_owned(),
+        |l| {
+            format!(
+                "answers after {:.1} ms (median of {}; 10–90 % {:.1}–{:.1} ms)",
+                ms(l.median_ns),
+                l.samples,
+                ms(l.p10_ns),
+                ms(l.p90_ns)
+            )
+        },
+    );
+    let _ = writeln!(
+        notes,
+        "mbtap: emulating unit {} as {} showed it: {} as last heard; {refused} requests refused as recorded; {latency}; what it never showed: exception 02 (01 for a function)",
+        d.address(),
+        path.display(),
+        if held.is_empty() { "no values".to_owned() } else { held.join(", ") },
+    );
+}
+
+#[allow(clippy::cast_precision_loss)] // a latency in ms, shown to a tenth
+fn ms(ns: u64) -> f64 {
+    ns as f64 / 1e6
+}
+
+const fn table_name(t: Table) -> &'static str {
+    match t {
+        Table::Coils => "coils",
+        Table::DiscreteInputs => "discrete inputs",
+        Table::InputRegisters => "input registers",
+        Table::HoldingRegisters => "holding registers",
+    }
+}

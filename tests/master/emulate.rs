@@ -1,0 +1,189 @@
+//! `mbtap simulate --from CAPTURE` and `--device FILE@UNIT` behind the bridge's Modbus TCP
+//! listener (issue 41): a recording becomes a device that answers what the recording showed,
+//! byte for byte, refuses what it refused, and never invents what it did not show. The
+//! expected answers are read from the captures' `.txt` hex (the bytes the recordings were
+//! made from), not from our own replay.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use crate::common::{self, BIN, Kill};
+
+// Unit 9, FC 03, address 0, quantity 1, CRC 0x4285 (low byte first).
+const POLL_9: [u8; 8] = [
+    /* unit */ 0x09, /* fc */ 0x03, /* address */ 0x00, 0x00, /* quantity */ 0x00, 0x01,
+    /* crc */ 0x85, 0x42,
+];
+
+fn capture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("captures").join(name)
+}
+
+/// Starts `mbtap simulate ARGS --listen 127.0.0.1:0`; the process, the address it serves on,
+/// and what it said before serving.
+pub fn emulate(args: &[&str]) -> (Kill, String, String) {
+    let mut child = Command::new(BIN)
+        .arg("simulate")
+        .args(args)
+        .args(["--listen", "127.0.0.1:0", "--duration", "60"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut said = String::new();
+    let addr = loop {
+        let l = lines.next().expect("simulate ended before listening").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+        said.push_str(&l);
+        said.push('\n');
+    };
+    std::thread::spawn(move || for _ in lines {});
+    (Kill(child), addr, said)
+}
+
+/// The request/answer pairs of a capture's `.txt`: RTU frames in hex, a request line then its
+/// answer line; each as (unit, PDU) with the CRC left off.
+/// A frame as (unit, PDU).
+type Frame = (u8, Vec<u8>);
+
+fn pairs(txt: &str) -> Vec<(Frame, Frame)> {
+    let frames: Vec<Frame> = std::fs::read_to_string(capture(txt))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let bytes: Vec<u8> = l.split_whitespace().map(|h| u8::from_str_radix(h, 16).unwrap()).collect();
+            (bytes[0], bytes[1..bytes.len() - 2].to_vec())
+        })
+        .collect();
+    frames.chunks(2).map(|c| (c[0].clone(), c[1].clone())).collect()
+}
+
+fn connect(addr: &str) -> std::net::TcpStream {
+    let s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(std::time::Duration::from_secs(5))).unwrap();
+    s
+}
+
+#[test]
+fn a_recorded_power_meter_answers_every_request_as_recorded() {
+    // Input registers 0–41, holding 0–45, coils 0–30, discrete inputs 0–5, read once each.
+    let (_sim, addr, said) = emulate(&["--from", capture("rtu-real-power-meter.pcapng").to_str().unwrap()]);
+    assert!(said.contains("emulating unit 1"), "{said}");
+    assert!(said.contains("42 input registers") && said.contains("46 holding registers"), "{said}");
+    let mut s = connect(&addr);
+    let pairs = pairs("rtu-real-power-meter.txt");
+    assert_eq!(pairs.len(), 4);
+    for (i, ((unit, request), (_, answer))) in pairs.into_iter().enumerate() {
+        let got = common::call(&mut s, u16::try_from(i).unwrap(), unit, &request);
+        assert_eq!(got, answer, "request {request:02X?}");
+    }
+}
+
+#[test]
+fn what_the_recording_never_showed_is_refused_not_invented() {
+    let (_sim, addr, _) = emulate(&["--from", capture("rtu-real-power-meter.pcapng").to_str().unwrap()]);
+    let mut s = connect(&addr);
+    // Input registers 41–42: 42 was never read (MAP v1.1b3 §7: 02).
+    assert_eq!(common::call(&mut s, 1, 1, &[0x04, 0x00, 0x29, 0x00, 0x02]), [0x84, 0x02]);
+    // FC 2B/0E identity, never asked in the recording: 01.
+    assert_eq!(common::call(&mut s, 2, 1, &[0x2B, 0x0E, 0x01, 0x00]), [0xAB, 0x01]);
+    // Unit 2 is not in the recording: nobody answers, as on a line (0B).
+    assert_eq!(common::call(&mut s, 3, 2, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x83, 0x0B]);
+}
+
+#[test]
+fn a_recorded_mk4_gives_its_exceptions_keeps_its_writes_and_reads_by_name() {
+    let (_sim, addr, said) = emulate(&["--from", capture("mk4-doc-examples-rtu.pcapng").to_str().unwrap()]);
+    assert!(said.contains("1 requests refused as recorded"), "{said}");
+    let mut s = connect(&addr);
+    // The recording's FC 03 at 0x12 ×6 was refused with 03: so is ours.
+    assert_eq!(common::call(&mut s, 1, 1, &[0x03, 0x00, 0x12, 0x00, 0x06]), [0x83, 0x03]);
+    // Holding 101–105 as the recording's FC 10 left them: 0, 0, 400, 300, 10.
+    let out = Command::new(BIN)
+        .args(["read", &addr, "--device", "mk4", "--unit", "1", "--format", "jsonl", "holding", "101..105"])
+        .args(["Control"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    let raws: Vec<i64> =
+        text.lines().map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["raw"].as_i64().unwrap()).collect();
+    // Input 400 "Control" answered 2 (motor M2 on) in the recording.
+    assert_eq!(raws, [0, 0, 400, 300, 10, 2], "{text}");
+    // A write to a register the recording showed is kept and read back.
+    assert_eq!(common::call(&mut s, 2, 1, &[0x06, 0x00, 0x68, 0x00, 0x07]), [0x06, 0x00, 0x68, 0x00, 0x07]);
+    assert_eq!(common::call(&mut s, 3, 1, &[0x03, 0x00, 0x68, 0x00, 0x01]), [0x03, 0x02, 0x00, 0x07]);
+}
+
+#[test]
+fn an_ascii_recording_emulates_the_same_device_as_the_rtu_one() {
+    let (_a, rtu, _) = emulate(&["--from", capture("mk4-doc-examples-rtu.pcapng").to_str().unwrap()]);
+    let (_b, ascii, said) = emulate(&["--from", capture("mk4-doc-examples-ascii.pcapng").to_str().unwrap()]);
+    assert!(said.contains("emulating unit 1"), "{said}");
+    let (mut r, mut a) = (connect(&rtu), connect(&ascii));
+    for pdu in [[0x04, 0x01, 0x90, 0x00, 0x03], [0x03, 0x00, 0x65, 0x00, 0x05], [0x02, 0x00, 0x32, 0x00, 0x10]] {
+        assert_eq!(common::call(&mut r, 1, 1, &pdu), common::call(&mut a, 1, 1, &pdu), "{pdu:02X?}");
+    }
+}
+
+#[test]
+fn a_profile_file_is_a_device_too() {
+    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/example-profile.toml");
+    let spec = format!("{}@7", profile.display());
+    let (_sim, addr, said) = emulate(&["--device", &spec]);
+    assert!(said.contains("simulating mk4-example at address 7"), "{said}");
+    let out = Command::new(BIN)
+        .args([
+            "read",
+            &addr,
+            "--device",
+            profile.to_str().unwrap(),
+            "--unit",
+            "7",
+            "--format",
+            "jsonl",
+            "input",
+            "430..433",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The file maps input registers 430–433 (phase voltages): all four answered, none refused.
+    let text = String::from_utf8_lossy(&out.stdout);
+    let answered = text.lines().filter(|l| l.contains("\"raw\":") && !l.contains("\"error\"")).count();
+    assert_eq!(answered, 4, "{text}");
+}
+
+#[test]
+fn bad_sources_are_refused_with_what_to_do() {
+    let run = |args: &[&str]| {
+        let out = Command::new(BIN).arg("simulate").args(args).args(["--listen", "127.0.0.1:0"]).output().unwrap();
+        assert!(!out.status.success(), "{args:?} was accepted");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let meter = capture("rtu-real-power-meter.pcapng");
+    let err = run(&["--from", &format!("{}@5", meter.display())]);
+    assert!(err.contains("unit 5 did not answer") && err.contains("units that did: 1"), "{err}");
+    let err = run(&["--from", "/nonexistent/site.pcapng"]);
+    assert!(err.contains("no such file"), "{err}");
+    let err = run(&["--device", "no-such-profile@3"]);
+    assert!(err.contains("no profile named"), "{err}");
+    let err = run(&["--from", meter.to_str().unwrap(), "--device", "mk4@1"]);
+    assert!(err.contains("two devices at address 1"), "{err}");
+    // A capture in which nobody answered: five polls of unit 9, 100 ms apart, no answer.
+    let dir = std::env::temp_dir().join(format!("mbtap-emulate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let silent = dir.join("silent.pcapng");
+    let mut w = mbtap_core::capture::PcapNgWriter::new(Vec::new()).unwrap();
+    let i = w.add_serial_interface("/dev/ttyUSB0", "mbtap rtu 9600 8E1").unwrap();
+    for k in 0..5u64 {
+        w.write_packet(i, mbtap_core::chunk::Timestamp(k * 100_000_000), &POLL_9).unwrap();
+    }
+    std::fs::write(&silent, w.into_inner()).unwrap();
+    let err = run(&["--from", silent.to_str().unwrap()]);
+    assert!(err.contains("no unit answered") && err.contains("units 9 were asked"), "{err}");
+}
