@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context as _;
-use mbtap_core::learn::diff::{Image, diff, parse_image_csv, parse_image_json_from};
+use mbtap_core::learn::diff::{Image, diff};
 
 /// Which registers changed between two captures, register images (`replay --image` CSV or
 /// JSON) or probe dumps (`probe --format json` saved) — before and after a settings change or
@@ -36,9 +36,6 @@ pub enum Format {
     Jsonl,
 }
 
-/// The largest image file read: every address of the four tables as JSON rows is ~40 MB.
-const MAX_IMAGE_FILE: u64 = 64 << 20;
-
 /// Builds the image of a capture and says what was wrong with the capture (a corrupt block)
 /// on the way, as `replay` does.
 struct ImageSink<'a> {
@@ -58,33 +55,14 @@ impl mbtap_core::analyzer::Sink for ImageSink<'_> {
 
 /// The register image of a capture or an image file.
 fn load(path: &Path) -> anyhow::Result<Image> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or_default().to_ascii_lowercase();
-    let open = || -> anyhow::Result<std::io::Take<std::fs::File>> {
-        let f = std::fs::File::open(path).with_context(|| format!("{}: cannot read it", path.display()))?;
-        let len = f.metadata().map_or(0, |m| m.len());
-        anyhow::ensure!(
-            len <= MAX_IMAGE_FILE,
-            "{}: {len} bytes, over the {MAX_IMAGE_FILE} an image or probe dump of every address has; not read",
-            path.display()
-        );
-        Ok(std::io::Read::take(f, MAX_IMAGE_FILE))
-    };
-    match ext.as_str() {
-        "json" => parse_image_json_from(open()?).map_err(|e| anyhow::anyhow!("{}: {e}", path.display())),
-        "csv" => {
-            let mut text = String::new();
-            std::io::Read::read_to_string(&mut open()?, &mut text)
-                .with_context(|| format!("{}: cannot read it", path.display()))?;
-            parse_image_csv(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
-        }
-        _ => {
-            let input = crate::output::progress::open_capture(path, false)?;
-            let mut sink = ImageSink { image: mbtap_core::profile::image::RegisterImage::default(), path };
-            mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut sink)
-                .with_context(|| format!("reading {}", path.display()))?;
-            Ok(sink.image.values.iter().map(|(&k, v)| (k, v.raw)).collect())
-        }
+    if let Some(image) = crate::source::image_file::load(path)? {
+        return Ok(image);
     }
+    let input = crate::output::progress::open_capture(path, false)?;
+    let mut sink = ImageSink { image: mbtap_core::profile::image::RegisterImage::default(), path };
+    mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut sink)
+        .with_context(|| format!("reading {}", path.display()))?;
+    Ok(sink.image.values.iter().map(|(&k, v)| (k, v.raw)).collect())
 }
 
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {

@@ -35,6 +35,9 @@ pub fn parse_device(spec: &str) -> anyhow::Result<Device> {
 /// The capture cannot be read; no unit answered in it; a unit asked for is not in it.
 pub fn from_capture(spec: &str, notes: &mut String) -> anyhow::Result<Vec<Device>> {
     let (path, wanted) = split_units(spec)?;
+    if let Some(image) = super::image_file::load(path)? {
+        return from_image(path, &image, wanted.as_ref(), notes);
+    }
     let input = crate::output::progress::open_capture(path, false)?;
     let mut recorder = Recorder::default();
     mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut recorder)
@@ -72,6 +75,43 @@ pub fn from_capture(spec: &str, notes: &mut String) -> anyhow::Result<Vec<Device
     Ok(devices.into_iter().map(Device::Recorded).collect())
 }
 
+/// The units of a register image file (a probe dump, `replay --image`), each a device holding
+/// the image's values.
+fn from_image(
+    path: &Path,
+    image: &mbtap_core::learn::diff::Image,
+    wanted: Option<&BTreeSet<u8>>,
+    notes: &mut String,
+) -> anyhow::Result<Vec<Device>> {
+    let units: BTreeSet<u8> = image.keys().map(|&(u, _, _)| u).filter(|u| (1..=247).contains(u)).collect();
+    anyhow::ensure!(
+        !units.is_empty(),
+        "--from {}: no values of units 1–247 in this image: nothing to emulate",
+        path.display()
+    );
+    if let Some(wanted) = wanted {
+        let missing: Vec<u8> = wanted.iter().copied().filter(|u| !units.contains(u)).collect();
+        anyhow::ensure!(
+            missing.is_empty(),
+            "--from {}: unit {} has no values in this image; units that have: {}",
+            path.display(),
+            join(missing.iter()),
+            join(units.iter())
+        );
+    }
+    let mut out = Vec::new();
+    for unit in units.into_iter().filter(|u| wanted.is_none_or(|w| w.contains(u))) {
+        let values = image
+            .range((unit, Table::Coils, 0)..=(unit, Table::InputRegisters, u16::MAX))
+            .map(|(&(_, t, a), &raw)| ((t, a), raw))
+            .collect();
+        let d = mbtap_core::sim::RecordedDevice::from_image(unit, values);
+        describe(path, &d, notes);
+        out.push(Device::Recorded(d));
+    }
+    Ok(out)
+}
+
 /// `CAPTURE@1,5` → the path and the units; a path that exists as given is taken whole (a file
 /// name may hold `@`).
 fn split_units(spec: &str) -> anyhow::Result<(&Path, Option<BTreeSet<u8>>)> {
@@ -84,6 +124,10 @@ fn split_units(spec: &str) -> anyhow::Result<(&Path, Option<BTreeSet<u8>>)> {
     anyhow::ensure!(Path::new(path).exists(), "--from {spec}: no such file {path}");
     let units = mbtap_gateway::parse::parse_units(units)
         .with_context(|| format!("--from {spec}: after @, the units to emulate (1,5,17 or 1-4)"))?;
+    anyhow::ensure!(
+        !units.is_empty(),
+        "--from {spec}: no units after @; give them as 1,5,17 or 1-4, or leave @ out for all"
+    );
     Ok((Path::new(path), Some(units.into_iter().collect())))
 }
 
@@ -103,7 +147,7 @@ fn describe(path: &Path, d: &mbtap_core::sim::RecordedDevice, notes: &mut String
     }
     let refused = d.refusals().count();
     let latency = d.latency.map_or_else(
-        || "answers at once (the recording's reads could not time it)".to_owned(),
+        || "no latency measured in it: answers after 3 ms (--turnaround-ms to change)".to_owned(),
         |l| {
             format!(
                 "answers after {:.1} ms (median of {}; 10–90 % {:.1}–{:.1} ms)",

@@ -6,6 +6,7 @@
 pub mod demo;
 pub mod emulate_from;
 pub mod emulated;
+pub mod image_file;
 pub mod link;
 pub mod play;
 pub mod pty;

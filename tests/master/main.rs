@@ -6,6 +6,7 @@
 mod common;
 
 mod emulate;
+mod interop_emulate;
 mod interop_master;
 mod interop_mbpoll;
 mod interop_pymodbus;

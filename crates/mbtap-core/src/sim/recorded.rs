@@ -189,6 +189,21 @@ pub struct RecordedDevice {
 }
 
 impl RecordedDevice {
+    /// A device from a register image alone (`replay --image`, a probe dump): every value as
+    /// the image holds it, no refusals, no latency.
+    #[must_use]
+    pub fn from_image(address: u8, values: BTreeMap<(Table, u16), u16>) -> Self {
+        Self {
+            address,
+            values,
+            refusals: BTreeMap::new(),
+            verbatim: BTreeMap::new(),
+            latency: None,
+            answered: 0,
+            unanswered: 0,
+        }
+    }
+
     /// The unit's address.
     #[must_use]
     pub const fn address(&self) -> u8 {
@@ -289,21 +304,15 @@ impl RecordedDevice {
             .map(|(_, &code)| code)
     }
 
-    /// Every address of the range heard, or the refusal the recording showed for a request of
-    /// this function overlapping it, else 02.
+    /// Every address of the range heard, else refused: 01 where the recording showed the whole
+    /// function refused, else 02. (A refusal of another request overlapping this one is no
+    /// evidence: a device's 03 for a block says nothing of a smaller read inside it.)
     fn covered(&self, table: Table, function: u8, address: u16, quantity: u16) -> Result<(), u8> {
         let last = answers::last_address(address, quantity).map_err(ExceptionCode::value)?;
         if (address..=last).all(|a| self.values.contains_key(&(table, a))) {
             return Ok(());
         }
-        let overlapping = self
-            .refusals
-            .range((function, 0, 0)..=(function, u16::MAX, u16::MAX))
-            .find(|&(&(_, from, n), _)| from <= last && u32::from(from) + u32::from(n.max(1)) > u32::from(address))
-            .map(|(_, &code)| code);
-        Err(overlapping
-            .or_else(|| self.refused_function(function))
-            .unwrap_or(ExceptionCode::IllegalDataAddress.value()))
+        Err(self.refused_function(function).unwrap_or(ExceptionCode::IllegalDataAddress.value()))
     }
 
     fn read(&self, table: Table, function: u8, address: u16, quantity: u16) -> Result<Vec<u8>, u8> {
@@ -417,7 +426,7 @@ mod tests {
         // A function never heard at all.
         assert_eq!(d.handle(9, &COIL_3_ON).unwrap(), [0x85, 0x02], "a coil never heard: 02");
         assert_eq!(d.handle(9, &[0x2B, 0x0E, 0x01, 0x00]).unwrap(), [0xAB, 0x01], "identity never asked: 01");
-        // The recorded refusal covers reads overlapping it.
+        // A read overlapping the recorded refusal is not that request: 02, as anything unheard.
         assert_eq!(d.handle(9, &[0x04, 0x00, 0x06, 0x00, 0x02]).unwrap(), [0x84, 0x02]);
     }
 

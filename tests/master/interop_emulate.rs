@@ -1,0 +1,129 @@
+//! Emulated devices read by third-party masters (issue 41): pymodbus and mbpoll (libmodbus)
+//! over Modbus TCP read a device emulated from an imported profile, from a real recording in
+//! `captures/` and from a probe dump, and get exactly what the source holds. Needs python3 with
+//! pymodbus and mbpoll: `#[ignore]`d in a plain `cargo test`, run by `.ci/run` with `--ignored`.
+
+use std::path::Path;
+use std::process::Command;
+
+use super::emulate::emulate;
+use crate::common::BIN;
+
+/// pymodbus reading one range (`tests/interop/pymodbus_tcp_read.py`): its JSON answer.
+fn pymodbus_read(addr: &str, unit: u8, table: &str, address: u16, count: u16) -> serde_json::Value {
+    let (host, port) = addr.rsplit_once(':').unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/pymodbus_tcp_read.py");
+    let out = Command::new("python3")
+        .arg(script)
+        .args([host, port, &unit.to_string(), table, &address.to_string(), &count.to_string()])
+        .output()
+        .expect("python3 must be installed");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// The registers of an FC 03/04 answer line of a capture's `.txt` (unit, fc, count, data, CRC).
+fn registers_of(answer_hex: &str) -> Vec<u64> {
+    let bytes: Vec<u8> = answer_hex.split_whitespace().map(|h| u8::from_str_radix(h, 16).unwrap()).collect();
+    bytes[3..bytes.len() - 2].chunks(2).map(|w| u64::from(u16::from_be_bytes([w[0], w[1]]))).collect()
+}
+
+fn txt_line(name: &str, starts: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures").join(name);
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .find(|l| l.to_ascii_lowercase().starts_with(starts))
+        .unwrap()
+        .to_owned()
+}
+
+#[test]
+#[ignore = "needs python3 with pymodbus; .ci/run installs it and runs this with --ignored"]
+fn pymodbus_reads_a_recorded_power_meter_as_it_was_recorded() {
+    let meter = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/rtu-real-power-meter.pcapng");
+    let (_sim, addr, _) = emulate(&["--from", meter.to_str().unwrap()]);
+    // The recording's answers to FC 04 0–41 and FC 03 0–45.
+    let input = registers_of(&txt_line("rtu-real-power-meter.txt", "01 04 54"));
+    let holding = registers_of(&txt_line("rtu-real-power-meter.txt", "01 03 5c"));
+    assert_eq!((input.len(), holding.len()), (42, 46));
+    assert_eq!(pymodbus_read(&addr, 1, "input", 0, 42)["registers"], serde_json::json!(input));
+    assert_eq!(pymodbus_read(&addr, 1, "holding", 0, 46)["registers"], serde_json::json!(holding));
+    // A smaller read inside what was recorded, and one past it.
+    assert_eq!(pymodbus_read(&addr, 1, "holding", 10, 3)["registers"], serde_json::json!(holding[10..13]));
+    assert_eq!(pymodbus_read(&addr, 1, "holding", 45, 2)["exception"], 2);
+    // Coils 0–30: answer 04 10 00 00 10 → coil 4 and coil 28 on.
+    let bits = pymodbus_read(&addr, 1, "coils", 0, 31)["bits"].clone();
+    let on: Vec<usize> =
+        bits.as_array().unwrap().iter().enumerate().filter(|(_, b)| b.as_bool().unwrap()).map(|(i, _)| i).collect();
+    assert_eq!(on, [4, 28]);
+}
+
+#[test]
+#[ignore = "needs python3 with pymodbus; .ci/run installs it and runs this with --ignored"]
+fn pymodbus_reads_an_imported_profile_and_a_probe_dump_as_they_hold() {
+    let dir = std::env::temp_dir().join(format!("mbtap-emulate-interop-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // An imported vendor sheet: input registers 0–1 (volts, a float), 6–7, 12–13, 70–71, 342–343.
+    let sheet = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sheets/energy-meter-modicon.csv");
+    let profile = dir.join("meter.toml");
+    let _ = std::fs::remove_file(&profile);
+    let out = Command::new(BIN)
+        .args(["profiles", "import", sheet.to_str().unwrap(), "-o", profile.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (_sim, addr, _) = emulate(&["--device", &format!("{}@3", profile.display())]);
+    // Mapped and at rest (0.0 V is in range: the sheet gives no range): read; unmapped: 02.
+    assert_eq!(pymodbus_read(&addr, 3, "input", 0, 2)["registers"], serde_json::json!([0, 0]));
+    assert_eq!(pymodbus_read(&addr, 3, "input", 342, 2)["registers"], serde_json::json!([0, 0]));
+    assert_eq!(pymodbus_read(&addr, 3, "input", 2, 2)["exception"], 2);
+
+    // A probe dump of the built-in MK4's holding registers 100–140, then a device from it.
+    let (_mk4, mk4, _) = emulate(&["--device", "mk4@1"]);
+    let out = Command::new(BIN)
+        .args(["probe", &mk4, "--unit", "1", "--tables", "holding", "--range", "100-140", "--rate", "1000"])
+        .args(["--format", "json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let dump = dir.join("mk4-dump.json");
+    std::fs::write(&dump, &out.stdout).unwrap();
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = doc["image"].as_array().unwrap();
+    assert!(rows.len() > 20, "the probe found {} holding registers", rows.len());
+    let (_copy, copy, said) = emulate(&["--from", dump.to_str().unwrap()]);
+    assert!(said.contains("emulating unit 1"), "{said}");
+    for row in rows {
+        let a = u16::try_from(row["address"].as_u64().unwrap()).unwrap();
+        assert_eq!(
+            pymodbus_read(&copy, 1, "holding", a, 1)["registers"],
+            serde_json::json!([row["raw"]]),
+            "holding {a}"
+        );
+    }
+}
+
+#[test]
+#[ignore = "needs mbpoll; .ci/run installs it and runs this with --ignored"]
+fn mbpoll_reads_a_recorded_device_over_tcp() {
+    let meter = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/rtu-real-power-meter.pcapng");
+    let (_sim, addr, _) = emulate(&["--from", meter.to_str().unwrap()]);
+    let (host, port) = addr.rsplit_once(':').unwrap();
+    // mbpoll: -t 4 holding registers, -0 zero-based addresses, -1 one poll.
+    let out = Command::new("mbpoll")
+        .args(["-m", "tcp", "-p", port, "-a", "1", "-t", "4", "-0", "-r", "0", "-c", "46", "-1", host])
+        .output()
+        .expect("mbpoll must be installed for this test");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    let got: Vec<u64> = text
+        .lines()
+        .filter_map(|l| {
+            let (_, v) = l.trim().strip_prefix('[')?.split_once("]:")?;
+            let v = v.split_whitespace().next()?;
+            v.parse().ok()
+        })
+        .collect();
+    assert_eq!(got, registers_of(&txt_line("rtu-real-power-meter.txt", "01 03 5c")), "{text}");
+}
