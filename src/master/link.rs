@@ -1,5 +1,5 @@
-//! The link to a device: a serial port (RTU), Modbus TCP, or RTU over TCP, opened as a
-//! tokio-modbus client context. Reopened after a timeout, because an answer that arrives late
+//! The link to a device: a serial port (RTU or ASCII), Modbus TCP, or RTU (ASCII) over TCP,
+//! opened as a tokio-modbus client context (ASCII through [`super::ascii::AsciiStream`]). Reopened after a timeout, because an answer that arrives late
 //! would otherwise be taken for the answer to the next request.
 
 use std::net::SocketAddr;
@@ -74,6 +74,7 @@ async fn resolve(host_port: &str) -> anyhow::Result<SocketAddr> {
 pub struct Link {
     endpoint: Endpoint,
     line: mbtap_core::framer::LineSettings,
+    mode: SerialMode,
     connect_timeout: Duration,
     context: Option<Context>,
     /// The last request timed out: listen for its late answer before the next one.
@@ -86,6 +87,7 @@ impl std::fmt::Debug for Link {
         f.debug_struct("Link")
             .field("endpoint", &self.endpoint)
             .field("line", &self.line)
+            .field("mode", &self.mode)
             .field("connect_timeout", &self.connect_timeout)
             .field("open", &self.context.is_some())
             .field("after_timeout", &self.after_timeout)
@@ -94,30 +96,33 @@ impl std::fmt::Debug for Link {
 }
 
 impl Link {
-    /// A link that opens on first use. ASCII framing is refused here: tokio-modbus speaks RTU
-    /// only (the bridge speaks ASCII).
+    /// A link that opens on first use. ASCII framing is for serial lines and raw TCP to a
+    /// converter (`rtu+tcp://`); Modbus TCP has its own framing (MBAP), and refuses it.
     pub fn new(target: &str, line: &crate::args::SerialLineArgs, connect_timeout: Duration) -> anyhow::Result<Self> {
         let (mode, settings, _) = line.overrides().resolve();
+        let endpoint = Endpoint::parse(target);
         anyhow::ensure!(
-            mode == SerialMode::Rtu,
-            "--mode ascii: read/write/watch speak RTU only (tokio-modbus has no ASCII client); to reach an ASCII line, run `mbtap bridge --mode ascii` and read through it over TCP"
+            mode == SerialMode::Rtu || !matches!(endpoint, Endpoint::Tcp(_)),
+            "--mode ascii: {target} is Modbus TCP, framed by MBAP, not ASCII; leave --mode out, or give rtu+tcp://{} for a converter that passes ASCII frames",
+            target.trim_start_matches("tcp://")
         );
-        Ok(Self {
-            endpoint: Endpoint::parse(target),
-            line: settings,
-            connect_timeout,
-            context: None,
-            after_timeout: false,
-        })
+        Ok(Self { endpoint, line: settings, mode, connect_timeout, context: None, after_timeout: false })
     }
 
     /// The endpoint, for messages.
     #[must_use]
     pub fn describe(&self) -> String {
         match &self.endpoint {
-            Endpoint::Serial(p) => format!("{p} (RTU, {})", self.line),
+            Endpoint::Serial(p) => format!("{p} ({}, {})", self.mode_name(), self.line),
             Endpoint::Tcp(a) => format!("{a} (Modbus TCP)"),
-            Endpoint::RtuOverTcp(a) => format!("{a} (RTU over TCP)"),
+            Endpoint::RtuOverTcp(a) => format!("{a} ({} over TCP)", self.mode_name()),
+        }
+    }
+
+    const fn mode_name(&self) -> &'static str {
+        match self.mode {
+            SerialMode::Rtu => "RTU",
+            SerialMode::Ascii => "ASCII",
         }
     }
 
@@ -136,7 +141,10 @@ impl Link {
                     if std::mem::take(&mut self.after_timeout) {
                         drain_late_answer(&mut port, self.connect_timeout).await;
                     }
-                    rtu::attach_slave(port, slave)
+                    match self.mode {
+                        SerialMode::Rtu => rtu::attach_slave(port, slave),
+                        SerialMode::Ascii => rtu::attach_slave(super::ascii::AsciiStream::new(port), slave),
+                    }
                 }
                 Endpoint::Tcp(a) => {
                     let addr = resolve(a).await?;
@@ -154,7 +162,10 @@ impl Link {
                     if std::mem::take(&mut self.after_timeout) {
                         drain_late_answer(&mut stream, self.connect_timeout).await;
                     }
-                    rtu::attach_slave(stream, slave)
+                    match self.mode {
+                        SerialMode::Rtu => rtu::attach_slave(stream, slave),
+                        SerialMode::Ascii => rtu::attach_slave(super::ascii::AsciiStream::new(stream), slave),
+                    }
                 }
             };
             self.context = Some(ctx);

@@ -2,6 +2,7 @@
 //! The requests are planned and checked by `mbtap_core::query` (pure); this module opens the
 //! link ([`link`]), sends them with tokio-modbus ([`exec`]) and prints what came back ([`show`]).
 
+pub mod ascii;
 pub mod exec;
 pub mod link;
 pub mod remote;

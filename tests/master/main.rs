@@ -5,6 +5,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod ascii_master;
 mod emulate;
 mod interop_emulate;
 mod interop_master;

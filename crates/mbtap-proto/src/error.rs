@@ -31,6 +31,12 @@ pub enum AduError {
     /// Fewer bytes than address + function + check.
     #[error("{mode} frame of {len} bytes is too short: at least {min} are needed")]
     TooShort { mode: &'static str, len: usize, min: usize },
+    /// More bytes than the mode's largest frame (RTU: 256, Serial Line v1.02 §2.5.1).
+    #[error("{mode} frame of {len} bytes is too long: at most {max} are allowed")]
+    TooLong { mode: &'static str, len: usize, max: usize },
+    /// The frame's check (CRC, LRC) does not match its bytes.
+    #[error("{mode} frame fails its check: its bytes were damaged or it is not one frame")]
+    BadCheck { mode: &'static str },
     /// ASCII frame not starting with ':'.
     #[error("ASCII frame must start with ':' (0x3A), found 0x{found:02X}")]
     MissingStart { found: u8 },

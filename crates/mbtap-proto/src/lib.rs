@@ -9,7 +9,7 @@
 //! [`request`] / [`response`] (PDU) → [`decode`] (direction hint) and [`findings`].
 //! [`length`] says how long a frame of a function code must be; [`answer_end`] uses it to find
 //! where an answer arriving byte by byte ends (the bridge's question); [`hexinput`] reads frames
-//! that people paste as text.
+//! that people paste as text; [`ascii_link`] carries an RTU master's frames over an ASCII line.
 //!
 //! This crate depends on `nom` and `thiserror` only: every parser here is fuzzed from
 //! `fuzz/` without compiling the analysis, the terminal or an async runtime.
@@ -17,6 +17,7 @@
 pub mod adu;
 pub mod answer_end;
 pub mod ascii;
+pub mod ascii_link;
 pub mod checksum;
 pub mod data;
 pub mod decode;
