@@ -21,6 +21,8 @@ mode = "rtu"             # rtu | ascii
 # Where Modbus TCP clients connect (502 needs root or CAP_NET_BIND_SERVICE), and raw RTU over TCP.
 listen = "0.0.0.0:502"
 # listen-rtu = "0.0.0.0:5020"
+# A serial port on which the bridge answers as the slave, for a master already on the line:
+# listen-serial = "/dev/ttyUSB1"
 
 # Per request: response timeout (ms), retries after a timeout or a bad CRC, extra quiet time
 # after t3.5 before the next request (ms).

@@ -24,8 +24,7 @@ use mbtap_core::analyzer::SerialMode;
 use mbtap_core::chunk::PortId;
 use mbtap_core::framer::LineSettings;
 use mbtap_core::proto::answer_end::Verdict;
-use mbtap_core::proto::{encode_ascii, encode_rtu};
-use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
+use mbtap_core::proto::encode_rtu;
 use mbtap_gateway::admit::{Asked, Policy, Role};
 use mbtap_gateway::answer::check;
 use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, exception_pdu};
@@ -106,37 +105,12 @@ impl Side<'_> {
 
 async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut Side<'_>) -> std::io::Result<()> {
     let metrics = side.metrics;
-    let mut rtu = RequestAssembler::default();
-    let mut ascii = AsciiRequestAssembler::default();
-    let silence = Duration::from_nanos(opts.line.t35_ns()) + Duration::from_millis(1);
     let policy = &opts.policy;
-    let mut buf = [0u8; 512];
-    let mut out = Vec::with_capacity(300);
+    let mut heard = super::slave_port::Requests::default();
     loop {
-        let pending = match opts.mode {
-            SerialMode::Rtu => rtu.pending(),
-            SerialMode::Ascii => 0,
-        };
-        let wait = if pending > 0 { silence } else { Duration::from_hours(1) };
-        let mut requests: Vec<RequestFrame> = Vec::new();
-        match tokio::time::timeout(wait, port.read(&mut buf)).await {
-            Ok(Ok(0)) => return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
-            Ok(Ok(n)) => {
-                let got = buf.get(..n).unwrap_or_default();
-                side.monitor(PortId(0), got);
-                match opts.mode {
-                    SerialMode::Rtu => {
-                        rtu.push(got);
-                        requests.extend(std::iter::from_fn(|| rtu.next_request()));
-                    }
-                    SerialMode::Ascii => {
-                        ascii.push(got);
-                        requests.extend(std::iter::from_fn(|| ascii.next_request()));
-                    }
-                }
-            }
-            Ok(Err(e)) => return Err(e),
-            Err(_) => requests.extend(rtu.silence()),
+        let (requests, got) = heard.next(port, opts.mode, opts.line).await?;
+        if !got.is_empty() {
+            side.monitor(PortId(0), &got);
         }
         for r in requests {
             let broadcast = r.unit == 0;
@@ -171,13 +145,7 @@ async fn serve_port(opts: &ReverseOptions, port: &mut SerialStream, side: &mut S
                 // Broadcasts are never answered (Serial Line v1.02 §2.1).
                 continue;
             }
-            tokio::time::sleep(opts.turnaround).await;
-            out.clear();
-            match opts.mode {
-                SerialMode::Rtu => encode_rtu(r.unit, &pdu, &mut out),
-                SerialMode::Ascii => encode_ascii(r.unit, &pdu, &mut out),
-            }
-            opts.rs485.send(port, &out).await?;
+            let out = super::slave_port::answer(port, &opts.rs485, opts.mode, opts.turnaround, r.unit, &pdu).await?;
             side.monitor_sent(PortId(1), &out, opts.line.char_ns());
         }
     }

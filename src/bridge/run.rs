@@ -47,6 +47,9 @@ pub struct BridgeOptions {
     pub roles: Arc<crate::bridge::tls::Roles>,
     /// `--mqtt-writes`: writes from the broker, through the same admission as clients'.
     pub broker_writes: Option<Arc<crate::bridge::broker::BrokerWrites>>,
+    /// `--listen-serial`: a serial port on which the bridge is the slave, for a master
+    /// already on the line.
+    pub listen_serial: Option<crate::bridge::serial_front::SerialFront>,
 }
 
 impl BridgeOptions {
@@ -101,6 +104,7 @@ impl BridgeOptions {
             tls: crate::bridge::tls::TlsArgs::default(),
             roles: Arc::default(),
             broker_writes: None,
+            listen_serial: None,
         }
     }
 }
@@ -228,6 +232,17 @@ pub async fn bridge<W: Write>(
             let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
             tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, None, Arc::clone(&connections)));
+        }
+        if let Some(front) = &opts.listen_serial {
+            let _ = writeln!(
+                err,
+                "mbtap: bridge answering as the slave on {} at {} {} (--listen-serial)",
+                front.port,
+                front.line,
+                front.mode.name()
+            );
+            let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, ..opts.server.clone() });
+            tokio::spawn(crate::bridge::serial_front::serve(front.clone(), Arc::clone(&routes), server_opts));
         }
         if let Some(addr) = &opts.listen_udp {
             let socket =

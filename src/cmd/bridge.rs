@@ -47,6 +47,11 @@ pub struct Args {
     /// under the same allow-lists, read-only rules, rate limit, queue and cache as TCP clients.
     #[arg(long, value_name = "ADDR:PORT")]
     pub listen_udp: Option<String>,
+    /// Answer as the slave on this serial port too (the line's settings), for a master already
+    /// on the device's line (an inverter polling its meter): its requests go through the same
+    /// admission, cache and queue as a TCP client's, the device is shared.
+    #[arg(long, value_name = "PORT")]
+    pub listen_serial: Option<String>,
     /// Units FIRST-LAST on another serial port (repeatable): --route 11-20=/dev/ttyUSB1.
     #[arg(long = "route", value_name = "UNITS=PORT")]
     pub routes: Vec<String>,
@@ -181,6 +186,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         listen,
         listen_rtu,
         listen_udp,
+        listen_serial,
         routes,
         timeout_ms,
         timeout,
@@ -286,6 +292,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             || listen.is_some()
             || listen_rtu.is_some()
             || listen_udp.is_some()
+            || listen_serial.is_some()
             || tls.listen_tls.is_some(),
         "nothing to listen on: give --listen ADDR:PORT (Modbus TCP), --listen-rtu ADDR:PORT, --listen-udp ADDR:PORT and/or --listen-tls ADDR:PORT"
     );
@@ -367,6 +374,13 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         roles: std::sync::Arc::new(crate::bridge::tls::parse_roles(&tls.role)?),
         tls,
         broker_writes: None,
+        listen_serial: listen_serial.map(|port| crate::bridge::serial_front::SerialFront {
+            port,
+            line: settings,
+            mode,
+            turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
+            rs485,
+        }),
     };
     let mut opts = opts;
     let profiles = crate::config::devices::load_devices(&devices)?;

@@ -9,6 +9,7 @@ mod agent;
 mod config;
 mod gave_up;
 mod hardware;
+mod listen_serial;
 mod one_path;
 mod serial;
 mod serial_server;

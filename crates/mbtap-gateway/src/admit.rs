@@ -190,6 +190,15 @@ impl Policy {
         Ok(Admitted { target, route, high })
     }
 
+    /// Whether a request to `unit` has a line to go to (after `--map-unit`): a front on a serial
+    /// line stands for those units only and stays silent for the others, as a slave answers
+    /// its own address alone (Serial Line v1.02 §2.2). Broadcasts go everywhere.
+    #[must_use]
+    pub fn serves(&self, unit: u8) -> bool {
+        let target = self.unit_map.get(&unit).copied().unwrap_or(unit);
+        target == 0 || self.routes.iter().any(|r| r.contains(&target))
+    }
+
     /// Whether a client at `ip` is in the priority class for all its requests.
     #[must_use]
     pub fn peer_high(&self, ip: IpAddr) -> bool {

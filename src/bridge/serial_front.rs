@@ -1,0 +1,101 @@
+//! `bridge --listen-serial PORT`: a serial port on which the bridge is the slave, for a master
+//! that is already on the device's line (an inverter polling its meter) and must now share the
+//! device with TCP clients. Its requests go the way every front's go ([`super::request`]: the
+//! gateway core's admission, unit map and read-only rules, the line's cache, the fair queue as
+//! a client of its own) and its answers come from the line or the cache; TCP clients are served
+//! between them. The two masters never see each other's traffic: each hears only its own
+//! port. Units no line serves get silence, as on a line where no slave has that address.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio_serial::{SerialPortBuilderExt, SerialStream};
+
+use super::request::{Client, Routes, ServerOptions, request};
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::framer::LineSettings;
+use mbtap_gateway::admit::Role;
+use mbtap_gateway::queue::ClientId;
+
+/// The serial front's place in the fair queue: apart from TCP (counting up from 1) and UDP
+/// (from 2^48) clients.
+const SERIAL_CLIENT: ClientId = 1 << 56;
+
+/// The serial port the bridge answers on, and how.
+#[derive(Debug, Clone)]
+pub struct SerialFront {
+    pub port: String,
+    pub line: LineSettings,
+    pub mode: SerialMode,
+    /// Time from the end of a request to the answer, at least (a slave's turnaround).
+    pub turnaround: Duration,
+    pub rs485: crate::source::rs485::Rs485Args,
+}
+
+/// Serves the port until the process ends; a port that goes away is reopened every second,
+/// said once per spell.
+pub async fn serve(front: SerialFront, routes: Arc<Routes>, opts: Arc<ServerOptions>) {
+    let mut said = false;
+    loop {
+        let opened = front
+            .rs485
+            .prepare(&front.port)
+            .and_then(|()| Ok(crate::source::serial::builder(&front.port, front.line).open_native_async()?));
+        let mut port = match opened {
+            Ok(p) => p,
+            Err(e) => {
+                if !said {
+                    note(
+                        &routes,
+                        &format!("--listen-serial {}: cannot open it ({e:#}); retrying every second", front.port),
+                    );
+                    said = true;
+                }
+                tokio::time::sleep(Duration::from_secs(1)).await;
+                continue;
+            }
+        };
+        said = false;
+        if let Err(e) = serve_port(&front, &mut port, &routes, &opts).await {
+            note(&routes, &format!("--listen-serial {}: lost ({e}); reopening", front.port));
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
+}
+
+/// A message for the operator, said with the first line's (the bridge prints those).
+fn note(routes: &Routes, text: &str) {
+    if let Some(r) = routes.first() {
+        r.line.metrics.note(text);
+    }
+}
+
+async fn serve_port(
+    front: &SerialFront,
+    port: &mut SerialStream,
+    routes: &Routes,
+    opts: &ServerOptions,
+) -> std::io::Result<()> {
+    // A serial master has no address: the priority class by address never holds for it.
+    let peer = SocketAddr::from(([0, 0, 0, 0], 0));
+    let mut client = Client::new(SERIAL_CLIENT, Role::Plain, peer, routes, opts);
+    let mut heard = super::slave_port::Requests::default();
+    loop {
+        let (requests, _) = heard.next(port, front.mode, front.line).await?;
+        for r in requests {
+            if !opts.policy.serves(r.unit) {
+                continue;
+            }
+            let broadcast = r.unit == 0;
+            let pending = request(&mut client, 0, r.unit, r.pdu, routes, opts);
+            // The answer of the line, the cache or the gateway (0A, 0B, a refusal's code).
+            let Some(pdu) = pending.answer_pdu().await else { continue };
+            if broadcast {
+                // Broadcasts are never answered (Serial Line v1.02 §2.1).
+                continue;
+            }
+            super::slave_port::answer(port, &front.rs485, front.mode, front.turnaround, r.unit, &pdu).await?;
+        }
+    }
+}

@@ -1,0 +1,89 @@
+//! A serial port on which the bridge is the slave (reverse mode, `--listen-serial`): requests
+//! framed from the bytes the way a slave's UART sees them (structure and CRC, the silence for
+//! functions of unknown length: [`mbtap_core::sim::RequestAssembler`]; ASCII by ':' … CR LF),
+//! and answers written after the slave's turnaround under the port's direction control.
+
+use std::time::Duration;
+
+use tokio::io::AsyncReadExt;
+use tokio_serial::SerialStream;
+
+use mbtap_core::analyzer::SerialMode;
+use mbtap_core::framer::LineSettings;
+use mbtap_core::proto::{encode_ascii, encode_rtu};
+use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
+
+/// The requests heard on one port, in its mode.
+#[derive(Debug, Default)]
+pub struct Requests {
+    rtu: RequestAssembler,
+    ascii: AsciiRequestAssembler,
+    buf: Vec<u8>,
+}
+
+impl Requests {
+    /// Waits for bytes (or, with an RTU frame begun, the silence that ends it); the requests
+    /// they complete, and the bytes read (for the monitor). `Ok` with nothing: a silence.
+    ///
+    /// # Errors
+    /// The port failed or closed.
+    pub async fn next(
+        &mut self,
+        port: &mut SerialStream,
+        mode: SerialMode,
+        line: LineSettings,
+    ) -> std::io::Result<(Vec<RequestFrame>, Vec<u8>)> {
+        let silence = Duration::from_nanos(line.t35_ns()) + Duration::from_millis(1);
+        let pending = match mode {
+            SerialMode::Rtu => self.rtu.pending(),
+            SerialMode::Ascii => 0,
+        };
+        let wait = if pending > 0 { silence } else { Duration::from_hours(1) };
+        self.buf.resize(512, 0);
+        let mut requests = Vec::new();
+        match tokio::time::timeout(wait, port.read(&mut self.buf)).await {
+            Ok(Ok(0)) => Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
+            Ok(Ok(n)) => {
+                let got = self.buf.get(..n).unwrap_or_default().to_vec();
+                match mode {
+                    SerialMode::Rtu => {
+                        self.rtu.push(&got);
+                        requests.extend(std::iter::from_fn(|| self.rtu.next_request()));
+                    }
+                    SerialMode::Ascii => {
+                        self.ascii.push(&got);
+                        requests.extend(std::iter::from_fn(|| self.ascii.next_request()));
+                    }
+                }
+                Ok((requests, got))
+            }
+            Ok(Err(e)) => Err(e),
+            Err(_) => {
+                requests.extend(self.rtu.silence());
+                Ok((requests, Vec::new()))
+            }
+        }
+    }
+}
+
+/// Writes the answer `pdu` of `unit` after `turnaround`, framed in `mode`; the frame written.
+///
+/// # Errors
+/// The port failed.
+pub async fn answer(
+    port: &mut SerialStream,
+    rs485: &crate::source::rs485::Rs485Args,
+    mode: SerialMode,
+    turnaround: Duration,
+    unit: u8,
+    pdu: &[u8],
+) -> std::io::Result<Vec<u8>> {
+    tokio::time::sleep(turnaround).await;
+    let mut out = Vec::with_capacity(pdu.len() * 2 + 5);
+    match mode {
+        SerialMode::Rtu => encode_rtu(unit, pdu, &mut out),
+        SerialMode::Ascii => encode_ascii(unit, pdu, &mut out),
+    }
+    rs485.send(port, &out).await?;
+    Ok(out)
+}
