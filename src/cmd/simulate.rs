@@ -32,6 +32,25 @@ pub struct Args {
     /// `CAPTURE@1,5` for some of its units (repeatable).
     #[arg(long = "from", value_name = "CAPTURE[@UNITS]")]
     pub from: Vec<String>,
+    /// A device whose values are read from another one: a serial port, `HOST:PORT` (Modbus TCP)
+    /// or `rtu+tcp://HOST:PORT`; with --mirror-device, and --as/--map to serve it under
+    /// another profile (the line options apply to a serial target).
+    #[arg(long, value_name = "TARGET", requires = "mirror_device")]
+    pub mirror: Option<String>,
+    /// The mirrored device's profile and unit on the target: `PROFILE@UNIT`.
+    #[arg(long, value_name = "PROFILE@UNIT", requires = "mirror")]
+    pub mirror_device: Option<String>,
+    /// Serve the mirrored device as this profile at this address (default: as itself, at its
+    /// unit): `sdm630@2`. Needs --map unless it is the same profile.
+    #[arg(long = "as", value_name = "PROFILE@ADDRESS", requires = "mirror")]
+    pub as_device: Option<String>,
+    /// Which served value comes from which source value: `V1=voltage,P=power*1000` (names or
+    /// addresses of the served profile = of the source's, times or divided by a factor).
+    #[arg(long, value_name = "SERVED=SOURCE,…", requires = "as_device")]
+    pub map: Option<String>,
+    /// How often the mirrored device is read; no value served is older [default: 1s].
+    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg, requires = "mirror")]
+    pub fresh: Option<std::time::Duration>,
     /// Serve the devices to Modbus TCP clients here (`127.0.0.1:1502`; port 0 picks one), through
     /// the bridge's admission, queue and limits.
     #[arg(long, value_name = "ADDR:PORT")]
@@ -81,6 +100,11 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         link,
         devices,
         from,
+        mirror,
+        mirror_device,
+        as_device,
+        map,
+        fresh,
         listen,
         listen_rtu,
         listen_udp,
@@ -98,7 +122,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         anyhow::ensure!(ms.is_finite() && ms >= 0.0, "--turnaround-ms {ms}: expected 0 or more");
     }
     let (mode, settings, _) = line.overrides().resolve();
-    let specs: Vec<String> = if devices.is_empty() && from.is_empty() {
+    let specs: Vec<String> = if devices.is_empty() && from.is_empty() && mirror.is_none() {
         crate::source::simulate::DEFAULT_DEVICES.iter().map(|(n, a)| format!("{n}@{a}")).collect()
     } else {
         devices
@@ -109,6 +133,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     for spec in &from {
         emulated.extend(emulate_from::from_capture(spec, &mut notes)?);
     }
+    let mirroring = match (&mirror, &mirror_device) {
+        (Some(target), Some(source)) => {
+            let (device, opts) = crate::master::mirror::prepare(
+                target,
+                source,
+                as_device.as_deref(),
+                map.as_deref(),
+                fresh.unwrap_or(std::time::Duration::from_secs(1)),
+                line.serial.clone(),
+                emulated.len(),
+                &mut notes,
+            )?;
+            emulated.push(device);
+            Some(opts)
+        }
+        _ => None,
+    };
     refuse_two_on_one_address(&emulated)?;
     for d in &emulated {
         if let mbtap_core::sim::Device::Profile(s) = d {
@@ -136,6 +177,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
     rt.block_on(async move {
+        if let Some(m) = mirroring {
+            tokio::spawn(crate::master::mirror::run(m, Arc::clone(&shared)));
+        }
         let served = async {
             if !listening {
                 return std::future::pending().await;

@@ -5,6 +5,7 @@
 pub mod ascii;
 pub mod exec;
 pub mod link;
+pub mod mirror;
 pub mod remote;
 pub mod show;
 pub mod sunspec;

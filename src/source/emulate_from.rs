@@ -17,15 +17,24 @@ use mbtap_core::sim::{Device, Recorder, Slave};
 /// # Errors
 /// When the form, the address (1–247) or the profile is wrong, saying which.
 pub fn parse_device(spec: &str) -> anyhow::Result<Device> {
+    let (profile, address) = profile_at(spec, "device")?;
+    Ok(Device::Profile(Slave::new(Arc::new(profile), address)))
+}
+
+/// `PROFILE@ADDRESS`: the profile (built-in, user, imported or a file) and the address 1–247.
+///
+/// # Errors
+/// When the form, the address or the profile is wrong, saying which (`what` names the option).
+pub fn profile_at(spec: &str, what: &str) -> anyhow::Result<(mbtap_core::profile::Profile, u8)> {
     let (name, address) =
-        spec.rsplit_once('@').with_context(|| format!("device {spec:?}: expected PROFILE@ADDRESS, e.g. mk4@1"))?;
+        spec.rsplit_once('@').with_context(|| format!("{what} {spec:?}: expected PROFILE@ADDRESS, e.g. mk4@1"))?;
     let address: u8 = address
         .parse()
         .ok()
         .filter(|a| (1..=247).contains(a))
-        .with_context(|| format!("device {spec:?}: the address must be 1–247 (Serial Line v1.02 §2.2)"))?;
-    let profile = crate::config::devices::resolve_profile(name).with_context(|| format!("device {spec:?}"))?;
-    Ok(Device::Profile(Slave::new(Arc::new(profile), address)))
+        .with_context(|| format!("{what} {spec:?}: the address must be 1–247 (Serial Line v1.02 §2.2)"))?;
+    let profile = crate::config::devices::resolve_profile(name).with_context(|| format!("{what} {spec:?}"))?;
+    Ok((profile, address))
 }
 
 /// Every unit `spec` (`CAPTURE` or `CAPTURE@UNITS`, units as `1,5,17` or `1-4`) showed

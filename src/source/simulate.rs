@@ -123,7 +123,7 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
                 .iter()
                 .filter_map(|d| match d {
                     Device::Profile(s) => Some(s.clone()),
-                    Device::Recorded(_) => None,
+                    Device::Recorded(_) | Device::Mirror { .. } => None,
                 })
                 .collect();
             (slaves, opts.devices.turnaround.unwrap_or(DEFAULT_TURNAROUND))

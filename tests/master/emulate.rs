@@ -174,6 +174,19 @@ fn bad_sources_are_refused_with_what_to_do() {
     assert!(err.contains("no profile named"), "{err}");
     let err = run(&["--from", meter.to_str().unwrap(), "--device", "mk4@1"]);
     assert!(err.contains("two devices at address 1"), "{err}");
+    let err = run(&[
+        "--mirror",
+        "127.0.0.1:1",
+        "--mirror-device",
+        "mk4@1",
+        "--as",
+        "mkzp@2",
+        "--map",
+        "Phase Z current=input 430",
+    ]);
+    assert!(err.contains("--map") && err.contains("the served profile mkzp"), "{err}");
+    let err = run(&["--mirror", "127.0.0.1:1", "--mirror-device", "mk4@1", "--as", "mkzp@2"]);
+    assert!(err.contains("--map"), "{err}");
     // A capture in which nobody answered: five polls of unit 9, 100 ms apart, no answer.
     let dir = std::env::temp_dir().join(format!("mbtap-emulate-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -186,4 +199,80 @@ fn bad_sources_are_refused_with_what_to_do() {
     std::fs::write(&silent, w.into_inner()).unwrap();
     let err = run(&["--from", silent.to_str().unwrap()]);
     assert!(err.contains("no unit answered") && err.contains("units 9 were asked"), "{err}");
+}
+
+/// Reads an f32 (high word first) at input register `address` of `unit`; `None` on an exception.
+fn read_f32(s: &mut std::net::TcpStream, unit: u8, address: u16) -> Result<f32, Vec<u8>> {
+    let [hi, lo] = address.to_be_bytes();
+    let answer = common::call(s, 1, unit, &[/* fc */ 0x04, hi, lo, /* quantity */ 0x00, 0x02]);
+    match answer[..] {
+        [0x04, 4, a, b, c, d] => Ok(f32::from_bits(u32::from_be_bytes([a, b, c, d]))),
+        _ => Err(answer),
+    }
+}
+
+/// Waits up to 10 s for `f` to hold.
+fn eventually(what: &str, mut f: impl FnMut() -> bool) {
+    let start = std::time::Instant::now();
+    while !f() {
+        assert!(start.elapsed() < std::time::Duration::from_secs(10), "{what} never happened");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn a_mirror_serves_another_devices_values_under_another_map_and_0b_while_it_is_away() {
+    let dir = std::env::temp_dir().join(format!("mbtap-mirror-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // The served profile: an imported energy meter's sheet (f32 volts at input 0, watts at 12).
+    let sheet = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sheets/energy-meter-modicon.csv");
+    let meter = dir.join("meter.toml");
+    let _ = std::fs::remove_file(&meter);
+    let out = Command::new(BIN)
+        .args(["profiles", "import", sheet.to_str().unwrap(), "-o", meter.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The source: the built-in MK4 on a pty, mirrored through it as an RTU master would.
+    let line = dir.join("mk4");
+    let source = common::simulate(&line, &["--device", "mk4@1", "--duration", "60"]);
+    let map = "Phase 1 line to neutral volts=Phase A (L1) voltage,Phase 1 active power=input 430*10";
+    let mut child = Command::new(BIN)
+        .args(["simulate", "--mirror", line.to_str().unwrap(), "--mirror-device", "mk4@1"])
+        .args(["--as", &format!("{}@2", meter.display()), "--map", map, "--fresh", "200ms"])
+        .args(["--listen", "127.0.0.1:0", "--duration", "60"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let addr = loop {
+        let l = lines.next().expect("simulate ended before listening").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    let said = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+    let sink = std::sync::Arc::clone(&said);
+    std::thread::spawn(move || {
+        for l in lines.map_while(Result::ok) {
+            sink.lock().unwrap().push_str(&(l + "\n"));
+        }
+    });
+    let _mirror = Kill(child);
+    let mut s = connect(&addr);
+    eventually("a first value", || read_f32(&mut s, 2, 0).is_ok());
+    // Volts and watts come from one read of the source: watts are volts × 10 exactly (the MK4's
+    // 0.1 V raw value scaled, rounded to whole watts).
+    let volts = read_f32(&mut s, 2, 0).unwrap();
+    let watts = read_f32(&mut s, 2, 12).unwrap();
+    assert!((200.0..260.0).contains(&volts), "{volts} V is not the MK4's mains voltage");
+    assert!((watts - volts * 10.0).abs() < 1.0, "{watts} W from {volts} V × 10");
+    // The source goes away: every request gets 0B, said.
+    drop(source);
+    eventually("exception 0B", || read_f32(&mut s, 2, 0) == Err(vec![0x84, 0x0B]));
+    assert!(said.lock().unwrap().contains("clients get exception 0B until it answers"), "{}", said.lock().unwrap());
+    // It comes back on the same line: values again, said.
+    let _back = common::simulate(&line, &["--device", "mk4@1", "--duration", "60"]);
+    eventually("values again", || read_f32(&mut s, 2, 0).is_ok());
+    eventually("the return said", || said.lock().unwrap().contains("answering again"));
 }

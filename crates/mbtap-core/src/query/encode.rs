@@ -264,6 +264,32 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
     }
 }
 
+/// A number as the registers of `def` hold it, rounded to the register's scale and held to the
+/// type's bounds: a value computed by mbtap (a mirrored device's, `simulate --mirror`), not typed
+/// by a user, so no range or representability refusal. `None` for text and dates.
+#[must_use]
+pub fn encode_number(value: f64, def: &Def) -> Option<Vec<u16>> {
+    if !value.is_finite() {
+        return None;
+    }
+    match def.value_type {
+        // Rounded to the nearest f32 (IEEE 754 binary32), as any device holding one would.
+        #[allow(clippy::cast_possible_truncation)]
+        ValueType::F32 => Some(words32((value as f32).to_bits(), def.word_order)),
+        ValueType::String | ValueType::Datetime => None,
+        t => {
+            let (lo, hi) = bounds(t);
+            // Within i64 once clamped to the type's bounds (both well inside it).
+            #[allow(clippy::cast_possible_truncation, clippy::cast_precision_loss)]
+            let raw = ((value / def.scale.unwrap_or(1.0)).round()).clamp(lo as f64, hi as f64) as i64;
+            Some(match t {
+                ValueType::U32 | ValueType::I32 => words32(bits32(raw), def.word_order),
+                _ => vec![word(raw)],
+            })
+        }
+    }
+}
+
 /// Checks and encodes the write `target` asks for. See the module documentation.
 pub fn encode_write(target: &Target, p: Option<&Profile>, force: bool) -> Result<Write, QueryError> {
     let item = target.item.text.as_str();

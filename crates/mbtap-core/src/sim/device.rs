@@ -1,5 +1,7 @@
 //! An emulated device, whatever it was made from: a profile ([`Slave`], values at rest and
-//! moving with the clock) or a recording ([`RecordedDevice`], answering as it did). The I/O
+//! moving with the clock), a recording ([`RecordedDevice`], answering as it did) or another
+//! device it mirrors (a [`Slave`] of the served profile whose values the shell sets from the
+//! source, [`super::mirror`]). The I/O
 //! shells (`simulate` on a pseudo-terminal, the bridge's fronts) hold these and nothing else.
 
 use super::recorded::RecordedDevice;
@@ -10,6 +12,13 @@ use super::{Slave, world};
 pub enum Device {
     Profile(Slave),
     Recorded(RecordedDevice),
+    /// Values from another device; `fresh` false once the source stopped answering: every
+    /// request then gets exception 0B (MAP v1.1b3 §7: the target failed to respond), never a
+    /// stale value presented as current.
+    Mirror {
+        slave: Slave,
+        fresh: bool,
+    },
 }
 
 impl Device {
@@ -17,7 +26,7 @@ impl Device {
     #[must_use]
     pub const fn address(&self) -> u8 {
         match self {
-            Self::Profile(s) => s.address(),
+            Self::Profile(s) | Self::Mirror { slave: s, .. } => s.address(),
             Self::Recorded(r) => r.address(),
         }
     }
@@ -36,6 +45,24 @@ impl Device {
         match self {
             Self::Profile(s) => s.handle(unit, pdu),
             Self::Recorded(r) => r.handle(unit, pdu),
+            Self::Mirror { slave, fresh: true } => slave.handle(unit, pdu),
+            Self::Mirror { slave, fresh: false } => {
+                let function = *pdu.first()?;
+                (unit == slave.address()).then(|| {
+                    vec![function | crate::proto::EXCEPTION_FLAG, crate::profile::image::GATEWAY_TARGET_FAILED]
+                })
+            }
+        }
+    }
+
+    /// A mirror's new values from its source (`fresh`: they are), or that the source is gone
+    /// (`fresh` false, no values). Other devices ignore it.
+    pub fn mirrored(&mut self, values: &[((crate::profile::Table, u16), u16)], now_fresh: bool) {
+        if let Self::Mirror { slave, fresh } = self {
+            for &((table, address), v) in values {
+                slave.set(table, address, v);
+            }
+            *fresh = now_fresh;
         }
     }
 
@@ -43,7 +70,7 @@ impl Device {
     #[must_use]
     pub fn latency_ns(&self) -> Option<u64> {
         match self {
-            Self::Profile(_) => None,
+            Self::Profile(_) | Self::Mirror { .. } => None,
             Self::Recorded(r) => r.latency.map(|l| l.median_ns),
         }
     }

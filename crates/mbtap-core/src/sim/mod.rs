@@ -7,6 +7,7 @@ pub mod answers;
 pub mod ascii_requests;
 pub mod bus;
 pub mod device;
+pub mod mirror;
 pub mod recorded;
 pub mod rtu_requests;
 pub mod slave;
