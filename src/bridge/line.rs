@@ -17,6 +17,7 @@ use super::metrics::Metrics;
 use super::port::Port;
 pub use super::port::{LineOptions, MonitorChunk};
 use super::shared::{Job, LineShared, POLL_CLIENT};
+use crate::source::pace::wait_until;
 use crate::source::stream::Transport;
 use mbtap_core::chunk::{PortId, Timestamp};
 use mbtap_gateway::breaker::Breaker;
@@ -280,17 +281,5 @@ impl Port<'_> {
             let t = Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
             let _ = m.send((PortId(0), t, bytes.to_vec(), true));
         }
-    }
-}
-
-/// Sleeps until `at`: the timer for all but the last millisecond (its granularity), then
-/// yields until the moment, so the line's quiet time is t3.5, not t3.5 rounded up to a tick.
-async fn wait_until(at: Instant) {
-    let coarse = at.checked_sub(Duration::from_millis(1)).unwrap_or(at);
-    if Instant::now() < coarse {
-        tokio::time::sleep_until(coarse).await;
-    }
-    while Instant::now() < at {
-        tokio::task::yield_now().await;
     }
 }

@@ -192,9 +192,9 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
             let Some((pdu, wait)) = opts.devices.answer(request.unit, &request.pdu) else { continue };
             if let (true, Some((first, count))) = (opts.paced, heard) {
                 let ended = first + char_time * u32::try_from(count).unwrap_or(u32::MAX);
-                tokio::time::sleep_until(ended + wait).await;
+                super::pace::wait_until(ended + wait).await;
             } else if !wait.is_zero() {
-                tokio::time::sleep(wait).await;
+                super::pace::wait_until(tokio::time::Instant::now() + wait).await;
             }
             out.clear();
             match opts.mode {
