@@ -63,10 +63,9 @@ impl BridgeOptions {
         line: mbtap_core::framer::LineSettings,
         mode: mbtap_core::analyzer::SerialMode,
         duration: Option<Duration>,
-        listen: Option<String>,
-        listen_rtu: Option<String>,
-        listen_udp: Option<String>,
+        fronts: EmulatedFronts,
     ) -> Self {
+        let EmulatedFronts { listen, listen_rtu, listen_udp, listen_serial } = fronts;
         let line = LineOptions {
             port: "emulated".to_owned(),
             line,
@@ -104,9 +103,19 @@ impl BridgeOptions {
             tls: crate::bridge::tls::TlsArgs::default(),
             roles: Arc::default(),
             broker_writes: None,
-            listen_serial: None,
+            listen_serial,
         }
     }
+}
+
+/// Where emulated devices are served (`simulate --listen…`, `--serial`).
+#[derive(Debug, Default)]
+pub struct EmulatedFronts {
+    pub listen: Option<String>,
+    pub listen_rtu: Option<String>,
+    pub listen_udp: Option<String>,
+    /// A real serial port, on which the devices answer as slaves.
+    pub listen_serial: Option<crate::bridge::serial_front::SerialFront>,
 }
 
 /// What the bridge serves, for the metrics endpoint and the notes on stderr.

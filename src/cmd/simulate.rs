@@ -3,6 +3,8 @@
 //! too) for a listener (the I/O: [`crate::source::simulate`], [`crate::bridge::emulated`]).
 
 use std::fmt::Write as _;
+
+use anyhow::Context as _;
 use std::io;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -51,6 +53,12 @@ pub struct Args {
     /// How often the mirrored device is read; no value served is older [default: 1s].
     #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg, requires = "mirror")]
     pub fresh: Option<std::time::Duration>,
+    /// Serve the devices on this serial port (a USB adapter, a UART), as slaves on its line, with
+    /// the line options and --rs485 direction control: the inverter's port of a fake meter.
+    #[arg(long, value_name = "PORT")]
+    pub serial: Option<String>,
+    #[command(flatten)]
+    pub rs485: crate::source::rs485::Rs485Args,
     /// Serve the devices to Modbus TCP clients here (`127.0.0.1:1502`; port 0 picks one), through
     /// the bridge's admission, queue and limits.
     #[arg(long, value_name = "ADDR:PORT")]
@@ -80,7 +88,7 @@ pub struct Args {
     pub echo: bool,
     /// Play the master too: poll the devices and put the whole line on the pseudo-terminal,
     /// paced at the line's character rate, for a listener (`mbtap sniff LINK`).
-    #[arg(long, conflicts_with_all = ["from", "listen", "listen_rtu", "listen_udp"])]
+    #[arg(long, conflicts_with_all = ["from", "listen", "listen_rtu", "listen_udp", "serial", "mirror"])]
     pub poll: bool,
     /// With --poll: inject a fault into every fourth transaction (repeatable).
     #[arg(long = "fault", value_enum, requires = "poll")]
@@ -105,6 +113,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         as_device,
         map,
         fresh,
+        serial,
+        rs485,
         listen,
         listen_rtu,
         listen_udp,
@@ -163,7 +173,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         turnaround: turnaround_ms.map(|ms| Duration::from_secs_f64(ms / 1000.0)),
         usual_turnaround: crate::source::simulate::DEFAULT_TURNAROUND,
     });
-    let listening = listen.is_some() || listen_rtu.is_some() || listen_udp.is_some();
+    let listening = listen.is_some() || listen_rtu.is_some() || listen_udp.is_some() || serial.is_some();
+    if let Some(port) = &serial {
+        rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
+    }
     let link = link.or_else(|| (!listening).then(|| PathBuf::from("/tmp/mbtap-bus")));
     let opts = crate::source::simulate::SimulateOptions {
         link: link.clone(),
@@ -184,9 +197,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             if !listening {
                 return std::future::pending().await;
             }
-            let bridge = crate::bridge::run::BridgeOptions::emulating(
-                shared, settings, mode, duration, listen, listen_rtu, listen_udp,
-            );
+            let fronts = crate::bridge::run::EmulatedFronts {
+                listen,
+                listen_rtu,
+                listen_udp,
+                listen_serial: serial.map(|port| crate::bridge::serial_front::SerialFront {
+                    port,
+                    line: settings,
+                    mode,
+                    turnaround: Duration::ZERO,
+                    rs485,
+                }),
+            };
+            let bridge = crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts);
             crate::bridge::run::bridge::<io::Sink>(bridge, None, &mut io::stderr()).await
         };
         let on_pty = async {

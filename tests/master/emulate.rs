@@ -276,3 +276,42 @@ fn a_mirror_serves_another_devices_values_under_another_map_and_0b_while_it_is_a
     eventually("values again", || read_f32(&mut s, 2, 0).is_ok());
     eventually("the return said", || said.lock().unwrap().contains("answering again"));
 }
+
+/// `simulate --serial PORT`: the devices as slaves on a real serial port (here one end of a pty
+/// pair; the other end is the master's), through the bridge's serial front.
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn a_recorded_device_answers_on_a_serial_port() {
+    let dir = std::env::temp_dir().join(format!("mbtap-emulate-serial-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (_socat, device_side, master_side) = common::socat_pair(&dir);
+    let meter = capture("rtu-real-power-meter.pcapng");
+    let _sim = Kill(
+        Command::new(BIN)
+            .args(["simulate", "--from", meter.to_str().unwrap(), "--serial", device_side.to_str().unwrap()])
+            .args(["--duration", "60"])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let expected = pairs("rtu-real-power-meter.txt");
+    // Holding registers 0–45 as the recording's answer holds them.
+    let (_, (_, answer)) = expected.iter().find(|((_, r), _)| r[0] == 0x03).unwrap().clone();
+    let holding: Vec<i64> = answer[2..].chunks(2).map(|w| i64::from(u16::from_be_bytes([w[0], w[1]]))).collect();
+    let start = std::time::Instant::now();
+    let out = loop {
+        let out = Command::new(BIN)
+            .args(["read", master_side.to_str().unwrap(), "--unit", "1", "--format", "jsonl", "holding", "0..45"])
+            .output()
+            .unwrap();
+        if out.status.success() || start.elapsed() > std::time::Duration::from_secs(10) {
+            break out;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    };
+    let raws: Vec<i64> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok()?["raw"].as_i64())
+        .collect();
+    assert_eq!(raws, holding, "{}", String::from_utf8_lossy(&out.stderr));
+}
