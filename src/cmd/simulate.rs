@@ -53,6 +53,14 @@ pub struct Args {
     /// How often the mirrored device is read; no value served is older [default: 1s].
     #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg, requires = "mirror")]
     pub fresh: Option<std::time::Duration>,
+    /// Set the devices' values from an MQTT broker (`mqtt://HOST[:PORT]`, `mqtts://…`): publish
+    /// `NAME=VALUE` to `PREFIX/unit/U/set` (or a value to `PREFIX/unit/U/TABLE/ADDRESS/set`), as
+    /// `watch --mqtt-writes` takes them; the next read sees it.
+    #[arg(long, value_name = "URL")]
+    pub values_from: Option<String>,
+    /// The topic prefix for --values-from [default: mbtap/HOSTNAME/simulate].
+    #[arg(long, value_name = "TOPIC", requires = "values_from")]
+    pub values_prefix: Option<String>,
     /// Serve the devices on this serial port (a USB adapter, a UART), as slaves on its line, with
     /// the line options and --rs485 direction control: the inverter's port of a fake meter.
     #[arg(long, value_name = "PORT")]
@@ -113,6 +121,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         as_device,
         map,
         fresh,
+        values_from,
+        values_prefix,
         serial,
         rs485,
         listen,
@@ -192,6 +202,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     rt.block_on(async move {
         if let Some(m) = mirroring {
             tokio::spawn(crate::master::mirror::run(m, Arc::clone(&shared)));
+        }
+        if let Some(url) = &values_from {
+            crate::publish::values_from::start(url, values_prefix, Arc::clone(&shared))?;
         }
         let served = async {
             if !listening {

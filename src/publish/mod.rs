@@ -10,6 +10,7 @@ pub mod mqtt_options;
 pub mod outbox;
 pub mod spool;
 pub mod spy;
+pub mod values_from;
 pub mod watched;
 
 use std::sync::Arc;

@@ -76,6 +76,67 @@ impl Device {
     }
 }
 
+/// Sets a value on the device from outside (`simulate --values-from`, an MQTT `…/set`): by a
+/// name of its profile or `TABLE ADDRESS`, the value as the profile holds it (a number at the
+/// register's scale and type, on/off for a bit, a label where the profile lists them) — input
+/// registers too, as a device's own measurements move. The value as now read back.
+///
+/// # Errors
+/// The item is unknown, the value cannot be held there, or the address is outside the device.
+pub fn set_value(
+    device: &mut Device,
+    item: &crate::query::items::Item,
+) -> Result<Option<crate::query::rows::Row>, String> {
+    use crate::profile::Table;
+    let (profile, address) = match device {
+        Device::Profile(s) | Device::Mirror { slave: s, .. } => (Some(s.profile().clone()), s.address()),
+        Device::Recorded(r) => (None, r.address()),
+    };
+    let text = item.value.as_deref().ok_or_else(|| format!("{}: no value: give NAME=VALUE", item.text))?;
+    let target = crate::query::resolve::resolve(item, profile.as_ref()).map_err(|e| e.to_string())?;
+    let bits = matches!(target.table, Table::Coils | Table::DiscreteInputs);
+    let def = profile.as_ref().and_then(|p| p.slot(target.table, target.first)).map(|(_, d)| d.clone());
+    let number = text.trim().parse::<f64>().ok();
+    let words: Vec<u16> = match (&def, number) {
+        (_, _) if bits => {
+            let on = matches!(text.trim().to_ascii_lowercase().as_str(), "1" | "on" | "true")
+                || def.as_ref().and_then(|d| d.on.as_deref()).is_some_and(|on| on.eq_ignore_ascii_case(text.trim()));
+            vec![u16::from(on)]
+        }
+        (Some(d), Some(v)) => {
+            crate::query::encode::encode_number(v, d).ok_or_else(|| format!("{}: not a number register", item.text))?
+        }
+        (Some(d), None) => {
+            let raw = d
+                .labels
+                .iter()
+                .chain(&d.commands)
+                .find(|(_, l)| l.eq_ignore_ascii_case(text.trim()))
+                .map(|(&k, _)| k)
+                .ok_or_else(|| format!("{}: {text:?} is neither a number nor one of its labels", item.text))?;
+            // A label's raw value, at the register's scale (labels are raw values).
+            #[allow(clippy::cast_precision_loss)]
+            let value = raw as f64 * d.scale.unwrap_or(1.0);
+            crate::query::encode::encode_number(value, d)
+                .ok_or_else(|| format!("{}: not a number register", item.text))?
+        }
+        (None, _) => text
+            .split(',')
+            .map(|v| v.trim().parse::<u16>().map_err(|_| format!("{}: {v:?} is not a 16-bit raw value", item.text)))
+            .collect::<Result<_, _>>()?,
+    };
+    for (a, &w) in (target.first..).zip(&words) {
+        let stored = match device {
+            Device::Profile(s) | Device::Mirror { slave: s, .. } => s.set(target.table, a, w),
+            Device::Recorded(r) => r.set(target.table, a, w),
+        };
+        if !stored {
+            return Err(format!("{}: unit {address} has no {} {a}", item.text, target.table.name()));
+        }
+    }
+    Ok(crate::query::rows::rows(address, target.table, target.first, &words, profile.as_ref()).into_iter().next())
+}
+
 /// The answer of the first of `devices` that answers `unit` (only one answers an address:
 /// two on one address is a fault, not a simulation), with that device's own latency.
 pub fn answer(devices: &mut [Device], unit: u8, pdu: &[u8], t: f64) -> Option<(Vec<u8>, Option<u64>)> {

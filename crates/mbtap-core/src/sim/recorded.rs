@@ -223,6 +223,18 @@ impl RecordedDevice {
         self.values.get(&(table, address)).copied()
     }
 
+    /// Sets a value the recording showed (from outside: `simulate --values-from`); `false` at an
+    /// address it never showed, which stays refused.
+    pub fn set(&mut self, table: Table, address: u16, value: u16) -> bool {
+        match self.values.get_mut(&(table, address)) {
+            Some(v) => {
+                *v = value;
+                true
+            }
+            None => false,
+        }
+    }
+
     /// Requests the recording showed refused, and with which code.
     pub fn refusals(&self) -> impl Iterator<Item = ((u8, u16, u16), u8)> + '_ {
         self.refusals.iter().map(|(&k, &v)| (k, v))
