@@ -34,6 +34,10 @@ pub struct Args {
     /// `CAPTURE@1,5` for some of its units (repeatable).
     #[arg(long = "from", value_name = "CAPTURE[@UNITS]")]
     pub from: Vec<String>,
+    /// With --from: serve the recording's values in their recorded time course (as first heard,
+    /// changing when they changed, looping) instead of as last heard.
+    #[arg(long, requires = "from")]
+    pub replay_values: bool,
     /// A device whose values are read from another one: a serial port, `HOST:PORT` (Modbus TCP)
     /// or `rtu+tcp://HOST:PORT`; with --mirror-device, and --as/--map to serve it under
     /// another profile (the line options apply to a serial target).
@@ -116,6 +120,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         link,
         devices,
         from,
+        replay_values,
         mirror,
         mirror_device,
         as_device,
@@ -151,7 +156,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         specs.iter().map(|d| emulate_from::parse_device(d)).collect::<anyhow::Result<_>>()?;
     let mut notes = String::new();
     for spec in &from {
-        emulated.extend(emulate_from::from_capture(spec, &mut notes)?);
+        emulated.extend(emulate_from::from_capture(spec, replay_values, &mut notes)?);
     }
     let mirroring = match (&mirror, &mirror_device) {
         (Some(target), Some(source)) => {

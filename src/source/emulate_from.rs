@@ -42,7 +42,7 @@ pub fn profile_at(spec: &str, what: &str) -> anyhow::Result<(mbtap_core::profile
 ///
 /// # Errors
 /// The capture cannot be read; no unit answered in it; a unit asked for is not in it.
-pub fn from_capture(spec: &str, notes: &mut String) -> anyhow::Result<Vec<Device>> {
+pub fn from_capture(spec: &str, replay_values: bool, notes: &mut String) -> anyhow::Result<Vec<Device>> {
     let (path, wanted) = split_units(spec)?;
     if let Some(image) = super::image_file::load(path)? {
         return from_image(path, &image, wanted.as_ref(), notes);
@@ -78,7 +78,17 @@ pub fn from_capture(spec: &str, notes: &mut String) -> anyhow::Result<Vec<Device
         );
         devices.retain(|d| wanted.contains(&d.address()));
     }
-    for d in &devices {
+    for d in &mut devices {
+        if replay_values {
+            let course = recorder.course(d.address());
+            let _ = writeln!(
+                notes,
+                "mbtap: unit {}: {} recorded values replayed in their time course, looping",
+                d.address(),
+                course.len()
+            );
+            d.replay_values(course);
+        }
         describe(path, d, notes);
     }
     Ok(devices.into_iter().map(Device::Recorded).collect())

@@ -315,3 +315,21 @@ fn a_recorded_device_answers_on_a_serial_port() {
         .collect();
     assert_eq!(raws, holding, "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// `--replay-values`: a recording's values in their time course — at the start, as first heard;
+/// without it, as last heard. The three-phase meter's shape (64 polls 4 s apart, voltages
+/// moving) tells them apart.
+#[test]
+fn replayed_values_start_as_first_heard_last_heard_without() {
+    let shape = capture("rtu-shape-three-phase-floats.pcapng");
+    let all = pairs("rtu-shape-three-phase-floats.txt");
+    let first = all.first().unwrap().clone();
+    let last = all.iter().rev().find(|(req, _)| *req == first.0).unwrap().clone();
+    assert_ne!(first.1, last.1, "the voltages moved over the recording");
+    let (_a, replayed, said) = emulate(&["--from", shape.to_str().unwrap(), "--replay-values"]);
+    assert!(said.contains("recorded values replayed in their time course"), "{said}");
+    let (_b, held, _) = emulate(&["--from", shape.to_str().unwrap()]);
+    let ((unit, request), _) = &first;
+    assert_eq!(common::call(&mut connect(&replayed), 1, *unit, request), first.1.1);
+    assert_eq!(common::call(&mut connect(&held), 1, *unit, request), last.1.1);
+}

@@ -32,10 +32,12 @@ impl Device {
     }
 
     /// Moves its values to the time `t` (seconds since the start): a profile's measurements
-    /// move; a recording's stay as heard.
+    /// move; a recording's stay as last heard, or follow their recorded course when replayed.
     pub fn step(&mut self, t: f64) {
-        if let Self::Profile(s) = self {
-            world::step(s, t);
+        match self {
+            Self::Profile(s) => world::step(s, t),
+            Self::Recorded(r) => r.step(t),
+            Self::Mirror { .. } => {}
         }
     }
 

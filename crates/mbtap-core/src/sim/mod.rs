@@ -9,6 +9,7 @@ pub mod bus;
 pub mod device;
 pub mod mirror;
 pub mod recorded;
+pub mod recording;
 pub mod rtu_requests;
 pub mod slave;
 pub mod uart;
@@ -16,7 +17,8 @@ pub mod world;
 
 pub use ascii_requests::AsciiRequestAssembler;
 pub use device::Device;
-pub use recorded::{RecordedDevice, Recorder};
+pub use recorded::RecordedDevice;
+pub use recording::Recorder;
 pub use rtu_requests::{RequestAssembler, RequestFrame};
 pub use slave::Slave;
 

@@ -1,9 +1,9 @@
 //! A device as a recording showed it (`mbtap simulate --from CAPTURE`): the register image the
 //! capture carried (the last value heard at each address, what was written included), the
 //! exceptions it gave and for which requests, answers to functions that carry no registers
-//! (FC 11 Report Server ID, FC 2B/0E identity, FC 08) as they were, and how long it took to
-//! answer. Built by [`Recorder`], an analyzer sink fed by the one replay every command uses;
-//! pure like the rest of the core.
+//! (FC 11 Report Server ID, FC 2B/0E identity, FC 08) as they were, how long it took to
+//! answer, and — with `--replay-values` — its values in their recorded time course, looping.
+//! Built by [`super::recording::Recorder`]; pure like the rest of the core.
 //!
 //! What the recording never showed is not invented: a read of an address never heard is
 //! refused with exception 02 (MAP v1.1b3 §7), a function never heard with 01, unless the
@@ -12,147 +12,18 @@
 use std::collections::BTreeMap;
 
 use super::answers::{self, COIL_OFF, COIL_ON};
-use crate::analyzer::{Event, Sink};
-use crate::pairing::{Outcome, ShownLatency};
 use crate::profile::format::Table;
-use crate::profile::image::RegisterImage;
 use crate::proto::{EXCEPTION_FLAG, ExceptionCode, Request, parse_request};
-
-/// Answers kept verbatim per device (requests of functions without registers, by their PDU):
-/// a recording of ever-new diagnostics requests must not grow without bound.
-const MAX_VERBATIM: usize = 1024;
-/// Refusals kept per device, by (function, start address, quantity).
-const MAX_REFUSALS: usize = 65_536;
-/// Latencies kept per device for its median and spread (the most recent).
-const MAX_LATENCIES: usize = 4096;
-
-/// What one unit showed in the recording.
-#[derive(Debug, Clone, Default)]
-struct UnitLog {
-    /// `(function, address, quantity)` → exception code, for requests the device refused.
-    refusals: BTreeMap<(u8, u16, u16), u8>,
-    /// Request PDU → response PDU, for functions that carry no registers.
-    verbatim: BTreeMap<Vec<u8>, Vec<u8>>,
-    latencies: Vec<u64>,
-    /// Where the next latency goes once `latencies` is full (a ring of the most recent).
-    latency_at: usize,
-    answered: u64,
-    unanswered: u64,
-}
-
-/// Builds devices from a recording's transactions (an [`Sink`] for [`crate::replay::replay_into`]).
-#[derive(Debug, Default)]
-pub struct Recorder {
-    image: RegisterImage,
-    units: BTreeMap<u8, UnitLog>,
-    /// What the replay warned about (a damaged block), said to the user by the caller.
-    pub warnings: Vec<String>,
-}
-
-impl Sink for Recorder {
-    fn event(&mut self, event: &Event<'_>) {
-        if let Event::Transaction(t) = event {
-            self.transaction(t);
-        }
-    }
-
-    fn warning(&mut self, message: &str) {
-        if self.warnings.len() < 16 {
-            self.warnings.push(message.to_owned());
-        }
-    }
-}
-
-impl Recorder {
-    /// Takes in one transaction as the pairing gave it.
-    pub fn transaction(&mut self, t: &crate::pairing::Transaction<'_>) {
-        let Some(request) = t.request_pdu else { return };
-        if t.unit == 0 || t.unit > 247 {
-            return;
-        }
-        let log = self.units.entry(t.unit).or_default();
-        match (t.outcome, t.response_pdu) {
-            (Outcome::Ok, Some(response)) => {
-                log.answered += 1;
-                let function = request.first().copied().unwrap_or(0);
-                if !carries_registers(function) && log.verbatim.len() < MAX_VERBATIM {
-                    log.verbatim.insert(request.to_vec(), response.to_vec());
-                }
-                self.image.update(t.unit, t.t_start.0, request, Some(response));
-            }
-            (Outcome::Exception(code), _) => {
-                log.answered += 1;
-                let key = refusal_key(request);
-                if log.refusals.len() < MAX_REFUSALS || log.refusals.contains_key(&key) {
-                    log.refusals.insert(key, code);
-                }
-            }
-            _ => {
-                log.unanswered += 1;
-                return;
-            }
-        }
-        if let ShownLatency::Measured(ns) = t.shown_latency() {
-            if log.latencies.len() < MAX_LATENCIES {
-                log.latencies.push(ns);
-            } else if let Some(slot) = log.latencies.get_mut(log.latency_at) {
-                *slot = ns;
-                log.latency_at = (log.latency_at + 1) % MAX_LATENCIES;
-            }
-        }
-    }
-
-    /// Units asked in the recording that never answered (nothing to emulate them from).
-    #[must_use]
-    pub fn silent_units(&self) -> Vec<u8> {
-        self.units.iter().filter(|(_, l)| l.answered == 0).map(|(&u, _)| u).collect()
-    }
-
-    /// One device per unit that answered at least once, in address order.
-    #[must_use]
-    pub fn devices(&self) -> Vec<RecordedDevice> {
-        self.units
-            .iter()
-            .filter(|(_, l)| l.answered > 0)
-            .map(|(&unit, log)| {
-                // Coils sort first and input registers last (the order of `Table`'s variants).
-                let values = self
-                    .image
-                    .values
-                    .range((unit, Table::Coils, 0)..=(unit, Table::InputRegisters, u16::MAX))
-                    .map(|(&(_, table, a), k)| ((table, a), k.raw))
-                    .collect();
-                let mut sorted = log.latencies.clone();
-                sorted.sort_unstable();
-                let at = |q: usize| sorted.get(sorted.len().saturating_sub(1) * q / 100).copied();
-                RecordedDevice {
-                    address: unit,
-                    values,
-                    refusals: log.refusals.clone(),
-                    verbatim: log.verbatim.clone(),
-                    latency: at(50).map(|median| Latency {
-                        median_ns: median,
-                        p10_ns: at(10).unwrap_or(median),
-                        p90_ns: at(90).unwrap_or(median),
-                        samples: sorted.len(),
-                    }),
-                    answered: log.answered,
-                    unanswered: log.unanswered,
-                }
-            })
-            .collect()
-    }
-}
 
 /// Functions whose answers the register image holds (MAP v1.1b3 §6.1–§6.6, §6.11, §6.12, §6.17):
 /// served from values, not replayed verbatim.
-const fn carries_registers(function: u8) -> bool {
+pub(super) const fn carries_registers(function: u8) -> bool {
     matches!(function, 0x01..=0x06 | 0x0F | 0x10 | 0x17)
 }
 
 /// A refused request's key: its function, and for the register functions its start address
 /// and quantity (1 for single writes), else 0.
-fn refusal_key(request: &[u8]) -> (u8, u16, u16) {
+pub(super) fn refusal_key(request: &[u8]) -> (u8, u16, u16) {
     let function = request.first().copied().unwrap_or(0);
     let word = |i: usize| match (request.get(i), request.get(i + 1)) {
         (Some(&hi), Some(&lo)) => u16::from_be_bytes([hi, lo]),
@@ -178,10 +49,15 @@ pub struct Latency {
 /// One unit of a recording, answering as it did.
 #[derive(Debug, Clone)]
 pub struct RecordedDevice {
-    address: u8,
-    values: BTreeMap<(Table, u16), u16>,
-    refusals: BTreeMap<(u8, u16, u16), u8>,
-    verbatim: BTreeMap<Vec<u8>, Vec<u8>>,
+    pub(super) address: u8,
+    pub(super) values: BTreeMap<(Table, u16), u16>,
+    pub(super) refusals: BTreeMap<(u8, u16, u16), u8>,
+    pub(super) verbatim: BTreeMap<Vec<u8>, Vec<u8>>,
+    /// The values in their recorded time course (ns from the recording's first transaction),
+    /// and where serving them has got to; empty unless replayed.
+    pub(super) course: Vec<(u64, Table, u16, u16)>,
+    pub(super) course_at: usize,
+    pub(super) course_last_ns: u64,
     /// `None` when no answer's start could be measured (one read held request and answer).
     pub latency: Option<Latency>,
     pub answered: u64,
@@ -198,10 +74,45 @@ impl RecordedDevice {
             values,
             refusals: BTreeMap::new(),
             verbatim: BTreeMap::new(),
+            course: Vec::new(),
+            course_at: 0,
+            course_last_ns: 0,
             latency: None,
             answered: 0,
             unanswered: 0,
         }
+    }
+
+    /// Serves the recorded time course from now on: values start as first heard and change
+    /// when the recording changed them, from the start again after the last change.
+    pub fn replay_values(&mut self, course: Vec<(u64, Table, u16, u16)>) {
+        for &(_, table, address, value) in course.iter().rev() {
+            self.values.insert((table, address), value);
+        }
+        self.course = course;
+        self.course_at = 0;
+        self.course_last_ns = 0;
+    }
+
+    /// Moves the values on to `t` seconds since serving began (with a replayed time course).
+    pub fn step(&mut self, t: f64) {
+        let Some(&(span, ..)) = self.course.last() else { return };
+        // One period past the last change, so the last values are served a while too.
+        let period = span.saturating_add(span / self.course.len().max(1) as u64).max(1);
+        // Seconds to ns, within u64 for any run shorter than 584 years.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let now = ((t.max(0.0) * 1e9) as u64) % period;
+        if now < self.course_last_ns {
+            self.course_at = 0;
+        }
+        while let Some(&(at, table, address, value)) = self.course.get(self.course_at) {
+            if at > now {
+                break;
+            }
+            self.values.insert((table, address), value);
+            self.course_at += 1;
+        }
+        self.course_last_ns = now;
     }
 
     /// The unit's address.
@@ -360,9 +271,10 @@ impl RecordedDevice {
 
 #[cfg(test)]
 mod tests {
+    use super::super::recording::Recorder;
     use super::*;
     use crate::chunk::Timestamp;
-    use crate::pairing::Transaction;
+    use crate::pairing::{Outcome, Transaction};
 
     /// FC 03 at 100, 2 registers (MAP v1.1b3 §6.3).
     const READ_100_2: [u8; 5] = [/* fc */ 0x03, /* address */ 0x00, 0x64, /* quantity */ 0x00, 0x02];
@@ -450,6 +362,27 @@ mod tests {
         assert_eq!(d.get(Table::HoldingRegisters, 101), Some(0xABCD));
         assert_eq!(d.handle(0, &[0x06, 0x00, 0x64, 0x00, 0x01]), None, "broadcast: acted on, silent");
         assert_eq!(d.get(Table::HoldingRegisters, 100), Some(1));
+    }
+
+    #[test]
+    fn replayed_values_follow_their_recorded_course_and_loop() {
+        let mut d = RecordedDevice::from_image(9, BTreeMap::from([((Table::HoldingRegisters, 100), 3)]));
+        // Holding 100 was 1, then 2 a second later, then 3 at two seconds.
+        d.replay_values(vec![
+            (0, Table::HoldingRegisters, 100, 1),
+            (1_000_000_000, Table::HoldingRegisters, 100, 2),
+            (2_000_000_000, Table::HoldingRegisters, 100, 3),
+        ]);
+        let read =
+            |d: &mut RecordedDevice| d.handle(9, &READ_100_2[..3].iter().copied().chain([0, 1]).collect::<Vec<_>>());
+        assert_eq!(read(&mut d).unwrap(), [0x03, 2, 0, 1], "starts as first heard");
+        d.step(1.5);
+        assert_eq!(read(&mut d).unwrap(), [0x03, 2, 0, 2]);
+        d.step(2.1);
+        assert_eq!(read(&mut d).unwrap(), [0x03, 2, 0, 3]);
+        // The period is the span and one mean step (2.67 s): 2.8 s is 0.13 s into the next loop.
+        d.step(2.8);
+        assert_eq!(read(&mut d).unwrap(), [0x03, 2, 0, 1], "from the start again");
     }
 
     #[test]
