@@ -6,9 +6,14 @@
 
 use std::pin::Pin;
 use std::task::{Context, Poll};
+#[cfg(test)]
+use std::time::Duration;
 
 use mbtap_proto::ascii_link::AsciiLink;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+
+/// Reads of the port in one poll before giving the runtime back.
+const READS_BEFORE_YIELD: usize = 16;
 
 /// A byte stream (a serial port, a TCP stream to a converter) speaking ASCII underneath.
 #[derive(Debug)]
@@ -29,7 +34,10 @@ impl<S> AsciiStream<S> {
 impl<S: AsyncRead + Unpin> AsyncRead for AsciiStream<S> {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<std::io::Result<()>> {
         let this = &mut *self;
-        loop {
+        // A line that streams characters and never a whole frame must not hold the runtime:
+        // after a few reads without an answer the task yields (woken at once), so the caller's
+        // timeout is looked at.
+        for _ in 0..READS_BEFORE_YIELD {
             if this.link.has_answer() {
                 buf.put_slice(&this.link.take_answer(buf.remaining()));
                 return Poll::Ready(Ok(()));
@@ -42,6 +50,8 @@ impl<S: AsyncRead + Unpin> AsyncRead for AsciiStream<S> {
                 other => return other,
             }
         }
+        cx.waker().wake_by_ref();
+        Poll::Pending
     }
 }
 
@@ -79,5 +89,44 @@ impl<S: AsyncWrite + Unpin> AsyncWrite for AsciiStream<S> {
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
         Pin::new(&mut self.inner).poll_shutdown(cx)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+
+    /// A line that always has characters and never a frame (a babbling device at a wrong
+    /// setting): endless 'A's.
+    struct Babble;
+
+    impl AsyncRead for Babble {
+        fn poll_read(self: Pin<&mut Self>, _cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<std::io::Result<()>> {
+            let n = buf.remaining().min(64);
+            buf.put_slice(&[b'A'; 64][..n]);
+            Poll::Ready(Ok(()))
+        }
+    }
+
+    #[tokio::test]
+    async fn a_babbling_line_does_not_hold_the_runtime_past_the_timeout() {
+        let mut s = AsciiStream::new(Babble);
+        let mut buf = [0u8; 8];
+        let r = tokio::time::timeout(Duration::from_millis(50), s.read(&mut buf)).await;
+        assert!(r.is_err(), "the read must time out, not spin forever");
+    }
+
+    #[tokio::test]
+    async fn a_written_frame_leaves_as_ascii_at_the_flush() {
+        let (near, mut far) = tokio::io::duplex(256);
+        let mut s = AsciiStream::new(near);
+        // Unit 1, FC 03, address 0x0065, quantity 3, CRC 0xD415 low byte first.
+        s.write_all(&[0x01, 0x03, 0x00, 0x65, 0x00, 0x03, 0x15, 0xD4]).await.unwrap();
+        s.flush().await.unwrap();
+        let mut out = [0u8; 17];
+        far.read_exact(&mut out).await.unwrap();
+        assert_eq!(&out, b":01030065000394\r\n");
     }
 }
