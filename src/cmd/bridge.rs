@@ -167,10 +167,6 @@ pub struct Args {
     pub mqtt_role: Option<String>,
 }
 
-/// The least silence taken as the end of an answer on a networked line (`rtu-over-tcp://`,
-/// `rfc2217://`): the network and the server's buffering split answers by more than t3.5.
-const NETWORK_LATENCY: std::time::Duration = std::time::Duration::from_millis(50);
-
 /// Runs the bridge; `matches` tells which options the command line gave, for `--config`.
 pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode> {
     let args = match &args.config {
@@ -319,13 +315,11 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         retries,
         turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
         broadcast_reply,
-        // A serial server's TCP stream keeps no timing: silences shorter than this are not
-        // taken as the end of an answer whose length the structure does not give.
-        latency: if crate::source::stream::Transport::of(&port).networked() {
-            std::time::Duration::from_nanos(latency_ns).max(NETWORK_LATENCY)
-        } else {
-            std::time::Duration::from_nanos(latency_ns)
-        },
+        // A serial server's TCP stream keeps no timing: silences shorter than its latency are
+        // not taken as the end of an answer whose length the structure does not give.
+        latency: std::time::Duration::from_nanos(
+            crate::source::stream::Transport::of(&port).latency_ns(latency_ns).unwrap_or(0),
+        ),
         port,
         emulated: None,
     };

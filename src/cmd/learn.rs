@@ -80,7 +80,7 @@ fn listen(args: &Args) -> anyhow::Result<mbtap_core::learn::Learner> {
         port: port.clone(),
         mode,
         line: settings,
-        latency_ns: args.line.line.latency_ms.is_some().then_some(latency_ns),
+        latency_ns,
         record: None,
         duration: args.duration,
     };

@@ -38,15 +38,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { port, link, line, output, record, duration } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
     let record_path = record.clone();
-    let opts = crate::source::tap::TapOptions {
-        port,
-        link,
-        mode,
-        line: settings,
-        latency_ns: line.latency_ms.is_some().then_some(latency_ns),
-        record,
-        duration,
-    };
+    let opts = crate::source::tap::TapOptions { port, link, mode, line: settings, latency_ns, record, duration };
     let profiles = crate::config::devices::load_devices(&output.devices)?;
     let publishing = crate::publish::Publishing::start(&output.publish, true, &opts.port, &profiles)?;
     let taps = publishing.taps();

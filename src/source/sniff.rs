@@ -8,7 +8,7 @@
 //! `rtu-over-tcp://HOST:PORT` (or `rtu+tcp://`) listens to a serial server in transparent mode
 //! (ser2net raw, USR, Elfin, NPort): the remote line's bytes as TCP delivers them. TCP keeps no
 //! timing — a segment may hold parts of several frames, or be held back — so the framer is told
-//! not to trust silences shorter than [`SERIAL_SERVER_LATENCY`] and finds frame ends by their
+//! not to trust silences shorter than [`crate::source::stream::SERIAL_SERVER_LATENCY`] and finds frame ends by their
 //! structure and CRC; a connection that drops is made again every second.
 
 use std::io::Write;
@@ -36,10 +36,6 @@ pub struct SniffOptions {
     /// Stop after this long (for tests and timed captures); `None` runs until Ctrl-C.
     pub duration: Option<Duration>,
 }
-
-/// What a serial server's TCP stream is trusted to in timing (unless `--latency-ms` says):
-/// its buffering and the network's, far beyond t3.5 at any baud rate.
-pub const SERIAL_SERVER_LATENCY: u64 = 100_000_000;
 
 /// The serial server's `HOST:PORT` when `port` names one (raw or RFC 2217).
 fn serial_server(port: &str) -> Option<&str> {
@@ -88,10 +84,9 @@ pub async fn sniff<W: Write>(
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
     let remote = serial_server(&opts.port).is_some();
-    let latency_ns = if remote {
-        opts.latency_ns.unwrap_or(SERIAL_SERVER_LATENCY)
-    } else {
-        crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err)
+    let latency_ns = match Transport::of(&opts.port).latency_ns(opts.latency_ns) {
+        Some(ns) if remote => ns,
+        _ => crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err),
     };
     let description = LineOverrides::describe(opts.mode, opts.line, latency_ns);
     let recorder = match &opts.record {

@@ -50,10 +50,30 @@ impl<'a> Transport<'a> {
 
     /// Reached over the network: no RS-485 direction control, no serial ioctls.
     #[must_use]
-    pub fn networked(self) -> bool {
+    pub const fn networked(self) -> bool {
         !matches!(self, Self::Serial(_))
     }
+
+    /// How late its bytes may arrive, decided once for every command (sniff, tap, learn, the
+    /// bridge): what `--latency-ms` gave (`given`, `None`: not given — never taken for 0), else
+    /// for a line reached over the network [`SERIAL_SERVER_LATENCY`]; `None` for a local port
+    /// whose adapter is asked ([`crate::source::serial::prepare_latency`]).
+    #[must_use]
+    pub const fn latency_ns(self, given: Option<u64>) -> Option<u64> {
+        match (given, self.networked()) {
+            (Some(ns), _) => Some(ns),
+            (None, true) => Some(SERIAL_SERVER_LATENCY),
+            (None, false) => None,
+        }
+    }
 }
+
+/// What a serial server's TCP stream is trusted to in timing (unless `--latency-ms` says): its
+/// buffering and the network's split and join the line's bytes far beyond t3.5 at any baud rate,
+/// so silences shorter than this are not taken as frame ends (sniffing) or as the end of an
+/// answer whose length its structure does not give (the bridge). One figure for every command:
+/// the bridge had 50 ms and sniff 100 ms for the same kind of line (issue 43).
+pub const SERIAL_SERVER_LATENCY: u64 = 100_000_000;
 
 /// An open line.
 pub enum LineStream {

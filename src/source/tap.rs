@@ -51,10 +51,10 @@ const APP_STALL: Duration = Duration::from_millis(50);
 /// When the port or the pseudo-terminal cannot be set up, or the recording written.
 pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &mut dyn Write) -> anyhow::Result<()> {
     // A serial server's stream keeps no timing: as for `sniff`, frames are found by structure.
-    let latency_ns = if Transport::of(&opts.port).networked() {
-        opts.latency_ns.unwrap_or(crate::source::sniff::SERIAL_SERVER_LATENCY)
-    } else {
-        crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err)
+    let transport = Transport::of(&opts.port);
+    let latency_ns = match transport.latency_ns(opts.latency_ns) {
+        Some(ns) if transport.networked() => ns,
+        _ => crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err),
     };
     let mut watch = crate::source::serial::DeviceWatch::default();
     let mut bus = LineStream::open_line(&opts.port, opts.line, &mut watch, err).await?;

@@ -34,7 +34,7 @@ impl LineOverrides {
 
     /// The settings, defaults filled in (19200 8E1 RTU, Modbus over Serial Line v1.02 §2.5.1).
     #[must_use]
-    pub fn resolve(self) -> (SerialMode, LineSettings, u64) {
+    pub fn resolve(self) -> (SerialMode, LineSettings, Option<u64>) {
         let d = LineSettings::default();
         let mode = self.mode.unwrap_or(SerialMode::Rtu);
         // ASCII's default character is 7 data bits (§2.5.2).
@@ -45,7 +45,8 @@ impl LineOverrides {
             parity: self.parity.unwrap_or(d.parity),
             stop_bits: self.stop_bits.unwrap_or(d.stop_bits),
         };
-        (mode, line, self.latency_ns.unwrap_or(0))
+        // "Not given" stays distinct from 0 (issue 43: commands rebuilt it from the option).
+        (mode, line, self.latency_ns)
     }
 
     /// The description written into a capture's interface block.
@@ -97,7 +98,7 @@ mod tests {
         let line = LineSettings { baud: 9600, data_bits: 8, parity: Parity::None, stop_bits: 2 };
         let d = LineOverrides::describe(SerialMode::Ascii, line, 16_000_000);
         let back = LineOverrides::from_description(&d).resolve();
-        assert_eq!(back, (SerialMode::Ascii, line, 16_000_000));
+        assert_eq!(back, (SerialMode::Ascii, line, Some(16_000_000)));
     }
 
     #[test]

@@ -51,7 +51,11 @@ pub fn replay_into<R: std::io::Read, S: Sink>(input: R, cli: LineOverrides, sink
         sink.settings(line);
         // A latency given on the command line is kept; one the capture stores (or none) is
         // what the recorder knew, and valid frames may show the reads were later still.
-        let framer = FramerConfig { learn_latency: cli.latency_ns.is_none(), ..FramerConfig::new(line, latency_ns) };
+        // Neither said: the reads are taken as exact until valid frames show otherwise.
+        let framer = FramerConfig {
+            learn_latency: cli.latency_ns.is_none(),
+            ..FramerConfig::new(line, latency_ns.unwrap_or(0))
+        };
         let mut analyzer = Analyzer::new(AnalyzerConfig { mode, framer, pairing });
         analyzer.declare_lengths(&sink.declared_lengths());
         analyzer
