@@ -188,3 +188,48 @@ pub fn call(s: &mut std::net::TcpStream, tid: u16, unit: u8, pdu: &[u8]) -> Vec<
     std::io::Read::read_exact(s, &mut answer).unwrap();
     answer
 }
+
+/// `mbtap simulate ARGS` serving on a free Modbus TCP port (the caller's `--listen 127.0.0.1:0`
+/// among `args`): the process, the address it listens on, what it said before listening, and
+/// what it says after (gathered as it comes).
+pub fn simulate_listening(args: &[&str]) -> (Kill, String, String, std::sync::Arc<std::sync::Mutex<String>>) {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(BIN)
+        .arg("simulate")
+        .args(args)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut before = String::new();
+    let addr = loop {
+        let l = lines.next().expect("simulate ended before listening").unwrap();
+        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+        before.push_str(&l);
+        before.push('\n');
+    };
+    let after = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+    let sink = std::sync::Arc::clone(&after);
+    std::thread::spawn(move || {
+        for l in lines.map_while(Result::ok) {
+            sink.lock().unwrap().push_str(&(l + "\n"));
+        }
+    });
+    (Kill(child), addr, before, after)
+}
+
+/// The energy meter's vendor sheet (`tests/fixtures/sheets/energy-meter-modicon.csv`: f32 volts at
+/// input register 0, watts at 12, …) imported into `dir/meter.toml`, as a user would.
+pub fn imported_meter(dir: &std::path::Path) -> std::path::PathBuf {
+    let sheet = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sheets/energy-meter-modicon.csv");
+    let meter = dir.join("meter.toml");
+    let _ = std::fs::remove_file(&meter);
+    let out = std::process::Command::new(BIN)
+        .args(["profiles", "import", sheet.to_str().unwrap(), "-o", meter.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    meter
+}

@@ -742,30 +742,20 @@ fn values_set_over_mqtt_appear_at_the_next_read_of_an_emulated_meter() {
     let _broker = broker(&d, port);
     let sub = Sub::start(port, "v/#");
     // The imported sheet: an f32 of volts at input register 0.
-    let sheet = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sheets/energy-meter-modicon.csv");
-    let meter = d.join("meter.toml");
-    let _ = std::fs::remove_file(&meter);
-    let out = Command::new(BIN)
-        .args(["profiles", "import", sheet.to_str().unwrap(), "-o", meter.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let mut child = Command::new(BIN)
-        .args(["simulate", "--device", &format!("{}@3", meter.display())])
-        .args(["--values-from", &format!("mqtt://127.0.0.1:{port}"), "--values-prefix", "v"])
-        .args(["--listen", "127.0.0.1:0", "--duration", "60"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let addr = loop {
-        let l = lines.next().expect("simulate ended before listening").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            break rest.split_whitespace().next().unwrap().to_owned();
-        }
-    };
-    std::thread::spawn(move || for _ in lines {});
-    let _sim = Kill(child);
+    let meter = common::imported_meter(&d);
+    let (device, url) = (format!("{}@3", meter.display()), format!("mqtt://127.0.0.1:{port}"));
+    let (_sim, addr, _, _) = common::simulate_listening(&[
+        "--device",
+        &device,
+        "--values-from",
+        &url,
+        "--values-prefix",
+        "v",
+        "--listen",
+        "127.0.0.1:0",
+        "--duration",
+        "60",
+    ]);
     let results = |g: &[(String, String)]| -> Vec<serde_json::Value> {
         g.iter().filter(|(t, _)| t == "v/unit/3/write").map(|(_, p)| serde_json::from_str(p).unwrap()).collect()
     };

@@ -4,7 +4,6 @@
 //! expected answers are read from the captures' `.txt` hex (the bytes the recordings were
 //! made from), not from our own replay.
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -23,25 +22,9 @@ fn capture(name: &str) -> PathBuf {
 /// Starts `mbtap simulate ARGS --listen 127.0.0.1:0`; the process, the address it serves on,
 /// and what it said before serving.
 pub fn emulate(args: &[&str]) -> (Kill, String, String) {
-    let mut child = Command::new(BIN)
-        .arg("simulate")
-        .args(args)
-        .args(["--listen", "127.0.0.1:0", "--duration", "60"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let mut said = String::new();
-    let addr = loop {
-        let l = lines.next().expect("simulate ended before listening").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            break rest.split_whitespace().next().unwrap().to_owned();
-        }
-        said.push_str(&l);
-        said.push('\n');
-    };
-    std::thread::spawn(move || for _ in lines {});
-    (Kill(child), addr, said)
+    let all = [args, &["--listen", "127.0.0.1:0", "--duration", "60"][..]].concat();
+    let (child, addr, said, _) = common::simulate_listening(&all);
+    (child, addr, said)
 }
 
 /// The request/answer pairs of a capture's `.txt`: RTU frames in hex, a request line then its
@@ -225,40 +208,28 @@ fn a_mirror_serves_another_devices_values_under_another_map_and_0b_while_it_is_a
     let dir = std::env::temp_dir().join(format!("mbtap-mirror-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     // The served profile: an imported energy meter's sheet (f32 volts at input 0, watts at 12).
-    let sheet = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sheets/energy-meter-modicon.csv");
-    let meter = dir.join("meter.toml");
-    let _ = std::fs::remove_file(&meter);
-    let out = Command::new(BIN)
-        .args(["profiles", "import", sheet.to_str().unwrap(), "-o", meter.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let meter = common::imported_meter(&dir);
     // The source: the built-in MK4 on a pty, mirrored through it as an RTU master would.
     let line = dir.join("mk4");
     let source = common::simulate(&line, &["--device", "mk4@1", "--duration", "60"]);
     let map = "Phase 1 line to neutral volts=Phase A (L1) voltage,Phase 1 active power=input 430*10";
-    let mut child = Command::new(BIN)
-        .args(["simulate", "--mirror", line.to_str().unwrap(), "--mirror-device", "mk4@1"])
-        .args(["--as", &format!("{}@2", meter.display()), "--map", map, "--fresh", "200ms"])
-        .args(["--listen", "127.0.0.1:0", "--duration", "60"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-    let addr = loop {
-        let l = lines.next().expect("simulate ended before listening").unwrap();
-        if let Some(rest) = l.strip_prefix("mbtap: bridge listening on ") {
-            break rest.split_whitespace().next().unwrap().to_owned();
-        }
-    };
-    let said = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
-    let sink = std::sync::Arc::clone(&said);
-    std::thread::spawn(move || {
-        for l in lines.map_while(Result::ok) {
-            sink.lock().unwrap().push_str(&(l + "\n"));
-        }
-    });
-    let _mirror = Kill(child);
+    let as_meter = format!("{}@2", meter.display());
+    let (_mirror, addr, _, said) = common::simulate_listening(&[
+        "--mirror",
+        line.to_str().unwrap(),
+        "--mirror-device",
+        "mk4@1",
+        "--as",
+        &as_meter,
+        "--map",
+        map,
+        "--fresh",
+        "200ms",
+        "--listen",
+        "127.0.0.1:0",
+        "--duration",
+        "60",
+    ]);
     let mut s = connect(&addr);
     eventually("a first value", || read_f32(&mut s, 2, 0).is_ok());
     // Volts and watts come from one read of the source: watts are volts × 10 exactly (the MK4's

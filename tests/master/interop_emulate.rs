@@ -65,14 +65,7 @@ fn pymodbus_reads_an_imported_profile_and_a_probe_dump_as_they_hold() {
     let dir = std::env::temp_dir().join(format!("mbtap-emulate-interop-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     // An imported vendor sheet: input registers 0–1 (volts, a float), 6–7, 12–13, 70–71, 342–343.
-    let sheet = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sheets/energy-meter-modicon.csv");
-    let profile = dir.join("meter.toml");
-    let _ = std::fs::remove_file(&profile);
-    let out = Command::new(BIN)
-        .args(["profiles", "import", sheet.to_str().unwrap(), "-o", profile.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let profile = crate::common::imported_meter(&dir);
     let (_sim, addr, _) = emulate(&["--device", &format!("{}@3", profile.display())]);
     // Mapped and at rest (0.0 V is in range: the sheet gives no range): read; unmapped: 02.
     assert_eq!(pymodbus_read(&addr, 3, "input", 0, 2)["registers"], serde_json::json!([0, 0]));
