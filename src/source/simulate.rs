@@ -129,6 +129,11 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
             (slaves, opts.devices.turnaround.unwrap_or(DEFAULT_TURNAROUND))
         };
         let mut bus = VirtualBus::new(slaves, opts.line);
+        // An empty poll list would spin without end (and never see --duration).
+        anyhow::ensure!(
+            bus.poll_count() > 0,
+            "--poll: nothing to poll — the built-in master polls devices from profiles (--device), and these map no register"
+        );
         bus.faults = poll.faults;
         bus.ascii = opts.mode == SerialMode::Ascii;
         bus.turnaround_ns = u64::try_from(turnaround.as_nanos()).unwrap_or(u64::MAX);

@@ -22,6 +22,40 @@ fn poll_list(profile: &str) -> &'static [(u8, u16, u16)] {
     }
 }
 
+/// What a master polls on a device whose profile has no poll list here (an imported or user
+/// profile): its mapped runs, table by table, each read within the spec's limits (MAP v1.1b3
+/// §6.1–§6.4: 2000 bits, 125 registers) — at most [`GENERIC_POLLS`], a SCADA's poll list, not a scan.
+fn runs_of(profile: &crate::profile::Profile) -> Vec<(u8, u16, u16)> {
+    use crate::profile::Table;
+    let mut out = Vec::new();
+    for (table, function, limit) in [
+        (Table::Coils, 0x01, 2000u16),
+        (Table::DiscreteInputs, 0x02, 2000),
+        (Table::HoldingRegisters, 0x03, 125),
+        (Table::InputRegisters, 0x04, 125),
+    ] {
+        let mut run: Option<(u16, u16)> = None;
+        for a in profile.addresses(table) {
+            run = match run {
+                Some((first, last)) if last.checked_add(1) == Some(a) && a - first < limit => Some((first, a)),
+                Some((first, last)) => {
+                    out.push((function, first, last - first + 1));
+                    Some((a, a))
+                }
+                None => Some((a, a)),
+            };
+        }
+        if let Some((first, last)) = run {
+            out.push((function, first, last - first + 1));
+        }
+    }
+    out.truncate(GENERIC_POLLS);
+    out
+}
+
+/// Reads per device in a generic poll list.
+const GENERIC_POLLS: usize = 8;
+
 /// One frame on the line: when its last byte arrived (ns since the start) and its bytes.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LineFrame {
@@ -109,7 +143,9 @@ impl VirtualBus {
     pub fn new(slaves: Vec<Slave>, line: LineSettings) -> Self {
         let mut polls = Vec::new();
         for s in &slaves {
-            for &(function, start, quantity) in poll_list(&s.profile().meta.name) {
+            let builtin = poll_list(&s.profile().meta.name);
+            let generic = if builtin.is_empty() { runs_of(s.profile()) } else { Vec::new() };
+            for &(function, start, quantity) in builtin.iter().chain(&generic) {
                 let mut pdu = vec![function];
                 pdu.extend_from_slice(&start.to_be_bytes());
                 pdu.extend_from_slice(&quantity.to_be_bytes());
@@ -292,6 +328,27 @@ mod tests {
 
     use super::*;
     use crate::proto::parse_rtu;
+
+    /// A profile mbtap has no poll list for: holding 10–12 and 20, input 0–1.
+    const OTHER: &str = "[profile]\nname = \"other\"\ndevice = \"Other\"\n\n\
+        [[holding_registers]]\naddresses = [10, 12]\nname = \"H{n}\"\n\n\
+        [[holding_registers]]\naddress = 20\nname = \"H20\"\n\n\
+        [[input_registers]]\naddresses = [0, 1]\nname = \"I{n}\"\n";
+
+    /// Regression (issue 41): `simulate --poll --device FILE@N` polled nothing for a profile
+    /// without a built-in poll list, and the line loop then spun without end, `--duration` unseen.
+    #[test]
+    fn regression_issue_41_a_profile_without_a_poll_list_is_polled_over_its_mapped_runs() {
+        let p = crate::profile::loader::load("other.toml", OTHER).unwrap();
+        let mut bus = VirtualBus::new(vec![Slave::new(Arc::new(p), 7)], LineSettings::default());
+        assert_eq!(bus.poll_count(), 3, "holding 10–12, holding 20, input 0–1");
+        for _ in 0..3 {
+            let frames = bus.next_transaction();
+            assert_eq!(frames.len(), 2, "a request and its answer");
+            let answer = parse_rtu(&frames[1].bytes).unwrap();
+            assert!(answer.check_ok() && answer.pdu[0] & 0x80 == 0, "{:02X?}", frames[1].bytes);
+        }
+    }
 
     fn bus() -> VirtualBus {
         let slaves = [("mk4", 1), ("display", 5), ("mkzp", 17)]
