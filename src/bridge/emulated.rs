@@ -11,7 +11,7 @@ pub use crate::source::emulated::Emulated;
 use mbtap_gateway::rules::GATEWAY_TARGET_FAILED;
 use mbtap_gateway::transaction::Reply;
 
-use super::shared::{Job, LineShared};
+use super::shared::LineShared;
 
 /// Runs the emulated line forever, answering the clients' requests in the queue's order.
 pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
@@ -55,15 +55,7 @@ pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
         for twin in twins {
             let _ = twin.reply.send(reply.clone());
         }
-        answer(&shared, job, reply);
+        shared.metrics.latency(job.unit, job.queued.elapsed());
+        super::line::answer(&shared, job, reply);
     }
-}
-
-/// Hands `reply` to the job's client, counting a gateway exception.
-fn answer(shared: &LineShared, job: Job, reply: Reply) {
-    if let Reply::Gateway(code) = reply {
-        shared.metrics.gateway_exception(job.unit, code);
-    }
-    shared.metrics.latency(job.unit, job.queued.elapsed());
-    let _ = job.reply.send(reply);
 }

@@ -135,8 +135,8 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
     }
 }
 
-/// Hands `reply` to the job's client, counting a gateway exception.
-fn answer(shared: &LineShared, job: Job, reply: Reply) {
+/// Hands `reply` to the job's client, counting a gateway exception (every line task's ending).
+pub(super) fn answer(shared: &LineShared, job: Job, reply: Reply) {
     if let Reply::Gateway(code) = reply {
         shared.metrics.gateway_exception(job.unit, code);
     }

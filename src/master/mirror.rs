@@ -10,7 +10,6 @@ use std::time::{Duration, Instant};
 
 use mbtap_core::profile::{Profile, Table};
 use mbtap_core::sim::mirror::MirrorMap;
-use tokio_modbus::prelude::Reader as _;
 
 use crate::source::emulated::Emulated;
 
@@ -127,7 +126,7 @@ pub async fn run(opts: MirrorOptions, emulated: Arc<Emulated>) {
                 failures = 0;
             }
             Err(e) => {
-                link.reset();
+                // The link was reset by the request path where the failure called for it.
                 failures = failures.saturating_add(1);
                 if failures >= FAILURES_BEFORE_STALE {
                     update(&emulated, opts.index, &[], false);
@@ -148,41 +147,27 @@ fn update(emulated: &Emulated, index: usize, sets: &[((Table, u16), u16)], fresh
     }
 }
 
-/// Every span read from the source; the first failure ends the round.
+/// Every span read from the source through the master's one request path (`exec::send`: the
+/// timeout, the link reset after a failure, an answer of the wrong length refused); the first
+/// failure ends the round.
 async fn read_all(
     link: &mut super::link::Link,
     unit: u8,
     reads: &[(Table, u16, u16)],
     timeout: Duration,
 ) -> anyhow::Result<BTreeMap<(Table, u16), u16>> {
+    use super::exec::{Answer, Op, send};
     let mut values = BTreeMap::new();
-    for &(table, first, last) in reads {
-        let n = last - first + 1;
-        let ctx = link.context(unit).await?;
-        let words: Vec<u16> = match tokio::time::timeout(timeout, async {
-            match table {
-                Table::Coils => {
-                    ctx.read_coils(first, n).await.map(|r| r.map(|b| b.into_iter().map(u16::from).collect()))
-                }
-                Table::DiscreteInputs => {
-                    ctx.read_discrete_inputs(first, n).await.map(|r| r.map(|b| b.into_iter().map(u16::from).collect()))
-                }
-                Table::HoldingRegisters => ctx.read_holding_registers(first, n).await,
-                Table::InputRegisters => ctx.read_input_registers(first, n).await,
-            }
-        })
-        .await
-        {
-            Err(_) => {
-                anyhow::bail!("unit {unit}: no answer to a read of {} {first}..{last} within {timeout:?}", table.name())
-            }
-            Ok(Err(e)) => anyhow::bail!("unit {unit}: {e}"),
-            Ok(Ok(Err(code))) => {
-                anyhow::bail!("unit {unit}: {} {first}..{last} refused with exception {code}", table.name())
-            }
-            Ok(Ok(Ok(w))) => w,
-        };
-        values.extend((first..).zip(words).map(|(a, v)| ((table, a), v)));
+    for &(table, address, last) in reads {
+        let read = mbtap_core::query::plan::Read { target: 0, table, address, quantity: last - address + 1 };
+        match send(link, unit, Op::Read(read), timeout, 0).await.0 {
+            Answer::Values(words) => values.extend((address..).zip(words).map(|(a, v)| ((table, a), v))),
+            other => anyhow::bail!(
+                "unit {unit}, {} {address}..{last}: {}",
+                table.name(),
+                other.problem().unwrap_or_else(|| "no values".to_owned())
+            ),
+        }
     }
     Ok(values)
 }

@@ -68,14 +68,7 @@ pub fn from_capture(spec: &str, replay_values: bool, notes: &mut String) -> anyh
     );
     if let Some(wanted) = &wanted {
         let heard: BTreeSet<u8> = devices.iter().map(mbtap_core::sim::RecordedDevice::address).collect();
-        let missing: Vec<u8> = wanted.iter().copied().filter(|u| !heard.contains(u)).collect();
-        anyhow::ensure!(
-            missing.is_empty(),
-            "--from {}: unit {} did not answer in this capture; units that did: {}",
-            path.display(),
-            join(missing.iter()),
-            join(heard.iter())
-        );
+        require_units(path, wanted, &heard, "did not answer in this capture; units that did")?;
         devices.retain(|d| wanted.contains(&d.address()));
     }
     for d in &mut devices {
@@ -109,14 +102,7 @@ fn from_image(
         path.display()
     );
     if let Some(wanted) = wanted {
-        let missing: Vec<u8> = wanted.iter().copied().filter(|u| !units.contains(u)).collect();
-        anyhow::ensure!(
-            missing.is_empty(),
-            "--from {}: unit {} has no values in this image; units that have: {}",
-            path.display(),
-            join(missing.iter()),
-            join(units.iter())
-        );
+        require_units(path, wanted, &units, "has no values in this image; units that have")?;
     }
     let mut out = Vec::new();
     for unit in units.into_iter().filter(|u| wanted.is_none_or(|w| w.contains(u))) {
@@ -148,6 +134,19 @@ fn split_units(spec: &str) -> anyhow::Result<(&Path, Option<BTreeSet<u8>>)> {
         "--from {spec}: no units after @; give them as 1,5,17 or 1-4, or leave @ out for all"
     );
     Ok((Path::new(path), Some(units.into_iter().collect())))
+}
+
+/// Every unit of `wanted` is in `have`, else the error names the missing ones and those there.
+fn require_units(path: &Path, wanted: &BTreeSet<u8>, have: &BTreeSet<u8>, why: &str) -> anyhow::Result<()> {
+    let missing: Vec<u8> = wanted.difference(have).copied().collect();
+    anyhow::ensure!(
+        missing.is_empty(),
+        "--from {}: unit {} {why}: {}",
+        path.display(),
+        join(missing.iter()),
+        join(have.iter())
+    );
+    Ok(())
 }
 
 fn join<'a>(units: impl Iterator<Item = &'a u8>) -> String {

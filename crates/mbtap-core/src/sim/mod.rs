@@ -8,6 +8,7 @@ pub mod ascii_requests;
 pub mod bus;
 pub mod device;
 pub mod mirror;
+pub mod poll_list;
 pub mod recorded;
 pub mod recording;
 pub mod rtu_requests;
