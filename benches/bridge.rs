@@ -36,7 +36,7 @@ fn simulator(link: &Path) -> Kill {
 fn rtu(pdu: &[u8]) -> Vec<u8> {
     let mut f = vec![1u8];
     f.extend_from_slice(pdu);
-    let crc = mbtap_core::proto::crc16(&f);
+    let crc = mbtap_proto::crc16(&f);
     f.extend_from_slice(&crc.to_le_bytes());
     f
 }

@@ -7,11 +7,11 @@ use std::sync::Arc;
 
 use divan::counter::ItemsCount;
 use divan::{Bencher, black_box};
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::health::Health;
-use mbtap_core::sim::Slave;
-use mbtap_core::sim::bus::{Fault, VirtualBus};
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::health::Health;
+use mbtap_sim::Slave;
+use mbtap_sim::bus::{Fault, VirtualBus};
 
 fn main() {
     divan::main();
@@ -20,9 +20,9 @@ fn main() {
 /// The analyzer's events for `n` transactions of the demo bus with every fault taking turns,
 /// as owned values the benchmark can replay.
 fn events(n: usize) -> Vec<(u64, Vec<u8>)> {
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
-    let mut bus = VirtualBus::new(slaves, mbtap_core::framer::LineSettings::default());
+    let mut bus = VirtualBus::new(slaves, mbtap_analysis::framer::LineSettings::default());
     bus.faults = Fault::ALL.to_vec();
     (0..n).flat_map(|_| bus.next_transaction()).map(|f| (f.end_ns, f.bytes)).collect()
 }
@@ -33,7 +33,7 @@ fn events(n: usize) -> Vec<(u64, Vec<u8>)> {
 fn analyze_with_health(bencher: Bencher, with_health: bool) {
     const N: usize = 10_000;
     let frames = events(N);
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     bencher.counter(ItemsCount::new(N)).bench_local(|| {
         let mut analyzer = Analyzer::new(AnalyzerConfig::default());
         let mut health = Health::new(profiles.clone());
@@ -55,7 +55,7 @@ fn analyze_with_health(bencher: Bencher, with_health: bool) {
 fn report_of_100k_transactions(bencher: Bencher) {
     let frames = events(100_000);
     let mut analyzer = Analyzer::new(AnalyzerConfig::default());
-    let mut health = Health::new(mbtap_core::sim::demo_profiles().unwrap());
+    let mut health = Health::new(mbtap_sim::demo_profiles().unwrap());
     for (t, bytes) in &frames {
         analyzer.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut |e: &Event<'_>| health.event(e));
     }

@@ -4,7 +4,7 @@
 
 use divan::counter::{BytesCount, ItemsCount};
 use divan::{Bencher, black_box};
-use mbtap_core::proto::{DirectionHint, checksum, decode_pdu, parse_request, parse_response, parse_rtu};
+use mbtap_proto::{DirectionHint, checksum, decode_pdu, parse_request, parse_response, parse_rtu};
 
 fn main() {
     divan::main();
@@ -45,7 +45,7 @@ fn frames(wire: &[u8]) -> Vec<Vec<u8>> {
             // Vary the address so the CRC differs frame to frame.
             pdu[3] = u8::try_from(i % 256).unwrap_or(0);
             let mut out = Vec::new();
-            mbtap_core::proto::encode_rtu(1, &pdu[1..], &mut out);
+            mbtap_proto::encode_rtu(1, &pdu[1..], &mut out);
             out
         })
         .collect()
@@ -101,7 +101,7 @@ fn decode_rtu_unknown_direction(bencher: Bencher) {
             if let Ok(frame) = parse_rtu(black_box(f)) {
                 n += usize::from(matches!(
                     decode_pdu(frame.pdu, DirectionHint::Unknown),
-                    mbtap_core::proto::PduDecode::One(_)
+                    mbtap_proto::PduDecode::One(_)
                 ));
             }
         }

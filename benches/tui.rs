@@ -9,11 +9,11 @@ use std::sync::{Arc, OnceLock};
 use divan::counter::ItemsCount;
 use divan::{Bencher, black_box};
 use mbtap::tui::{App, Model};
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings};
-use mbtap_core::sim::Slave;
-use mbtap_core::sim::bus::{Fault, VirtualBus};
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings};
+use mbtap_sim::Slave;
+use mbtap_sim::bus::{Fault, VirtualBus};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -47,7 +47,7 @@ fn rss_kib() -> u64 {
 
 /// The demo bus with every fault, through the real analyzer, `n` transactions.
 fn feed(n: usize, mut sink: impl FnMut(&Event<'_>)) {
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let line = LineSettings::default();
     let mut bus = VirtualBus::new(slaves, line);
@@ -66,8 +66,8 @@ fn feed(n: usize, mut sink: impl FnMut(&Event<'_>)) {
 }
 
 fn new_model(capacity: usize) -> Model {
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
-    Model::new(profiles, mbtap_core::profile::annotate::Lang::En, LineSettings::default(), capacity)
+    let profiles = mbtap_sim::demo_profiles().unwrap();
+    Model::new(profiles, mbtap_device::profile::annotate::Lang::En, LineSettings::default(), capacity)
 }
 
 fn loaded() -> &'static Model {
@@ -155,7 +155,7 @@ fn ingest_1000_transactions(bencher: Bencher) {
     bencher.counter(ItemsCount::new(events.len())).bench_local(|| {
         let mut m = new_model(TRANSACTIONS);
         for (outcome, unit, function, req, resp, t_start, latency_ns, req_pdu, resp_pdu) in &events {
-            let t = mbtap_core::pairing::Transaction {
+            let t = mbtap_analysis::pairing::Transaction {
                 outcome: *outcome,
                 unit: *unit,
                 function: *function,

@@ -1,5 +1,5 @@
 """Condenses the SunSpec Alliance's model definitions (the JSON files pysunspec2 ships, Apache-2.0)
-into crates/mbtap-core/src/sunspec/models.json: per model its ID, group name, top-level points
+into crates/mbtap-device/src/sunspec/models.json: per model its ID, group name, top-level points
 (name, type, size in registers, scale-factor point, units) and its first repeating group.
 Run: python3 contrib/sunspec-models.py  (needs pysunspec2)."""
 import glob
@@ -29,7 +29,7 @@ for path in sorted(glob.glob(os.path.join(src, "model_*.json")), key=lambda p: i
             break
     models.append(model)
 
-out = os.path.join(os.path.dirname(__file__), "..", "crates", "mbtap-core", "src", "sunspec", "models.json")
+out = os.path.join(os.path.dirname(__file__), "..", "crates", "mbtap-device", "src", "sunspec", "models.json")
 with open(out, "w", encoding="utf-8") as f:
     version = importlib.metadata.version("pysunspec2")
     source = f"pysunspec2 {version} models/json (SunSpec Alliance, Apache-2.0)"

@@ -11,19 +11,19 @@
 //! and the slow bus gets `gap_inside_frame` against unit 17 where the observer can see its
 //! pause, and no timing finding against any other unit or the master.
 
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
-use mbtap_core::health::{Health, Report};
-use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe};
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_analysis::health::{Health, Report};
+use mbtap_sim::traffic::{Observation, TrafficConfig, generate, observe};
 
 const TIMING: [&str; 3] = ["gap_inside_frame", "fast_answer", "fast_master"];
 
-fn report(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSettings) -> (Report, u64) {
+fn report(wire: &mbtap_sim::traffic::Wire, model: Observation, line: LineSettings) -> (Report, u64) {
     let chunks = observe(wire, model, line.char_ns());
     // No latency given: what a user who does not know their adapter's timer runs.
     let mut a = Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
-    let mut health = Health::new(mbtap_core::profile::Profiles::new());
+    let mut health = Health::new(mbtap_device::profile::Profiles::new());
     for (t, r) in &chunks {
         a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes: &wire.bytes[r.clone()] }, &mut |e: &Event<'_>| {
             health.event(e);
@@ -125,8 +125,8 @@ fn main() {
 
 /// With `DUMP_WRONG` set: every stretch of a healthy line the framer did not read as a valid
 /// frame or a glitch (noise, a failed check), with what the wire held there, for finding out why.
-fn dump_wrong(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSettings) {
-    use mbtap_core::traffic::run_framer;
+fn dump_wrong(wire: &mbtap_sim::traffic::Wire, model: Observation, line: LineSettings) {
+    use mbtap_sim::traffic::run_framer;
     let chunks = observe(wire, model, line.char_ns());
     for d in run_framer(wire, &chunks, FramerConfig::new(line, 0)) {
         if d.glitch || (d.frame && d.check_ok) {

@@ -9,8 +9,8 @@
 //! same lengths per unit all day and a quarter of their CRCs ending in `00` (add `nolengths`
 //! to keep the framer from learning those lengths — what it did before issue 25).
 
-use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
-use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
+use mbtap_analysis::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_sim::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
 
 fn main() {
     let arg = |i: usize| std::env::args().nth(i);
@@ -108,8 +108,8 @@ fn main() {
 
 /// With `DUMP_FALSE_VALID` set: each frame reported valid that was never on the wire, with the
 /// truth around it (what the wire really held there), for finding out why.
-fn dump_false_valid(wire: &mbtap_core::traffic::Wire, decided: &[mbtap_core::traffic::Decided], model: Observation) {
-    use mbtap_core::traffic::TruthKind;
+fn dump_false_valid(wire: &mbtap_sim::traffic::Wire, decided: &[mbtap_sim::traffic::Decided], model: Observation) {
+    use mbtap_sim::traffic::TruthKind;
     let good: std::collections::HashSet<(usize, usize)> =
         wire.truth.iter().filter(|t| t.kind == TruthKind::Good).map(|t| (t.start, t.end)).collect();
     if std::env::var_os("DUMP_MISSED_VENDOR").is_some() {

@@ -3,9 +3,9 @@
 //! its file under `cmd/`.
 
 use clap::{Args, ValueEnum};
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::framer::Parity;
-use mbtap_core::line_args::LineOverrides;
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::Parity;
+use mbtap_analysis::line_args::LineOverrides;
 
 use crate::output::{EventFormat, EventWriter};
 
@@ -18,7 +18,7 @@ pub enum LangArg {
     Ru,
 }
 
-impl From<LangArg> for mbtap_core::profile::annotate::Lang {
+impl From<LangArg> for mbtap_device::profile::annotate::Lang {
     fn from(l: LangArg) -> Self {
         match l {
             LangArg::En => Self::En,
@@ -223,12 +223,12 @@ impl From<EventFormatArg> for EventFormat {
 /// # Errors
 /// What is wrong with the value, with examples.
 pub fn duration_arg(s: &str) -> Result<std::time::Duration, String> {
-    mbtap_core::duration::parse_duration(s, std::time::Duration::ZERO, std::time::Duration::from_hours(24 * 100))
+    mbtap_analysis::duration::parse_duration(s, std::time::Duration::ZERO, std::time::Duration::from_hours(24 * 100))
 }
 
 /// The faults named on the command line (`all`: every one, taking turns).
-pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_core::sim::bus::Fault> {
-    use mbtap_core::sim::bus::Fault;
+pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_sim::bus::Fault> {
+    use mbtap_sim::bus::Fault;
     args.iter()
         .flat_map(|f| match f {
             FaultArg::Corrupt => vec![Fault::Corrupt],
@@ -251,7 +251,7 @@ pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_core::sim::bus::Fault> {
 /// When a `--device` profile cannot be loaded.
 pub fn tui_source(
     o: &OutputArgs,
-    line: mbtap_core::framer::LineSettings,
+    line: mbtap_analysis::framer::LineSettings,
     pacing: bool,
 ) -> anyhow::Result<crate::tui::source::TuiSource> {
     Ok(crate::tui::source::TuiSource {
@@ -276,7 +276,7 @@ pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result
         writer.report_every_ns = Some(std::time::Duration::from_secs_f64(every.min(3.2e7)).as_nanos().try_into()?);
     }
     if o.report || o.report_every.is_some() {
-        writer.health = Some(mbtap_core::health::Health::new(writer.profiles.clone()));
+        writer.health = Some(mbtap_analysis::health::Health::new(writer.profiles.clone()));
     }
     if let Some(path) = &o.learn {
         use crate::output::learn_draft::DraftTo;

@@ -1,6 +1,7 @@
 //! mbtap — a Modbus RTU/ASCII bus analyzer: the binary's edges. The analysis itself is pure and
-//! lives in the workspace's libraries: `mbtap-proto` (frames and PDUs) and `mbtap-core`
-//! (framers, pairing, profiles, health, captures, the simulated bus), which import no tokio,
+//! lives in the workspace's libraries: `mbtap-proto` (frames and PDUs), `mbtap-device` (profiles,
+//! SunSpec, queries), `mbtap-analysis` (framers, pairing, health, learn, captures), `mbtap-sim`
+//! (simulated lines and devices), `mbtap-publish` (Sparkplug, the spool) and `mbtap-gateway`, which import no tokio,
 //! terminal, command line or serial crate and read no clock.
 //!
 //! Module map (dependencies point down, never up):
@@ -10,7 +11,7 @@
 //! - [`tui`] — the terminal UI (ratatui), rendered from the model the events build.
 //! - [`source`] — live serial ports, pseudo-terminals and the clock: the I/O loops.
 //! - [`master`] — `read`/`write`/`watch`: requests to a device through tokio-modbus (RTU on a
-//!   serial port, TCP, RTU over TCP), planned and checked by `mbtap_core::query`.
+//!   serial port, TCP, RTU over TCP), planned and checked by `mbtap_device::query`.
 //! - [`publish`] — what the sniffer hears, served to others: a read-only Modbus TCP server of
 //!   the register image (spy mode) and MQTT.
 //! - [`output`] — the output sink: events as text or JSON lines, the UI feed, reports; and the

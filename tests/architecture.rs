@@ -1,10 +1,25 @@
 //! The tree keeps the architecture (issue 13): no import cycles between the top-level modules
-//! of the binary or of the pure core, at most a dozen entries in `src/`, and no edge crate
-//! named in the pure crates' sources.
+//! of the binary or of the pure crates, at most a dozen entries in `src/`, and no edge crate
+//! named in the pure crates' sources. Issue 43: the libraries depend on each other only
+//! downward, in the order [`LIBRARIES`] gives, and none holds more than 40 % of the lines.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+
+/// The pure libraries, lowest first, each with the libraries it may depend on (all below it).
+const LIBRARIES: [(&str, &[&str]); 6] = [
+    ("mbtap-proto", &[]),
+    ("mbtap-device", &["mbtap-proto"]),
+    ("mbtap-analysis", &["mbtap-proto", "mbtap-device"]),
+    ("mbtap-sim", &["mbtap-proto", "mbtap-device", "mbtap-analysis"]),
+    ("mbtap-publish", &["mbtap-device"]),
+    ("mbtap-gateway", &["mbtap-proto", "mbtap-device", "mbtap-analysis"]),
+];
+
+fn library_src(root: &Path, krate: &str) -> PathBuf {
+    root.join("crates").join(krate).join("src")
+}
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     for e in std::fs::read_dir(dir).unwrap().flatten() {
@@ -74,12 +89,8 @@ fn cycle(g: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
 #[test]
 fn no_import_cycles_between_top_level_modules() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for src in [
-        root.join("src"),
-        root.join("crates/mbtap-core/src"),
-        root.join("crates/mbtap-proto/src"),
-        root.join("crates/mbtap-gateway/src"),
-    ] {
+    let libraries = LIBRARIES.iter().map(|(k, _)| library_src(root, k));
+    for src in std::iter::once(root.join("src")).chain(libraries) {
         let g = graph(&src);
         assert!(g.len() > 3, "{}: modules not found", src.display());
         assert_eq!(cycle(&g), None, "an import cycle in {}", src.display());
@@ -95,9 +106,10 @@ fn src_shows_the_design_in_at_most_a_dozen_entries() {
 #[test]
 fn the_pure_crates_name_no_edge_crate() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for krate in ["crates/mbtap-proto", "crates/mbtap-core", "crates/mbtap-gateway"] {
+    for (name, _) in LIBRARIES {
+        let krate = format!("crates/{name}");
         let mut files = Vec::new();
-        rust_files(&root.join(krate).join("src"), &mut files);
+        rust_files(&root.join(&krate).join("src"), &mut files);
         for f in files {
             let text = std::fs::read_to_string(&f).unwrap();
             for edge in ["tokio", "ratatui", "crossterm", "clap", "serialport", "std::time::Instant", "SystemTime"] {
@@ -105,10 +117,46 @@ fn the_pure_crates_name_no_edge_crate() {
                 assert!(!used, "{} names {edge}: the pure crates take time as an input", f.display());
             }
         }
-        let manifest = std::fs::read_to_string(root.join(krate).join("Cargo.toml")).unwrap();
+        let manifest = std::fs::read_to_string(root.join(&krate).join("Cargo.toml")).unwrap();
         for edge in ["tokio", "ratatui", "crossterm", "clap", "serialport"] {
             assert!(!manifest.contains(edge), "{krate}/Cargo.toml depends on {edge}");
         }
+    }
+}
+
+/// Issue 43: a library names in its manifest only the libraries below it, so no crate reaches
+/// up (and no circle can form); every library is a workspace member.
+#[test]
+fn the_libraries_depend_only_downward() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let workspace = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
+    for (name, allowed) in LIBRARIES {
+        assert!(workspace.contains(&format!("\"crates/{name}\"")), "{name} is not a workspace member");
+        let manifest = std::fs::read_to_string(root.join("crates").join(name).join("Cargo.toml")).unwrap();
+        let deps = manifest.split("[dependencies]").nth(1).unwrap_or_default();
+        for line in deps.lines().take_while(|l| !l.starts_with('[')) {
+            let dep = line.split([' ', '=']).next().unwrap_or_default();
+            if dep.starts_with("mbtap-") {
+                assert!(allowed.contains(&dep), "{name} depends on {dep}: only {allowed:?} are below it");
+            }
+        }
+    }
+}
+
+/// Issue 43: no library holds more than 40 % of the project's lines (src/ and crates/), so the
+/// tree says where a change belongs.
+#[test]
+fn no_library_holds_more_than_two_fifths_of_the_lines() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let lines = |dir: &Path| {
+        let mut files = Vec::new();
+        rust_files(dir, &mut files);
+        files.iter().map(|f| std::fs::read_to_string(f).unwrap().lines().count()).sum::<usize>()
+    };
+    let each: Vec<(&str, usize)> = LIBRARIES.iter().map(|(k, _)| (*k, lines(&library_src(root, k)))).collect();
+    let total = lines(&root.join("src")) + each.iter().map(|(_, n)| n).sum::<usize>();
+    for (name, n) in each {
+        assert!(n * 5 <= total * 2, "{name} holds {n} of {total} lines");
     }
 }
 
@@ -168,12 +216,8 @@ fn file_graphs(src: &Path) -> Vec<(PathBuf, BTreeMap<String, BTreeSet<String>>)>
 fn no_import_circles_between_the_files_of_a_module() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut circles = Vec::new();
-    for src in [
-        root.join("src"),
-        root.join("crates/mbtap-core/src"),
-        root.join("crates/mbtap-proto/src"),
-        root.join("crates/mbtap-gateway/src"),
-    ] {
+    let libraries = LIBRARIES.iter().map(|(k, _)| library_src(root, k));
+    for src in std::iter::once(root.join("src")).chain(libraries) {
         for (dir, g) in file_graphs(&src) {
             if let Some(c) = cycle(&g) {
                 circles.push(format!("{}: {}", dir.display(), c.join(" → ")));

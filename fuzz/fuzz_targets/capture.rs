@@ -1,3 +1,3 @@
 //! Any bytes as a pcap/pcapng capture, replayed through the whole analyzer.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::capture(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_analysis::fuzzing::capture(data));

@@ -1,3 +1,3 @@
 //! Any bytes as `mbtap decode`'s standard input: the streaming line reader and the decoder.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::decode_lines(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_analysis::fuzzing::decode_lines(data));

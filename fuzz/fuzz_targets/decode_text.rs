@@ -1,3 +1,3 @@
 //! Any text through `mbtap decode`: hex input reading, mode detection, pairing, both renderers.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::decode_text(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_analysis::fuzzing::decode_text(data));

@@ -2,5 +2,5 @@
 //! Assistant, ESPHome and Telegraf: each export parses back and every string comes back as written.
 #![no_main]
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
-    mbtap_core::fuzzing::export_escape(data);
+    mbtap_device::fuzzing::export_escape(data);
 });

@@ -1,3 +1,3 @@
 //! Arbitrary chunk sequences through the RTU and ASCII framers; no byte lost or duplicated.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::framer(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_analysis::fuzzing::framer(data));

@@ -1,3 +1,3 @@
 //! Any bytes as a request PDU: parse, findings, fields, expected length.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::pdu_request(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_analysis::fuzzing::pdu_request(data));

@@ -1,3 +1,3 @@
 //! Any text as the items of `mbtap read`/`write`: parsed, resolved, planned and encoded.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::query(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_device::fuzzing::query(data));

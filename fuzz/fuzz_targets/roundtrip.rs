@@ -1,3 +1,3 @@
 //! Whatever parses re-encodes to exactly the bytes it came from (asserted).
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::roundtrip(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_analysis::fuzzing::roundtrip(data));

@@ -1,3 +1,3 @@
 //! Any bytes as a Sparkplug command from the broker, a held update, and a published value.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::sparkplug(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_publish::fuzzing::sparkplug(data));

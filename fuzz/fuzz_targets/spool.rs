@@ -1,3 +1,3 @@
 //! Any bytes as a store-and-forward buffer file and as a record's body.
 #![no_main]
-libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_core::fuzzing::spool(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| mbtap_publish::fuzzing::spool(data));

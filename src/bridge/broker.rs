@@ -14,13 +14,13 @@ use tokio::time::Instant;
 use super::request::{Routes, ServerOptions};
 use super::shared::Job;
 use crate::publish::mqtt::Mqtt;
-use mbtap_core::profile::Profiles;
-use mbtap_core::query::encode::encode_write;
-use mbtap_core::query::remote::{Ask, Outcome};
-use mbtap_core::query::resolve;
+use mbtap_device::profile::Profiles;
+use mbtap_device::query::encode::encode_write;
+use mbtap_device::query::resolve;
 use mbtap_gateway::admit::{Asked, Role, RoleRules};
 use mbtap_gateway::queue::ClientId;
 use mbtap_gateway::transaction::Reply;
+use mbtap_publish::remote::{Ask, Outcome};
 
 /// The queue's client id of the broker's writes: a client of its own, taking its turn.
 const BROKER_CLIENT: ClientId = ClientId::MAX - 1;
@@ -79,12 +79,10 @@ async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerO
     let job = Job { unit: admitted.target, pdu, reply: tx, queued: Instant::now(), high: false, write };
     route.line.submit(BROKER_CLIENT, job).map_err(|_| format!("{text}: the line's queue is full"))?;
     match tokio::time::timeout(Duration::from_secs(30), rx).await {
-        Ok(Ok(Reply::Pdu(answer))) if answer.first().is_some_and(|f| f & mbtap_core::proto::EXCEPTION_FLAG == 0) => {
-            Ok(None)
-        }
+        Ok(Ok(Reply::Pdu(answer))) if answer.first().is_some_and(|f| f & mbtap_proto::EXCEPTION_FLAG == 0) => Ok(None),
         Ok(Ok(Reply::Pdu(answer))) => Err(format!(
             "{text}: the device answered exception {}",
-            mbtap_core::proto::ExceptionCode::from(answer.get(1).copied().unwrap_or(0))
+            mbtap_proto::ExceptionCode::from(answer.get(1).copied().unwrap_or(0))
         )),
         Ok(Ok(Reply::Gateway(code))) => Err(format!("{text}: the bridge answered exception {code}")),
         Ok(Ok(Reply::Silence)) => Ok(None),

@@ -12,11 +12,11 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 use super::request::{Client, Pending, Routes, ServerOptions, request};
-use mbtap_core::proto::tcp::{Streaming, parse_tcp_frame};
-use mbtap_core::proto::{encode_rtu, encode_tcp};
 use mbtap_gateway::admit::Role;
 use mbtap_gateway::giveup::GiveUp;
 use mbtap_gateway::queue::ClientId;
+use mbtap_proto::tcp::{Streaming, parse_tcp_frame};
+use mbtap_proto::{encode_rtu, encode_tcp};
 
 /// A pause that ends an RTU-over-TCP frame of unknown length.
 const RTU_OVER_TCP_SILENCE: Duration = Duration::from_millis(50);
@@ -104,7 +104,7 @@ pub(super) async fn connection<S>(
     };
     let mut buf = Vec::with_capacity(600);
     let mut chunk = [0u8; 1024];
-    let mut rtu_frames = mbtap_core::sim::RequestAssembler::default();
+    let mut rtu_frames = mbtap_sim::RequestAssembler::default();
     // The idle timer counts from the last whole request, not the last byte: bytes that never
     // make a request do not keep a connection alive. A request begun must end within
     // REQUEST_DEADLINE.

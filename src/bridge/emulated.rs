@@ -1,6 +1,6 @@
 //! A line whose devices are emulated in this process (`mbtap simulate --listen`): the bridge's
 //! fronts (Modbus TCP, RTU over TCP, UDP, TLS) and their one admission, queue, cache and
-//! metrics, with the devices of [`mbtap_core::sim::device`] behind them instead of a port.
+//! metrics, with the devices of [`mbtap_sim::device`] behind them instead of a port.
 //! Every answer still passes the gateway core's one answer check: an emulated device that
 //! answered what was not asked is a defect to count, never a reply to forward.
 
@@ -41,7 +41,7 @@ pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
                     }
                 }
             }
-            None if job.unit == mbtap_core::sim::slave::BROADCAST => Reply::Silence,
+            None if job.unit == mbtap_sim::slave::BROADCAST => Reply::Silence,
             // No emulated device at that address: as a line where nobody answers (MAP v1.1b3 §7, 0B).
             None => Reply::Gateway(GATEWAY_TARGET_FAILED),
         };

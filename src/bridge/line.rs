@@ -19,7 +19,7 @@ pub use super::port::{LineOptions, MonitorChunk};
 use super::shared::{Job, LineShared, POLL_CLIENT};
 use crate::source::pace::wait_until;
 use crate::source::stream::Transport;
-use mbtap_core::chunk::{PortId, Timestamp};
+use mbtap_analysis::chunk::{PortId, Timestamp};
 use mbtap_gateway::breaker::Breaker;
 use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED};
 use mbtap_gateway::transaction::{LateListener, MasterConfig, Note, Outcome, Reply, SerialMaster, Step, Transaction};

@@ -11,9 +11,9 @@ use tokio_serial::{SerialPort, SerialPortBuilderExt};
 
 use super::shared::LineShared;
 use crate::source::stream::{LineStream, Transport};
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::chunk::{PortId, Timestamp};
-use mbtap_core::framer::LineSettings;
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::chunk::{PortId, Timestamp};
+use mbtap_analysis::framer::LineSettings;
 use mbtap_gateway::cache::{Poll, Rule};
 use mbtap_gateway::timeouts::{TimeoutMode, Timeouts};
 use mbtap_gateway::transaction::{EchoMode, MasterConfig, SerialMaster};

@@ -3,7 +3,7 @@
 //! ASCII) master can reach TCP devices.
 //!
 //! Requests are framed from the serial bytes the way a slave's UART sees them (structure and
-//! CRC, the silence for functions of unknown length: [`mbtap_core::sim::RequestAssembler`]). The TCP
+//! CRC, the silence for functions of unknown length: [`mbtap_sim::RequestAssembler`]). The TCP
 //! side is a plain MBAP client kept open and reconnected on failure; PDUs pass through
 //! unchanged in both directions, vendor codes included — which is why it is not tokio-modbus's
 //! client, whose typed responses would have to be re-encoded. A TCP server that cannot be
@@ -20,16 +20,16 @@ use tokio_serial::{SerialPortBuilderExt, SerialStream};
 
 use super::line::MonitorChunk;
 use super::metrics::Metrics;
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::chunk::PortId;
-use mbtap_core::framer::LineSettings;
-use mbtap_core::proto::answer_end::Verdict;
-use mbtap_core::proto::encode_rtu;
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::chunk::PortId;
+use mbtap_analysis::framer::LineSettings;
 use mbtap_gateway::admit::{Asked, Policy, Role};
 use mbtap_gateway::answer::check;
 use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED, exception_pdu};
 use mbtap_gateway::tcp_device::{Heard, TcpDevice};
 use mbtap_proto::ExceptionCode;
+use mbtap_proto::answer_end::Verdict;
+use mbtap_proto::encode_rtu;
 
 /// Reverse-mode settings.
 #[derive(Debug, Clone)]
@@ -97,7 +97,7 @@ impl Side<'_> {
     fn monitor_sent(&self, port: PortId, bytes: &[u8], char_ns: u64) {
         if let Some(m) = self.monitor {
             let on_wire = char_ns.saturating_mul(bytes.len() as u64);
-            let t = mbtap_core::chunk::Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
+            let t = mbtap_analysis::chunk::Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
             let _ = m.send((port, t, bytes.to_vec(), true));
         }
     }
@@ -241,7 +241,7 @@ async fn forward_rtu(opts: &ReverseOptions, s: &mut TcpStream, unit: u8, pdu: &[
             Err(_) if buf.is_empty() || tokio::time::Instant::now() >= deadline => return Err(RtuFailure::NoAnswer),
             Err(_) => true,
         };
-        match mbtap_core::proto::answer_end::judge_rtu(&buf, unit, function, silent) {
+        match mbtap_proto::answer_end::judge_rtu(&buf, unit, function, silent) {
             Verdict::Pending => {}
             Verdict::Answer { len } => {
                 let answer = buf.get(1..len.saturating_sub(2)).map(<[u8]>::to_vec).ok_or(RtuFailure::NoAnswer)?;

@@ -20,10 +20,10 @@ use crate::bridge::server;
 use crate::bridge::shared::LineShared;
 use crate::output::EventWriter;
 use crate::source::session::Session;
-use mbtap_core::analyzer::AnalyzerConfig;
-use mbtap_core::chunk::{Chunk, PortId};
-use mbtap_core::framer::FramerConfig;
-use mbtap_core::pairing::PairingConfig;
+use mbtap_analysis::analyzer::AnalyzerConfig;
+use mbtap_analysis::chunk::{Chunk, PortId};
+use mbtap_analysis::framer::FramerConfig;
+use mbtap_analysis::pairing::PairingConfig;
 
 /// Everything the bridge needs.
 #[derive(Debug, Clone)]
@@ -60,8 +60,8 @@ impl BridgeOptions {
     #[must_use]
     pub fn emulating(
         emulated: Arc<crate::source::emulated::Emulated>,
-        line: mbtap_core::framer::LineSettings,
-        mode: mbtap_core::analyzer::SerialMode,
+        line: mbtap_analysis::framer::LineSettings,
+        mode: mbtap_analysis::analyzer::SerialMode,
         duration: Option<Duration>,
         fronts: EmulatedFronts,
     ) -> Self {
@@ -288,11 +288,10 @@ pub async fn bridge<W: Write>(
                 Arc::clone(&connections),
             ));
         }
-        (mode, settings) =
-            opts.lines.first().map_or(
-                (mbtap_core::analyzer::SerialMode::Rtu, mbtap_core::framer::LineSettings::default()),
-                |(_, l)| (l.mode, l.line),
-            );
+        (mode, settings) = opts.lines.first().map_or(
+            (mbtap_analysis::analyzer::SerialMode::Rtu, mbtap_analysis::framer::LineSettings::default()),
+            |(_, l)| (l.mode, l.line),
+        );
         // The bridge knows who said what: requests on port 0, responses on port 1.
         pairing = PairingConfig { request_port: Some(PortId(0)), response_port: Some(PortId(1)), ..Default::default() };
         Served::Lines(routes)

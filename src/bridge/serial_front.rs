@@ -13,8 +13,8 @@ use std::time::Duration;
 use tokio_serial::{SerialPortBuilderExt, SerialStream};
 
 use super::request::{Client, Routes, ServerOptions, request};
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::framer::LineSettings;
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::LineSettings;
 use mbtap_gateway::admit::Role;
 use mbtap_gateway::queue::ClientId;
 

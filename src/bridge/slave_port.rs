@@ -1,6 +1,6 @@
 //! A serial port on which the bridge is the slave (reverse mode, `--listen-serial`): requests
 //! framed from the bytes the way a slave's UART sees them (structure and CRC, the silence for
-//! functions of unknown length: [`mbtap_core::sim::RequestAssembler`]; ASCII by ':' … CR LF),
+//! functions of unknown length: [`mbtap_sim::RequestAssembler`]; ASCII by ':' … CR LF),
 //! and answers written after the slave's turnaround under the port's direction control.
 
 use std::time::Duration;
@@ -8,10 +8,10 @@ use std::time::Duration;
 use tokio::io::AsyncReadExt;
 use tokio_serial::SerialStream;
 
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::framer::LineSettings;
-use mbtap_core::proto::{encode_ascii, encode_rtu};
-use mbtap_core::sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::LineSettings;
+use mbtap_proto::{encode_ascii, encode_rtu};
+use mbtap_sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
 
 /// The requests heard on one port, in its mode.
 #[derive(Debug, Default)]

@@ -11,7 +11,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use tokio::time::Instant;
 
-use mbtap_core::proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
+use mbtap_proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
 use tokio::net::UdpSocket;
 
 use super::request::{Client, Pending, Routes, ServerOptions, request};

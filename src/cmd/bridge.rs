@@ -420,15 +420,15 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
 
 fn run_monitored(
     monitor: Option<EventFormatArg>,
-    profiles: mbtap_core::profile::Profiles,
-    settings: mbtap_core::framer::LineSettings,
+    profiles: mbtap_device::profile::Profiles,
+    settings: mbtap_analysis::framer::LineSettings,
     opts: crate::bridge::run::BridgeOptions,
     taps: Vec<std::sync::Arc<dyn crate::output::Tap>>,
 ) -> anyhow::Result<ExitCode> {
     match monitor {
         Some(EventFormatArg::Tui) => {
             let ui =
-                TuiSource { profiles, lang: mbtap_core::profile::annotate::Lang::En, line: settings, pacing: false };
+                TuiSource { profiles, lang: mbtap_device::profile::annotate::Lang::En, line: settings, pacing: false };
             ui.run("bridge", move |writer, err| {
                 writer.taps = taps;
                 runtime()?.block_on(crate::bridge::run::bridge(opts, Some(writer), err))

@@ -1,13 +1,13 @@
-//! `mbtap decode`: frames typed or pasted as text, explained ([`mbtap_core::decode`]).
+//! `mbtap decode`: frames typed or pasted as text, explained ([`mbtap_analysis::decode`]).
 
 use std::io::{self, Write};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::ValueEnum;
-use mbtap_core::decode::{self as decode_cmd, Format};
-use mbtap_core::decode_lines::{Line, Lines, MAX_LINE};
-use mbtap_core::proto::Mode;
+use mbtap_analysis::decode::{self as decode_cmd, Format};
+use mbtap_analysis::decode_lines::{Line, Lines, MAX_LINE};
+use mbtap_proto::Mode;
 
 use crate::args::LangArg;
 

@@ -1,11 +1,11 @@
 //! `mbtap demo`: the whole job with no hardware — simulated MK4, Display and MKZP-0.4 on a
-//! virtual line ([`mbtap_core::sim::bus`]), polled by a built-in master, heard by the same
+//! virtual line ([`mbtap_sim::bus`]), polled by a built-in master, heard by the same
 //! analyzer `sniff` uses and shown annotated by their profiles, in real time.
 
 use std::io::{self, IsTerminal};
 use std::process::ExitCode;
 
-use mbtap_core::framer::LineSettings;
+use mbtap_analysis::framer::LineSettings;
 
 use crate::args::{EventFormatArg, FaultArg, LangArg, fault_list};
 use crate::cmd::runtime;
@@ -46,7 +46,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let opts = crate::source::demo::DemoOptions { duration, faults, speed, heard_at };
     let format =
         format.unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });
-    let profiles = mbtap_core::sim::demo_profiles()?;
+    let profiles = mbtap_sim::demo_profiles()?;
     // The demo's line is simulated: values age by its own time, not the clock's.
     let publishing = crate::publish::Publishing::start(&publish, false, "demo", &profiles)?;
     let taps = publishing.taps();

@@ -1,12 +1,12 @@
 //! `mbtap diff A B`: which registers changed between two captures, register images or probe
-//! dumps, and how ([`mbtap_core::learn::diff`]), named and scaled by profiles when given.
+//! dumps, and how ([`mbtap_analysis::learn::diff`]), named and scaled by profiles when given.
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context as _;
-use mbtap_core::learn::diff::{Image, diff};
+use mbtap_analysis::learn::diff::{Image, diff};
 
 /// Which registers changed between two captures, register images (`replay --image` CSV or
 /// JSON) or probe dumps (`probe --format json` saved) — before and after a settings change or
@@ -39,17 +39,17 @@ pub enum Format {
 /// Builds the image of a capture and says what was wrong with the capture (a corrupt block)
 /// on the way, as `replay` does.
 struct ImageSink<'a> {
-    image: mbtap_core::profile::image::RegisterImage,
+    image: mbtap_device::profile::image::RegisterImage,
     path: &'a Path,
 }
 
-impl mbtap_core::analyzer::Sink for ImageSink<'_> {
-    fn event(&mut self, e: &mbtap_core::analyzer::Event<'_>) {
+impl mbtap_analysis::analyzer::Sink for ImageSink<'_> {
+    fn event(&mut self, e: &mbtap_analysis::analyzer::Event<'_>) {
         crate::output::update_image(&mut self.image, e);
     }
 
     fn warning(&mut self, message: &str) {
-        eprintln!("mbtap: {}: {}", self.path.display(), mbtap_core::report::format::printable(message));
+        eprintln!("mbtap: {}: {}", self.path.display(), mbtap_analysis::report::format::printable(message));
     }
 }
 
@@ -59,8 +59,8 @@ fn load(path: &Path) -> anyhow::Result<Image> {
         return Ok(image);
     }
     let input = crate::output::progress::open_capture(path, false)?;
-    let mut sink = ImageSink { image: mbtap_core::profile::image::RegisterImage::default(), path };
-    mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut sink)
+    let mut sink = ImageSink { image: mbtap_device::profile::image::RegisterImage::default(), path };
+    mbtap_analysis::replay::replay_into(input, mbtap_analysis::line_args::LineOverrides::default(), &mut sink)
         .with_context(|| format!("reading {}", path.display()))?;
     Ok(sink.image.values.iter().map(|(&k, v)| (k, v.raw)).collect())
 }
@@ -84,7 +84,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let Some(raw) = raw else { return "—".into() };
         let named = profiles
             .get(&unit)
-            .and_then(|p| mbtap_core::query::rows::rows(unit, table, address, &[raw], Some(p)).into_iter().next());
+            .and_then(|p| mbtap_device::query::rows::rows(unit, table, address, &[raw], Some(p)).into_iter().next());
         named.map_or_else(|| raw.to_string(), |r| format!("{} ({})", r.shown, raw))
     };
     for c in &changes {
@@ -96,7 +96,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             Format::Text => format!(
                 "unit {} {} {}{name}: {} → {}",
                 c.unit,
-                mbtap_core::query::rows::short_table(c.table),
+                mbtap_device::query::rows::short_table(c.table),
                 c.address,
                 shown(c.unit, c.table, c.address, c.before),
                 shown(c.unit, c.table, c.address, c.after)
@@ -107,7 +107,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             })
             .to_string(),
         };
-        writeln!(out, "{}", mbtap_core::report::format::printable(&line)).context("writing the differences")?;
+        writeln!(out, "{}", mbtap_analysis::report::format::printable(&line)).context("writing the differences")?;
     }
     if args.format == Format::Text {
         writeln!(out, "{} differ, {same} the same", changes.len()).context("writing the differences")?;

@@ -29,9 +29,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, out, line } = args;
     let input = crate::output::progress::open_capture(&file, true)?;
     let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
-    let export = mbtap_core::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
+    let export = mbtap_analysis::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
     let mut sink = ExportSink { export, error: None };
-    mbtap_core::replay::replay_into(input, line.overrides(), &mut sink)
+    mbtap_analysis::replay::replay_into(input, line.overrides(), &mut sink)
         .context("reading the capture")
         .with_context(|| format!("reading {}", file.display()))?;
     if let Some(e) = sink.error {
@@ -45,13 +45,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 
 /// Collects frames for the Wireshark export.
 struct ExportSink<W: Write> {
-    export: mbtap_core::capture::export::WiresharkExport<W>,
+    export: mbtap_analysis::capture::export::WiresharkExport<W>,
     error: Option<io::Error>,
 }
 
-impl<W: Write> mbtap_core::analyzer::Sink for ExportSink<W> {
-    fn event(&mut self, e: &mbtap_core::analyzer::Event<'_>) {
-        if let mbtap_core::analyzer::Event::Frame { frame, role, .. } = *e
+impl<W: Write> mbtap_analysis::analyzer::Sink for ExportSink<W> {
+    fn event(&mut self, e: &mbtap_analysis::analyzer::Event<'_>) {
+        if let mbtap_analysis::analyzer::Event::Frame { frame, role, .. } = *e
             && self.error.is_none()
             && let Err(err) = self.export.frame(frame.t_start, frame.bytes, role, frame.check_ok)
         {

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::ValueEnum;
-use mbtap_core::traffic::{Observation, TrafficConfig};
+use mbtap_sim::traffic::{Observation, TrafficConfig};
 
 use crate::args::LineArgs;
 
@@ -67,12 +67,12 @@ fn frames(args: &Args, list: &Path) -> anyhow::Result<ExitCode> {
         if l.is_empty() || l.starts_with('#') {
             continue;
         }
-        let wire = mbtap_core::proto::hexinput::parse_frame_text(l)
+        let wire = mbtap_proto::hexinput::parse_frame_text(l)
             .map_err(|e| anyhow::anyhow!("{}:{}: {e}", list.display(), i + 1))?;
         frames.push(wire);
     }
     let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
-    let n = mbtap_core::traffic::capture::write_frames(
+    let n = mbtap_sim::traffic::capture::write_frames(
         io::BufWriter::new(file),
         &frames,
         mode,
@@ -108,7 +108,7 @@ fn random(args: &Args) -> anyhow::Result<ExitCode> {
     };
     let model = model(*observe);
     let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
-    let (chunks, bytes) = mbtap_core::traffic::capture::write_capture(io::BufWriter::new(file), &cfg, model)
+    let (chunks, bytes) = mbtap_sim::traffic::capture::write_capture(io::BufWriter::new(file), &cfg, model)
         .with_context(|| format!("writing {}", out.display()))?;
     eprintln!(
         "mbtap: wrote {} ({transactions} transactions, {bytes} bytes in {chunks} packets, {settings}, {})",

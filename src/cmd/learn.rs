@@ -1,5 +1,5 @@
 //! `mbtap learn CAPTURE|PORT`: a register map drafted from what a recorded or a live line says
-//! ([`mbtap_core::learn`]): the blocks the master polls, its writes, the exceptions, and each
+//! ([`mbtap_analysis::learn`]): the blocks the master polls, its writes, the exceptions, and each
 //! register's likely type with its evidence; `-o DRAFT.toml` writes one unit's profile and
 //! `--dir DIR` one per unit, each one `profiles check` accepts. A live line is heard through the sniffer's loop
 //! ([`crate::source::sniff`]) until `--duration` or Ctrl-C.
@@ -46,8 +46,8 @@ pub struct Args {
     pub format: Format,
     /// A value read off the device's display when the capture ended, `UNIT:TABLE:ADDRESS=VALUE`
     /// (e.g. `1:input:430=230.4`): fixes that register's scale in the draft (repeatable).
-    #[arg(long, value_name = "UNIT:TABLE:ADDRESS=VALUE", value_parser = mbtap_core::learn::hint::parse_hint)]
-    pub hint: Vec<mbtap_core::learn::hint::Hint>,
+    #[arg(long, value_name = "UNIT:TABLE:ADDRESS=VALUE", value_parser = mbtap_analysis::learn::hint::parse_hint)]
+    pub hint: Vec<mbtap_analysis::learn::hint::Hint>,
 }
 
 /// Output of `learn`.
@@ -73,7 +73,7 @@ fn target(args: &Args) -> Option<crate::output::learn_draft::DraftTo> {
 }
 
 /// Listens to `args.capture` as a port, the learner fed as the sniffer hears.
-fn listen(args: &Args) -> anyhow::Result<mbtap_core::learn::Learner> {
+fn listen(args: &Args) -> anyhow::Result<mbtap_analysis::learn::Learner> {
     let (mode, settings, latency_ns) = args.line.line.overrides().resolve();
     let port = args.capture.to_string_lossy().into_owned();
     let opts = crate::source::sniff::SniffOptions {
@@ -102,16 +102,16 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             args.capture.display()
         );
         let input = crate::output::progress::open_capture(&args.capture, true)?;
-        let mut learner = mbtap_core::learn::Learner::default();
+        let mut learner = mbtap_analysis::learn::Learner::default();
         learner.only = args.unit;
-        mbtap_core::replay::replay_into(input, args.line.overrides(), &mut learner)
+        mbtap_analysis::replay::replay_into(input, args.line.overrides(), &mut learner)
             .with_context(|| format!("reading {}", args.capture.display()))?;
         learner
     };
     if let Some(u) = args.unit {
         learner.units.retain(|&k, _| k == u);
     }
-    if let Some(note) = mbtap_core::learn::draft::not_kept_note(&learner) {
+    if let Some(note) = mbtap_analysis::learn::draft::not_kept_note(&learner) {
         eprintln!("mbtap: {note}");
     }
     anyhow::ensure!(
@@ -122,13 +122,15 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     );
     let mut out = std::io::stdout().lock();
     let shown = match args.format {
-        Format::Text => mbtap_core::report::format::printable(&mbtap_core::learn::draft::text(&learner)).into_owned(),
+        Format::Text => {
+            mbtap_analysis::report::format::printable(&mbtap_analysis::learn::draft::text(&learner)).into_owned()
+        }
         Format::Json => String::new(),
     };
     let written = if args.format == Format::Json {
         // Streamed: a capture of many registers is never held as one JSON tree.
         let mut w = std::io::BufWriter::new(&mut out);
-        serde_json::to_writer_pretty(&mut w, &mbtap_core::learn::draft::Json(&learner))
+        serde_json::to_writer_pretty(&mut w, &mbtap_analysis::learn::draft::Json(&learner))
             .map_err(std::io::Error::from)
             .and_then(|()| w.write_all(b"\n"))
             .and_then(|()| w.flush())

@@ -1,5 +1,5 @@
 //! The commands, one file each: its options (clap derive) and its `run`. The work itself is in
-//! the libraries (`mbtap-core`, `mbtap-proto`) and the edge modules (`bridge`, `source`, `tui`,
+//! the libraries (`crates/`) and the edge modules (`bridge`, `source`, `tui`,
 //! `output`); a command file glues them to the command line. Adding a command is adding a file
 //! here and a line to [`Command`] and [`run`].
 

@@ -1,5 +1,5 @@
 //! `mbtap probe TARGET`: active, read-only discovery of a device's map
-//! ([`mbtap_core::learn::probe`] decides; this sends): device identification (2B/0E) and the
+//! ([`mbtap_analysis::learn::probe`] decides; this sends): device identification (2B/0E) and the
 //! server ID (11) asked once each, then functions 01–04 over the range, at the rate asked for,
 //! stopping at the first sign of distress. Never a write.
 
@@ -9,9 +9,9 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use mbtap_core::learn::probe::{Probe, Reply, Step};
-use mbtap_core::profile::Table;
-use mbtap_core::query::plan::Read;
+use mbtap_analysis::learn::probe::{Probe, Reply, Step};
+use mbtap_device::profile::Table;
+use mbtap_device::query::plan::Read;
 use tokio_modbus::prelude::{Client as _, Request, Response};
 
 use crate::master::exec::{Answer, Op, send};
@@ -160,7 +160,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let took = started.elapsed();
     if let Some(out) = &args.output {
         let skeleton = probe.skeleton(args.unit, &args.target);
-        mbtap_core::profile::load("skeleton", &skeleton)
+        mbtap_device::profile::load("skeleton", &skeleton)
             .context("the skeleton does not load (a bug: please report it)")?;
         std::fs::write(out, skeleton).with_context(|| format!("writing {}", out.display()))?;
         eprintln!("mbtap: wrote {}", out.display());
@@ -170,10 +170,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         Format::Text => {
             if let Some(objects) = &ident {
                 let shown: Vec<String> = objects.iter().map(|(id, v)| format!("0x{id:02X} {v:?}")).collect();
-                writeln!(stdout, "identification: {}", mbtap_core::report::format::printable(&shown.join(", ")))?;
+                writeln!(stdout, "identification: {}", mbtap_analysis::report::format::printable(&shown.join(", ")))?;
             }
             if let Some(s) = &server {
-                writeln!(stdout, "report server id: {}", mbtap_core::report::format::printable(s))?;
+                writeln!(stdout, "report server id: {}", mbtap_analysis::report::format::printable(s))?;
             }
             write!(stdout, "{}", probe.text())?;
             writeln!(stdout, "took {:.1} s at up to {} requests/s", took.as_secs_f64(), args.rate)?;

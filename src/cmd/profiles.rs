@@ -1,16 +1,16 @@
 //! `mbtap profiles list|check|show|import|export`: the device profiles — built in, the user's, a
 //! file; imported from register sheets and Home Assistant YAML, exported to the site's tools.
 
-use mbtap_core::report::format::printable;
+use mbtap_analysis::report::format::printable;
 use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clap::{Subcommand, ValueEnum};
-use mbtap_core::profile::Table;
-use mbtap_core::profile::export::Target;
-use mbtap_core::profile::import::sheet::{SheetOptions, parse_columns};
+use mbtap_device::profile::Table;
+use mbtap_device::profile::export::Target;
+use mbtap_device::profile::import::sheet::{SheetOptions, parse_columns};
 
 use crate::config::devices::{load_profile_file, resolve_profile, user_profile_dir};
 
@@ -67,7 +67,7 @@ pub struct ImportArgs {
     /// `f32`, `u32`, `i16`, `string(8)`, … as a type column would give it. Without it and
     /// without a type column, registers are u16 and the import says so.
     #[arg(long = "type", value_name = "TYPE", value_parser = parse_type_arg)]
-    pub value_type: Option<(mbtap_core::profile::format::ValueType, Option<u16>)>,
+    pub value_type: Option<(mbtap_device::profile::format::ValueType, Option<u16>)>,
     /// The profile's name (default: the first file's name).
     #[arg(long)]
     pub name: Option<String>,
@@ -147,8 +147,8 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
 /// The built-in profiles, then the user's (each says whether it loads).
 fn list() -> anyhow::Result<ExitCode> {
     let mut out = std::io::stdout().lock();
-    for name in mbtap_core::profile::builtin::names() {
-        if let Some(Ok(p)) = mbtap_core::profile::builtin::get(name) {
+    for name in mbtap_device::profile::builtin::names() {
+        if let Some(Ok(p)) = mbtap_device::profile::builtin::get(name) {
             let line = format!("{name:<8} built-in  {} — {}", p.meta.device, p.meta.document.as_deref().unwrap_or(""));
             writeln!(out, "{}", printable(&line))?;
         }
@@ -247,8 +247,8 @@ fn detect(path: &std::path::Path) -> anyhow::Result<ImportFormat> {
 }
 
 /// `--type TYPE`, read as a sheet's type column would read it.
-fn parse_type_arg(s: &str) -> Result<(mbtap_core::profile::format::ValueType, Option<u16>), String> {
-    mbtap_core::profile::import::notation::parse_type(s)
+fn parse_type_arg(s: &str) -> Result<(mbtap_device::profile::format::ValueType, Option<u16>), String> {
+    mbtap_device::profile::import::notation::parse_type(s)
 }
 
 /// `profiles import`: the sheets read, the profile written and loaded back, what was skipped said.
@@ -266,12 +266,12 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             TableArg::Discrete => Table::DiscreteInputs,
         }),
         word_order: args.word_order.map(|w| match w {
-            WordOrderArg::HighFirst => mbtap_core::profile::format::WordOrder::HighFirst,
-            WordOrderArg::LowFirst => mbtap_core::profile::format::WordOrder::LowFirst,
+            WordOrderArg::HighFirst => mbtap_device::profile::format::WordOrder::HighFirst,
+            WordOrderArg::LowFirst => mbtap_device::profile::format::WordOrder::LowFirst,
         }),
         value_type: args.value_type,
     };
-    let mut all = mbtap_core::profile::import::Imported::default();
+    let mut all = mbtap_device::profile::import::Imported::default();
     let mut err = std::io::stderr().lock();
     if let Some(target) = &args.from {
         anyhow::ensure!(
@@ -301,9 +301,9 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
         };
         let one = match format {
             ImportFormat::Csv => {
-                mbtap_core::profile::import::sheet::parse_sheet(&crate::config::sheets::read_csv(file)?, &opts)
+                mbtap_device::profile::import::sheet::parse_sheet(&crate::config::sheets::read_csv(file)?, &opts)
             }
-            ImportFormat::Xlsx => mbtap_core::profile::import::sheet::parse_sheet(
+            ImportFormat::Xlsx => mbtap_device::profile::import::sheet::parse_sheet(
                 &crate::config::sheets::read_workbook(file, args.sheet.as_deref())?,
                 &opts,
             ),
@@ -311,7 +311,7 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             ImportFormat::HomeAssistant => {
                 let yaml = crate::config::sheets::read_yaml(file)?;
                 let (imported, unit) =
-                    mbtap_core::profile::import::home_assistant::parse_home_assistant(&yaml, args.unit)
+                    mbtap_device::profile::import::home_assistant::parse_home_assistant(&yaml, args.unit)
                         .with_context(|| format!("reading {}", file.display()))?;
                 writeln!(err, "mbtap: {}: device {unit}", file.display())?;
                 imported
@@ -339,7 +339,7 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
 /// The profile from `all` (made from `sources`) written, loaded back and summarised.
 fn write_imported(
     args: &ImportArgs,
-    all: &mbtap_core::profile::import::Imported,
+    all: &mbtap_device::profile::import::Imported,
     sources: &[String],
     err: &mut impl std::io::Write,
 ) -> anyhow::Result<ExitCode> {
@@ -371,7 +371,7 @@ fn write_imported(
         anyhow::bail!("nothing imported ({} problem(s), listed above): {hint}", all.problems.len());
     }
     // What is written must load like a hand-written profile: checked before it is kept.
-    mbtap_core::profile::import::load_back(&name, &toml)
+    mbtap_device::profile::import::load_back(&name, &toml)
         .context("the imported profile does not load (a bug: please report it with the sheet)")?;
     let out = if let Some(o) = &args.output {
         o.clone()
@@ -381,7 +381,7 @@ fn write_imported(
         dir.join(format!("{name}.toml"))
     };
     write_profile_file(&out, &toml, args.force)?;
-    if args.output.is_none() && mbtap_core::profile::builtin::get(&name).is_some() {
+    if args.output.is_none() && mbtap_device::profile::builtin::get(&name).is_some() {
         writeln!(
             err,
             "mbtap: warning: {name} is also a built-in profile, which is found first by that name; \
@@ -439,7 +439,7 @@ fn export(args: &ExportArgs) -> anyhow::Result<ExitCode> {
         ExportFormat::Esphome => Target::Esphome,
         ExportFormat::Telegraf => Target::Telegraf,
     };
-    let e = mbtap_core::profile::export::export(&p, args.unit, target);
+    let e = mbtap_device::profile::export::export(&p, args.unit, target);
     match &args.output {
         Some(o) => std::fs::write(o, &e.text).with_context(|| format!("writing {}", o.display()))?,
         None => std::io::stdout().lock().write_all(e.text.as_bytes())?,

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use mbtap_core::query::{items, plan, resolve};
+use mbtap_device::query::{items, plan, resolve};
 
 use crate::master::{MasterArgs, exec, link::Link, show};
 
@@ -26,7 +26,7 @@ pub struct Args {
 /// The plan for `items`, or the first problem with one of them.
 pub fn prepare(
     items: &[String],
-    profile: Option<&mbtap_core::profile::Profile>,
+    profile: Option<&mbtap_device::profile::Profile>,
 ) -> anyhow::Result<(Vec<resolve::Target>, plan::Plan)> {
     let parsed = items::parse_items(items)?;
     let targets = parsed.iter().map(|i| resolve::resolve(i, profile)).collect::<Result<Vec<_>, _>>()?;
@@ -35,7 +35,7 @@ pub fn prepare(
         let item = targets.get(i).map(|t| t.item.text.as_str()).unwrap_or_default();
         eprintln!(
             "mbtap: {item}: {} {a}..{b} reserved by the device's document, not read",
-            mbtap_core::query::rows::short_table(table)
+            mbtap_device::query::rows::short_table(table)
         );
     }
     Ok((targets, plan))

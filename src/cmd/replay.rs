@@ -51,7 +51,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut writer = event_writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()), &output)?;
     writer.taps = taps;
     if image.is_some() {
-        writer.image = Some(mbtap_core::profile::image::RegisterImage::default());
+        writer.image = Some(mbtap_device::profile::image::RegisterImage::default());
     }
     crate::output::replay(input, line.overrides(), &mut writer, &mut io::stderr())
         .with_context(|| format!("replaying {}", file.display()))?;
@@ -59,7 +59,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         if img.overflowed > 0 {
             eprintln!(
                 "mbtap: warning: the register image is full ({} addresses): {} values of new addresses not kept",
-                mbtap_core::profile::image::MAX_VALUES,
+                mbtap_device::profile::image::MAX_VALUES,
                 img.overflowed
             );
         }

@@ -28,7 +28,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, line, format, devices } = args;
     let devices = [crate::config::devices::devices_beside(&file)?, devices].concat();
     let input = crate::output::progress::open_capture(&file, true)?;
-    let mut health = mbtap_core::health::Health::new(crate::config::devices::load_devices(&devices)?);
+    let mut health = mbtap_analysis::health::Health::new(crate::config::devices::load_devices(&devices)?);
     let mut warnings = Vec::new();
     let (mut settings, mut observers) = (None, Vec::new());
     {
@@ -38,7 +38,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             settings: &mut settings,
             observers: &mut observers,
         };
-        mbtap_core::replay::replay_into(input, line.overrides(), &mut sink)
+        mbtap_analysis::replay::replay_into(input, line.overrides(), &mut sink)
             .context("reading the capture")
             .with_context(|| format!("reading {}", file.display()))?;
     }
@@ -50,9 +50,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     report.line = settings.map(|l| l.to_string());
     report.observers = observers;
     let text = match format {
-        ReportFormatArg::Text => mbtap_core::report::format::printable(&report.text()).into_owned(),
+        ReportFormatArg::Text => mbtap_analysis::report::format::printable(&report.text()).into_owned(),
         ReportFormatArg::Json => serde_json::to_string_pretty(&report.json())? + "\n",
-        ReportFormatArg::Html => mbtap_core::health::html::render(&report, &file.display().to_string()),
+        ReportFormatArg::Html => mbtap_analysis::health::html::render(&report, &file.display().to_string()),
     };
     io::stdout().lock().write_all(text.as_bytes())?;
     // Nothing that frames was heard: not a healthy bus, and scripts must see it.
@@ -74,14 +74,14 @@ pub enum ReportFormatArg {
 
 /// The health report as an analyzer sink.
 struct HealthSink<'a> {
-    health: &'a mut mbtap_core::health::Health,
+    health: &'a mut mbtap_analysis::health::Health,
     warnings: &'a mut Vec<String>,
-    settings: &'a mut Option<mbtap_core::framer::LineSettings>,
+    settings: &'a mut Option<mbtap_analysis::framer::LineSettings>,
     observers: &'a mut Vec<String>,
 }
 
-impl mbtap_core::analyzer::Sink for HealthSink<'_> {
-    fn event(&mut self, event: &mbtap_core::analyzer::Event<'_>) {
+impl mbtap_analysis::analyzer::Sink for HealthSink<'_> {
+    fn event(&mut self, event: &mbtap_analysis::analyzer::Event<'_>) {
         self.health.event(event);
     }
 
@@ -89,14 +89,14 @@ impl mbtap_core::analyzer::Sink for HealthSink<'_> {
         self.warnings.push(message.to_owned());
     }
 
-    fn settings(&mut self, line: mbtap_core::framer::LineSettings) {
+    fn settings(&mut self, line: mbtap_analysis::framer::LineSettings) {
         *self.settings = Some(line);
     }
 
-    fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
+    fn observer(&mut self, port: mbtap_analysis::chunk::PortId, estimate: &mbtap_analysis::framer::ObserverEstimate) {
         self.health.observer(port, estimate);
         if estimate.split_frames > 0 || estimate.reads > 0 {
-            self.observers.push(mbtap_core::report::events::observer_text(port.0, estimate).trim().to_owned());
+            self.observers.push(mbtap_analysis::report::events::observer_text(port.0, estimate).trim().to_owned());
         }
     }
 }

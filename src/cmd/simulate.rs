@@ -11,7 +11,7 @@ use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use mbtap_core::framer::LineSettings;
+use mbtap_analysis::framer::LineSettings;
 
 use crate::args::{FaultArg, LineArgs, fault_list};
 use crate::source::emulate_from;
@@ -152,7 +152,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     } else {
         devices
     };
-    let mut emulated: Vec<mbtap_core::sim::Device> =
+    let mut emulated: Vec<mbtap_sim::Device> =
         specs.iter().map(|d| emulate_from::parse_device(d)).collect::<anyhow::Result<_>>()?;
     let mut notes = String::new();
     for spec in &from {
@@ -177,7 +177,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     };
     refuse_two_on_one_address(&emulated)?;
     for d in &emulated {
-        if let mbtap_core::sim::Device::Profile(s) = d {
+        if let mbtap_sim::Device::Profile(s) = d {
             let _ = writeln!(notes, "mbtap: simulating {} at address {}", s.profile().meta.name, s.address());
         }
     }
@@ -245,7 +245,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 }
 
 /// Two devices on one address would both answer: refused before anything is served.
-fn refuse_two_on_one_address(devices: &[mbtap_core::sim::Device]) -> anyhow::Result<()> {
+fn refuse_two_on_one_address(devices: &[mbtap_sim::Device]) -> anyhow::Result<()> {
     let mut seen = std::collections::BTreeSet::new();
     for d in devices {
         anyhow::ensure!(

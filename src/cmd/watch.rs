@@ -36,7 +36,7 @@ pub struct Args {
 
 /// Between 1 ms and a day.
 fn parse_interval(s: &str) -> Result<Duration, String> {
-    mbtap_core::duration::parse_duration(s, Duration::from_millis(1), Duration::from_hours(24))
+    mbtap_analysis::duration::parse_duration(s, Duration::from_millis(1), Duration::from_hours(24))
 }
 
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
@@ -48,7 +48,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let mut link = Link::new(&m.target, &m.line, timeout)?;
     let format = m.format();
     let live = format == MasterFormat::Text && std::io::stdout().is_terminal();
-    let profiles: mbtap_core::profile::Profiles = profile.iter().map(|p| (unit, p.clone())).collect();
+    let profiles: mbtap_device::profile::Profiles = profile.iter().map(|p| (unit, p.clone())).collect();
     // No health figures: watch hears only its own answers, not the bus.
     // Writes the broker asks for (`--mqtt-writes`) arrive here and are done between rounds.
     let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);

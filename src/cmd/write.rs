@@ -6,11 +6,11 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use mbtap_core::query::encode::{Write, encode_write};
-use mbtap_core::query::plan::{Plan, Read};
-use mbtap_core::query::rows::{rows, short_table};
-use mbtap_core::query::{QueryError, items, resolve};
-use mbtap_core::report::format::printable;
+use mbtap_analysis::report::format::printable;
+use mbtap_device::query::encode::{Write, encode_write};
+use mbtap_device::query::plan::{Plan, Read};
+use mbtap_device::query::rows::{rows, short_table};
+use mbtap_device::query::{QueryError, items, resolve};
 
 use crate::master::link::{Endpoint, Link};
 use crate::master::{MasterArgs, MasterFormat, exec, show};
@@ -41,14 +41,14 @@ pub struct Args {
     pub force: bool,
 }
 
-fn frame(endpoint: &Endpoint, unit: u8, pdu: &[u8]) -> (Vec<u8>, mbtap_core::proto::Mode) {
+fn frame(endpoint: &Endpoint, unit: u8, pdu: &[u8]) -> (Vec<u8>, mbtap_proto::Mode) {
     let mut out = Vec::new();
     if let Endpoint::Tcp(_) = endpoint {
-        mbtap_core::proto::encode_tcp(1, unit, pdu, &mut out);
-        (out, mbtap_core::proto::Mode::Tcp)
+        mbtap_proto::encode_tcp(1, unit, pdu, &mut out);
+        (out, mbtap_proto::Mode::Tcp)
     } else {
-        mbtap_core::proto::encode_rtu(unit, pdu, &mut out);
-        (out, mbtap_core::proto::Mode::Rtu)
+        mbtap_proto::encode_rtu(unit, pdu, &mut out);
+        (out, mbtap_proto::Mode::Rtu)
     }
 }
 
@@ -56,7 +56,7 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
 }
 
-fn describe(w: &Write, target: &resolve::Target, profile: Option<&mbtap_core::profile::Profile>, unit: u8) -> String {
+fn describe(w: &Write, target: &resolve::Target, profile: Option<&mbtap_device::profile::Profile>, unit: u8) -> String {
     let shown = rows(unit, w.table, w.address, &w.words, profile)
         .first()
         .map(|r| format!("{} = {}", r.name.as_deref().unwrap_or("-"), r.shown))
@@ -96,17 +96,17 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let mut out = std::io::stdout().lock();
     let endpoint = Endpoint::parse(&m.target);
     if args.dry_run {
-        let profiles: mbtap_core::profile::Profiles = p.map(|p| (unit, p.clone())).into_iter().collect();
+        let profiles: mbtap_device::profile::Profiles = p.map(|p| (unit, p.clone())).into_iter().collect();
         for (target, w) in &writes {
             let (bytes, mode) = frame(&endpoint, unit, &w.pdu());
             writeln!(out, "would send to unit {unit}: {}", printable(&describe(w, target, p, unit)))?;
             writeln!(out, "  {}", hex(&bytes))?;
-            mbtap_core::decode::run_with_profiles(
+            mbtap_analysis::decode::run_with_profiles(
                 &[hex(&bytes)],
                 Some(mode),
-                mbtap_core::decode::Format::Text,
+                mbtap_analysis::decode::Format::Text,
                 &profiles,
-                mbtap_core::profile::annotate::Lang::En,
+                mbtap_device::profile::annotate::Lang::En,
                 &mut out,
                 &mut std::io::sink(),
             )?;
@@ -165,7 +165,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
                 let o = serde_json::json!({
                     "event": "write", "unit": unit, "table": w.table.name(), "address": w.address,
                     "function": w.function, "words": w.words, "item": target.item.text,
-                    "read_back": back.iter().map(mbtap_core::query::rows::Row::to_json).collect::<Vec<_>>(),
+                    "read_back": back.iter().map(mbtap_device::query::rows::Row::to_json).collect::<Vec<_>>(),
                     "kept_as_written": !differs,
                 });
                 writeln!(out, "{o}")?;

@@ -3,11 +3,11 @@
 //! `[devices]`. Reads files and the environment, so it lives at the edge.
 
 use anyhow::Context;
-use mbtap_core::profile::Profiles;
+use mbtap_device::profile::Profiles;
 
-pub fn load_profile_file(path: &std::path::Path) -> anyhow::Result<mbtap_core::profile::Profile> {
+pub fn load_profile_file(path: &std::path::Path) -> anyhow::Result<mbtap_device::profile::Profile> {
     let src = std::fs::read_to_string(path).with_context(|| format!("reading profile {}", path.display()))?;
-    Ok(mbtap_core::profile::load(&path.display().to_string(), &src)?)
+    Ok(mbtap_device::profile::load(&path.display().to_string(), &src)?)
 }
 
 /// Where users keep their own profiles: `$MBTAP_PROFILE_DIR`, else
@@ -24,8 +24,8 @@ pub fn user_profile_dir() -> Option<std::path::PathBuf> {
 
 /// A built-in profile by name, a user profile by name (`NAME.toml` in the user profile
 /// directory), or a profile file by path.
-pub fn resolve_profile(spec: &str) -> anyhow::Result<mbtap_core::profile::Profile> {
-    if let Some(p) = mbtap_core::profile::builtin::get(spec) {
+pub fn resolve_profile(spec: &str) -> anyhow::Result<mbtap_device::profile::Profile> {
+    if let Some(p) = mbtap_device::profile::builtin::get(spec) {
         return Ok(p?);
     }
     let path = std::path::Path::new(spec);
@@ -41,7 +41,7 @@ pub fn resolve_profile(spec: &str) -> anyhow::Result<mbtap_core::profile::Profil
     let dir = user_profile_dir().map_or_else(|| "(no config directory)".to_owned(), |d| d.display().to_string());
     anyhow::bail!(
         "no profile named {spec:?}: built-in profiles are {}; user profiles are NAME.toml files in {dir}; or give the path of a profile file (see docs/profiles.md)",
-        mbtap_core::profile::builtin::names().join(", ")
+        mbtap_device::profile::builtin::names().join(", ")
     )
 }
 

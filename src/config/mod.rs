@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use mbtap_core::profile::ProfileError;
+use mbtap_device::profile::ProfileError;
 
 /// The parsed file.
 #[derive(Debug, Clone, Default, Deserialize)]

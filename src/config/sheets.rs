@@ -13,7 +13,7 @@ use std::path::Path;
 
 use anyhow::Context as _;
 use calamine::{Data, DataRef, Reader as _};
-use mbtap_core::profile::import::grid::{Grid, MAX_COLUMNS, MAX_ROWS};
+use mbtap_device::profile::import::grid::{Grid, MAX_COLUMNS, MAX_ROWS};
 
 /// The largest CSV read (64 MiB; the largest register sheet — every address of four tables at
 /// 200 bytes a row — is ~52 MB).

@@ -5,11 +5,11 @@
 
 use std::time::{Duration, Instant};
 
-use mbtap_core::profile::Table;
-use mbtap_core::proto::function::ExceptionCode;
-use mbtap_core::query::encode::Write;
-use mbtap_core::query::is_bits;
-use mbtap_core::query::plan::Read;
+use mbtap_device::profile::Table;
+use mbtap_device::query::encode::Write;
+use mbtap_device::query::is_bits;
+use mbtap_device::query::plan::Read;
+use mbtap_proto::function::ExceptionCode;
 use tokio_modbus::prelude::{Reader as _, Writer as _};
 
 use super::link::Link;
@@ -150,12 +150,12 @@ pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retr
 pub async fn read_all(
     link: &mut Link,
     unit: u8,
-    targets: &[mbtap_core::query::resolve::Target],
-    plan: &mbtap_core::query::plan::Plan,
-    profile: Option<&mbtap_core::profile::Profile>,
+    targets: &[mbtap_device::query::resolve::Target],
+    plan: &mbtap_device::query::plan::Plan,
+    profile: Option<&mbtap_device::profile::Profile>,
     timeout: Duration,
     retries: u32,
-) -> (Vec<mbtap_core::query::rows::Row>, Vec<super::show::Failure>) {
+) -> (Vec<mbtap_device::query::rows::Row>, Vec<super::show::Failure>) {
     let mut rows = Vec::new();
     let mut failures = Vec::new();
     for &read in &plan.reads {
@@ -164,7 +164,7 @@ pub async fn read_all(
             Answer::Values(mut v) => {
                 // Bits come back padded to whole bytes (MAP v1.1b3 §6.1); keep those asked for.
                 v.truncate(usize::from(read.quantity));
-                rows.extend(mbtap_core::query::rows::rows(unit, read.table, read.address, &v, profile));
+                rows.extend(mbtap_device::query::rows::rows(unit, read.table, read.address, &v, profile));
             }
             other => failures.push(super::show::Failure {
                 unit,

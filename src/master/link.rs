@@ -6,7 +6,7 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use mbtap_core::analyzer::SerialMode;
+use mbtap_analysis::analyzer::SerialMode;
 use tokio_modbus::client::Context;
 use tokio_modbus::{Slave, prelude::rtu, prelude::tcp};
 
@@ -73,7 +73,7 @@ async fn resolve(host_port: &str) -> anyhow::Result<SocketAddr> {
 /// A reopenable link.
 pub struct Link {
     endpoint: Endpoint,
-    line: mbtap_core::framer::LineSettings,
+    line: mbtap_analysis::framer::LineSettings,
     mode: SerialMode,
     connect_timeout: Duration,
     context: Option<Context>,

@@ -1,6 +1,6 @@
 //! `simulate --mirror TARGET`: the served device's values read from another device on its
 //! freshness period, through the master's link (serial RTU/ASCII, Modbus TCP, RTU over TCP),
-//! and set into the emulated device ([`mbtap_core::sim::mirror`] says what to read and how each
+//! and set into the emulated device ([`mbtap_sim::mirror`] says what to read and how each
 //! value becomes the served registers). A source that stops answering makes the device answer
 //! exception 0B to everything — said once a minute, and when it answers again.
 
@@ -8,8 +8,8 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, PoisonError};
 use std::time::{Duration, Instant};
 
-use mbtap_core::profile::{Profile, Table};
-use mbtap_core::sim::mirror::MirrorMap;
+use mbtap_device::profile::{Profile, Table};
+use mbtap_sim::mirror::MirrorMap;
 
 use crate::source::emulated::Emulated;
 
@@ -46,7 +46,7 @@ pub fn prepare(
     line: crate::args::SerialLineArgs,
     index: usize,
     notes: &mut String,
-) -> anyhow::Result<(mbtap_core::sim::Device, MirrorOptions)> {
+) -> anyhow::Result<(mbtap_sim::Device, MirrorOptions)> {
     use std::fmt::Write as _;
     anyhow::ensure!(!fresh.is_zero(), "--fresh: expected a period above 0, e.g. 1s");
     let (source_profile, unit) = crate::source::emulate_from::profile_at(source, "--mirror-device")?;
@@ -73,8 +73,8 @@ pub fn prepare(
         served_profile.meta.name,
         reads.len()
     );
-    let slave = mbtap_core::sim::Slave::new(Arc::new(served_profile.clone()), address);
-    let device = mbtap_core::sim::Device::Mirror { slave, fresh: false };
+    let slave = mbtap_sim::Slave::new(Arc::new(served_profile.clone()), address);
+    let device = mbtap_sim::Device::Mirror { slave, fresh: false };
     let opts = MirrorOptions {
         target: target.to_owned(),
         line,
@@ -159,7 +159,7 @@ async fn read_all(
     use super::exec::{Answer, Op, send};
     let mut values = BTreeMap::new();
     for &(table, address, last) in reads {
-        let read = mbtap_core::query::plan::Read { target: 0, table, address, quantity: last - address + 1 };
+        let read = mbtap_device::query::plan::Read { target: 0, table, address, quantity: last - address + 1 };
         match send(link, unit, Op::Read(read), timeout, 0).await.0 {
             Answer::Values(words) => values.extend((address..).zip(words).map(|(a, v)| ((table, a), v))),
             other => anyhow::bail!(

@@ -1,5 +1,5 @@
 //! `read`, `write` and `watch`: mbtap as a Modbus master that speaks in the profiles' names.
-//! The requests are planned and checked by `mbtap_core::query` (pure); this module opens the
+//! The requests are planned and checked by `mbtap_device::query` (pure); this module opens the
 //! link ([`link`]), sends them with tokio-modbus ([`exec`]) and prints what came back ([`show`]).
 
 pub mod ascii;
@@ -68,21 +68,21 @@ impl MasterArgs {
     /// The profile named by `--device`, if any. `--device sunspec` (for `watch` and `write`;
     /// `read` decodes SunSpec itself): the device's model chain discovered now and made a
     /// profile, its scale factors as read now.
-    pub fn profile(&self) -> anyhow::Result<Option<mbtap_core::profile::Profile>> {
+    pub fn profile(&self) -> anyhow::Result<Option<mbtap_device::profile::Profile>> {
         if self.sunspec() {
             let unit = self.unit.unwrap_or(1);
             let timeout = std::time::Duration::from_millis(self.timeout_ms);
             let mut link = link::Link::new(&self.target, &self.line, timeout)?;
             let imported = crate::runtime()?.block_on(sunspec::import(&mut link, unit, timeout, self.retries))?;
             let toml = imported.to_toml("sunspec", &format!("SunSpec device at {}", self.target), &self.target);
-            return Ok(Some(mbtap_core::profile::load("sunspec", &toml)?));
+            return Ok(Some(mbtap_device::profile::load("sunspec", &toml)?));
         }
         self.device.as_deref().map(crate::config::devices::resolve_profile).transpose()
     }
 
     /// When the unit was not given: which address was asked and why, for a failure's message.
     #[must_use]
-    pub fn unit_hint(&self, profile: Option<&mbtap_core::profile::Profile>) -> Option<String> {
+    pub fn unit_hint(&self, profile: Option<&mbtap_device::profile::Profile>) -> Option<String> {
         if self.unit.is_some() {
             return None;
         }
@@ -97,7 +97,7 @@ impl MasterArgs {
 
     /// `--unit`, else the profile's default address, else 1.
     #[must_use]
-    pub fn unit(&self, profile: Option<&mbtap_core::profile::Profile>) -> u8 {
+    pub fn unit(&self, profile: Option<&mbtap_device::profile::Profile>) -> u8 {
         self.unit.or_else(|| profile.and_then(|p| p.meta.default_address)).unwrap_or(1)
     }
 }

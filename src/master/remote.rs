@@ -4,11 +4,11 @@
 
 use std::time::Duration;
 
-use mbtap_core::profile::Profile;
-use mbtap_core::query::encode::encode_write;
-use mbtap_core::query::plan::{Plan, Read};
-use mbtap_core::query::remote::{Ask, Outcome};
-use mbtap_core::query::resolve;
+use mbtap_device::profile::Profile;
+use mbtap_device::query::encode::encode_write;
+use mbtap_device::query::plan::{Plan, Read};
+use mbtap_device::query::resolve;
+use mbtap_publish::remote::{Ask, Outcome};
 
 use super::exec;
 use super::link::Link;

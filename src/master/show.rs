@@ -3,9 +3,9 @@
 
 use std::io::Write;
 
-use mbtap_core::query::plan::Read;
-use mbtap_core::query::rows::{Row, short_table};
-use mbtap_core::report::format::printable;
+use mbtap_analysis::report::format::printable;
+use mbtap_device::query::plan::Read;
+use mbtap_device::query::rows::{Row, short_table};
 
 use super::MasterFormat;
 

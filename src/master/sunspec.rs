@@ -1,14 +1,14 @@
 //! `--device sunspec`: the device's SunSpec model chain discovered over the link (the `SunS`
 //! marker at 40000, 0 or 50000, then model headers until `0xFFFF`), the models asked for read
 //! whole (in requests of at most 125 registers, MAP v1.1b3 §6.3) and their points named
-//! `MODEL.POINT`, scaled by their scale factors (`mbtap_core::sunspec`).
+//! `MODEL.POINT`, scaled by their scale factors (`mbtap_device::sunspec`).
 
 use std::time::Duration;
 
-use mbtap_core::profile::Table;
-use mbtap_core::query::plan::Read;
-use mbtap_core::query::rows::Row;
-use mbtap_core::sunspec::{self, Found, PointRef, Shown};
+use mbtap_device::profile::Table;
+use mbtap_device::query::plan::Read;
+use mbtap_device::query::rows::Row;
+use mbtap_device::sunspec::{self, Found, PointRef, Shown};
 
 use super::exec::{Answer, Op, send};
 use super::link::Link;
@@ -189,9 +189,9 @@ pub async fn import(
     unit: u8,
     timeout: Duration,
     retries: u32,
-) -> anyhow::Result<mbtap_core::profile::import::Imported> {
-    use mbtap_core::profile::format::{Access, ValueType, WordOrder};
-    use mbtap_core::profile::import::{Imported, Point, Problem};
+) -> anyhow::Result<mbtap_device::profile::import::Imported> {
+    use mbtap_device::profile::format::{Access, ValueType, WordOrder};
+    use mbtap_device::profile::import::{Imported, Point, Problem};
     let chain = discover(link, unit, timeout, retries).await?;
     let mut out = Imported::default();
     let mut seen: Vec<u16> = Vec::new();

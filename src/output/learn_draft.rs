@@ -7,8 +7,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use mbtap_core::analyzer::{Event, Sink as _};
-use mbtap_core::learn::Learner;
+use mbtap_analysis::analyzer::{Event, Sink as _};
+use mbtap_analysis::learn::Learner;
 
 /// How often the drafts are rewritten while listening, in line time.
 pub const EVERY_NS: u64 = 10_000_000_000;
@@ -61,7 +61,7 @@ pub fn write_drafts(
     learner: &Learner,
     to: &DraftTo,
     source: &str,
-    hints: &[mbtap_core::learn::hint::Hint],
+    hints: &[mbtap_analysis::learn::hint::Hint],
 ) -> anyhow::Result<Vec<(u8, PathBuf)>> {
     match to {
         DraftTo::File(path) if learner.units.len() > 1 => {
@@ -74,7 +74,7 @@ pub fn write_drafts(
     let mut written = Vec::new();
     for (unit, u) in &learner.units {
         let file = to.file_for(*unit);
-        write_atomic(&file, &mbtap_core::learn::draft::profile_toml(*unit, u, source, hints))?;
+        write_atomic(&file, &mbtap_analysis::learn::draft::profile_toml(*unit, u, source, hints))?;
         written.push((*unit, file));
     }
     Ok(written)
@@ -105,7 +105,7 @@ impl LiveDraft {
             && let Some((&first, u)) = self.learner.units.iter().next()
         {
             self.left_out = self.learner.units.keys().copied().filter(|&k| k != first).collect();
-            write_atomic(path, &mbtap_core::learn::draft::profile_toml(first, u, &self.source, &[]))?;
+            write_atomic(path, &mbtap_analysis::learn::draft::profile_toml(first, u, &self.source, &[]))?;
             return Ok(vec![(first, path.clone())]);
         }
         write_drafts(&self.learner, to, &self.source, &[])

@@ -9,9 +9,9 @@ use std::io::{self, Read, Write};
 
 use anyhow::Context;
 
-use mbtap_core::analyzer::Event;
-use mbtap_core::line_args::LineOverrides;
-use mbtap_core::report::events::{Stats, json, text_line};
+use mbtap_analysis::analyzer::Event;
+use mbtap_analysis::line_args::LineOverrides;
+use mbtap_analysis::report::events::{Stats, json, text_line};
 
 /// Output of `replay` and `sniff`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -30,11 +30,11 @@ pub struct EventWriter<W: Write> {
     pub stats: Stats,
     pub error: Option<io::Error>,
     /// Profiles by unit: transactions of these units get their values annotated.
-    pub profiles: mbtap_core::profile::Profiles,
+    pub profiles: mbtap_device::profile::Profiles,
     /// The register image, when asked for.
-    pub image: Option<mbtap_core::profile::image::RegisterImage>,
+    pub image: Option<mbtap_device::profile::image::RegisterImage>,
     /// Language of names in text annotations.
-    pub lang: mbtap_core::profile::annotate::Lang,
+    pub lang: mbtap_device::profile::annotate::Lang,
     /// The terminal UI's model: events go there instead of `out`.
     pub tui: Option<std::sync::Arc<dyn UiFeed>>,
     /// Others that take every event beside the output (the spy server, MQTT).
@@ -42,7 +42,7 @@ pub struct EventWriter<W: Write> {
     /// Recorded input shown in the UI: each event held until its time at the UI's speed.
     pub paced: bool,
     /// The bus health report, written by [`Self::finish`] when set.
-    pub health: Option<mbtap_core::health::Health>,
+    pub health: Option<mbtap_analysis::health::Health>,
     /// Also write the report so far each time this much bus time has passed.
     pub report_every_ns: Option<u64>,
     next_report_ns: Option<u64>,
@@ -57,9 +57,9 @@ impl<W: Write> EventWriter<W> {
             format,
             stats: Stats::default(),
             error: None,
-            profiles: mbtap_core::profile::Profiles::new(),
+            profiles: mbtap_device::profile::Profiles::new(),
             image: None,
-            lang: mbtap_core::profile::annotate::Lang::En,
+            lang: mbtap_device::profile::annotate::Lang::En,
             tui: None,
             taps: Vec::new(),
             paced: false,
@@ -77,11 +77,11 @@ impl<W: Write> EventWriter<W> {
         let shown = self.tui.is_none() && self.error.is_none() && self.format != EventFormat::Summary;
         let annotations = match e {
             Event::Transaction(t)
-                if t.outcome == mbtap_core::pairing::Outcome::Ok && (shown || self.health.is_some()) =>
+                if t.outcome == mbtap_analysis::pairing::Outcome::Ok && (shown || self.health.is_some()) =>
             {
                 match (self.profiles.get(&t.unit), t.request_pdu) {
                     (Some(p), Some(req)) => {
-                        Some(mbtap_core::profile::transaction::annotate_pdus(p, req, t.response_pdu))
+                        Some(mbtap_device::profile::transaction::annotate_pdus(p, req, t.response_pdu))
                     }
                     _ => None,
                 }
@@ -134,7 +134,7 @@ impl<W: Write> EventWriter<W> {
                 }
                 // Names, decoded strings and ASCII frames come from files and the bus: a terminal
                 // must never get their control characters.
-                writeln!(self.out, "{}", mbtap_core::report::format::printable(&text))
+                writeln!(self.out, "{}", mbtap_analysis::report::format::printable(&text))
             }
             EventFormat::Jsonl => {
                 let mut line = json(e).to_string();
@@ -145,7 +145,7 @@ impl<W: Write> EventWriter<W> {
                         if i > 0 {
                             line.push(',');
                         }
-                        mbtap_core::report::annotations::write_json(&mut line, a);
+                        mbtap_analysis::report::annotations::write_json(&mut line, a);
                     }
                     line.push_str("]}");
                 }
@@ -169,7 +169,11 @@ impl<W: Write> EventWriter<W> {
     }
 
     /// Keeps what a port's framer learned about its reads, for the summary.
-    pub fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
+    pub fn observer(
+        &mut self,
+        port: mbtap_analysis::chunk::PortId,
+        estimate: &mbtap_analysis::framer::ObserverEstimate,
+    ) {
         self.stats.observe(port.0, estimate);
         if let Some(h) = &mut self.health {
             h.observer(port, estimate);
@@ -219,10 +223,10 @@ impl<W: Write> EventWriter<W> {
         match self.format {
             EventFormat::Text | EventFormat::Summary => {
                 if !last {
-                    let until = report.last_t_ns.map_or_else(String::new, mbtap_core::health::clock);
+                    let until = report.last_t_ns.map_or_else(String::new, mbtap_analysis::health::clock);
                     writeln!(self.out, "--- bus health so far (until {until}) ---")?;
                 }
-                write!(self.out, "{}", mbtap_core::report::format::printable(&report.text()))?;
+                write!(self.out, "{}", mbtap_analysis::report::format::printable(&report.text()))?;
                 if !last {
                     writeln!(self.out, "---")?;
                 }
@@ -251,12 +255,12 @@ pub fn event_time(e: &Event<'_>) -> u64 {
 }
 
 /// Takes a completed transaction into a register image (other events change nothing).
-pub fn update_image(image: &mut mbtap_core::profile::image::RegisterImage, e: &Event<'_>) {
+pub fn update_image(image: &mut mbtap_device::profile::image::RegisterImage, e: &Event<'_>) {
     if let Event::Transaction(t) = e
         && let Some(req) = t.request_pdu
     {
         // A failed answer carries no values; its request alone still counts as a transaction.
-        let resp = if t.outcome == mbtap_core::pairing::Outcome::Ok { t.response_pdu } else { None };
+        let resp = if t.outcome == mbtap_analysis::pairing::Outcome::Ok { t.response_pdu } else { None };
         image.update(t.unit, t.t_start.0, req, resp);
     }
 }
@@ -275,7 +279,7 @@ pub trait UiFeed: Send + Sync + std::fmt::Debug {
     fn event(&self, e: &Event<'_>, paced: bool);
 
     /// The line settings the events come from (a capture says them after the UI started).
-    fn settings(&self, line: mbtap_core::framer::LineSettings);
+    fn settings(&self, line: mbtap_analysis::framer::LineSettings);
 
     /// How long until line time `t_ns` is due at the UI's speed (`None`: now) — for a producer
     /// that paces itself (the simulated line of `demo`).
@@ -292,7 +296,7 @@ pub fn replay<R: Read, W: Write>(
     writer: &mut EventWriter<W>,
     err: &mut dyn Write,
 ) -> anyhow::Result<()> {
-    mbtap_core::replay::replay_into(input, cli, &mut WriterSink { writer, err }).context("reading the capture")
+    mbtap_analysis::replay::replay_into(input, cli, &mut WriterSink { writer, err }).context("reading the capture")
 }
 
 /// An [`EventWriter`] as an analyzer sink, warnings included.
@@ -301,7 +305,7 @@ struct WriterSink<'a, W: Write> {
     err: &'a mut dyn Write,
 }
 
-impl<W: Write> mbtap_core::analyzer::Sink for WriterSink<'_, W> {
+impl<W: Write> mbtap_analysis::analyzer::Sink for WriterSink<'_, W> {
     fn event(&mut self, event: &Event<'_>) {
         self.writer.write(event);
     }
@@ -310,18 +314,18 @@ impl<W: Write> mbtap_core::analyzer::Sink for WriterSink<'_, W> {
         self.writer.warning(self.err, message);
     }
 
-    fn settings(&mut self, line: mbtap_core::framer::LineSettings) {
+    fn settings(&mut self, line: mbtap_analysis::framer::LineSettings) {
         // The UI shows the line the capture was recorded on, not the command line's default.
         if let Some(feed) = &self.writer.tui {
             feed.settings(line);
         }
     }
 
-    fn observer(&mut self, port: mbtap_core::chunk::PortId, estimate: &mbtap_core::framer::ObserverEstimate) {
+    fn observer(&mut self, port: mbtap_analysis::chunk::PortId, estimate: &mbtap_analysis::framer::ObserverEstimate) {
         self.writer.observer(port, estimate);
     }
 
-    fn declared_lengths(&self) -> Vec<mbtap_core::analyzer::DeclaredLength> {
-        mbtap_core::analyzer::declared_lengths(&self.writer.profiles)
+    fn declared_lengths(&self) -> Vec<mbtap_analysis::analyzer::DeclaredLength> {
+        mbtap_analysis::analyzer::declared_lengths(&self.writer.profiles)
     }
 }

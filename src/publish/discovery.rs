@@ -1,8 +1,8 @@
 //! Home Assistant MQTT discovery: a sensor (or binary sensor) per named value heard, and with
 //! writes from the broker on, a switch, select or number per writable register.
 
-use mbtap_core::profile::Table;
-use mbtap_core::query::rows::Row;
+use mbtap_device::profile::Table;
+use mbtap_device::query::rows::Row;
 
 use super::mqtt_options::topic_level;
 
@@ -23,7 +23,7 @@ pub(super) fn discovery_object(r: &Row) -> String {
 pub fn discovery(
     prefix: &str,
     r: &Row,
-    profile: Option<&mbtap_core::profile::Profile>,
+    profile: Option<&mbtap_device::profile::Profile>,
     state_topic: &str,
 ) -> (String, String, &'static str, serde_json::Value) {
     let node = topic_level(&prefix.replace('/', "_"));
@@ -40,7 +40,7 @@ pub fn discovery(
             d.insert("model".into(), p.meta.name.clone().into());
         }
     }
-    let bits = mbtap_core::query::is_bits(r.table);
+    let bits = mbtap_device::query::is_bits(r.table);
     let mut config = serde_json::json!({
         "name": r.name,
         "unique_id": format!("{node}_{object}"),
@@ -57,7 +57,7 @@ pub fn discovery(
         } else {
             o.insert("value_template".into(), "{{ value_json.value }}".into());
             // Home Assistant's spelling and classes (long-term statistics, the Energy dashboard).
-            match r.unit_of_measure.as_deref().map(|u| (u, mbtap_core::profile::ha_classes::ha_class(u))) {
+            match r.unit_of_measure.as_deref().map(|u| (u, mbtap_device::profile::ha_classes::ha_class(u))) {
                 Some((_, Some(c))) => {
                     o.insert("unit_of_measurement".into(), c.unit.into());
                     if let Some(d) = c.device_class {
@@ -83,11 +83,11 @@ pub fn discovery(
 /// text, or no profile).
 pub fn control(
     r: &Row,
-    profile: Option<&mbtap_core::profile::Profile>,
+    profile: Option<&mbtap_device::profile::Profile>,
     state_topic: &str,
     mut config: serde_json::Value,
 ) -> Option<(&'static str, serde_json::Value)> {
-    use mbtap_core::profile::format::Access;
+    use mbtap_device::profile::format::Access;
     let (_, def) = profile?.slot(r.table, r.address)?;
     if def.access == Access::Read || !matches!(r.table, Table::Coils | Table::HoldingRegisters) {
         return None;
@@ -130,9 +130,9 @@ mod tests {
     /// voltage (input 430, `V`) is a voltage measurement, and no config names a `via_device`.
     #[test]
     fn regression_issue_42_discovery_gives_classes_and_no_unannounced_via_device() {
-        use mbtap_core::profile::Table;
-        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
-        let regs = mbtap_core::query::rows::rows(1, Table::InputRegisters, 430, &[2304], Some(&mk4));
+        use mbtap_device::profile::Table;
+        let mk4 = mbtap_device::profile::builtin::get("mk4").unwrap().unwrap();
+        let regs = mbtap_device::query::rows::rows(1, Table::InputRegisters, 430, &[2304], Some(&mk4));
         let (_, _, component, config) = discovery("mbtap/site", &regs[0], Some(&mk4), "t");
         assert_eq!(component, "sensor");
         assert_eq!(config["unit_of_measurement"], "V", "{config}");
@@ -145,16 +145,16 @@ mod tests {
     /// null`, which Home Assistant's schema refuses, and coils as numeric sensors.
     #[test]
     fn discovery_leaves_out_absent_keys_and_announces_bits_as_binary_sensors() {
-        use mbtap_core::profile::Table;
-        let mkzp = mbtap_core::profile::builtin::get("mkzp").unwrap().unwrap();
+        use mbtap_device::profile::Table;
+        let mkzp = mbtap_device::profile::builtin::get("mkzp").unwrap().unwrap();
         assert!(mkzp.meta.vendor.is_none(), "the test needs a profile without a vendor");
-        let regs = mbtap_core::query::rows::rows(17, Table::HoldingRegisters, 50, &[123], Some(&mkzp));
+        let regs = mbtap_device::query::rows::rows(17, Table::HoldingRegisters, 50, &[123], Some(&mkzp));
         let (_, _, component, config) = discovery("mbtap/site", &regs[0], Some(&mkzp), "t");
         assert_eq!(component, "sensor");
         assert!(!config.to_string().contains("null"), "{config}");
         assert!(config["device"].get("manufacturer").is_none(), "{config}");
-        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
-        let coil = mbtap_core::query::rows::rows(1, Table::Coils, 0, &[1], Some(&mk4));
+        let mk4 = mbtap_device::profile::builtin::get("mk4").unwrap().unwrap();
+        let coil = mbtap_device::query::rows::rows(1, Table::Coils, 0, &[1], Some(&mk4));
         let (_, _, component, config) = discovery("mbtap/site", &coil[0], Some(&mk4), "t");
         assert_eq!(component, "binary_sensor");
         assert_eq!((config["payload_on"].as_str(), config["payload_off"].as_str()), (Some("1"), Some("0")));
@@ -167,10 +167,10 @@ mod tests {
     /// switch, a ranged set point a number within its scaled range — and the rest stay sensors.
     #[test]
     fn writable_registers_are_announced_as_controls() {
-        use mbtap_core::profile::Table;
-        let mk4 = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
+        use mbtap_device::profile::Table;
+        let mk4 = mbtap_device::profile::builtin::get("mk4").unwrap().unwrap();
         let row = |table, address, raw: u16| {
-            mbtap_core::query::rows::rows(1, table, address, &[raw], Some(&mk4)).into_iter().next().unwrap()
+            mbtap_device::query::rows::rows(1, table, address, &[raw], Some(&mk4)).into_iter().next().unwrap()
         };
         let announce = |r: &Row| {
             let (_, _, _, config) = discovery("p", r, Some(&mk4), "p/unit/1/x");

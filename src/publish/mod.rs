@@ -50,7 +50,8 @@ fn parse_age(s: &str) -> Result<MaxAge, String> {
     if s.trim().eq_ignore_ascii_case("none") {
         return Ok(MaxAge(None));
     }
-    mbtap_core::duration::parse_duration(s, Duration::ZERO, Duration::from_secs(1_000_000_000)).map(|d| MaxAge(Some(d)))
+    mbtap_analysis::duration::parse_duration(s, Duration::ZERO, Duration::from_secs(1_000_000_000))
+        .map(|d| MaxAge(Some(d)))
 }
 
 /// The publishers the options ask for, started; their taps go into the event writer.
@@ -68,7 +69,7 @@ impl Publishing {
         args: &PublishArgs,
         live: bool,
         source: &str,
-        profiles: &mbtap_core::profile::Profiles,
+        profiles: &mbtap_device::profile::Profiles,
     ) -> anyhow::Result<Self> {
         let spy = match &args.serve {
             Some(addr) => Some(spy::Spy::start(addr, args.max_age.0, live)?),

@@ -15,11 +15,11 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context as _;
-use mbtap_core::analyzer::Event;
-use mbtap_core::health::Health;
-use mbtap_core::profile::image::RegisterImage;
-use mbtap_core::profile::{Profiles, Table};
-use mbtap_core::query::rows::{Row, rows};
+use mbtap_analysis::analyzer::Event;
+use mbtap_analysis::health::Health;
+use mbtap_device::profile::image::RegisterImage;
+use mbtap_device::profile::{Profiles, Table};
+use mbtap_device::query::rows::{Row, rows};
 use rumqttc::{AsyncClient, MqttOptions, QoS, Transport};
 
 use super::discovery::{control, discovery, discovery_object};
@@ -124,7 +124,7 @@ impl Mqtt {
         source: &str,
         profiles: Profiles,
         health: bool,
-        writes: Option<std::sync::mpsc::SyncSender<mbtap_core::query::remote::Ask>>,
+        writes: Option<std::sync::mpsc::SyncSender<mbtap_publish::remote::Ask>>,
     ) -> anyhow::Result<Option<Arc<Self>>> {
         let Some(url) = &args.mqtt else { return Ok(None) };
         anyhow::ensure!(
@@ -148,7 +148,7 @@ impl Mqtt {
                     .filter(|(g, n)| !g.is_empty() && !n.is_empty() && !n.contains('/'))
                     .with_context(|| format!("--sparkplug {spec:?}: expected GROUP/NODE, e.g. plant1/pumpstation3"))?;
                 // Silence shorter than this never kills a device (a slow poll cycle is no death).
-                Some(mbtap_core::sparkplug::EdgeNode::new(group, node, 5_000_000_000))
+                Some(mbtap_publish::sparkplug::EdgeNode::new(group, node, 5_000_000_000))
             }
         };
         let spool = match &args.mqtt_buffer {
@@ -208,7 +208,7 @@ impl Mqtt {
         ob.prefix.clone_from(&prefix);
         ob.profiles = profiles.clone();
         ob.memory_cap = args.mqtt_queue.max(1);
-        ob.host = args.sparkplug_host.as_deref().map(|h| (mbtap_core::sparkplug::state_topic(h), false));
+        ob.host = args.sparkplug_host.as_deref().map(|h| (mbtap_publish::sparkplug::state_topic(h), false));
         let outbox = Arc::new(Mutex::new(ob));
         let connected = Arc::new(AtomicBool::new(false));
         let (done_tx, done_rx) = std::sync::mpsc::channel();
@@ -415,7 +415,7 @@ impl Mqtt {
             // `online` would say the wrong thing. Sparkplug: the NDEATH a clean end publishes
             // itself (§7.2), with the session's bdSeq.
             if self.connected.load(Ordering::SeqCst) {
-                let end = match ob.node.as_ref().map(mbtap_core::sparkplug::EdgeNode::will) {
+                let end = match ob.node.as_ref().map(mbtap_publish::sparkplug::EdgeNode::will) {
                     Some(w) => (w.topic, w.payload, false),
                     None => (format!("{}/status", self.prefix), b"offline".to_vec(), true),
                 };
@@ -434,7 +434,7 @@ impl Mqtt {
             eprintln!(
                 "mbtap: mqtt: {} rebirth commands not obeyed (at most one each {} s)",
                 n.rebirths_ignored,
-                mbtap_core::sparkplug::node::REBIRTH_MIN_MS / 1000
+                mbtap_publish::sparkplug::node::REBIRTH_MIN_MS / 1000
             );
         }
         if ob.commands.oversized > 0 {
@@ -455,7 +455,7 @@ impl Mqtt {
             eprintln!(
                 "mbtap: mqtt: {} values not published: their device already declares {} metrics (the most one Sparkplug birth carries here)",
                 n.over_limit,
-                mbtap_core::sparkplug::node::MAX_METRICS
+                mbtap_publish::sparkplug::node::MAX_METRICS
             );
         }
         let mut held = match &ob.spool {
@@ -476,12 +476,7 @@ impl Mqtt {
 
     /// What became of a write the broker asked for: published on `PREFIX/unit/U/write` (plain;
     /// Sparkplug hosts see the value read back as DDATA), refusals counted.
-    pub fn write_result(
-        &self,
-        ask: &mbtap_core::query::remote::Ask,
-        outcome: &mbtap_core::query::remote::Outcome,
-        t_ns: u64,
-    ) {
+    pub fn write_result(&self, ask: &mbtap_publish::remote::Ask, outcome: &mbtap_publish::remote::Outcome, t_ns: u64) {
         match outcome {
             Err(why) => lock(&self.outbox).refuse(Some(ask.unit), why),
             Ok(back) => {
@@ -489,7 +484,7 @@ impl Mqtt {
                 if !self.sparkplug {
                     let body = serde_json::json!({
                         "ok": true, "item": ask.item.text, "t_ns": t_ns,
-                        "read_back": back.as_ref().map(mbtap_core::query::rows::Row::to_json),
+                        "read_back": back.as_ref().map(mbtap_device::query::rows::Row::to_json),
                     });
                     self.send(
                         &format!("{}/unit/{}/write", self.prefix, ask.unit),
@@ -507,14 +502,14 @@ impl Mqtt {
 
     /// Sparkplug: the rows of one event as samples of their units' devices.
     fn sparkplug_rows(&self, rows: Vec<Row>, t_ns: u64) {
-        let mut by_unit: BTreeMap<u8, Vec<mbtap_core::sparkplug::Sample>> = BTreeMap::new();
+        let mut by_unit: BTreeMap<u8, Vec<mbtap_publish::sparkplug::Sample>> = BTreeMap::new();
         let t_ms = t_ns / 1_000_000;
         for r in rows {
             let name = r.name.clone().unwrap_or_else(|| format!("{} {}", r.table.name(), r.address));
-            by_unit.entry(r.unit).or_default().push(mbtap_core::sparkplug::Sample {
-                name: mbtap_core::sparkplug::node::metric_name(&name),
+            by_unit.entry(r.unit).or_default().push(mbtap_publish::sparkplug::Sample {
+                name: mbtap_publish::sparkplug::node::metric_name(&name),
                 value: r.value.clone(),
-                bits: mbtap_core::query::is_bits(r.table),
+                bits: mbtap_device::query::is_bits(r.table),
                 unit: r.unit_of_measure.clone(),
                 t_ms,
             });

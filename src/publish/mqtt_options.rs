@@ -92,7 +92,7 @@ pub enum Discovery {
 
 /// From 0 (every change) to a day.
 fn parse_interval(s: &str) -> Result<Duration, String> {
-    mbtap_core::duration::parse_duration(s, Duration::ZERO, Duration::from_hours(24))
+    mbtap_analysis::duration::parse_duration(s, Duration::ZERO, Duration::from_hours(24))
 }
 
 /// A topic level from free text: MQTT reserves `/`, `+` and `#` (MQTT v3.1.1 §4.7).

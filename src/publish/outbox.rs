@@ -12,10 +12,10 @@
 use std::sync::{Mutex, PoisonError};
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use mbtap_core::profile::Profiles;
-use mbtap_core::query::remote::{Ask, parse_dcmd, parse_set};
-use mbtap_core::sparkplug::{EdgeNode, Emit, Out};
-use mbtap_core::spool::{Kind, mqtt_body, parse_mqtt_body};
+use mbtap_device::profile::Profiles;
+use mbtap_publish::remote::{Ask, parse_dcmd, parse_set};
+use mbtap_publish::sparkplug::{EdgeNode, Emit, Out};
+use mbtap_publish::spool::{Kind, mqtt_body, parse_mqtt_body};
 use rumqttc::{AsyncClient, LastWill, QoS};
 
 use super::spool::{Record, Spool};
@@ -369,7 +369,7 @@ impl Outbox {
         if let Some((state, online)) = self.host.as_mut()
             && topic == state.as_str()
         {
-            let now = mbtap_core::sparkplug::host_online(payload);
+            let now = mbtap_publish::sparkplug::host_online(payload);
             match (now, *online) {
                 (Some(true), false) => {
                     *online = true;

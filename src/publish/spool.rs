@@ -1,6 +1,6 @@
 //! Store-and-forward on disk (`--mqtt-buffer [DIR]`): while the broker (or the Sparkplug
 //! primary host) is away, messages are appended to segment files of records
-//! (`mbtap_core::spool`); when it is back, they are forwarded oldest first and each segment is
+//! (`mbtap_publish::spool`); when it is back, they are forwarded oldest first and each segment is
 //! deleted once all its records are handed to the connection.
 //!
 //! Bounded by `--mqtt-buffer-max`: beyond it the oldest segment goes, its records counted as
@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use mbtap_core::spool::{HEADER, Kind, MAX_BODY, encode_record, parse_records};
+use mbtap_publish::spool::{HEADER, Kind, MAX_BODY, encode_record, parse_records};
 use nix::fcntl::OFlag;
 
 /// A segment is closed and a new one begun beyond this size.

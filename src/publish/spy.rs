@@ -11,9 +11,9 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context as _;
-use mbtap_core::analyzer::Event;
-use mbtap_core::profile::Table;
-use mbtap_core::profile::image::{ILLEGAL_FUNCTION, RegisterImage};
+use mbtap_analysis::analyzer::Event;
+use mbtap_device::profile::Table;
+use mbtap_device::profile::image::{ILLEGAL_FUNCTION, RegisterImage};
 use tokio_modbus::server::tcp::Server;
 
 use super::watched::{Table as Connections, Watched};
@@ -147,7 +147,7 @@ impl Spy {
     /// The answer to one request.
     fn answer(&self, unit: u8, request: &Request<'_>) -> Result<Response, ExceptionCode> {
         let read = |table, address, quantity| -> Result<Vec<u16>, u8> {
-            let img = self.image.lock().map_err(|_| mbtap_core::profile::image::GATEWAY_TARGET_FAILED)?;
+            let img = self.image.lock().map_err(|_| mbtap_device::profile::image::GATEWAY_TARGET_FAILED)?;
             img.values.serve_read(unit, table, address, quantity, self.now_ns(&img), self.max_age_ns)
         };
         let r = match *request {

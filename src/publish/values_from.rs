@@ -31,10 +31,10 @@ pub fn start(url: &str, prefix: Option<String>, emulated: Arc<Emulated>) -> anyh
         devices
             .iter()
             .filter_map(|d| match d {
-                mbtap_core::sim::Device::Profile(s) | mbtap_core::sim::Device::Mirror { slave: s, .. } => {
+                mbtap_sim::Device::Profile(s) | mbtap_sim::Device::Mirror { slave: s, .. } => {
                     Some((s.address(), s.profile().clone()))
                 }
-                mbtap_core::sim::Device::Recorded(_) => None,
+                mbtap_sim::Device::Recorded(_) => None,
             })
             .collect()
     };
@@ -49,7 +49,7 @@ pub fn start(url: &str, prefix: Option<String>, emulated: Arc<Emulated>) -> anyh
                 let outcome = {
                     let mut devices = emulated.devices.lock().unwrap_or_else(PoisonError::into_inner);
                     match devices.iter_mut().find(|d| d.address() == ask.unit) {
-                        Some(d) => mbtap_core::sim::device::set_value(d, &ask.item),
+                        Some(d) => mbtap_sim::device::set_value(d, &ask.item),
                         None => Err(format!("{}: no device at unit {} here", ask.item.text, ask.unit)),
                     }
                 };

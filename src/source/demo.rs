@@ -1,5 +1,5 @@
 //! `mbtap demo`: the whole job with no hardware — simulated MK4, Display and MKZP-0.4 on a
-//! virtual line ([`mbtap_core::sim::bus`]), polled by a built-in master, heard by the same analyzer
+//! virtual line ([`mbtap_sim::bus`]), polled by a built-in master, heard by the same analyzer
 //! `sniff` uses and shown annotated by their profiles, in real time.
 
 use std::io::Write;
@@ -9,19 +9,19 @@ use std::time::Duration;
 use crate::output::EventWriter;
 use crate::source::serial::now;
 use crate::source::session::Session;
-use mbtap_core::analyzer::AnalyzerConfig;
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings};
-use mbtap_core::sim::Slave;
-use mbtap_core::sim::bus::VirtualBus;
-use mbtap_core::sim::uart::Listener;
+use mbtap_analysis::analyzer::AnalyzerConfig;
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings};
+use mbtap_sim::Slave;
+use mbtap_sim::bus::VirtualBus;
+use mbtap_sim::uart::Listener;
 
 /// Demo settings.
 #[derive(Debug, Clone, Default)]
 pub struct DemoOptions {
     /// Line time to run for.
     pub duration: Option<Duration>,
-    pub faults: Vec<mbtap_core::sim::bus::Fault>,
+    pub faults: Vec<mbtap_sim::bus::Fault>,
     /// Line time per wall-clock time; 0 runs without waiting.
     pub speed: f64,
     /// The listener's UART settings, when not the line's.
@@ -36,7 +36,7 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     let duration = opts.duration;
     let line = LineSettings::default();
     let mut slaves = Vec::new();
-    for (address, profile) in mbtap_core::sim::demo_profiles()? {
+    for (address, profile) in mbtap_sim::demo_profiles()? {
         writer.profiles.insert(address, profile.clone());
         slaves.push(Slave::new(Arc::new(profile), address));
     }

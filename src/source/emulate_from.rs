@@ -9,8 +9,8 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::Context;
-use mbtap_core::profile::Table;
-use mbtap_core::sim::{Device, Recorder, Slave};
+use mbtap_device::profile::Table;
+use mbtap_sim::{Device, Recorder, Slave};
 
 /// Parses `PROFILE@ADDRESS` (`mk4@1`, `./meter.toml@3`, an imported profile's name).
 ///
@@ -25,7 +25,7 @@ pub fn parse_device(spec: &str) -> anyhow::Result<Device> {
 ///
 /// # Errors
 /// When the form, the address or the profile is wrong, saying which (`what` names the option).
-pub fn profile_at(spec: &str, what: &str) -> anyhow::Result<(mbtap_core::profile::Profile, u8)> {
+pub fn profile_at(spec: &str, what: &str) -> anyhow::Result<(mbtap_device::profile::Profile, u8)> {
     let (name, address) =
         spec.rsplit_once('@').with_context(|| format!("{what} {spec:?}: expected PROFILE@ADDRESS, e.g. mk4@1"))?;
     let address: u8 = address
@@ -49,7 +49,7 @@ pub fn from_capture(spec: &str, replay_values: bool, notes: &mut String) -> anyh
     }
     let input = crate::output::progress::open_capture(path, false)?;
     let mut recorder = Recorder::default();
-    mbtap_core::replay::replay_into(input, mbtap_core::line_args::LineOverrides::default(), &mut recorder)
+    mbtap_analysis::replay::replay_into(input, mbtap_analysis::line_args::LineOverrides::default(), &mut recorder)
         .with_context(|| format!("--from {}: reading the capture", path.display()))?;
     for w in &recorder.warnings {
         let _ = writeln!(notes, "mbtap: --from {}: {w}", path.display());
@@ -67,7 +67,7 @@ pub fn from_capture(spec: &str, replay_values: bool, notes: &mut String) -> anyh
         }
     );
     if let Some(wanted) = &wanted {
-        let heard: BTreeSet<u8> = devices.iter().map(mbtap_core::sim::RecordedDevice::address).collect();
+        let heard: BTreeSet<u8> = devices.iter().map(mbtap_sim::RecordedDevice::address).collect();
         require_units(path, wanted, &heard, "did not answer in this capture; units that did")?;
         devices.retain(|d| wanted.contains(&d.address()));
     }
@@ -91,7 +91,7 @@ pub fn from_capture(spec: &str, replay_values: bool, notes: &mut String) -> anyh
 /// the image's values.
 fn from_image(
     path: &Path,
-    image: &mbtap_core::learn::diff::Image,
+    image: &mbtap_analysis::learn::diff::Image,
     wanted: Option<&BTreeSet<u8>>,
     notes: &mut String,
 ) -> anyhow::Result<Vec<Device>> {
@@ -110,7 +110,7 @@ fn from_image(
             .range((unit, Table::Coils, 0)..=(unit, Table::InputRegisters, u16::MAX))
             .map(|(&(_, t, a), &raw)| ((t, a), raw))
             .collect();
-        let d = mbtap_core::sim::RecordedDevice::from_image(unit, values);
+        let d = mbtap_sim::RecordedDevice::from_image(unit, values);
         describe(path, &d, notes);
         out.push(Device::Recorded(d));
     }
@@ -156,7 +156,7 @@ fn join<'a>(units: impl Iterator<Item = &'a u8>) -> String {
 /// `unit 17 (from site.pcapng): holding registers 100–139, input registers 430–441 as last
 /// heard; 2 requests refused as recorded; answers after 4.1 ms (median of 80); anything
 /// else: exception 02`.
-fn describe(path: &Path, d: &mbtap_core::sim::RecordedDevice, notes: &mut String) {
+fn describe(path: &Path, d: &mbtap_sim::RecordedDevice, notes: &mut String) {
     let mut held = Vec::new();
     for (table, n) in d.counts() {
         if n > 0 {

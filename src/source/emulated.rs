@@ -5,7 +5,7 @@
 use std::sync::{Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use mbtap_core::sim::Device;
+use mbtap_sim::Device;
 
 /// The devices, shared with whatever else serves them (the pseudo-terminal of `simulate`).
 #[derive(Debug)]
@@ -25,7 +25,7 @@ impl Emulated {
     pub fn answer(&self, unit: u8, pdu: &[u8]) -> Option<(Vec<u8>, Duration)> {
         let t = self.started.elapsed().as_secs_f64();
         let mut devices = self.devices.lock().unwrap_or_else(PoisonError::into_inner);
-        let (answer, own) = mbtap_core::sim::device::answer(&mut devices, unit, pdu, t)?;
+        let (answer, own) = mbtap_sim::device::answer(&mut devices, unit, pdu, t)?;
         let wait = self.turnaround.or_else(|| own.map(Duration::from_nanos)).unwrap_or(self.usual_turnaround);
         Some((answer, wait))
     }

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::Context as _;
-use mbtap_core::learn::diff::{Image, parse_image_csv, parse_image_json_from};
+use mbtap_analysis::learn::diff::{Image, parse_image_csv, parse_image_json_from};
 
 /// The largest image file read: every address of the four tables as JSON rows is ~40 MB.
 const MAX_IMAGE_FILE: u64 = 64 << 20;

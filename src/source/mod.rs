@@ -1,6 +1,6 @@
 //! Sources at the edge: live serial ports (tokio-serial), pseudo-terminals and the host clock —
 //! the I/O loops of `sniff`, `tap`, `scan`, `play`, `simulate` and `demo`. Everything here
-//! produces [`Chunk`](mbtap_core::chunk::Chunk)s for the pure core (or, for `play` and
+//! produces [`Chunk`](mbtap_analysis::chunk::Chunk)s for the pure core (or, for `play` and
 //! `simulate`, writes bytes a peer reads).
 
 pub mod demo;

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 
 use crate::source::serial::builder;
-use mbtap_core::capture::{CaptureReader, Item};
-use mbtap_core::framer::LineSettings;
+use mbtap_analysis::capture::{CaptureReader, Item};
+use mbtap_analysis::framer::LineSettings;
 
 /// Plays `file` into `port`; returns (packets, bytes) written. A silence in the capture longer
 /// than `max_gap` (a clock step, a corrupt timestamp, a night without traffic) is played as

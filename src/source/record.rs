@@ -7,8 +7,8 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use mbtap_core::capture::PcapNgWriter;
-use mbtap_core::chunk::Timestamp;
+use mbtap_analysis::capture::PcapNgWriter;
+use mbtap_analysis::chunk::Timestamp;
 
 /// A recording in progress, or one that failed.
 #[derive(Debug)]
@@ -63,8 +63,8 @@ impl Recorder {
     /// back by `replay` and shown beside what the replay learns.
     pub fn note_observer(
         &mut self,
-        port: mbtap_core::chunk::PortId,
-        e: &mbtap_core::framer::ObserverEstimate,
+        port: mbtap_analysis::chunk::PortId,
+        e: &mbtap_analysis::framer::ObserverEstimate,
         err: &mut dyn Write,
     ) {
         let Some(learned) = e.learned_latency_ns else { return };
@@ -98,9 +98,9 @@ impl Recorder {
 /// Valid frames seen while reading a capture back.
 struct ValidFrames(u64);
 
-impl mbtap_core::analyzer::Sink for ValidFrames {
-    fn event(&mut self, e: &mbtap_core::analyzer::Event<'_>) {
-        if let mbtap_core::analyzer::Event::Frame { frame, .. } = e
+impl mbtap_analysis::analyzer::Sink for ValidFrames {
+    fn event(&mut self, e: &mbtap_analysis::analyzer::Event<'_>) {
+        if let mbtap_analysis::analyzer::Event::Frame { frame, .. } = e
             && frame.check_ok
         {
             self.0 += 1;
@@ -124,8 +124,8 @@ pub fn ended_note(path: &Path) -> Option<String> {
         .then(|| {
             let file = std::fs::File::open(path).ok()?;
             let mut count = ValidFrames(0);
-            let overrides = mbtap_core::line_args::LineOverrides::default();
-            mbtap_core::replay::replay_into(std::io::BufReader::new(file), overrides, &mut count).ok()?;
+            let overrides = mbtap_analysis::line_args::LineOverrides::default();
+            mbtap_analysis::replay::replay_into(std::io::BufReader::new(file), overrides, &mut count).ok()?;
             Some(format!("{} valid frames, ", count.0))
         })
         .flatten()
@@ -183,14 +183,14 @@ mod tests {
         let mut r = Recorder::create(&path, &[("p", "mbtap rtu 9600 8E1 latency_ns=0")]).unwrap();
         let mut err = Vec::new();
         r.write(0, Timestamp(5), &[0x01, 0x03, 0x00, 0x00], &mut err);
-        let mut e = mbtap_core::framer::ObserverEstimate::default();
-        r.note_observer(mbtap_core::chunk::PortId(0), &e, &mut err);
+        let mut e = mbtap_analysis::framer::ObserverEstimate::default();
+        r.note_observer(mbtap_analysis::chunk::PortId(0), &e, &mut err);
         e.learned_latency_ns = Some(15_900_000);
-        r.note_observer(mbtap_core::chunk::PortId(0), &e, &mut err);
+        r.note_observer(mbtap_analysis::chunk::PortId(0), &e, &mut err);
         r.finish(&mut err).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         let _ = std::fs::remove_file(&path);
-        let mut reader = mbtap_core::capture::CaptureReader::new(&bytes[..]);
+        let mut reader = mbtap_analysis::capture::CaptureReader::new(&bytes[..]);
         while reader.next_item().unwrap().is_some() {}
         assert_eq!(reader.recorded_latency, [(0, 15_900_000)]);
         let blocks = String::from_utf8_lossy(&bytes).matches("mbtap observer").count();

@@ -1,6 +1,6 @@
 //! `mbtap scan PORT`: opens a live port at each baud rate, parity and character size in turn,
 //! listens for a while, and ranks the settings by the valid frames they give
-//! ([`mbtap_core::scan`]). Bounded: `--dwell-ms` per setting, stopping early once a setting
+//! ([`mbtap_analysis::scan`]). Bounded: `--dwell-ms` per setting, stopping early once a setting
 //! decodes the bus cleanly.
 
 use std::io::Write;
@@ -10,9 +10,9 @@ use anyhow::Context;
 use tokio::io::AsyncReadExt;
 use tokio_serial::SerialPortBuilderExt;
 
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::framer::{LineSettings, Parity};
-use mbtap_core::scan::{BAUDS, Candidate, Score, rank, score};
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::{LineSettings, Parity};
+use mbtap_analysis::scan::{BAUDS, Candidate, Score, rank, score};
 
 /// A setting that decodes this many frames with no garbage ends the scan early.
 const CLEAN_ENOUGH: i64 = 6;
@@ -139,7 +139,7 @@ pub fn scan_file(path: &std::path::Path) -> anyhow::Result<(String, bool)> {
         (vec![(0, bytes)], None)
     };
     let total: usize = chunks.iter().map(|(_, b)| b.len()).sum();
-    let ranked = mbtap_core::scan::scan_stored(&chunks, recorded.unwrap_or_default());
+    let ranked = mbtap_analysis::scan::scan_stored(&chunks, recorded.unwrap_or_default());
     let ok = ranked.first().is_some_and(|b| b.score.valid_frames > 0);
     Ok((describe_stored(&ranked, recorded, total, capture), ok))
 }
@@ -149,20 +149,20 @@ type Chunks = Vec<(u64, Vec<u8>)>;
 
 /// The packets of a capture (merged in time order) and the line settings it was recorded at.
 fn read_capture(file: &[u8]) -> anyhow::Result<(Chunks, Option<LineSettings>)> {
-    let mut reader = mbtap_core::capture::CaptureReader::new(file);
+    let mut reader = mbtap_analysis::capture::CaptureReader::new(file);
     let mut chunks = Vec::new();
     let mut recorded = None;
     while let Some(item) = reader.next_item()? {
         match item {
-            mbtap_core::capture::Item::Interface { interface, .. } if recorded.is_none() => {
-                let described = mbtap_core::line_args::LineOverrides::from_description(
+            mbtap_analysis::capture::Item::Interface { interface, .. } if recorded.is_none() => {
+                let described = mbtap_analysis::line_args::LineOverrides::from_description(
                     interface.description.as_deref().unwrap_or_default(),
                 );
                 if described.baud.is_some() {
                     recorded = Some(described.resolve().1);
                 }
             }
-            mbtap_core::capture::Item::Packet { t, data, .. } => chunks.push((t.0, data.to_vec())),
+            mbtap_analysis::capture::Item::Packet { t, data, .. } => chunks.push((t.0, data.to_vec())),
             _ => {}
         }
     }
@@ -172,18 +172,18 @@ fn read_capture(file: &[u8]) -> anyhow::Result<(Chunks, Option<LineSettings>)> {
 
 /// The readings of stored bytes, for people.
 fn describe_stored(
-    ranked: &[mbtap_core::scan::StoredScore],
+    ranked: &[mbtap_analysis::scan::StoredScore],
     recorded: Option<LineSettings>,
     bytes: usize,
     capture: bool,
 ) -> String {
-    use mbtap_core::scan::EighthBit;
+    use mbtap_analysis::scan::EighthBit;
     use std::fmt::Write as _;
     let mut s = String::new();
     let what = if capture { "bytes of capture" } else { "raw bytes (no timing: framed by structure and check)" };
     let at = recorded.map_or_else(String::new, |l| format!(", recorded at {l}"));
     let _ = writeln!(s, "{bytes} {what}{at}");
-    let reading = |r: &mbtap_core::scan::StoredScore| match r.seven_bit {
+    let reading = |r: &mbtap_analysis::scan::StoredScore| match r.seven_bit {
         None => r.mode.name().to_owned(),
         Some(EighthBit::Even) => {
             "ascii, 7 data bits + even parity stored as the 8th bit (a 7E1 line recorded at 8N1)".into()

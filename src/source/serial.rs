@@ -4,8 +4,8 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use tokio_serial::{DataBits, Parity as SParity, SerialPortBuilder, StopBits};
 
-use mbtap_core::chunk::Timestamp;
-use mbtap_core::framer::{LineSettings, Parity};
+use mbtap_analysis::chunk::Timestamp;
+use mbtap_analysis::framer::{LineSettings, Parity};
 
 /// Now, as a [`Timestamp`] (the only clock read in mbtap is here and in the other sources).
 #[must_use]

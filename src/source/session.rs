@@ -6,8 +6,8 @@
 
 use std::io::Write;
 
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, Timestamp};
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, Timestamp};
 
 use crate::output::EventWriter;
 use crate::source::record::Recorder;
@@ -62,7 +62,7 @@ impl Session {
     fn declare<W: Write>(&mut self, writer: &EventWriter<W>) {
         if !self.declared {
             self.declared = true;
-            self.analyzer.declare_lengths(&mbtap_core::analyzer::declared_lengths(&writer.profiles));
+            self.analyzer.declare_lengths(&mbtap_analysis::analyzer::declared_lengths(&writer.profiles));
         }
     }
 

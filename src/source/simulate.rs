@@ -2,8 +2,8 @@
 //! tests, and commissioning a SCADA before the hardware arrives.
 //!
 //! A master opens PATH as its serial port. Requests are assembled from what it writes
-//! ([`mbtap_core::sim::RequestAssembler`]), handed to every simulated slave, and the one that answers
-//! is heard after a turnaround delay. Values move with the host clock ([`mbtap_core::sim::world`]).
+//! ([`mbtap_sim::RequestAssembler`]), handed to every simulated slave, and the one that answers
+//! is heard after a turnaround delay. Values move with the host clock ([`mbtap_sim::world`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -14,12 +14,12 @@ use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::{SerialPort, SerialStream};
 
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::framer::LineSettings;
-use mbtap_core::proto::{encode_ascii, encode_rtu};
-use mbtap_core::sim::bus::VirtualBus;
-use mbtap_core::sim::uart::Listener;
-use mbtap_core::sim::{AsciiRequestAssembler, Device, RequestAssembler, RequestFrame, Slave};
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::LineSettings;
+use mbtap_proto::{encode_ascii, encode_rtu};
+use mbtap_sim::bus::VirtualBus;
+use mbtap_sim::uart::Listener;
+use mbtap_sim::{AsciiRequestAssembler, Device, RequestAssembler, RequestFrame, Slave};
 
 use super::emulated::Emulated;
 
@@ -80,7 +80,7 @@ pub struct SimulateOptions {
 /// The built-in master's settings.
 #[derive(Debug, Clone, Default)]
 pub struct PollOptions {
-    pub faults: Vec<mbtap_core::sim::bus::Fault>,
+    pub faults: Vec<mbtap_sim::bus::Fault>,
     /// The listener's UART settings when they differ from the line's (a wrong-baud or
     /// wrong-parity training line).
     pub heard_at: Option<LineSettings>,

@@ -19,10 +19,10 @@ use crate::source::record::Recorder;
 use crate::source::serial::now;
 use crate::source::session::Session;
 use crate::source::stream::{LineStream, Transport};
-use mbtap_core::analyzer::{AnalyzerConfig, SerialMode};
-use mbtap_core::chunk::{Chunk, PortId};
-use mbtap_core::framer::{FramerConfig, LineSettings};
-use mbtap_core::line_args::LineOverrides;
+use mbtap_analysis::analyzer::{AnalyzerConfig, SerialMode};
+use mbtap_analysis::chunk::{Chunk, PortId};
+use mbtap_analysis::framer::{FramerConfig, LineSettings};
+use mbtap_analysis::line_args::LineOverrides;
 
 /// Sniff settings.
 #[derive(Debug, Clone)]

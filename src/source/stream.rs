@@ -10,7 +10,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio_serial::{SerialPort, SerialStream};
 
-use mbtap_core::framer::{LineSettings, Parity};
+use mbtap_analysis::framer::{LineSettings, Parity};
 use mbtap_gateway::rfc2217::{self, LineSetup, Telnet};
 
 /// The most bytes one [`LineStream::clear_input`] drops before it returns: sixteen of the

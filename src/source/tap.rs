@@ -19,11 +19,11 @@ use crate::source::rs485::Rs485Args;
 use crate::source::serial::now;
 use crate::source::session::Session;
 use crate::source::stream::{LineStream, Transport};
-use mbtap_core::analyzer::{AnalyzerConfig, SerialMode};
-use mbtap_core::chunk::{Chunk, PortId};
-use mbtap_core::framer::{FramerConfig, LineSettings};
-use mbtap_core::line_args::LineOverrides;
-use mbtap_core::pairing::PairingConfig;
+use mbtap_analysis::analyzer::{AnalyzerConfig, SerialMode};
+use mbtap_analysis::chunk::{Chunk, PortId};
+use mbtap_analysis::framer::{FramerConfig, LineSettings};
+use mbtap_analysis::line_args::LineOverrides;
+use mbtap_analysis::pairing::PairingConfig;
 
 /// The application's side (requests) and the bus's side (responses).
 pub const APP_PORT: PortId = PortId(0);

@@ -160,7 +160,7 @@ pub struct App {
     pub page: usize,
     /// The health findings shown in the devices view, and the row count they were made at
     /// (recomputed at most every 20 draws — about a second — when rows arrived).
-    pub findings: Vec<mbtap_core::health::Finding>,
+    pub findings: Vec<mbtap_analysis::health::Finding>,
     pub findings_rows: Option<u64>,
     pub draws: u64,
 }

@@ -17,7 +17,7 @@ pub struct Field {
 #[must_use]
 pub fn binary(wire: &[u8]) -> Vec<u8> {
     if wire.first() == Some(&b':') {
-        mbtap_core::proto::parse_ascii(wire).map_or_else(
+        mbtap_proto::parse_ascii(wire).map_or_else(
             |_| wire.to_vec(),
             |f| {
                 let mut b = vec![f.unit()];

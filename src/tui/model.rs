@@ -4,11 +4,11 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use mbtap_core::analyzer::Event;
-use mbtap_core::framer::LineSettings;
-use mbtap_core::pairing::Outcome;
-use mbtap_core::profile::Profiles;
-use mbtap_core::profile::annotate::{Annotation, Lang};
+use mbtap_analysis::analyzer::Event;
+use mbtap_analysis::framer::LineSettings;
+use mbtap_analysis::pairing::Outcome;
+use mbtap_device::profile::Profiles;
+use mbtap_device::profile::annotate::{Annotation, Lang};
 
 use super::registers::Registers;
 use super::stats::{BusStats, DeviceStats};
@@ -111,7 +111,7 @@ pub struct Model {
     /// The producer's latest message (a port lost and reopened, a warning about the input).
     pub notice: Option<String>,
     /// The bus health findings, live (the devices view shows them).
-    pub health: mbtap_core::health::Health,
+    pub health: mbtap_analysis::health::Health,
 }
 
 impl Model {
@@ -133,7 +133,7 @@ impl Model {
             pending: TimingFlags::default(),
             finished: None,
             notice: None,
-            health: mbtap_core::health::Health::new(profiles_for_health),
+            health: mbtap_analysis::health::Health::new(profiles_for_health),
         }
     }
 
@@ -178,7 +178,7 @@ impl Model {
             Event::Transaction(t) => {
                 let annotations = match (t.outcome, t.request_pdu, self.profiles.get(&t.unit)) {
                     (Outcome::Ok, Some(req), Some(p)) => {
-                        mbtap_core::profile::transaction::annotate_pdus(p, req, t.response_pdu)
+                        mbtap_device::profile::transaction::annotate_pdus(p, req, t.response_pdu)
                     }
                     _ => Vec::new(),
                 };
@@ -190,7 +190,8 @@ impl Model {
                 }
                 self.devices.entry(t.unit).or_default().transaction(t);
                 self.bus.transaction(t.outcome);
-                let summary = mbtap_core::report::format::printable(&summary(t, &annotations, self.lang)).into_owned();
+                let summary =
+                    mbtap_analysis::report::format::printable(&summary(t, &annotations, self.lang)).into_owned();
                 let timing = std::mem::take(&mut self.pending);
                 self.push(Row {
                     seq: 0,
@@ -204,7 +205,7 @@ impl Model {
                     // The one rule every output shows latency by: a 0 or a figure under what the
                     // reads resolve is not shown as a latency.
                     latency_ns: match t.shown_latency() {
-                        mbtap_core::pairing::ShownLatency::Measured(l) => Some(l),
+                        mbtap_analysis::pairing::ShownLatency::Measured(l) => Some(l),
                         _ => None,
                     },
                     summary,
@@ -241,12 +242,12 @@ impl Model {
 }
 
 /// One line for a transaction: the annotated values, else what was asked and answered.
-fn summary(t: &mbtap_core::pairing::Transaction<'_>, annotations: &[Annotation], lang: Lang) -> String {
+fn summary(t: &mbtap_analysis::pairing::Transaction<'_>, annotations: &[Annotation], lang: Lang) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
     match t.outcome {
         Outcome::Exception(code) => {
-            let _ = write!(s, "exception {}", mbtap_core::proto::ExceptionCode::from(code));
+            let _ = write!(s, "exception {}", mbtap_proto::ExceptionCode::from(code));
         }
         Outcome::NoResponse => s.push_str("no response"),
         Outcome::BadResponse => s.push_str("response failed its check"),
@@ -280,8 +281,8 @@ fn summary(t: &mbtap_core::pairing::Transaction<'_>, annotations: &[Annotation],
 
 /// What a request asks, briefly: `430 ×4`, `100 := 7`.
 fn request_brief(pdu: &[u8]) -> Option<String> {
-    use mbtap_core::proto::Request as R;
-    let (_, req) = mbtap_core::proto::parse_request(pdu).ok()?;
+    use mbtap_proto::Request as R;
+    let (_, req) = mbtap_proto::parse_request(pdu).ok()?;
     Some(match req {
         R::ReadCoils { address, quantity }
         | R::ReadDiscreteInputs { address, quantity }

@@ -4,9 +4,9 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use mbtap_core::profile::Table;
-use mbtap_core::profile::annotate::{Annotation, Lang, Shown};
-use mbtap_core::profile::image::RegisterImage;
+use mbtap_device::profile::Table;
+use mbtap_device::profile::annotate::{Annotation, Lang, Shown};
+use mbtap_device::profile::image::RegisterImage;
 
 /// Values kept per register for its sparkline.
 pub const HISTORY: usize = 48;
@@ -56,8 +56,8 @@ impl Registers {
         for a in annotations {
             let numeric = matches!(a.shown, Shown::Number { .. } | Shown::Raw | Shown::Bool { .. });
             // Names from profile files and strings from the bus: nothing a terminal would obey.
-            let name = a.name_in(lang).map(|n| mbtap_core::report::format::printable(n).into_owned());
-            let text = mbtap_core::report::format::printable(&a.value_text()).into_owned();
+            let name = a.name_in(lang).map(|n| mbtap_analysis::report::format::printable(n).into_owned());
+            let text = mbtap_analysis::report::format::printable(&a.value_text()).into_owned();
             self.set((unit, a.table, a.address), name, text, a.raw, numeric, t_ns);
         }
     }

@@ -10,9 +10,9 @@ use crate::output::{EventFormat, EventWriter};
 /// What the terminal UI needs to know about a source.
 #[derive(Debug)]
 pub struct TuiSource {
-    pub profiles: mbtap_core::profile::Profiles,
-    pub lang: mbtap_core::profile::annotate::Lang,
-    pub line: mbtap_core::framer::LineSettings,
+    pub profiles: mbtap_device::profile::Profiles,
+    pub lang: mbtap_device::profile::annotate::Lang,
+    pub line: mbtap_analysis::framer::LineSettings,
     /// Recorded or simulated input the UI may pace; live input it can only freeze.
     pub pacing: bool,
 }

@@ -4,8 +4,8 @@
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 
-use mbtap_core::framer::LineSettings;
-use mbtap_core::pairing::{Outcome, Transaction};
+use mbtap_analysis::framer::LineSettings;
+use mbtap_analysis::pairing::{Outcome, Transaction};
 
 /// Latencies kept per device for percentiles: enough for a stable p99, bounded on an endless bus.
 const LATENCY_WINDOW: usize = 4096;
@@ -148,7 +148,7 @@ fn ratio(a: u64, b: u64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mbtap_core::chunk::Timestamp;
+    use mbtap_analysis::chunk::Timestamp;
 
     fn t(outcome: Outcome, at_ms: u64, latency_ms: Option<u64>, req: &'static [u8]) -> Transaction<'static> {
         Transaction {

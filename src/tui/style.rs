@@ -4,7 +4,7 @@
 
 use ratatui::style::{Color, Style};
 
-pub use mbtap_core::report::format::clock_ms as clock;
+pub use mbtap_analysis::report::format::clock_ms as clock;
 
 /// A duration for a narrow column: `850µs`, `12.3ms`, `1.25s`, `3m05s`.
 #[must_use]
@@ -37,7 +37,7 @@ pub fn short_function(fc: u8) -> String {
         0x16 => "Mask Write",
         0x17 => "R/W Regs",
         0x2B => "Encapsulated",
-        _ => mbtap_core::proto::FunctionCode::from(base).label(),
+        _ => mbtap_proto::FunctionCode::from(base).label(),
     };
     format!("{fc:02X} {name}")
 }
@@ -46,7 +46,7 @@ pub fn short_function(fc: u8) -> String {
 #[must_use]
 pub fn status_style(row: &super::model::Row) -> Style {
     use super::model::RowKind;
-    use mbtap_core::pairing::Outcome;
+    use mbtap_analysis::pairing::Outcome;
     match row.kind {
         RowKind::Transaction(Outcome::Ok | Outcome::Broadcast) if row.is_error() => Style::new().fg(Color::Yellow),
         RowKind::Transaction(Outcome::Ok | Outcome::Broadcast) => Style::new(),

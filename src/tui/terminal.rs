@@ -23,7 +23,7 @@ pub struct Shared {
 }
 
 impl crate::output::UiFeed for Shared {
-    fn event(&self, e: &mbtap_core::analyzer::Event<'_>, paced: bool) {
+    fn event(&self, e: &mbtap_analysis::analyzer::Event<'_>, paced: bool) {
         if paced {
             // Wait (the producer's thread) until the event is due; a stop ends all waiting.
             let t = crate::output::event_time(e);
@@ -37,7 +37,7 @@ impl crate::output::UiFeed for Shared {
         self.model().event(e);
     }
 
-    fn settings(&self, line: mbtap_core::framer::LineSettings) {
+    fn settings(&self, line: mbtap_analysis::framer::LineSettings) {
         self.model().line = line;
     }
 
@@ -123,15 +123,15 @@ mod notice_tests {
     /// "sniffing PORT at … (reads trusted to …)" taken for the whole message.
     #[test]
     fn regression_issue_42_a_message_written_in_pieces_is_shown_whole() {
-        let line = mbtap_core::framer::LineSettings {
+        let line = mbtap_analysis::framer::LineSettings {
             baud: 19_200,
             data_bits: 8,
-            parity: mbtap_core::framer::Parity::Even,
+            parity: mbtap_analysis::framer::Parity::Even,
             stop_bits: 1,
         };
         let model = super::super::model::Model::new(
-            mbtap_core::profile::Profiles::new(),
-            mbtap_core::profile::annotate::Lang::En,
+            mbtap_device::profile::Profiles::new(),
+            mbtap_device::profile::annotate::Lang::En,
             line,
             100,
         );
@@ -308,7 +308,7 @@ fn create_unique(dir: &std::path::Path, stem: &str, ext: &str) -> std::io::Resul
 }
 
 fn hex(b: Option<&[u8]>) -> Option<String> {
-    b.map(mbtap_core::report::format::hex_compact)
+    b.map(mbtap_analysis::report::format::hex_compact)
 }
 
 /// One exported row (the same keys as `sniff --format jsonl` transactions and noise).
@@ -335,15 +335,15 @@ pub fn row_json(r: &Row, model: &Model) -> serde_json::Value {
 
 /// The rows' frames as a capture `mbtap replay` reads back (line settings in the interface).
 fn write_pcapng(rows: &[&Row], model: &Model, out: &mut dyn Write) -> std::io::Result<()> {
-    let mut w = mbtap_core::capture::writer::PcapNgWriter::new(out)?;
+    let mut w = mbtap_analysis::capture::writer::PcapNgWriter::new(out)?;
     let description =
-        mbtap_core::line_args::LineOverrides::describe(mbtap_core::analyzer::SerialMode::Rtu, model.line, 0);
+        mbtap_analysis::line_args::LineOverrides::describe(mbtap_analysis::analyzer::SerialMode::Rtu, model.line, 0);
     let port = w.add_serial_interface("export", &description)?;
     for r in rows {
         let mut t = r.t_ns;
         for frame in [r.request.as_deref(), r.response.as_deref()].into_iter().flatten() {
             let end = t.saturating_add(model.line.char_ns().saturating_mul(frame.len() as u64));
-            w.write_packet(port, mbtap_core::chunk::Timestamp(end), frame)?;
+            w.write_packet(port, mbtap_analysis::chunk::Timestamp(end), frame)?;
             t = end.saturating_add(r.latency_ns.unwrap_or(0));
         }
     }

@@ -12,7 +12,7 @@ use super::app::{App, Side};
 use super::layout::{Field, binary, fields};
 use super::model::{Model, Row};
 use super::style::{clock, duration, status_style};
-use mbtap_core::proto::FunctionCode;
+use mbtap_proto::FunctionCode;
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
     let Some(row) = app.selected.and_then(|s| model.row(s)) else {
@@ -83,7 +83,7 @@ fn decoded(row: &Row, model: &Model) -> Vec<Line<'static>> {
         if wire.first() == Some(&b':') {
             String::from_utf8_lossy(wire).trim_end().to_owned()
         } else {
-            mbtap_core::report::format::hex_spaced(wire)
+            mbtap_analysis::report::format::hex_spaced(wire)
         }
     };
     let lines: Vec<String> =
@@ -93,10 +93,10 @@ fn decoded(row: &Row, model: &Model) -> Vec<Line<'static>> {
     }
     let mut out = Vec::new();
     let mut err = Vec::new();
-    let _ = mbtap_core::decode::run_with_profiles(
+    let _ = mbtap_analysis::decode::run_with_profiles(
         &lines,
         None,
-        mbtap_core::decode::Format::Text,
+        mbtap_analysis::decode::Format::Text,
         &model.profiles,
         model.lang,
         &mut out,
@@ -105,7 +105,7 @@ fn decoded(row: &Row, model: &Model) -> Vec<Line<'static>> {
     String::from_utf8_lossy(&out)
         .lines()
         .chain(String::from_utf8_lossy(&err).lines())
-        .map(|l| Line::raw(mbtap_core::report::format::printable(l).into_owned()))
+        .map(|l| Line::raw(mbtap_analysis::report::format::printable(l).into_owned()))
         .collect()
 }
 

@@ -10,7 +10,7 @@ use super::app::App;
 use super::model::Model;
 use super::registers::sparkline;
 use super::style::clock;
-use mbtap_core::profile::Table as RegTable;
+use mbtap_device::profile::Table as RegTable;
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
     let Some(unit) = app.register_unit(model) else {

@@ -95,7 +95,7 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
 /// Noise in hex, a few bytes of it.
 fn hex_preview(bytes: Option<&[u8]>) -> String {
     let bytes = bytes.unwrap_or_default();
-    let mut s = mbtap_core::report::format::hex_spaced(bytes.get(..24).unwrap_or(bytes));
+    let mut s = mbtap_analysis::report::format::hex_spaced(bytes.get(..24).unwrap_or(bytes));
     if bytes.len() > 24 {
         s.push_str(" …");
     }

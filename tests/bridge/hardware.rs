@@ -153,7 +153,7 @@ fn fake_adapter(path: &Path, kind: EchoKind) {
                 for a in address..address + quantity {
                     answer.extend_from_slice(&(100 + a).to_be_bytes());
                 }
-                let crc = mbtap_core::proto::crc16(&answer);
+                let crc = mbtap_proto::crc16(&answer);
                 answer.extend_from_slice(&crc.to_le_bytes());
                 echo.extend_from_slice(&answer);
                 if port.write_all(&echo).is_err() {

@@ -361,7 +361,7 @@ fn rtu_over_tcp_carries_raw_frames() {
     let mut answer = [0u8; 13];
     s.read_exact(&mut answer).unwrap();
     assert_eq!(answer[..3], [0x01, 0x04, 0x08]);
-    let crc = mbtap_core::proto::crc16(&answer[..11]).to_le_bytes();
+    let crc = mbtap_proto::crc16(&answer[..11]).to_le_bytes();
     assert_eq!(answer[11..], crc, "a valid RTU frame back");
 }
 
@@ -537,7 +537,7 @@ fn a_request_whose_byte_count_lies_reaches_the_device() {
     let (_bridge, _, others) = bridge(&d.join("bus"), &["--listen-rtu", "127.0.0.1:0"]);
     // Unit 1 (MK4), write 0 registers from 0x0160, byte count 0, then six data bytes anyway.
     let mut frame = vec![0x01, 0x10, 0x01, 0x60, 0x00, 0x00, 0x00, 0x02, 0x2B, 0x00, 0x01, 0x00, 0x64];
-    let crc = mbtap_core::proto::crc16(&frame).to_le_bytes();
+    let crc = mbtap_proto::crc16(&frame).to_le_bytes();
     frame.extend_from_slice(&crc);
     let mut s = TcpStream::connect(&others[0]).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
@@ -780,7 +780,7 @@ fn pulling_the_adapter_under_load_answers_every_client_and_recovers() {
 fn smuggle(pdu: &[u8], hidden: &[u8]) -> Vec<u8> {
     let mut out = pdu.to_vec();
     out.extend_from_slice(hidden);
-    out.extend_from_slice(&mbtap_core::proto::crc16(hidden).to_le_bytes());
+    out.extend_from_slice(&mbtap_proto::crc16(hidden).to_le_bytes());
     out
 }
 

@@ -307,7 +307,7 @@ fn revoked_sessions_close_roles_judge_the_line_unit_and_reads_carry_no_writes() 
     let hidden = [0x01, 0x06, 0x00, 0x69, 0x00, 0x2A];
     let mut smuggled = vec![0x03, 0x00, 0x69, 0x00, 0x01];
     smuggled.extend_from_slice(&hidden);
-    smuggled.extend_from_slice(&mbtap_core::proto::crc16(&hidden).to_le_bytes());
+    smuggled.extend_from_slice(&mbtap_proto::crc16(&hidden).to_le_bytes());
     let hex = smuggled.iter().fold(String::new(), |mut s, b| {
         use std::fmt::Write as _;
         let _ = write!(s, "{b:02x}");

@@ -4,11 +4,11 @@
 //! delays, 1.05 × t3.5 pauses, a unit pausing 30 characters) come from the generator's models.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
-use mbtap_core::health::{Health, Report};
-use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe};
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_analysis::health::{Health, Report};
+use mbtap_sim::traffic::{Observation, TrafficConfig, generate, observe};
 
 const L9600: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
 const L19200: LineSettings = LineSettings { baud: 19_200, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
@@ -36,7 +36,7 @@ fn report(cfg: &TrafficConfig, model: Observation) -> Report {
     let wire = generate(cfg);
     let chunks = observe(&wire, model, cfg.line.char_ns());
     let mut a = Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(cfg.line, 0), ..AnalyzerConfig::default() });
-    let mut health = Health::new(mbtap_core::profile::Profiles::new());
+    let mut health = Health::new(mbtap_device::profile::Profiles::new());
     for (t, r) in &chunks {
         a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes: &wire.bytes[r.clone()] }, &mut |e: &Event<'_>| {
             health.event(e);

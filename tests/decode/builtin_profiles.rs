@@ -4,7 +4,7 @@
 //! from a profile — or the document gaining one — fails this test.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::profile::{Table, builtin};
+use mbtap_device::profile::{Table, builtin};
 
 /// Addresses listed in the tables of a document section: table rows start with a 3-digit
 /// address (`101\t…`) or a range (`019-049`, `244 · · · 255`, `279 – 285`).
@@ -87,7 +87,7 @@ fn mk4_profile_defines_exactly_the_documented_ranges() {
 #[test]
 fn mk4_phase_voltages() {
     let p = builtin::get("mk4").unwrap().unwrap();
-    let a = mbtap_core::profile::annotate::annotate_registers(
+    let a = mbtap_device::profile::annotate::annotate_registers(
         &p,
         Table::InputRegisters,
         430,
@@ -110,7 +110,7 @@ fn mk4_phase_voltages() {
 #[test]
 fn mk4_alarm_log_code_is_decoded() {
     let p = builtin::get("mk4").unwrap().unwrap();
-    let a = mbtap_core::profile::annotate::annotate_registers(&p, Table::InputRegisters, 517, &[25], false);
+    let a = mbtap_device::profile::annotate::annotate_registers(&p, Table::InputRegisters, 517, &[25], false);
     assert_eq!(a[0].to_string(), "517 Alarm log record 2: alarm code = motor M1: starts per hour exceeded (raw 25)");
 }
 
@@ -148,7 +148,7 @@ fn display_profile_has_every_address_of_the_document() {
 /// A flow meter's status bits and a level sensor's 32-bit volume (high word first).
 #[test]
 fn display_values() {
-    use mbtap_core::profile::annotate::annotate_registers;
+    use mbtap_device::profile::annotate::annotate_registers;
     let p = builtin::get("display").unwrap().unwrap();
     let a = annotate_registers(&p, Table::InputRegisters, 65, &[0b10_0010], false);
     assert_eq!(a[0].to_string(), "65 Flow meter 1: status = mode: nominal, interference (raw 34)");
@@ -204,7 +204,7 @@ fn mkzp_profile_has_every_address_of_the_document() {
 
 #[test]
 fn mkzp_status_bits_and_trip_records() {
-    use mbtap_core::profile::annotate::annotate_registers;
+    use mbtap_device::profile::annotate::annotate_registers;
     let p = builtin::get("mkzp").unwrap().unwrap();
     let a = annotate_registers(&p, Table::HoldingRegisters, 66, &[0b100_0000_1000], false);
     assert_eq!(a[0].to_string(), "66 System_Status: status register = overload, motor on (raw 1032)");
@@ -224,11 +224,11 @@ const OCCURRED: [u16; 5] =
 #[test]
 fn mk4_alarm_log_time_is_one_date() {
     let p = builtin::get("mk4").unwrap().unwrap();
-    let a = mbtap_core::profile::annotate::annotate_registers(&p, Table::InputRegisters, 501, &OCCURRED, false);
+    let a = mbtap_device::profile::annotate::annotate_registers(&p, Table::InputRegisters, 501, &OCCURRED, false);
     assert_eq!(a.len(), 1, "five registers, one value: {a:?}");
     assert_eq!(a[0].to_string(), "501 Alarm log record 1: occurred = 2026-11-22 14:35");
     assert!(a[0].notes.is_empty());
-    let a = mbtap_core::profile::annotate::annotate_registers(
+    let a = mbtap_device::profile::annotate::annotate_registers(
         &p,
         Table::InputRegisters,
         501,

@@ -4,8 +4,8 @@
 //! message and the rest of the file still replays.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::capture::{CaptureReader, Item, PcapNgWriter};
-use mbtap_core::chunk::Timestamp;
+use mbtap_analysis::capture::{CaptureReader, Item, PcapNgWriter};
+use mbtap_analysis::chunk::Timestamp;
 
 /// MK4 §3.3 read request and response, RTU.
 const REQ: &[u8] = &[0x01, 0x03, 0x00, 0x65, 0x00, 0x03, 0x15, 0xD4];

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use mbtap::output::{EventFormat, EventWriter, replay};
-use mbtap_core::line_args::LineOverrides;
+use mbtap_analysis::line_args::LineOverrides;
 
 /// Warnings, then every event, then the summary, as one text. A capture with a `.devices`
 /// file beside it (`UNIT=PROFILE` per line) is annotated with those built-in profiles.
@@ -14,7 +14,7 @@ fn transcript(path: &std::path::Path, format: EventFormat) -> String {
     if let Ok(devices) = std::fs::read_to_string(path.with_extension("devices")) {
         for line in devices.lines().filter(|l| !l.trim().is_empty()) {
             let (unit, name) = line.split_once('=').unwrap();
-            let profile = mbtap_core::profile::builtin::get(name.trim()).unwrap().unwrap();
+            let profile = mbtap_device::profile::builtin::get(name.trim()).unwrap().unwrap();
             w.profiles.insert(unit.trim().parse().unwrap(), profile);
         }
     }

@@ -2,7 +2,7 @@
 //! length fields that lie. Each must give a precise error or a finding — never a panic.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::proto::{
+use mbtap_proto::{
     AduError, DecodedPdu, DirectionHint, Finding, Mode, PduDecode, PduError, decode_pdu, parse_adu, parse_ascii,
     parse_request, parse_response, parse_rtu, parse_tcp, parse_tcp_frame,
 };
@@ -54,7 +54,7 @@ fn rtu_frame_over_256_bytes_is_flagged_and_still_decoded() {
     let mut pdu = vec![0x41];
     pdu.extend(std::iter::repeat_n(0xAB, 300));
     let mut wire = Vec::new();
-    mbtap_core::proto::encode_rtu(1, &pdu, &mut wire);
+    mbtap_proto::encode_rtu(1, &pdu, &mut wire);
     let adu = parse_adu(&wire, Some(Mode::Rtu)).unwrap();
     assert!(adu.check.ok());
     assert_eq!(adu.findings, vec![Finding::AduTooLong { len: 304, max: 256 }]);
@@ -125,7 +125,7 @@ fn write_quantity_limits_include_0x17() {
 fn mbap_length_that_lies() {
     // Transaction 1, protocol 0, length 200, unit 1, PDU 03 00 00 00 01.
     let frame = [0, 1, 0, 0, 0, 200, 1, 3, 0, 0, 0, 1];
-    assert_eq!(parse_tcp_frame(&frame), Ok(mbtap_core::proto::Streaming::Incomplete(206)));
+    assert_eq!(parse_tcp_frame(&frame), Ok(mbtap_proto::Streaming::Incomplete(206)));
     assert!(matches!(parse_tcp(&frame), Err(AduError::LengthMismatch { .. })));
     let zero = [0, 1, 0, 0, 0, 0, 1];
     assert_eq!(parse_tcp_frame(&zero), Err(AduError::Length(0)));
@@ -134,10 +134,10 @@ fn mbap_length_that_lies() {
 #[test]
 fn reserved_and_broadcast_addresses_are_findings() {
     let mut out = Vec::new();
-    mbtap_core::proto::findings::check_unit(0, false, &mut out);
-    mbtap_core::proto::findings::check_unit(248, false, &mut out);
-    mbtap_core::proto::findings::check_unit(0, true, &mut out);
-    mbtap_core::proto::findings::check_unit(247, false, &mut out);
+    mbtap_proto::findings::check_unit(0, false, &mut out);
+    mbtap_proto::findings::check_unit(248, false, &mut out);
+    mbtap_proto::findings::check_unit(0, true, &mut out);
+    mbtap_proto::findings::check_unit(247, false, &mut out);
     assert_eq!(
         out,
         vec![Finding::BroadcastAddress, Finding::ReservedAddress { unit: 248 }, Finding::ResponseFromBroadcastAddress]

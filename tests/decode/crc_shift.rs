@@ -6,11 +6,11 @@
 //! on this line are left — by showing both lengths rather than passing a guess off as certain.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
-use mbtap_core::proto::{crc16, encode_rtu};
-use mbtap_core::report::events::text_line;
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_analysis::report::events::text_line;
+use mbtap_proto::{crc16, encode_rtu};
 
 const L9600: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
 
@@ -214,7 +214,7 @@ fn a_vendor_request_ending_in_00_on_a_line_that_never_glitched_is_whole() {
 fn the_other_length_is_said_in_text_and_json() {
     let request = ending_in_zero(1, &[VENDOR, 0x10, 0x20, 0x30]);
     let n = request.len();
-    let frame = mbtap_core::framer::Frame {
+    let frame = mbtap_analysis::framer::Frame {
         port: PortId(0),
         bytes: &request[..n - 1],
         t_start: Timestamp(0),
@@ -230,10 +230,10 @@ fn the_other_length_is_said_in_text_and_json() {
         alt_len: Some(n),
     };
     let pdu = &request[1..n - 3];
-    let e = Event::Frame { frame: &frame, role: mbtap_core::pairing::Role::Unknown, unit: Some(1), pdu: Some(pdu) };
+    let e = Event::Frame { frame: &frame, role: mbtap_analysis::pairing::Role::Unknown, unit: Some(1), pdu: Some(pdu) };
     let text = text_line(&e);
     assert!(text.contains(&format!("[or {n} bytes: the 00 after it checks as its CRC's high byte too")), "{text}");
-    let json = mbtap_core::report::events::json(&e);
+    let json = mbtap_analysis::report::events::json(&e);
     assert_eq!(json["or_len"], n, "{json}");
 }
 

@@ -3,8 +3,8 @@
 //! these are regression tests of the framer's decisions, not statistics.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
-use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
+use mbtap_analysis::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_sim::traffic::{Observation, TrafficConfig, generate, observe, run_framer, run_gap_cutter, score};
 
 fn check(line: LineSettings, model: Observation, seed: u64, min_good: f64, min_corrupted: f64, max_false: usize) {
     let wire = generate(&TrafficConfig { seed, line, transactions: 3000, ..TrafficConfig::default() });
@@ -114,7 +114,7 @@ fn regression_issue_25_vendor_lengths_learned_per_unit_decide_crc_00_twins() {
 /// The wire of `transactions` vendor-heavy transactions (5 % vendor functions, fixed lengths
 /// per unit, a quarter of their CRCs ending in `00`) through `model`, the framer told nothing
 /// of the latency: its score.
-fn vendor_line(line: LineSettings, seed: u64, glitch: f64, model: Observation) -> mbtap_core::traffic::Score {
+fn vendor_line(line: LineSettings, seed: u64, glitch: f64, model: Observation) -> mbtap_sim::traffic::Score {
     let cfg = TrafficConfig {
         seed,
         line,

@@ -6,13 +6,13 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings};
-use mbtap_core::health::{Finding, Health, Report};
-use mbtap_core::sim::Slave;
-use mbtap_core::sim::bus::{Fault, LineFrame, VirtualBus};
-use mbtap_core::sim::uart::Listener;
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings};
+use mbtap_analysis::health::{Finding, Health, Report};
+use mbtap_sim::Slave;
+use mbtap_sim::bus::{Fault, LineFrame, VirtualBus};
+use mbtap_sim::uart::Listener;
 
 const START_NS: u64 = 1_000_000_000_000;
 
@@ -32,7 +32,7 @@ fn run_with(
     heard_at: Option<LineSettings>,
     mut setup: impl FnMut(&mut VirtualBus, usize),
 ) -> (Vec<Vec<LineFrame>>, Report) {
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let line = LineSettings::default();
     let mut bus = VirtualBus::new(slaves, line);
@@ -60,13 +60,13 @@ fn run_with(
 /// An RTU frame.
 fn rtu(unit: u8, pdu: &[u8]) -> Vec<u8> {
     let mut out = Vec::new();
-    mbtap_core::proto::encode_rtu(unit, pdu, &mut out);
+    mbtap_proto::encode_rtu(unit, pdu, &mut out);
     out
 }
 
 /// The report of `frames` — each `(silence before it in ns, bytes)`, sent at the default
 /// line's character time — checked against `profiles`.
-fn report_of(profiles: mbtap_core::decode::Profiles, frames: &[(u64, Vec<u8>)]) -> Report {
+fn report_of(profiles: mbtap_analysis::decode::Profiles, frames: &[(u64, Vec<u8>)]) -> Report {
     let mut health = Health::new(profiles);
     let mut analyzer = Analyzer::new(AnalyzerConfig::default());
     let char_ns = LineSettings::default().char_ns();
@@ -84,7 +84,7 @@ fn of_kind<'a>(r: &'a Report, kind: &str) -> Vec<&'a Finding> {
 }
 
 fn crc_ok(f: &[u8]) -> bool {
-    f.len() >= 4 && mbtap_core::proto::crc16(&f[..f.len() - 2]).to_le_bytes() == f[f.len() - 2..]
+    f.len() >= 4 && mbtap_proto::crc16(&f[..f.len() - 2]).to_le_bytes() == f[f.len() - 2..]
 }
 
 /// Start of a frame (ns, as the report's clock) from its end and length.
@@ -181,14 +181,14 @@ fn a_listener_at_the_wrong_baud_rate_is_told_so() {
 #[test]
 fn an_exception_storm_is_named_with_its_codes() {
     // A master polling registers the MK4 does not have: exception 02 every time.
-    let profile = mbtap_core::profile::builtin::get("mk4").unwrap().unwrap();
+    let profile = mbtap_device::profile::builtin::get("mk4").unwrap().unwrap();
     let mut slave = Slave::new(Arc::new(profile), 1);
     // Read input register 1000 (function 04, address 0x03E8, quantity 1).
     let pdu = [0x04, 0x03, 0xE8, 0x00, 0x01];
     let answer = rtu(1, &slave.handle(1, &pdu).unwrap());
     let frames: Vec<(u64, Vec<u8>)> =
         (0..20).flat_map(|_| [(100_000_000, rtu(1, &pdu)), (5_000_000, answer.clone())]).collect();
-    let r = report_of(mbtap_core::decode::Profiles::new(), &frames);
+    let r = report_of(mbtap_analysis::decode::Profiles::new(), &frames);
     let found = of_kind(&r, "exception_storm");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 20));
@@ -209,7 +209,7 @@ fn the_json_report_has_the_documented_keys() {
 #[test]
 fn the_html_report_is_self_contained_and_has_its_three_plots() {
     let (_, r) = run(120, &[Fault::SilentSlave, Fault::Noise], None);
-    let html = mbtap_core::health::html::render(&r, "test <bus>");
+    let html = mbtap_analysis::health::html::render(&r, "test <bus>");
     assert!(html.starts_with("<!DOCTYPE html>"));
     assert!(html.contains("test &lt;bus&gt;"), "titles are escaped");
     for id in ["id=\"latency\"", "id=\"errors\"", "id=\"availability\""] {
@@ -249,19 +249,19 @@ fn regression_issue_25_a_garbled_address_makes_no_unit_row() {
 
 /// `scan` on simulated lines: the virtual bus sent at the true settings, heard through the UART
 /// model at every candidate's; the winner must be the truth and the units all three devices.
-fn scan(truth: &str, ascii: bool) -> Vec<mbtap_core::scan::Score> {
+fn scan(truth: &str, ascii: bool) -> Vec<mbtap_analysis::scan::Score> {
     let line: LineSettings = truth.parse().unwrap();
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let mut bus = VirtualBus::new(slaves, line);
     bus.ascii = ascii;
     let frames: Vec<LineFrame> = (0..20).flat_map(|_| bus.next_transaction()).collect();
-    mbtap_core::scan::scan_line(&frames, line)
+    mbtap_sim::scan_line(&frames, line)
 }
 
 #[test]
 fn scan_finds_the_settings_of_simulated_lines() {
-    use mbtap_core::analyzer::SerialMode;
+    use mbtap_analysis::analyzer::SerialMode;
     for (truth, ascii) in [("9600 8E1", false), ("19200 8N2", false), ("115200 8N1", false), ("9600 7E1", true)] {
         let ranked = scan(truth, ascii);
         let best = &ranked[0];
@@ -286,7 +286,7 @@ fn two_devices_on_one_address_answer_twice() {
     let b = rtu(1, &[0x03, 0x02, 0x00, 0x09]);
     let frames: Vec<(u64, Vec<u8>)> =
         (0..5).flat_map(|_| [(100_000_000, req.clone()), (5_000_000, a.clone()), (5_000_000, b.clone())]).collect();
-    let r = report_of(mbtap_core::decode::Profiles::new(), &frames);
+    let r = report_of(mbtap_analysis::decode::Profiles::new(), &frames);
     let found = of_kind(&r, "duplicate_address");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 5));
@@ -355,7 +355,7 @@ fn an_answer_after_the_master_gave_up_is_a_late_answer() {
             ]
         })
         .collect();
-    let r = report_of(mbtap_core::decode::Profiles::new(), &frames);
+    let r = report_of(mbtap_analysis::decode::Profiles::new(), &frames);
     let found = of_kind(&r, "late_answer");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 6), "{}", r.text());
@@ -411,7 +411,7 @@ fn a_failed_answer_to_a_request_that_overtook_another_is_not_noise() {
         (200_000_000, rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01])),
         (5_000_000, bad),
     ];
-    let r = report_of(mbtap_core::decode::Profiles::new(), &frames);
+    let r = report_of(mbtap_analysis::decode::Profiles::new(), &frames);
     assert!(of_kind(&r, "noise").is_empty(), "{}", r.text());
     let units = |kind| of_kind(&r, kind).iter().map(|f| (f.unit, f.count)).collect::<Vec<_>>();
     assert_eq!(units("check_errors"), [(Some(1), 1)], "{}", r.text());
@@ -435,7 +435,7 @@ fn a_reading_that_jumps_implausibly_is_named() {
     // MK4 phase A voltage (input register 430, 0.1 V, documented 0–4000): 230 V, then 0 V,
     // then 230 V again — a sensor or wiring fault, not mains.
     let frames = mk4_phase_a_reads(&[2300, 2301, 2299, 0, 2300, 2302]);
-    let r = report_of(mbtap_core::sim::demo_profiles().unwrap(), &frames);
+    let r = report_of(mbtap_sim::demo_profiles().unwrap(), &frames);
     let found = of_kind(&r, "implausible_jump");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 2), "down to 0 and back up: {}", r.text());
@@ -488,7 +488,7 @@ fn report_every_gives_the_report_so_far_by_bus_time() {
 /// one untimed byte stream, as `cat /dev/ttyUSB0 > dump.bin` stores it.
 fn dump(sent: &str, heard: &str, ascii: bool, n: usize) -> Vec<u8> {
     let sent: LineSettings = sent.parse().unwrap();
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let mut bus = VirtualBus::new(slaves, sent);
     bus.ascii = ascii;
@@ -498,8 +498,8 @@ fn dump(sent: &str, heard: &str, ascii: bool, n: usize) -> Vec<u8> {
 
 #[test]
 fn scan_of_stored_bytes_tells_the_mode_and_the_character_size() {
-    use mbtap_core::analyzer::SerialMode;
-    use mbtap_core::scan::{EighthBit, scan_stored};
+    use mbtap_analysis::analyzer::SerialMode;
+    use mbtap_analysis::scan::{EighthBit, scan_stored};
     let untimed = |bytes: Vec<u8>| vec![(0u64, bytes)];
     // RTU recorded at the right settings: every frame, all three units.
     let best = &scan_stored(&untimed(dump("19200 8E1", "19200 8E1", false, 20)), LineSettings::default())[0];
@@ -549,7 +549,7 @@ fn a_value_outside_the_profiles_range_is_named_with_its_times() {
     // MK4 phase A voltage (input register 430, 0.1 V, documented 0–4000): 230 V, then 3 reads
     // of 6553.5 V (0xFFFF: a sensor input floating), then 230 V.
     let frames = mk4_phase_a_reads(&[2300, 0xFFFF, 0xFFFF, 2301, 0xFFFF, 2299]);
-    let r = report_of(mbtap_core::sim::demo_profiles().unwrap(), &frames);
+    let r = report_of(mbtap_sim::demo_profiles().unwrap(), &frames);
     let found = of_kind(&r, "value_out_of_range");
     assert_eq!(found.len(), 1, "{}", r.text());
     assert_eq!((found[0].unit, found[0].count), (Some(1), 3), "{}", r.text());
@@ -558,7 +558,7 @@ fn a_value_outside_the_profiles_range_is_named_with_its_times() {
     let start = |i: u64| START_NS + (i + 1) * 100_000_000 + i * (5_000_000 + char_ns * 7) + i * char_ns * 8;
     assert_eq!(found[0].evidence, [start(1), start(2), start(4)], "{}", r.text());
     // Without the profile, nothing to judge values by.
-    let r = report_of(mbtap_core::decode::Profiles::new(), &frames);
+    let r = report_of(mbtap_analysis::decode::Profiles::new(), &frames);
     assert!(of_kind(&r, "value_out_of_range").is_empty());
 }
 
@@ -573,12 +573,12 @@ fn joining_the_line_mid_frame_is_not_noise() {
         frames.push((100_000_000, rtu(1, &[0x03, 0x00, 0x64, 0x00, 0x01])));
         frames.push((5_000_000, answer.clone()));
     }
-    let r = report_of(mbtap_core::decode::Profiles::new(), &frames);
+    let r = report_of(mbtap_analysis::decode::Profiles::new(), &frames);
     assert!(r.findings.is_empty(), "{}", r.text());
     assert_eq!((r.noise_bytes, r.cut_at_start_bytes), (0, 5));
     // The same bytes later on are noise.
     frames.push((100_000_000, answer[2..].to_vec()));
-    let r = report_of(mbtap_core::decode::Profiles::new(), &frames);
+    let r = report_of(mbtap_analysis::decode::Profiles::new(), &frames);
     assert_eq!(of_kind(&r, "noise").len(), 1, "{}", r.text());
 }
 

@@ -8,7 +8,7 @@
 //! marked `computed, document says xx xx`.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::proto::{
+use mbtap_proto::{
     Bits, DecodedPdu, DirectionHint, ExceptionCode, Pdu, PduDecode, Request, Response, decode_pdu, encode_ascii,
     encode_rtu, parse_ascii, parse_rtu,
 };

@@ -4,13 +4,13 @@
 //! observer's delay. Given `--latency-ms`, the given figure is kept, and the summary says both.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::analyzer::{Event, Sink};
-use mbtap_core::capture::PcapNgWriter;
-use mbtap_core::chunk::{PortId, Timestamp};
-use mbtap_core::framer::{LineSettings, ObserverEstimate, Parity};
-use mbtap_core::line_args::LineOverrides;
-use mbtap_core::replay::replay_into;
-use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe};
+use mbtap_analysis::analyzer::{Event, Sink};
+use mbtap_analysis::capture::PcapNgWriter;
+use mbtap_analysis::chunk::{PortId, Timestamp};
+use mbtap_analysis::framer::{LineSettings, ObserverEstimate, Parity};
+use mbtap_analysis::line_args::LineOverrides;
+use mbtap_analysis::replay::replay_into;
+use mbtap_sim::traffic::{Observation, TrafficConfig, generate, observe};
 
 const L9600: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
 
@@ -109,7 +109,7 @@ fn the_latency_a_recording_session_learned_is_stored_and_read_back() {
     let seen = replay(&file, LineOverrides::default());
     let e = seen.observers[0].1;
     assert_eq!(e.recorded_latency_ns, Some(12_345_678), "{e:?}");
-    let mut stats = mbtap_core::report::events::Stats::default();
+    let mut stats = mbtap_analysis::report::events::Stats::default();
     stats.observe(0, &e);
     assert!(stats.text().contains("the session that recorded it learned 12.3 ms"), "{}", stats.text());
     assert_eq!(stats.json()["observers"][0]["recorded_latency_ns"], 12_345_678);

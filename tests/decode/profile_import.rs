@@ -74,8 +74,8 @@ fn read(fc: u8, address: u16, words: &[u16]) -> [String; 2] {
         resp.extend_from_slice(&w.to_be_bytes());
     }
     let (mut a, mut b) = (Vec::new(), Vec::new());
-    mbtap_core::proto::encode_rtu(1, &req, &mut a);
-    mbtap_core::proto::encode_rtu(1, &resp, &mut b);
+    mbtap_proto::encode_rtu(1, &req, &mut a);
+    mbtap_proto::encode_rtu(1, &resp, &mut b);
     [hex(&a), hex(&b)]
 }
 

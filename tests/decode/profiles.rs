@@ -2,12 +2,12 @@
 //! register and bit values (scaling, enums, bits, 32-bit pairs, blocks, findings).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::profile::annotate::{Note, Shown, annotate_bits, annotate_registers};
-use mbtap_core::profile::{Table, load};
+use mbtap_device::profile::annotate::{Note, Shown, annotate_bits, annotate_registers};
+use mbtap_device::profile::{Table, load};
 
 const EXAMPLE: &str = include_str!("../fixtures/example-profile.toml");
 
-fn example() -> mbtap_core::profile::Profile {
+fn example() -> mbtap_device::profile::Profile {
     load("example-profile.toml", EXAMPLE).unwrap()
 }
 
@@ -184,7 +184,7 @@ fn regression_issue_25_a_profile_declares_vendor_frame_lengths() {
         "[profile]\nname = \"bad\"\ndevice = \"x\"\n\n[[vendor_functions]]\ncode = 3\nresponse_length = 9\n",
     )
     .unwrap();
-    let e = mbtap_core::profile::load("bad", &std::fs::read_to_string(&bad).unwrap()).unwrap_err().to_string();
+    let e = mbtap_device::profile::load("bad", &std::fs::read_to_string(&bad).unwrap()).unwrap_err().to_string();
     assert!(e.contains("bad:5:") && e.contains("0x03"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -3,12 +3,12 @@
 //! pinned with the case that was seen going wrong.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings, Parity};
-use mbtap_core::health::{Health, Report};
-use mbtap_core::proto::encode_rtu;
-use mbtap_core::traffic::{Observation, TrafficConfig, generate, observe, run_framer, score};
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings, Parity};
+use mbtap_analysis::health::{Health, Report};
+use mbtap_proto::encode_rtu;
+use mbtap_sim::traffic::{Observation, TrafficConfig, generate, observe, run_framer, score};
 
 const L9600: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
 const L19200: LineSettings = LineSettings { baud: 19_200, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
@@ -184,13 +184,13 @@ fn a_healthy_line_with_glitches_reports_only_turnaround_glitches() {
     }
 }
 
-fn health_of(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSettings) -> Report {
+fn health_of(wire: &mbtap_sim::traffic::Wire, model: Observation, line: LineSettings) -> Report {
     let chunks = observe(wire, model, line.char_ns());
     let mut a = Analyzer::new(AnalyzerConfig {
         framer: FramerConfig::new(line, model.latency_ns(line.char_ns())),
         ..AnalyzerConfig::default()
     });
-    let mut health = Health::new(mbtap_core::profile::Profiles::new());
+    let mut health = Health::new(mbtap_device::profile::Profiles::new());
     for (t, r) in &chunks {
         a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes: &wire.bytes[r.clone()] }, &mut |e: &Event<'_>| {
             health.event(e);
@@ -204,7 +204,7 @@ fn health_of(wire: &mbtap_core::traffic::Wire, model: Observation, line: LineSet
 fn report_of(chunks: &[(u64, Vec<u8>)], line: LineSettings, latency_ns: u64) -> Report {
     let mut a =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, latency_ns), ..AnalyzerConfig::default() });
-    let mut health = Health::new(mbtap_core::profile::Profiles::new());
+    let mut health = Health::new(mbtap_device::profile::Profiles::new());
     for (t, bytes) in chunks {
         a.push(&Chunk { port: PortId(0), t: Timestamp(*t), bytes }, &mut |e: &Event<'_>| health.event(e));
     }
@@ -311,13 +311,13 @@ fn an_answer_sooner_than_t35_is_a_fast_answer() {
 #[test]
 fn scan_of_a_raw_dump_that_starts_mid_frame_finds_the_frames() {
     let wire = generate(&TrafficConfig { seed: 36, line: L19200, transactions: 300, ..TrafficConfig::default() });
-    let good = wire.truth.iter().filter(|t| t.kind == mbtap_core::traffic::generate::TruthKind::Good).count() as u64;
+    let good = wire.truth.iter().filter(|t| t.kind == mbtap_sim::traffic::generate::TruthKind::Good).count() as u64;
     for cut in [1, 3, 5] {
         // A raw dump: no timing at all, one chunk.
         let dump = vec![(0u64, wire.bytes[cut..].to_vec())];
-        let scores = mbtap_core::scan::scan_stored(&dump, L19200);
+        let scores = mbtap_analysis::scan::scan_stored(&dump, L19200);
         let best = &scores[0];
-        assert_eq!(best.mode, mbtap_core::analyzer::SerialMode::Rtu);
+        assert_eq!(best.mode, mbtap_analysis::analyzer::SerialMode::Rtu);
         // All but the cut one, less a few vendor frames that only timing could have ended.
         assert!(best.score.valid_frames * 100 >= good * 99, "cut {cut}: {} of {good} frames", best.score.valid_frames);
     }

@@ -2,7 +2,7 @@
 //! encode → parse → equal, and for arbitrary bytes: parse → encode → the same bytes.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::proto::{
+use mbtap_proto::{
     Bits, DeviceObjects, DiagnosticSubFunction, ExceptionCode, FileRecords, FileSubRequests, FunctionCode, MeiType,
     Registers, Request, Response, encode_ascii, encode_rtu, encode_tcp, parse_ascii, parse_request, parse_response,
     parse_rtu, parse_tcp,

@@ -7,11 +7,11 @@
 use std::sync::Arc;
 
 use mbtap::tui::{App, Model};
-use mbtap_core::analyzer::{Analyzer, AnalyzerConfig, Event};
-use mbtap_core::chunk::{Chunk, PortId, Timestamp};
-use mbtap_core::framer::{FramerConfig, LineSettings};
-use mbtap_core::sim::Slave;
-use mbtap_core::sim::bus::{Fault, VirtualBus};
+use mbtap_analysis::analyzer::{Analyzer, AnalyzerConfig, Event};
+use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
+use mbtap_analysis::framer::{FramerConfig, LineSettings};
+use mbtap_sim::Slave;
+use mbtap_sim::bus::{Fault, VirtualBus};
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -21,12 +21,12 @@ const START_NS: u64 = 10 * 3600 * 1_000_000_000;
 
 /// The demo's three devices after `transactions` polls, with `faults` injected.
 fn model(transactions: usize, faults: &[Fault]) -> Model {
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     let slaves = profiles.iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let line = LineSettings::default();
     let mut bus = VirtualBus::new(slaves, line);
     bus.faults = faults.to_vec();
-    let mut model = Model::new(profiles, mbtap_core::profile::annotate::Lang::En, line, 1000);
+    let mut model = Model::new(profiles, mbtap_device::profile::annotate::Lang::En, line, 1000);
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
     for _ in 0..transactions {
@@ -171,11 +171,10 @@ fn help_overlay_lists_every_key() {
 
 #[test]
 fn scroll_back_is_bounded_and_says_so() {
-    let profiles = mbtap_core::sim::demo_profiles().unwrap();
+    let profiles = mbtap_sim::demo_profiles().unwrap();
     let line = LineSettings::default();
-    let mut small = Model::new(profiles, mbtap_core::profile::annotate::Lang::En, line, 10);
-    let slaves =
-        mbtap_core::sim::demo_profiles().unwrap().iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
+    let mut small = Model::new(profiles, mbtap_device::profile::annotate::Lang::En, line, 10);
+    let slaves = mbtap_sim::demo_profiles().unwrap().iter().map(|(&a, p)| Slave::new(Arc::new(p.clone()), a)).collect();
     let mut bus = VirtualBus::new(slaves, line);
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
@@ -201,8 +200,8 @@ fn scroll_back_is_bounded_and_says_so() {
 fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
     let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-ascii.pcapng");
     let model = mbtap::tui::model::Model::new(
-        mbtap_core::decode::Profiles::new(),
-        mbtap_core::profile::annotate::Lang::En,
+        mbtap_analysis::decode::Profiles::new(),
+        mbtap_device::profile::annotate::Lang::En,
         LineSettings::default(),
         1000,
     );
@@ -210,8 +209,13 @@ fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
     let mut writer = mbtap::output::EventWriter::new(std::io::sink(), mbtap::output::EventFormat::Text);
     writer.tui = Some(shared.clone());
     let input = std::fs::File::open(capture).unwrap();
-    mbtap::output::replay(input, mbtap_core::line_args::LineOverrides::default(), &mut writer, &mut std::io::sink())
-        .unwrap();
+    mbtap::output::replay(
+        input,
+        mbtap_analysis::line_args::LineOverrides::default(),
+        &mut writer,
+        &mut std::io::sink(),
+    )
+    .unwrap();
     assert_eq!(shared.model().line, "19200 7E1".parse::<LineSettings>().unwrap());
     assert!(shared.model().total_rows() > 0);
 }
@@ -222,12 +226,13 @@ fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
 fn a_frame_with_two_possible_lengths_is_marked_in_the_traffic_view() {
     let line = LineSettings { baud: 9600, ..LineSettings::default() };
     let c = line.char_ns();
-    let mut model = Model::new(std::collections::BTreeMap::new(), mbtap_core::profile::annotate::Lang::En, line, 1000);
+    let mut model =
+        Model::new(std::collections::BTreeMap::new(), mbtap_device::profile::annotate::Lang::En, line, 1000);
     let mut analyzer =
         Analyzer::new(AnalyzerConfig { framer: FramerConfig::new(line, 0), ..AnalyzerConfig::default() });
     let rtu = |pdu: &[u8]| {
         let mut f = Vec::new();
-        mbtap_core::proto::encode_rtu(1, pdu, &mut f);
+        mbtap_proto::encode_rtu(1, pdu, &mut f);
         f
     };
     // A vendor request (user-defined 0x41) whose last byte makes its CRC end in 00.

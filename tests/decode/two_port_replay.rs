@@ -3,12 +3,12 @@
 //! pairing which frames are requests — so echo-shaped frames (06) pair without guessing.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
-use mbtap_core::analyzer::{Event, Sink};
-use mbtap_core::capture::PcapNgWriter;
-use mbtap_core::chunk::Timestamp;
-use mbtap_core::line_args::LineOverrides;
-use mbtap_core::pairing::Outcome;
-use mbtap_core::replay::replay_into;
+use mbtap_analysis::analyzer::{Event, Sink};
+use mbtap_analysis::capture::PcapNgWriter;
+use mbtap_analysis::chunk::Timestamp;
+use mbtap_analysis::line_args::LineOverrides;
+use mbtap_analysis::pairing::Outcome;
+use mbtap_analysis::replay::replay_into;
 
 /// MK4 §3.3 write of register 108 = 10; the response is the same 8 bytes.
 const WRITE_108: &[u8] = &[0x01, 0x06, 0x00, 0x6C, 0x00, 0x0A, 0xC9, 0xD0];

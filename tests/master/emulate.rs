@@ -174,10 +174,10 @@ fn bad_sources_are_refused_with_what_to_do() {
     let dir = std::env::temp_dir().join(format!("mbtap-emulate-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let silent = dir.join("silent.pcapng");
-    let mut w = mbtap_core::capture::PcapNgWriter::new(Vec::new()).unwrap();
+    let mut w = mbtap_analysis::capture::PcapNgWriter::new(Vec::new()).unwrap();
     let i = w.add_serial_interface("/dev/ttyUSB0", "mbtap rtu 9600 8E1").unwrap();
     for k in 0..5u64 {
-        w.write_packet(i, mbtap_core::chunk::Timestamp(k * 100_000_000), &POLL_9).unwrap();
+        w.write_packet(i, mbtap_analysis::chunk::Timestamp(k * 100_000_000), &POLL_9).unwrap();
     }
     std::fs::write(&silent, w.into_inner()).unwrap();
     let err = run(&["--from", silent.to_str().unwrap()]);

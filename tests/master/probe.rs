@@ -10,7 +10,7 @@ use crate::common;
 use std::process::{Command, Stdio};
 
 use common::{BIN, Kill, wait_for};
-use mbtap_core::profile::Table;
+use mbtap_device::profile::Table;
 
 fn probe(link: &str, args: &[&str]) -> (serde_json::Value, bool) {
     let out = Command::new(BIN)
@@ -26,7 +26,7 @@ fn probe(link: &str, args: &[&str]) -> (serde_json::Value, bool) {
 /// The runs of addresses a built-in profile defines in `table` — described or reserved by the
 /// device's document (a reserved address exists and answers) — as probe reports them.
 fn defined(name: &str, table: Table) -> serde_json::Value {
-    let p = mbtap_core::profile::builtin::get(name).unwrap().unwrap();
+    let p = mbtap_device::profile::builtin::get(name).unwrap().unwrap();
     let mut all: std::collections::BTreeSet<u16> = p.addresses(table).collect();
     for &(t, a, b) in &p.reserved {
         if t == table {

@@ -1,4 +1,4 @@
-//! Reads a capture with pcap-file or with mbtap-core's reader and prints what each got:
+//! Reads a capture with pcap-file or with mbtap-analysis' reader and prints what each got:
 //! packets, payload bytes, and how it ended (the first error, or the warnings counted).
 //!
 //!     cargo run --release -- pcap-file FILE.pcapng
@@ -35,15 +35,15 @@ fn main() {
             }
         }
     } else {
-        let mut r = mbtap_core::capture::CaptureReader::new(file);
+        let mut r = mbtap_analysis::capture::CaptureReader::new(file);
         let mut warnings = 0u64;
         loop {
             match r.next_item() {
-                Ok(Some(mbtap_core::capture::Item::Packet { data, .. })) => {
+                Ok(Some(mbtap_analysis::capture::Item::Packet { data, .. })) => {
                     packets += 1;
                     bytes += data.len() as u64;
                 }
-                Ok(Some(mbtap_core::capture::Item::Warning(_))) => warnings += 1,
+                Ok(Some(mbtap_analysis::capture::Item::Warning(_))) => warnings += 1,
                 Ok(Some(_)) => {}
                 Ok(None) => break,
                 Err(e) => {

@@ -7,10 +7,10 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
-use mbtap_core::profile::Table;
+use mbtap_device::profile::Table;
 
 use crate::BadValue;
-use mbtap_core::query::{is_bits, read_function, table_read_by, table_word};
+use mbtap_device::query::{is_bits, read_function, table_read_by, table_word};
 
 /// One `--cache` rule.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -46,7 +46,7 @@ pub fn parse_rule(spec: &str) -> Result<Rule, BadValue> {
         return Err(bad("the range runs backwards"));
     }
     // More than nothing (an age of 0 would cache nothing), at most a day.
-    let max_age = mbtap_core::duration::parse_duration(age, Duration::from_millis(1), Duration::from_hours(24))
+    let max_age = mbtap_analysis::duration::parse_duration(age, Duration::from_millis(1), Duration::from_hours(24))
         .map_err(|e| bad(&e))?;
     Ok(Rule { units, table, first, last, max_age })
 }

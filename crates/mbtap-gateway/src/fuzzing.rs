@@ -4,8 +4,8 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::framer::LineSettings;
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::LineSettings;
 
 use crate::timeouts::{TimeoutMode, Timeouts};
 use crate::transaction::{EchoMode, MasterConfig, SerialMaster, Step};

@@ -14,8 +14,8 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-use mbtap_core::analyzer::SerialMode;
-use mbtap_core::framer::LineSettings;
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::LineSettings;
 use mbtap_proto::answer_end::{Verdict, judge_ascii, judge_rtu};
 use mbtap_proto::{ExceptionCode, encode_ascii, encode_rtu, parse_ascii};
 

@@ -9,7 +9,8 @@
 //! [`request`] / [`response`] (PDU) → [`decode`] (direction hint) and [`findings`].
 //! [`length`] says how long a frame of a function code must be; [`answer_end`] uses it to find
 //! where an answer arriving byte by byte ends (the bridge's question); [`hexinput`] reads frames
-//! that people paste as text; [`ascii_link`] carries an RTU master's frames over an ASCII line.
+//! that people paste as text; [`ascii_link`] carries an RTU master's frames over an ASCII line; [`serial_line`] holds the
+//! line settings and the RTU timing they imply.
 //!
 //! This crate depends on `nom` and `thiserror` only: every parser here is fuzzed from
 //! `fuzz/` without compiling the analysis, the terminal or an async runtime.
@@ -29,6 +30,7 @@ pub mod length;
 pub mod request;
 pub mod response;
 pub mod rtu;
+pub mod serial_line;
 pub mod tcp;
 
 pub use adu::{Adu, Check, Mode, detect_mode, parse_adu};

@@ -1,0 +1,443 @@
+//! What the framer emits: valid frames with their timing evidence, damaged frames and noise
+//! split at known silences, CRC twins, and what each valid frame teaches the observer learner.
+
+use super::RtuFramer;
+use super::expect::{Expect, MAX_ADDRESS, Reading, diagnostics_even_len, next_expect, sender_of};
+use crate::chunk::{Chunk, Timestamp};
+use crate::framer::event::{Frame, FrameEvent, Noise};
+use crate::framer::glitch::Sender;
+use crate::framer::observer::SampleSender;
+use mbtap_proto::function::EXCEPTION_FLAG;
+use mbtap_proto::length::{PduLength, request_len, response_len};
+use mbtap_proto::rtu::RTU_MIN_LEN;
+
+impl RtuFramer {
+    /// Emits a chunk that [`Self::whole_frame`] accepted, with the same timing the buffered
+    /// path would give it.
+    pub(super) fn emit_whole_chunk<F: FnMut(FrameEvent<'_>)>(
+        &mut self,
+        chunk: &Chunk<'_>,
+        reading: Reading,
+        emit: &mut F,
+    ) {
+        let c = self.char_ns;
+        let n = u64::try_from(chunk.bytes.len()).unwrap_or(u64::MAX);
+        let mut e0 = chunk.t.0.saturating_sub((n - 1).saturating_mul(c));
+        let ub = match self.timed.last_end {
+            Some(prev) => {
+                e0 = e0.max(prev.saturating_add(c));
+                e0.saturating_sub(c).saturating_sub(prev.saturating_sub(self.latency))
+            }
+            None => u64::MAX,
+        };
+        let t_end = e0.saturating_add((n - 1).saturating_mul(c));
+        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
+        emit(FrameEvent::Frame(Frame {
+            port: self.port,
+            bytes: chunk.bytes,
+            t_start: Timestamp(e0.saturating_sub(c)),
+            t_end: Timestamp(t_end),
+            check_ok: true,
+            gap_violation_ns: None,
+            short_gap_before_ns: (self.after_frame && ub < self.t35).then_some(ub),
+            gap_tolerance_ns: None,
+            short_gap_tolerance_ns: self.short_tolerance(apparent_before),
+            resolution_ns: self.learner.estimate.resolution_ns(),
+            gap_before_known: ub != u64::MAX,
+            bad_chars: false,
+            alt_len: None,
+        }));
+        self.known_units[usize::from(chunk.bytes[0])] = true;
+        self.last_sender = sender_of(self.expect, chunk.bytes, Some(reading));
+        self.after_damage = false;
+        self.glitches.turn.frame(self.last_sender);
+        self.learner.frame();
+        self.timed.last_end = Some(t_end);
+        self.timed.last_read = self.timed.last_read.max(chunk.t.0);
+        self.after_frame = true;
+        self.wait_at = usize::MAX;
+        self.expect = next_expect(self.expect, chunk.bytes, Some(reading));
+        self.glitches.frame();
+        // The next byte buffered lands at the end of the (empty) live buffer.
+        self.glitch_at = Some(self.timed.buf.len());
+    }
+
+    /// Emits the first `n` live bytes, known to form no valid frame, split at known silences:
+    /// each piece a failed frame if it looks like one, else noise.
+    pub(super) fn emit_garbage<F: FnMut(FrameEvent<'_>)>(&mut self, n: usize, emit: &mut F) {
+        let stop = self.timed.head + n;
+        let mut a = self.timed.head;
+        while a < stop {
+            let mut b = a + 1;
+            while b < stop && self.timed.gap_lb[b] < self.t35 {
+                b += 1;
+            }
+            // A slow slave pauses inside its frame: when the structure says the frame goes on
+            // past this silence, and it ends at a silence or at the end of the garbage, follow it.
+            if let Some(l) = self.structural_len(a, stop)
+                && a + l > b
+                && (a + l == stop || self.timed.gap_lb[a + l] >= self.t35)
+                && self.timed.gap_lb[a + 1..a + l].iter().all(|&g| g < self.incomplete_timeout)
+            {
+                b = a + l;
+            }
+            self.emit_piece(a, b, emit);
+            a = b;
+        }
+        self.garbage = self.garbage.saturating_sub(n);
+    }
+
+    /// Emits bytes `a..b` (absolute, `a == self.timed.head`) that no silence divides. A frame whose
+    /// end the structure could not confirm in time (a user-defined code followed by another)
+    /// lands here whole, with a valid CRC; a valid frame glued to a corrupted one or to noise
+    /// is split off when its CRC and structure agree. The rest is a failed frame or noise.
+    pub(super) fn emit_piece<F: FnMut(FrameEvent<'_>)>(&mut self, mut a: usize, b: usize, emit: &mut F) {
+        while a < b {
+            let piece = &self.timed.buf[a..b];
+            // A frame of a length the structure cannot tell with its `00` glitch also passes the
+            // CRC (the shift property): Diagnostics' structure decides, else the odds on this line.
+            if piece.len() > RTU_MIN_LEN && piece.last() == Some(&0) && self.plausible_frame(&piece[..piece.len() - 1])
+            {
+                let n = piece.len();
+                if self.twin_len(a, n, self.sender_at(a - self.timed.head)) < n {
+                    self.emit_frame(n - 1, Some(Reading::Unknown), emit);
+                    self.emit_unframed(b - 1, b, emit);
+                } else {
+                    self.emit_frame(n, Some(Reading::Unknown), emit);
+                }
+                return;
+            }
+            if self.plausible_frame(piece) {
+                self.emit_frame(b - a, Some(Reading::Unknown), emit);
+                return;
+            }
+            let sender = self.sender_at(a - self.timed.head);
+            if let Some((e, twin)) = (RTU_MIN_LEN..piece.len()).find_map(|e| self.frame_in_piece(piece, e, sender)) {
+                let e = if twin { self.twin_len(a, e + 1, sender) } else { e };
+                self.emit_frame(e, Some(Reading::Unknown), emit);
+                a += e;
+                continue;
+            }
+            if let Some(s) = (1..piece.len().saturating_sub(RTU_MIN_LEN - 1))
+                .find(|&s| self.known_units[usize::from(piece[s])] && self.plausible_frame(&piece[s..]))
+            {
+                // With its `00` glitch the frame passes the CRC too: trim it where Diagnostics'
+                // structure or the odds on this line say the `00` is a glitch.
+                let n = piece.len() - s;
+                let both = piece.last() == Some(&0) && self.plausible_frame(&piece[s..piece.len() - 1]);
+                self.emit_unframed(a, a + s, emit);
+                if both && self.twin_len(a + s, n, Sender::Unknown) < n {
+                    self.emit_frame(n - 1, Some(Reading::Unknown), emit);
+                    self.emit_unframed(b - 1, b, emit);
+                } else {
+                    self.emit_frame(n, Some(Reading::Unknown), emit);
+                }
+                return;
+            }
+            self.emit_unframed(a, b, emit);
+            return;
+        }
+    }
+
+    /// A known unit's frame at the start of `piece`, checking at `e` bytes: the length to take
+    /// and whether it is a CRC-`00` twin the odds on this line decide (`twin_len`).
+    ///
+    /// Every `00` after a checking frame makes a longer one that checks too (CRC-16's shift
+    /// property): the lengths this unit's function was seen with decide among them (issue 25:
+    /// noise right after a vendor answer whose CRC ends in `00` left its 1-byte-shorter twin
+    /// reported valid, the learned lengths never asked). Otherwise the frame must stand by
+    /// itself — a length the unit's function has, and what follows looking like a frame — and
+    /// when it also checks one byte longer with a frame after that, the odds decide.
+    fn frame_in_piece(&self, piece: &[u8], e: usize, sender: Sender) -> Option<(usize, bool)> {
+        if !self.known_units[usize::from(piece[0])] || !self.plausible_shape(&piece[..e]) {
+            return None;
+        }
+        let mut lengths = vec![e];
+        while let Some(&l) = lengths.last()
+            && piece.get(l) == Some(&0)
+            && self.plausible_shape(&piece[..=l])
+        {
+            lengths.push(l + 1);
+        }
+        if lengths.len() > 1
+            && let Some(len) = self.lengths.choose_among(piece[0], piece[1], sender, &lengths)
+        {
+            return Some((len, false));
+        }
+        // A run of `00`s after it: a frame ending in `00` and its `00` glitch are the last two
+        // readings — a sender leaves one glitch byte, not several (issue 25: a vendor request
+        // ending in `00` and the master's `00` glitch was taken 1 byte short).
+        let e = if lengths.len() > 2 { lengths[lengths.len() - 2] } else { e };
+        if !self.plausible_frame(&piece[..e]) || !self.looks_like_frame(&piece[e..]) {
+            return None;
+        }
+        let twin = piece.get(e) == Some(&0)
+            && e + 1 < piece.len()
+            && self.plausible_frame(&piece[..=e])
+            && self.looks_like_frame(&piece[e + 1..]);
+        Some((e, twin))
+    }
+
+    /// The `n` bytes at absolute `at` end in `00` and check one byte shorter too (CRC-16's shift
+    /// property): the length to take ([`Self::twin_reading`]), with the other length kept for
+    /// the frame event (see [`Frame::alt_len`]) when it is not negligible.
+    pub(super) fn twin_len(&mut self, at: usize, n: usize, sender: Sender) -> usize {
+        let (take, other) = self.twin_reading(&self.timed.buf[at..], n, sender);
+        self.next_alt = other;
+        take
+    }
+
+    /// Which of the two readings of `s[..n]`, ending in `00` and checking one byte shorter too,
+    /// is the frame: Diagnostics' structure decides where it can, then the lengths this unit's
+    /// function was seen with, else the odds that `sender` leaves a `00` glitch — with the other
+    /// length where those odds do not make it negligible.
+    pub(super) fn twin_reading(&self, s: &[u8], n: usize, sender: Sender) -> (usize, Option<usize>) {
+        if let Some(even) = diagnostics_even_len(s, n - 1) {
+            return (even, None);
+        }
+        if let Some(len) = self.lengths.choose(s[0], s[1], sender, n - 1) {
+            return (len, None);
+        }
+        let odds = self.glitches.turn.zero_tail(sender);
+        let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
+        (take, odds.ambiguous.then_some(other))
+    }
+
+    /// Where a damaged frame at absolute `a` ends inside `a..b`, if its structure says so and a
+    /// frame of a known unit plausibly starts there.
+    pub(super) fn split_damaged(&self, a: usize, b: usize) -> Option<usize> {
+        // With timing that can show a t3.5 silence, frames were already cut at their silences;
+        // a damaged byte count would only mislead. This is for adapters whose latency hides them.
+        if self.latency < self.t35 {
+            return None;
+        }
+        let piece = &self.timed.buf[a..b];
+        if !self.looks_like_frame(piece) {
+            return None;
+        }
+        let pdu = &piece[1..];
+        let req = if piece[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
+        let mut cands: Vec<usize> = [req, response_len(pdu)]
+            .into_iter()
+            .filter_map(|c| match c {
+                PduLength::Exact(k) if k + 3 >= RTU_MIN_LEN && k + 3 + 2 <= piece.len() => Some(k + 3),
+                _ => None,
+            })
+            .collect();
+        // The expected reading first (a request after a completed transaction), then the shorter.
+        let expected_request = self.expect == Expect::Request && a == self.timed.head;
+        let req_len = match req {
+            PduLength::Exact(k) => Some(k + 3),
+            _ => None,
+        };
+        cands.sort_unstable_by_key(|&l| (!(expected_request && Some(l) == req_len), l));
+        // Only when the rest starts like a frame of a known unit: a short rest is as likely the
+        // tail of this frame read with the wrong reading (a request's response reading is 5
+        // bytes) as noise that followed it.
+        cands.into_iter().find(|&l| self.looks_like_frame_start(a - self.timed.head + l))
+    }
+
+    /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise;
+    /// a lone byte right after a frame is its turnaround glitch.
+    pub(super) fn emit_unframed<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, b: usize, emit: &mut F) {
+        // Glued to what follows (no silence seen between them), the glitch is split off when it
+        // cannot start a frame, takes a value this line's glitches take, or the bytes start like
+        // a frame of a known unit only after it.
+        let i = a - self.timed.head;
+        let v = self.timed.buf[a];
+        // A lone byte glued to the start of a frame, after a silence: the glitch of the driver
+        // switching on (seen as a `00` before answers on real lines).
+        if b - a == 1
+            && self.frame_next_at == Some(b)
+            && self.timed.gap_lb[b] < self.t15
+            && self.timed.gap_lb[a] >= self.t35
+            && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitches.value(v))
+            && !self.at_glitch(a)
+        {
+            // The silence before the glitch is the silence before the frame.
+            self.timed.gap_lb[b] = self.timed.gap_lb[a];
+            self.timed.gap_ub[b] = self.timed.gap_ub[a];
+            self.emit_glitch(a, emit);
+            return;
+        }
+        // A lone byte right after a frame, before the next frame's start, a silence or the end
+        // of what has arrived (emitted on a timeout: a request nobody answers, a broadcast),
+        // taking a value this sender's driver leaves or one any driver leaves (`00`, `FE`, `FF`:
+        // before this sender's own are counted), on a line seen to glitch: its glitch, whatever
+        // silence the reads seem to show before it — behind a USB timer that silence is a lower
+        // bound computed with a latency learned short of the timer's (issue 25: 46 glitches in
+        // 6 000 frames were reported as noise behind a 16 ms timer at 19200; then 5, a slave's
+        // first `FE` and `00`s after unanswered requests).
+        if b - a == 1
+            && self.glitch_at == Some(a)
+            && (self.frame_next_at == Some(b)
+                || b == self.timed.buf.len()
+                || self.timed.gap_lb.get(b).is_some_and(|&g| g >= self.t35))
+            && self.glitches.glitchy()
+            && (self.glitches.value_after(self.last_sender, v) || matches!(v, 0x00 | 0xFE | 0xFF))
+        {
+            self.emit_glitch(a, emit);
+            return;
+        }
+        if self.at_glitch(a)
+            && (b - a == 1
+                // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line
+                // is known to glitch, only the values drivers leave (`FE`, `FF`) count.
+                || (v > MAX_ADDRESS && (self.glitches.glitchy() || v >= 0xFE))
+                || (self.glitches.glitchy() && self.glitches.value_after(self.last_sender, v))
+                || ((self.glitches.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
+                    && !self.looks_like_frame_start(i)
+                    && self.looks_like_frame_start(i + 1)))
+        {
+            self.emit_glitch(a, emit);
+            if b > a + 1 {
+                self.emit_unframed(a + 1, b, emit);
+            }
+            return;
+        }
+        // A damaged frame with its turnaround glitch, on a line that glitches: the last byte
+        // takes a value this line's glitches take.
+        if b - a > RTU_MIN_LEN
+            && self.glitches.glitchy()
+            && self.glitches.value_after(self.sender_at(a - self.timed.head), self.timed.buf[b - 1])
+            && !self.expected_len_at(a, b - a)
+        {
+            self.emit_frame(b - a - 1, None, emit);
+            self.emit_unframed(b - 1, b, emit);
+            return;
+        }
+        // The awaited answer, damaged, with more after it: the request fixed its length
+        // (an exception's is 5), whatever its damaged byte count says.
+        if let Expect::Response { unit, fc, len: Some(n) } = self.expect
+            && self.timed.buf[a] == unit
+        {
+            let n = if self.timed.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { n };
+            if b - a > n && self.latency >= self.t35 {
+                self.emit_frame(n, None, emit);
+                self.emit_unframed(a + n, b, emit);
+                return;
+            }
+        }
+        // Two damaged frames back to back (no silence between them to go by): cut the first
+        // at its structural length when what follows starts like a frame of a known unit.
+        if let Some(l) = self.split_damaged(a, b) {
+            self.emit_frame(l, None, emit);
+            self.emit_unframed(a + l, b, emit);
+            return;
+        }
+        if self.looks_like_frame(&self.timed.buf[a..b]) {
+            self.emit_frame(b - a, None, emit);
+        } else {
+            emit(FrameEvent::Noise(Noise {
+                port: self.port,
+                bytes: &self.timed.buf[a..b],
+                t_start: Timestamp(self.timed.end[a].saturating_sub(self.char_ns)),
+                t_end: Timestamp(self.timed.end[b - 1]),
+            }));
+            self.timed.head = b;
+            self.wait_at = usize::MAX;
+            self.after_frame = false;
+            self.after_damage = true;
+        }
+    }
+
+    /// Emits the first `len` live bytes as a frame: valid, read as `reading`, or failed (`None`).
+    pub(super) fn emit_frame<F: FnMut(FrameEvent<'_>)>(&mut self, len: usize, reading: Option<Reading>, emit: &mut F) {
+        let check_ok = reading.is_some();
+        let a = self.timed.head;
+        let b = a + len;
+        let ub = self.timed.gap_ub[a];
+        let short_gap_before_ns = (self.after_frame && ub < self.t35).then_some(ub);
+        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
+        let (inner_gap, every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
+        let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.t15));
+        emit(FrameEvent::Frame(Frame {
+            port: self.port,
+            bytes: &self.timed.buf[a..b],
+            t_start: Timestamp(self.timed.end[a].saturating_sub(self.char_ns)),
+            t_end: Timestamp(self.timed.end[b - 1]),
+            check_ok,
+            gap_violation_ns: (inner_gap >= self.t15).then_some(inner_gap),
+            short_gap_before_ns,
+            gap_tolerance_ns,
+            short_gap_tolerance_ns: self.short_tolerance(apparent_before),
+            resolution_ns: self.learner.estimate.resolution_ns(),
+            gap_before_known: ub != u64::MAX,
+            bad_chars: false,
+            alt_len: self.next_alt.take().filter(|_| check_ok),
+        }));
+        self.last_sender = sender_of(self.expect, &self.timed.buf[a..b], reading);
+        self.after_damage = !check_ok;
+        if check_ok {
+            self.lengths.record(&self.timed.buf[a..b], self.timed.buf.get(b).copied(), self.last_sender);
+            self.known_units[usize::from(self.timed.buf[a])] = true;
+            self.glitches.turn.frame(self.last_sender);
+            self.learn_from(a, every_silence);
+        }
+        self.expect = next_expect(self.expect, &self.timed.buf[a..b], reading);
+        self.glitches.frame();
+        self.glitch_at = Some(b);
+        self.timed.head = b;
+        self.wait_at = usize::MAX;
+        self.after_frame = true;
+    }
+
+    /// A valid frame at absolute `a`, `delay` the longest apparent silence between two of its
+    /// reads (`None`: it came in one): its bytes were sent back to back, so that silence is the
+    /// observer's delay.
+    pub(super) fn learn_from(&mut self, a: usize, delay: Option<u64>) {
+        self.learner.frame();
+        let sender = match self.last_sender {
+            Sender::Master => SampleSender::Master,
+            Sender::Slave | Sender::Unknown => SampleSender::Unit(self.timed.buf[a]),
+        };
+        if let Some(d) = delay
+            && self.learner.sample(sender, d).is_some()
+        {
+            self.latency = self.learner.estimate.effective_latency_ns();
+        }
+    }
+
+    /// The longest apparent silence between two reads inside absolute `a..b`, taken at face
+    /// value (no latency allowed for); `None` when the bytes came in one read.
+    ///
+    /// A read's bytes are placed back to back before its timestamp; where the frame's last read
+    /// also holds bytes of the next frame, the silence between the two frames is hidden inside
+    /// that read and its first bytes look later than they were — by up to that silence. That
+    /// read's boundary says nothing about the observer or the sender and is left out (issue 25:
+    /// through a 16550 FIFO, which holds the tail of one frame with the head of the next, it
+    /// made healthy frames look paused). For learning the observer's delay it is kept (the
+    /// first of the pair returned): that errs high, towards fewer findings, and a glitchy
+    /// line's frames always share their last read with their glitch. One pass over the frame
+    /// gives all three: `(the longest silence the reads prove inside it, every boundary, the
+    /// boundaries the gap evidence may use)`.
+    pub(super) fn apparent_inner_silence(&self, a: usize, b: usize) -> (u64, Option<u64>, Option<u64>) {
+        let c = self.char_ns;
+        // A read began at `i` where the gap before it is bounded (inside a read it is unknown
+        // and set to `u64::MAX`).
+        let starts_read = |i: usize| self.timed.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
+        let (mut before_last, mut last) = (None::<u64>, None::<u64>);
+        // One pass over slices, the frame's longest proven gap with it (issue 40: two scans of
+        // every frame cost replay its speed).
+        let t = &self.timed;
+        let (Some(lb), Some(ub), Some(end)) = (t.gap_lb.get(a + 1..b), t.gap_ub.get(a + 1..b), t.end.get(a..b)) else {
+            return (0, None, None);
+        };
+        let mut inner_gap = 0;
+        for ((&l, &g), w) in lb.iter().zip(ub).zip(end.windows(2)) {
+            inner_gap = inner_gap.max(l);
+            if g != u64::MAX {
+                before_last = before_last.max(last);
+                last = Some(w[1].saturating_sub(c).saturating_sub(w[0]));
+            }
+        }
+        let every = before_last.max(last);
+        let last_read_spills = b < self.timed.buf.len() && !starts_read(b);
+        (inner_gap, every, if last_read_spills { before_last } else { every })
+    }
+
+    /// How far an apparent silence before a frame fell short of t3.5 after the previous frame.
+    pub(super) fn short_tolerance(&self, apparent_before: Option<u64>) -> Option<u64> {
+        apparent_before.filter(|_| self.after_frame).and_then(|g| self.t35.checked_sub(g)).filter(|&t| t > 0)
+    }
+}
