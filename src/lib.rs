@@ -1,12 +1,13 @@
 //! mbtap — a Modbus RTU/ASCII bus analyzer: the binary's edges. The analysis itself is pure and
 //! lives in the workspace's libraries: `mbtap-proto` (frames and PDUs), `mbtap-device` (profiles,
 //! SunSpec, queries), `mbtap-analysis` (framers, pairing, health, learn, captures), `mbtap-sim`
-//! (simulated lines and devices), `mbtap-publish` (Sparkplug, the spool) and `mbtap-gateway`, which import no tokio,
-//! terminal, command line or serial crate and read no clock.
+//! (simulated lines and devices), `mbtap-publish` (Sparkplug, the spool) and `mbtap-gateway`,
+//! which import no tokio, terminal, command line or serial crate and read no clock.
 //!
 //! Module map (dependencies point down, never up):
 //! - [`cmd`] — one file per command: its options and its `run`; `main` parses and dispatches.
-//! - [`args`] — command-line pieces several commands share (line settings, output options).
+//! - [`cli`] — what the commands share: the options several take ([`cli::args`]) and the one
+//!   runner of the analyzing commands ([`cli::runner`]: the UI or stdout, publishers, the end).
 //! - [`bridge`] — Modbus TCP ⇄ serial: server, line masters, reverse mode, metrics, its config file.
 //! - [`tui`] — the terminal UI (ratatui), rendered from the model the events build.
 //! - [`source`] — live serial ports, pseudo-terminals and the clock: the I/O loops.
@@ -19,8 +20,8 @@
 //! - [`config`] — the user configuration file, and device profiles by the names users give them.
 //! - [`signals`] — Ctrl-C, SIGTERM and the UI's `q`: one stop for every loop.
 
-pub mod args;
 pub mod bridge;
+pub mod cli;
 pub mod cmd;
 pub mod config;
 pub mod master;

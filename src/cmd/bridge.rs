@@ -3,7 +3,7 @@
 //! ([`crate::config::merge`]): an option given on the command line replaces the file's value,
 //! lists included.
 
-use std::io;
+use std::io::{self, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -11,10 +11,10 @@ use anyhow::Context;
 use clap::ArgMatches;
 use std::path::Path;
 
-use crate::args::{EventFormatArg, LineArgs};
+use crate::cli::args::{EventFormatArg, LineArgs};
+use crate::cli::runner::{Job, Runner};
 use crate::cmd::runtime;
-use crate::output::EventWriter;
-use crate::tui::source::TuiSource;
+use crate::output::{EventWriter, SourceError};
 
 /// Modbus TCP clients to serial devices: a TCP server in front of a serial master.
 // Flags, each its own switch on the command line (clap), not states of one machine.
@@ -115,7 +115,7 @@ pub struct Args {
     #[arg(long, default_value_t = 64)]
     pub max_connections: usize,
     /// Close a connection silent this long: `300s`, `5min` (a bare number is seconds).
-    #[arg(long, default_value = "300s", value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    #[arg(long, default_value = "300s", value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
     pub idle_timeout: std::time::Duration,
     /// Requests per second per connection; above it exception 0x06 (busy).
     #[arg(long)]
@@ -150,7 +150,7 @@ pub struct Args {
     #[arg(long = "device", value_name = "UNIT=PROFILE")]
     pub devices: Vec<String>,
     /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
-    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
     pub duration: Option<std::time::Duration>,
     /// RS-485 direction control of the serial lines.
     #[command(flatten)]
@@ -409,44 +409,25 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             role,
         }));
     }
-    let taps: Vec<std::sync::Arc<dyn crate::output::Tap>> =
-        publisher.iter().map(|m| std::sync::Arc::clone(m) as std::sync::Arc<dyn crate::output::Tap>).collect();
-    let result = run_monitored(monitor, profiles, settings, opts, taps);
-    if let Some(m) = &publisher {
-        m.finish();
-    }
-    result
+    let Some(format) = monitor else {
+        runtime()?.block_on(crate::bridge::run::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;
+        return Ok(ExitCode::SUCCESS);
+    };
+    let mut runner =
+        Runner::new("bridge".into(), format, profiles, mbtap_device::profile::annotate::Lang::En, settings);
+    runner.publishing = crate::publish::Publishing { spy: None, mqtt: publisher };
+    runner.run(Monitor(opts))
 }
 
-fn run_monitored(
-    monitor: Option<EventFormatArg>,
-    profiles: mbtap_device::profile::Profiles,
-    settings: mbtap_analysis::framer::LineSettings,
-    opts: crate::bridge::run::BridgeOptions,
-    taps: Vec<std::sync::Arc<dyn crate::output::Tap>>,
-) -> anyhow::Result<ExitCode> {
-    match monitor {
-        Some(EventFormatArg::Tui) => {
-            let ui =
-                TuiSource { profiles, lang: mbtap_device::profile::annotate::Lang::En, line: settings, pacing: false };
-            ui.run("bridge", move |writer, err| {
-                writer.taps = taps;
-                runtime()?.block_on(crate::bridge::run::bridge(opts, Some(writer), err))
-            })
-        }
-        Some(format) => {
-            let stdout = io::stdout();
-            let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), format.into());
-            writer.profiles = profiles;
-            writer.taps = taps;
-            runtime()?.block_on(crate::bridge::run::bridge(opts, Some(&mut writer), &mut io::stderr()))?;
-            writer.finish()?;
-            Ok(ExitCode::SUCCESS)
-        }
-        None => {
-            runtime()?.block_on(crate::bridge::run::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;
-            Ok(ExitCode::SUCCESS)
-        }
+/// The bridge as the runner's source: what its lines carry, shown by `--monitor`.
+struct Monitor(crate::bridge::run::BridgeOptions);
+
+impl Job for Monitor {
+    fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
+        // The bridge fails only while it sets up (a listener that cannot bind, a port that will
+        // not open); once serving, it serves until stopped.
+        let started = crate::runtime()?.block_on(crate::bridge::run::bridge(self.0, Some(writer), err));
+        started.map_err(SourceError::NotStarted)
     }
 }
 

@@ -9,7 +9,7 @@ use mbtap_analysis::decode::{self as decode_cmd, Format};
 use mbtap_analysis::decode_lines::{Line, Lines, MAX_LINE};
 use mbtap_proto::Mode;
 
-use crate::args::LangArg;
+use crate::cli::args::LangArg;
 
 #[derive(Debug, clap::Args)]
 /// Explain Modbus frames given as hex (RTU, TCP) or ASCII (`:...`).

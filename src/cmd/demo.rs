@@ -2,15 +2,15 @@
 //! virtual line ([`mbtap_sim::bus`]), polled by a built-in master, heard by the same
 //! analyzer `sniff` uses and shown annotated by their profiles, in real time.
 
-use std::io::{self, IsTerminal};
+use std::io::{self, IsTerminal, Write};
 use std::process::ExitCode;
 
 use mbtap_analysis::framer::LineSettings;
 
-use crate::args::{EventFormatArg, FaultArg, LangArg, fault_list};
-use crate::cmd::runtime;
-use crate::output::EventWriter;
-use crate::tui::source::TuiSource;
+use crate::cli::args::{EventFormatArg, FaultArg, LangArg, fault_list};
+use crate::cli::runner::{Job, Runner};
+use crate::output::{EventWriter, SourceError};
+use crate::source::demo::DemoOptions;
 
 #[derive(Debug, clap::Args)]
 /// The whole job with no hardware: simulated MK4, Display and MKZP-0.4 polled on a virtual
@@ -23,7 +23,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = LangArg::En)]
     pub lang: LangArg,
     /// Stop after this long (of line time): `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
-    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
     pub duration: Option<std::time::Duration>,
     /// Inject a fault into every fourth transaction, faults taking turns (repeatable).
     #[arg(long = "fault", value_enum)]
@@ -43,27 +43,25 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { format, lang, duration, faults, speed, heard_at, publish } = args;
     let faults = fault_list(&faults);
     anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
-    let opts = crate::source::demo::DemoOptions { duration, faults, speed, heard_at };
     let format =
         format.unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });
     let profiles = mbtap_sim::demo_profiles()?;
     // The demo's line is simulated: values age by its own time, not the clock's.
     let publishing = crate::publish::Publishing::start(&publish, false, "demo", &profiles)?;
-    let taps = publishing.taps();
-    if format == EventFormatArg::Tui {
-        let line = heard_at.unwrap_or_default();
-        let ui = TuiSource { profiles, lang: lang.into(), line, pacing: true };
-        return ui.run("demo (simulated bus)", move |writer, _| {
-            writer.taps = taps;
-            runtime()?.block_on(crate::source::demo::demo(opts, writer))
-        });
+    let line = heard_at.unwrap_or_default();
+    let mut runner = Runner::new("demo (simulated bus)".into(), format, profiles, lang.into(), line);
+    runner.publishing = publishing;
+    runner.pacing = true;
+    runner.run(Demo(DemoOptions { duration, faults, speed, heard_at }))
+}
+
+/// The simulated line as the runner's source.
+struct Demo(DemoOptions);
+
+impl Job for Demo {
+    fn run<W: Write>(self, writer: &mut EventWriter<W>, _: &mut dyn Write) -> Result<(), SourceError> {
+        // The demo fails only while it sets its line up (a built-in profile that does not load).
+        let started = crate::runtime()?.block_on(crate::source::demo::demo(self.0, writer));
+        started.map_err(SourceError::NotStarted)
     }
-    let stdout = io::stdout();
-    let mut writer = EventWriter::new(io::LineWriter::new(stdout.lock()), format.into());
-    writer.lang = lang.into();
-    writer.taps = taps;
-    runtime()?.block_on(crate::source::demo::demo(opts, &mut writer))?;
-    writer.finish()?;
-    publishing.finish();
-    Ok(ExitCode::SUCCESS)
 }

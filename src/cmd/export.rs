@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 
-use crate::args::CaptureLineArgs;
+use crate::cli::args::CaptureLineArgs;
 
 #[derive(Debug, clap::Args)]
 /// Export the rebuilt frames for Wireshark (pcapng, link type 252, `mbrtu` dissector).

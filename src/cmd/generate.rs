@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::ValueEnum;
 use mbtap_sim::traffic::{Observation, TrafficConfig};
 
-use crate::args::LineArgs;
+use crate::cli::args::LineArgs;
 
 #[derive(Debug, clap::Args)]
 /// Write a synthetic line capture with known content (for training, tests and benchmarks).

@@ -10,7 +10,7 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 
-use crate::args::CaptureLineArgs;
+use crate::cli::args::CaptureLineArgs;
 
 /// Draft a register map from a capture or a live line: blocks polled, writes, exceptions, and
 /// each register's likely type (constant, counter, enumeration, bits, signed, 32-bit integers
@@ -27,7 +27,7 @@ pub struct Args {
     pub capture: PathBuf,
     /// Listening to a port: stop after this long (`90s`, `10min`, `1h`; a bare number is
     /// seconds). Without it, until Ctrl-C.
-    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
     pub duration: Option<std::time::Duration>,
     #[command(flatten)]
     pub line: CaptureLineArgs,
@@ -88,7 +88,9 @@ fn listen(args: &Args) -> anyhow::Result<mbtap_analysis::learn::Learner> {
     let mut draft = crate::output::learn_draft::LiveDraft::new(target(args), port);
     draft.learner.only = args.unit;
     writer.learn = Some(draft);
-    crate::cmd::runtime()?.block_on(crate::source::sniff::sniff(opts, &mut writer, &mut std::io::stderr()))?;
+    crate::cmd::runtime()?
+        .block_on(crate::source::sniff::sniff(opts, &mut writer, &mut std::io::stderr()))
+        .map_err(crate::output::SourceError::into_error)?;
     Ok(writer.learn.take().map(|l| l.learner).unwrap_or_default())
 }
 

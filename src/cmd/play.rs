@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use crate::args::CaptureLineArgs;
+use crate::cli::args::CaptureLineArgs;
 
 #[derive(Debug, clap::Args)]
 /// Play a line capture into a serial port with its recorded timing.

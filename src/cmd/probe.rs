@@ -54,7 +54,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
     #[command(flatten)]
-    pub line: crate::args::SerialLineArgs,
+    pub line: crate::cli::args::SerialLineArgs,
 }
 
 /// Output of `probe`.

@@ -47,7 +47,7 @@ pub struct ImportArgs {
     #[arg(long, value_name = "TARGET")]
     pub from: Option<String>,
     #[command(flatten)]
-    pub line: crate::args::SerialLineArgs,
+    pub line: crate::cli::args::SerialLineArgs,
     /// Where to write the profile (default: the user profile directory, NAME.toml).
     #[arg(short, long)]
     pub output: Option<PathBuf>,

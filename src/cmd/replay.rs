@@ -1,14 +1,15 @@
 //! `mbtap replay FILE`: a line capture through the analyzer, exactly as a live session would
 //! have seen it.
 
-use std::io;
+use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
 
-use crate::args::event_writer;
-use crate::args::{CaptureLineArgs, EventFormatArg, OutputArgs};
+use crate::cli::args::{CaptureLineArgs, EventFormatArg, OutputArgs};
+use crate::cli::runner::{Job, Runner};
+use crate::output::{EventWriter, SourceError};
 
 #[derive(Debug, clap::Args)]
 /// Replay a line capture (pcap/pcapng, link type 147) through the analyzer.
@@ -33,49 +34,58 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // The profiles a capture ships with (NAME.devices beside it) under the command line's.
     output.devices = [crate::config::devices::devices_beside(&file)?, output.devices].concat();
     let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
-    let profiles = crate::config::devices::load_devices(&output.devices)?;
-    let publishing = crate::publish::Publishing::start(&output.publish, false, &file.display().to_string(), &profiles)?;
-    let taps = publishing.taps();
-    if output.format == EventFormatArg::Tui {
-        let (_, settings, _) = line.overrides().resolve();
-        let source = file.display().to_string();
-        let ui = crate::args::tui_source(&output, settings, true)?;
-        return ui.run(&source, move |writer, err| {
-            writer.paced = true;
-            writer.taps = taps;
-            crate::output::replay(input, line.overrides(), writer, err)
-                .with_context(|| format!("replaying {}", file.display()))
-        });
-    }
-    let stdout = io::stdout();
-    let mut writer = event_writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()), &output)?;
-    writer.taps = taps;
-    if image.is_some() {
-        writer.image = Some(mbtap_device::profile::image::RegisterImage::default());
-    }
-    crate::output::replay(input, line.overrides(), &mut writer, &mut io::stderr())
-        .with_context(|| format!("replaying {}", file.display()))?;
-    if let (Some(path), Some(img)) = (&image, writer.image.take()) {
-        if img.overflowed > 0 {
-            eprintln!(
-                "mbtap: warning: the register image is full ({} addresses): {} values of new addresses not kept",
-                mbtap_device::profile::image::MAX_VALUES,
-                img.overflowed
-            );
+    let (_, settings, _) = line.overrides().resolve();
+    let mut runner = Runner::from_output(file.display().to_string(), output, settings, false)?;
+    runner.pacing = true;
+    runner.block_buffered = true;
+    runner.serve_after_end = true;
+    runner.run(Replay { input, line, file, image })
+}
+
+/// A capture as the runner's source, and the register image it leaves (`--image`).
+struct Replay<R> {
+    input: R,
+    line: CaptureLineArgs,
+    file: PathBuf,
+    image: Option<PathBuf>,
+}
+
+impl<R: Read + Send + 'static> Job for Replay<R> {
+    fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
+        let Self { input, line, file, image } = self;
+        // Recorded input shown in the UI is held to its own time.
+        writer.paced = writer.tui.is_some();
+        if image.is_some() {
+            writer.image = Some(mbtap_device::profile::image::RegisterImage::default());
         }
-        let text = if path.extension().is_some_and(|e| e == "json") {
-            serde_json::to_string_pretty(&img.to_json(&writer.profiles))?
-        } else {
-            img.to_csv(&writer.profiles)
-        };
-        std::fs::write(path, text).with_context(|| format!("writing the register image {}", path.display()))?;
+        // A replay fails only on a file that cannot be read as a capture: nothing heard.
+        crate::output::replay(input, line.overrides(), writer, err)
+            .with_context(|| format!("replaying {}", file.display()))
+            .map_err(SourceError::NotStarted)?;
+        if let (Some(path), Some(img)) = (&image, writer.image.take()) {
+            write_image(path, &img, &writer.profiles)?;
+        }
+        Ok(())
     }
-    writer.finish()?;
-    if publishing.spy.is_some() {
-        // A replay ends in a moment; the image it built is served until asked to stop.
-        eprintln!("mbtap: the capture is replayed; serving its register image until Ctrl-C");
-        super::runtime()?.block_on(crate::signals::shutdown_signal());
+}
+
+/// The register image to `path`: JSON for `.json`, CSV otherwise; a full image said.
+fn write_image(
+    path: &std::path::Path,
+    img: &mbtap_device::profile::image::RegisterImage,
+    profiles: &mbtap_device::profile::Profiles,
+) -> anyhow::Result<()> {
+    if img.overflowed > 0 {
+        eprintln!(
+            "mbtap: warning: the register image is full ({} addresses): {} values of new addresses not kept",
+            mbtap_device::profile::image::MAX_VALUES,
+            img.overflowed
+        );
     }
-    publishing.finish();
-    Ok(ExitCode::SUCCESS)
+    let text = if path.extension().is_some_and(|e| e == "json") {
+        serde_json::to_string_pretty(&img.to_json(profiles))?
+    } else {
+        img.to_csv(profiles)
+    };
+    std::fs::write(path, text).with_context(|| format!("writing the register image {}", path.display()))
 }

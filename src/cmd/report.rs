@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::ValueEnum;
 
-use crate::args::CaptureLineArgs;
+use crate::cli::args::CaptureLineArgs;
 
 #[derive(Debug, clap::Args)]
 /// A bus health report from a capture: per unit and per bus, and findings with evidence.

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use mbtap_analysis::framer::LineSettings;
 
-use crate::args::{FaultArg, LineArgs, fault_list};
+use crate::cli::args::{FaultArg, LineArgs, fault_list};
 use crate::source::emulate_from;
 
 #[derive(Debug, clap::Args)]
@@ -55,7 +55,7 @@ pub struct Args {
     #[arg(long, value_name = "SERVED=SOURCE,…", requires = "as_device")]
     pub map: Option<String>,
     /// How often the mirrored device is read; no value served is older [default: 1s].
-    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg, requires = "mirror")]
+    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg, requires = "mirror")]
     pub fresh: Option<std::time::Duration>,
     /// Set the devices' values from an MQTT broker (`mqtt://HOST[:PORT]`, `mqtts://…`): publish
     /// `NAME=VALUE` to `PREFIX/unit/U/set` (or a value to `PREFIX/unit/U/TABLE/ADDRESS/set`), as
@@ -84,7 +84,7 @@ pub struct Args {
     #[command(flatten)]
     pub line: LineArgs,
     /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
-    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
     pub duration: Option<std::time::Duration>,
     /// A device's time from the end of a request to its answer, ms (default: a recording's
     /// own median, 3 ms for a profile's device).

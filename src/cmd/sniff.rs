@@ -1,12 +1,13 @@
 //! `mbtap sniff PORT`: a live serial port through the analyzer (the I/O loop: [`crate::source::sniff`]).
 
-use std::io;
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use crate::args::event_writer;
-use crate::args::{EventFormatArg, LineArgs, OutputArgs};
-use crate::cmd::runtime;
+use crate::cli::args::{LineArgs, OutputArgs};
+use crate::cli::runner::{Job, Runner};
+use crate::output::{EventWriter, SourceError};
+use crate::source::sniff::SniffOptions;
 
 #[derive(Debug, clap::Args)]
 /// Listen to a live serial port: rebuild, pair and show every frame.
@@ -27,45 +28,23 @@ pub struct Args {
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
-    #[arg(long, value_name = "DURATION", value_parser = crate::args::duration_arg)]
+    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
     pub duration: Option<std::time::Duration>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { port, line, output, record, duration } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
-    let record_path = record.clone();
-    let opts = crate::source::sniff::SniffOptions { port, mode, line: settings, latency_ns, record, duration };
-    let profiles = crate::config::devices::load_devices(&output.devices)?;
-    let publishing = crate::publish::Publishing::start(&output.publish, true, &opts.port, &profiles)?;
-    let taps = publishing.taps();
-    if output.format == EventFormatArg::Tui {
-        let source = opts.port.clone();
-        let ui = crate::args::tui_source(&output, settings, false)?;
-        let recorded = opts.record.clone();
-        let ended = ui.run(&source, move |writer, err| {
-            writer.taps = taps;
-            runtime()?.block_on(crate::source::sniff::sniff(opts, writer, err))
-        });
-        if let Some(note) = recorded.as_deref().and_then(crate::source::record::ended_note) {
-            eprintln!("mbtap: {note}");
-        }
-        return ended;
+    let mut runner = Runner::from_output(port.clone(), output, settings, true)?;
+    runner.recording.clone_from(&record);
+    runner.run(Sniff(SniffOptions { port, mode, line: settings, latency_ns, record, duration }))
+}
+
+/// The live port as the runner's source.
+struct Sniff(SniffOptions);
+
+impl Job for Sniff {
+    fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
+        crate::runtime().map_err(SourceError::NotStarted)?.block_on(crate::source::sniff::sniff(self.0, writer, err))
     }
-    let stdout = io::stdout();
-    let mut writer = event_writer(io::LineWriter::new(stdout.lock()), &output)?;
-    writer.taps = taps;
-    let result = runtime()?.block_on(crate::source::sniff::sniff(opts, &mut writer, &mut io::stderr()));
-    // The summary is written even when the recording failed; the exit status says it did. A
-    // port that never opened heard nothing: only the error is said.
-    let opened = !matches!(&result, Err(e) if e.downcast_ref::<crate::source::sniff::NeverOpened>().is_some());
-    if opened {
-        writer.finish()?;
-    }
-    publishing.finish();
-    if let Some(note) = record_path.as_deref().and_then(crate::source::record::ended_note) {
-        eprintln!("mbtap: {note}");
-    }
-    result?;
-    Ok(ExitCode::SUCCESS)
 }

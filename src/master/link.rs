@@ -98,7 +98,11 @@ impl std::fmt::Debug for Link {
 impl Link {
     /// A link that opens on first use. ASCII framing is for serial lines and raw TCP to a
     /// converter (`rtu+tcp://`); Modbus TCP has its own framing (MBAP), and refuses it.
-    pub fn new(target: &str, line: &crate::args::SerialLineArgs, connect_timeout: Duration) -> anyhow::Result<Self> {
+    pub fn new(
+        target: &str,
+        line: &crate::cli::args::SerialLineArgs,
+        connect_timeout: Duration,
+    ) -> anyhow::Result<Self> {
         let (mode, settings, _) = line.overrides().resolve();
         let endpoint = Endpoint::parse(target);
         anyhow::ensure!(

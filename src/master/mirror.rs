@@ -17,7 +17,7 @@ use crate::source::emulated::Emulated;
 #[derive(Debug)]
 pub struct MirrorOptions {
     pub target: String,
-    pub line: crate::args::SerialLineArgs,
+    pub line: crate::cli::args::SerialLineArgs,
     /// The source's unit on the target, and its profile.
     pub unit: u8,
     pub source: Profile,
@@ -43,7 +43,7 @@ pub fn prepare(
     served: Option<&str>,
     map: Option<&str>,
     fresh: Duration,
-    line: crate::args::SerialLineArgs,
+    line: crate::cli::args::SerialLineArgs,
     index: usize,
     notes: &mut String,
 ) -> anyhow::Result<(mbtap_sim::Device, MirrorOptions)> {

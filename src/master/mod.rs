@@ -12,7 +12,7 @@ pub mod sunspec;
 
 use clap::Args;
 
-use crate::args::SerialLineArgs;
+use crate::cli::args::SerialLineArgs;
 
 /// Where and whom the master asks, shared by `read`, `write` and `watch`.
 #[derive(Debug, Clone, Args)]

@@ -22,6 +22,33 @@ pub enum EventFormat {
     Summary,
 }
 
+/// Why a source feeding the output ended with an error, and so whether a summary is due
+/// (`cli::runner` decides by it; the source says which).
+#[derive(Debug)]
+pub enum SourceError {
+    /// The source never began (a port that did not open, a file that is no capture): nothing
+    /// was heard, so only the error is said (issue 31: an empty summary went to stdout beside
+    /// the real error).
+    NotStarted(anyhow::Error),
+    /// It began and then failed: the summary of what was heard is still written, then the error.
+    Stopped(anyhow::Error),
+}
+
+impl SourceError {
+    #[must_use]
+    pub fn into_error(self) -> anyhow::Error {
+        match self {
+            Self::NotStarted(e) | Self::Stopped(e) => e,
+        }
+    }
+}
+
+impl From<anyhow::Error> for SourceError {
+    fn from(e: anyhow::Error) -> Self {
+        Self::Stopped(e)
+    }
+}
+
 /// Writes events in a format and counts them.
 #[derive(Debug)]
 pub struct EventWriter<W: Write> {

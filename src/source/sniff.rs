@@ -14,7 +14,7 @@
 use std::io::Write;
 use std::time::Duration;
 
-use crate::output::EventWriter;
+use crate::output::{EventWriter, SourceError};
 use crate::source::record::Recorder;
 use crate::source::serial::now;
 use crate::source::session::Session;
@@ -63,26 +63,14 @@ const FLUSH: Duration = Duration::from_secs(1);
 /// Runs the sniffer until Ctrl-C, SIGTERM or the duration ends.
 ///
 /// # Errors
-/// When the port cannot be opened at start, or the recording cannot be written.
-/// The error of a sniff that never opened its port: nothing was heard, so no summary is due
-/// (issue 31: an empty summary went to stdout beside the real error).
-/// It says the opening error as it was.
-#[derive(Debug, Clone)]
-pub struct NeverOpened(String);
-
-impl std::fmt::Display for NeverOpened {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for NeverOpened {}
-
+/// [`SourceError::NotStarted`] when the recording cannot be created or the port cannot be
+/// opened at start (nothing heard: no summary is due); [`SourceError::Stopped`] when the
+/// recording cannot be written later.
 pub async fn sniff<W: Write>(
     opts: SniffOptions,
     writer: &mut EventWriter<W>,
     err: &mut dyn Write,
-) -> anyhow::Result<()> {
+) -> Result<(), SourceError> {
     let remote = serial_server(&opts.port).is_some();
     let latency_ns = match Transport::of(&opts.port).latency_ns(opts.latency_ns) {
         Some(ns) if remote => ns,
@@ -90,7 +78,7 @@ pub async fn sniff<W: Write>(
     };
     let description = LineOverrides::describe(opts.mode, opts.line, latency_ns);
     let recorder = match &opts.record {
-        Some(path) => Some(Recorder::create(path, &[(&opts.port, &description)])?),
+        Some(path) => Some(Recorder::create(path, &[(&opts.port, &description)]).map_err(SourceError::NotStarted)?),
         None => None,
     };
     let config = AnalyzerConfig {
@@ -101,8 +89,7 @@ pub async fn sniff<W: Write>(
     };
     let mut session = Session::new(config).recording(recorder).telling_observers();
     let mut watch = crate::source::serial::DeviceWatch::default();
-    let mut stream =
-        open_source(&opts, &mut watch, err).await.map_err(|e| anyhow::Error::new(NeverOpened(format!("{e:#}"))))?;
+    let mut stream = open_source(&opts, &mut watch, err).await.map_err(SourceError::NotStarted)?;
     let _ = writeln!(
         err,
         "mbtap: sniffing {} at {} {} (reads trusted to {} µs: --latency-ms{})",
@@ -134,7 +121,7 @@ pub async fn sniff<W: Write>(
                     session.tick(now(), writer);
                     stream = loop {
                         tokio::select! {
-                            () = &mut stop => return session.finish(writer, err),
+                            () = &mut stop => return Ok(session.finish(writer, err)?),
                             () = tokio::time::sleep(Duration::from_secs(1)) => {}
                         }
                         if let Some(r) = session.recorder() {
@@ -156,5 +143,5 @@ pub async fn sniff<W: Write>(
             session.flush(writer, err);
         }
     }
-    session.finish(writer, err)
+    Ok(session.finish(writer, err)?)
 }

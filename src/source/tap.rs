@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 
-use crate::output::EventWriter;
+use crate::output::{EventWriter, SourceError};
 use crate::source::record::Recorder;
 use crate::source::rs485::Rs485Args;
 use crate::source::serial::now;
@@ -48,8 +48,14 @@ const APP_STALL: Duration = Duration::from_millis(50);
 /// Runs the tap until Ctrl-C, SIGTERM or the duration ends.
 ///
 /// # Errors
-/// When the port or the pseudo-terminal cannot be set up, or the recording written.
-pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &mut dyn Write) -> anyhow::Result<()> {
+/// [`SourceError::NotStarted`] when the port, the pseudo-terminal or the recording cannot be
+/// set up (nothing relayed: no summary is due); [`SourceError::Stopped`] when the port or the
+/// recording cannot be written later.
+pub async fn tap<W: Write>(
+    opts: TapOptions,
+    writer: &mut EventWriter<W>,
+    err: &mut dyn Write,
+) -> Result<(), SourceError> {
     // A serial server's stream keeps no timing: as for `sniff`, frames are found by structure.
     let transport = Transport::of(&opts.port);
     let latency_ns = match transport.latency_ns(opts.latency_ns) {
@@ -57,11 +63,12 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
         _ => crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err),
     };
     let mut watch = crate::source::serial::DeviceWatch::default();
-    let mut bus = LineStream::open_line(&opts.port, opts.line, &mut watch, err).await?;
+    let mut bus =
+        LineStream::open_line(&opts.port, opts.line, &mut watch, err).await.map_err(SourceError::NotStarted)?;
     // The pty lives as long as we hold the master; the application opens the slave's path.
-    let (mut app, slave_path) = super::pty::open()?;
+    let (mut app, slave_path) = super::pty::open().map_err(SourceError::NotStarted)?;
     let slave_path = slave_path.to_string_lossy().into_owned();
-    super::link::make(&opts.link, &slave_path)?;
+    super::link::make(&opts.link, &slave_path).map_err(SourceError::NotStarted)?;
     let _ = writeln!(
         err,
         "mbtap: tapping {} at {}; point the application at {} ({slave_path})",
@@ -75,7 +82,10 @@ pub async fn tap<W: Write>(opts: TapOptions, writer: &mut EventWriter<W>, err: &
             let d = LineOverrides::describe(opts.mode, opts.line, latency_ns);
             let app_name = format!("{} (application)", opts.link.display());
             let (requests, responses) = (format!("{d} role=requests"), format!("{d} role=responses"));
-            Some(Recorder::create(path, &[(&app_name, &requests), (&opts.port, &responses)])?)
+            Some(
+                Recorder::create(path, &[(&app_name, &requests), (&opts.port, &responses)])
+                    .map_err(SourceError::NotStarted)?,
+            )
         }
         None => None,
     };

@@ -307,3 +307,33 @@ fn diff_refuses_an_image_file_larger_than_any_image() {
     assert!(!o.status.success() && err.contains("not read"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 43: the commands end through one runner now; the real binary's `replay` still prints,
+/// on every capture and in both formats, exactly the events and the summary the analysis gives
+/// the library's writer (what the golden transcripts above hold) — byte for byte.
+#[test]
+fn the_binary_replays_every_capture_as_the_library_writes_it() {
+    insta::glob!("../../captures", "*.pcap*", |path| {
+        for (format, arg) in [(EventFormat::Text, "text"), (EventFormat::Jsonl, "jsonl")] {
+            let mut expected = Vec::new();
+            let mut w = EventWriter::new(&mut expected, format);
+            if let Ok(devices) = std::fs::read_to_string(path.with_extension("devices")) {
+                for line in devices.lines().filter(|l| !l.trim().is_empty()) {
+                    let (unit, name) = line.split_once('=').unwrap();
+                    let profile = mbtap_device::profile::builtin::get(name.trim()).unwrap().unwrap();
+                    w.profiles.insert(unit.trim().parse().unwrap(), profile);
+                }
+            }
+            let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+            replay(file, LineOverrides::default(), &mut w, &mut std::io::sink()).unwrap();
+            w.finish().unwrap();
+            let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+                .args(["replay", "--format", arg])
+                .arg(path)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}: {}", path.display(), String::from_utf8_lossy(&o.stderr));
+            assert!(o.stdout == expected, "{} --format {arg}: the binary's output differs", path.display());
+        }
+    });
+}

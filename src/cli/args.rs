@@ -245,28 +245,12 @@ pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_sim::bus::Fault> {
         .collect()
 }
 
-/// The terminal UI's view of a source read with these output options (`--device`, `--lang`).
+/// The health report (`--report`, `--report-every`) and the learned draft (`--learn`) the output
+/// options ask for, added to `writer` (whose profiles the report names units by).
 ///
 /// # Errors
-/// When a `--device` profile cannot be loaded.
-pub fn tui_source(
-    o: &OutputArgs,
-    line: mbtap_analysis::framer::LineSettings,
-    pacing: bool,
-) -> anyhow::Result<crate::tui::source::TuiSource> {
-    Ok(crate::tui::source::TuiSource {
-        profiles: crate::config::devices::load_devices(&o.devices)?,
-        lang: o.lang.into(),
-        line,
-        pacing,
-    })
-}
-
-/// The event writer `sniff`, `tap` and `replay` print through, as their output options say.
-pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result<EventWriter<W>> {
-    let mut writer = EventWriter::new(out, o.format.into());
-    writer.profiles = crate::config::devices::load_devices(&o.devices)?;
-    writer.lang = o.lang.into();
+/// A `--report-every` that is no positive number of seconds.
+pub fn add_reports<W: std::io::Write>(writer: &mut EventWriter<W>, o: &OutputArgs) -> anyhow::Result<()> {
     if let Some(every) = o.report_every {
         anyhow::ensure!(
             every.is_finite() && every > 0.0,
@@ -284,5 +268,5 @@ pub fn event_writer<W: std::io::Write>(out: W, o: &OutputArgs) -> anyhow::Result
         let to = if dir { DraftTo::Dir(path.clone()) } else { DraftTo::File(path.clone()) };
         writer.learn = Some(crate::output::learn_draft::LiveDraft::new(Some(to), "the line mbtap listened to".into()));
     }
-    Ok(writer)
+    Ok(())
 }

@@ -1,0 +1,5 @@
+//! What the commands share and no one command owns: the options several take ([`args`]) and the
+//! one runner of the analyzing commands ([`runner`]). The commands themselves are in `cmd/`.
+
+pub mod args;
+pub mod runner;

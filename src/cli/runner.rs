@@ -1,0 +1,170 @@
+//! The one ending of the analyzing commands (`sniff`, `tap`, `demo`, `replay` and the bridge's
+//! `--monitor`, issue 43). A command builds its source — a [`Job`] — and its options; the runner
+//! owns the rest: the terminal UI or text/JSON lines on stdout (with the health report and the
+//! learned draft when asked), the publishers (spy server, MQTT), and what is said at the end —
+//! the summary, where a recording went.
+
+use std::io::{self, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use mbtap_analysis::framer::LineSettings;
+use mbtap_device::profile::Profiles;
+use mbtap_device::profile::annotate::Lang;
+
+use crate::cli::args::{EventFormatArg, OutputArgs};
+use crate::output::{EventWriter, SourceError};
+use crate::publish::Publishing;
+use crate::tui::source::TuiSource;
+
+/// A source of events: runs into `writer` until it ends or is stopped, and says on `err` what
+/// the user should know on the way. Implemented by each source's options.
+pub trait Job: Send + 'static {
+    /// # Errors
+    /// [`SourceError::NotStarted`] when the source never began (nothing heard, no summary due);
+    /// [`SourceError::Stopped`] when it failed after it had begun.
+    fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError>;
+}
+
+/// What an analyzing command shows, publishes and says at the end.
+#[derive(Debug)]
+pub struct Runner {
+    /// What the UI's title names: a port, `PORT ⇄ LINK`, a file.
+    pub title: String,
+    pub format: EventFormatArg,
+    /// Loaded once: the output, the UI and the publishers name values by the same profiles.
+    pub profiles: Profiles,
+    pub lang: Lang,
+    /// The line the UI shows until the source says its own.
+    pub line: LineSettings,
+    /// The report and the draft asked for (`--report`, `--report-every`, `--learn`).
+    pub output: Option<OutputArgs>,
+    /// The input keeps its own time (a recording, the demo's line): the UI plays it at its speed.
+    pub pacing: bool,
+    /// Stdout in 64 KiB blocks (a capture replayed as fast as it reads) rather than line by line
+    /// (a live line, whose events a pipe should see as they come).
+    pub block_buffered: bool,
+    pub publishing: Publishing,
+    /// The recording this session writes: where it went and how much, said at the end.
+    pub recording: Option<PathBuf>,
+    /// Once the input has ended, its register image is served until Ctrl-C (a replay with
+    /// `--serve`: it ends in a moment, the image is what was asked for).
+    pub serve_after_end: bool,
+}
+
+impl Runner {
+    /// A runner showing `format` with these profiles, nothing published.
+    #[must_use]
+    pub fn new(title: String, format: EventFormatArg, profiles: Profiles, lang: Lang, line: LineSettings) -> Self {
+        Self {
+            title,
+            format,
+            profiles,
+            lang,
+            line,
+            output: None,
+            pacing: false,
+            block_buffered: false,
+            publishing: Publishing::default(),
+            recording: None,
+            serve_after_end: false,
+        }
+    }
+
+    /// A runner as the shared output options say: their profiles (loaded once), format,
+    /// language, report and draft, and their publishers started. `live`: values age by the
+    /// clock (a live line) rather than by the newest bus time heard (a capture).
+    ///
+    /// # Errors
+    /// A profile that does not load, a publisher that cannot start.
+    pub fn from_output(title: String, output: OutputArgs, line: LineSettings, live: bool) -> anyhow::Result<Self> {
+        let profiles = crate::config::devices::load_devices(&output.devices)?;
+        let publishing = Publishing::start(&output.publish, live, &title, &profiles)?;
+        let mut runner = Self::new(title, output.format, profiles, output.lang.into(), line);
+        runner.publishing = publishing;
+        runner.output = Some(output);
+        Ok(runner)
+    }
+
+    /// Runs `job` into the UI or stdout, then ends: the summary (unless the job never began),
+    /// the recording's note, the publishers finished — on every path, the UI's too.
+    ///
+    /// # Errors
+    /// The job's error, or the output's.
+    pub fn run(self, job: impl Job) -> anyhow::Result<ExitCode> {
+        let Self {
+            title,
+            format,
+            profiles,
+            lang,
+            line,
+            output,
+            pacing,
+            block_buffered,
+            publishing,
+            recording,
+            serve_after_end,
+        } = self;
+        let taps = publishing.taps();
+        let ended = if format == EventFormatArg::Tui {
+            let ui = TuiSource { profiles, lang, line, pacing };
+            ui.run(&title, move |writer, err| {
+                writer.taps = taps;
+                job.run(writer, err).map_err(SourceError::into_error)
+            })
+            .map(|_| ())
+        } else {
+            let shown = Shown { format, profiles, lang, output: output.as_ref(), taps };
+            let stdout = io::stdout();
+            if block_buffered {
+                to_stdout(shown.writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()))?, job)
+            } else {
+                to_stdout(shown.writer(io::LineWriter::new(stdout.lock()))?, job)
+            }
+        };
+        if let Some(note) = recording.as_deref().and_then(crate::source::record::ended_note) {
+            eprintln!("mbtap: {note}");
+        }
+        if ended.is_ok() && serve_after_end && publishing.spy.is_some() {
+            eprintln!("mbtap: the capture is replayed; serving its register image until Ctrl-C");
+            crate::runtime()?.block_on(crate::signals::shutdown_signal());
+        }
+        publishing.finish();
+        ended.map(|()| ExitCode::SUCCESS)
+    }
+}
+
+/// How stdout shows events: the pieces of an [`EventWriter`] whatever it writes to.
+struct Shown<'a> {
+    format: EventFormatArg,
+    profiles: Profiles,
+    lang: Lang,
+    output: Option<&'a OutputArgs>,
+    taps: Vec<std::sync::Arc<dyn crate::output::Tap>>,
+}
+
+impl Shown<'_> {
+    fn writer<W: Write>(self, out: W) -> anyhow::Result<EventWriter<W>> {
+        let mut writer = EventWriter::new(out, self.format.into());
+        writer.profiles = self.profiles;
+        writer.lang = self.lang;
+        writer.taps = self.taps;
+        if let Some(o) = self.output {
+            crate::cli::args::add_reports(&mut writer, o)?;
+        }
+        Ok(writer)
+    }
+}
+
+/// Runs `job` into `writer`, then writes the summary (and report, and draft) unless the job
+/// never began; the job's error wins over the summary's.
+fn to_stdout<W: Write>(mut writer: EventWriter<W>, job: impl Job) -> anyhow::Result<()> {
+    match job.run(&mut writer, &mut io::stderr()) {
+        Ok(()) => writer.finish().map(|_| ()).map_err(Into::into),
+        Err(SourceError::NotStarted(e)) => Err(e),
+        Err(SourceError::Stopped(e)) => {
+            let _ = writer.finish();
+            Err(e)
+        }
+    }
+}
