@@ -89,3 +89,48 @@ async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerO
         Ok(Err(_)) | Err(_) => Err(format!("{text}: no answer from the line")),
     }
 }
+
+/// Starts the bridge's MQTT publisher (`--mqtt`) and, with `--mqtt-writes`, the broker's writes
+/// into `opts`: they go through the bridge's admission like a client's, judged by `--mqtt-role`'s
+/// rules where roles are given.
+///
+/// # Errors
+/// Roles without `--mqtt-role` under `--mqtt-writes` (fails closed), a role no `--role` defines,
+/// a publisher that cannot start.
+pub fn start_publisher(
+    mqtt: &crate::publish::mqtt_options::MqttArgs,
+    mqtt_role: Option<&str>,
+    source: &str,
+    profiles: &Profiles,
+    opts: &mut super::run::BridgeOptions,
+) -> anyhow::Result<Option<Arc<Mqtt>>> {
+    use anyhow::Context as _;
+    // Fails closed (issue 38): with roles, the broker's writes must be given one too — otherwise
+    // anyone on the broker would pass under the plain listeners' rules.
+    anyhow::ensure!(
+        !mqtt.mqtt_writes || opts.tls.role.is_empty() || mqtt_role.is_some(),
+        "--mqtt-writes with --role rules needs --mqtt-role NAME: the role whose rules judge the broker's writes (e.g. --role ops=functions:6,16 --mqtt-role ops); without one, anyone who can publish on the broker would write under the plain listeners' rules"
+    );
+    // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
+    let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);
+    let writer = (opts.reverse.is_none()).then_some(asks_tx);
+    let publisher = Mqtt::start_with(mqtt, source, profiles.clone(), true, writer)?;
+    if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {
+        let role = match mqtt_role {
+            None => None,
+            Some(name) => Some(
+                opts.roles
+                    .get(name)
+                    .cloned()
+                    .with_context(|| format!("--mqtt-role {name:?}: no --role {name}=… defines it"))?,
+            ),
+        };
+        opts.broker_writes = Some(Arc::new(BrokerWrites {
+            asks: Mutex::new(Some(asks)),
+            publisher: Arc::clone(p),
+            profiles: profiles.clone(),
+            role,
+        }));
+    }
+    Ok(publisher)
+}

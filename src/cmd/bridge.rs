@@ -9,12 +9,14 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::ArgMatches;
-use std::path::Path;
 
 use crate::cli::args::{EventFormatArg, LineArgs};
 use crate::cli::runner::{Job, Runner};
 use crate::cmd::runtime;
 use crate::output::{EventWriter, SourceError};
+
+mod values;
+use values::{check_values, merge};
 
 /// Modbus TCP clients to serial devices: a TCP server in front of a serial master.
 // Flags, each its own switch on the command line (clap), not states of one machine.
@@ -382,33 +384,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         mqtt.mqtt.is_none() || monitor.is_some(),
         "--mqtt on the bridge publishes what its monitor hears: add --monitor (text, jsonl or tui)"
     );
-    // Fails closed (issue 38): with roles, the broker's writes must be given one too — otherwise
-    // anyone on the broker would pass under the plain listeners' rules.
-    anyhow::ensure!(
-        !mqtt.mqtt_writes || opts.tls.role.is_empty() || mqtt_role.is_some(),
-        "--mqtt-writes with --role rules needs --mqtt-role NAME: the role whose rules judge the broker's writes (e.g. --role ops=functions:6,16 --mqtt-role ops); without one, anyone who can publish on the broker would write under the plain listeners' rules"
-    );
-    // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
-    let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);
-    let writer = (opts.reverse.is_none()).then_some(asks_tx);
-    let publisher = crate::publish::mqtt::Mqtt::start_with(&mqtt, &source, profiles.clone(), true, writer)?;
-    if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {
-        let role = match &mqtt_role {
-            None => None,
-            Some(name) => Some(
-                opts.roles
-                    .get(name.as_str())
-                    .cloned()
-                    .with_context(|| format!("--mqtt-role {name:?}: no --role {name}=… defines it"))?,
-            ),
-        };
-        opts.broker_writes = Some(std::sync::Arc::new(crate::bridge::broker::BrokerWrites {
-            asks: std::sync::Mutex::new(Some(asks)),
-            publisher: std::sync::Arc::clone(p),
-            profiles: profiles.clone(),
-            role,
-        }));
-    }
+    let publisher = crate::bridge::broker::start_publisher(&mqtt, mqtt_role.as_deref(), &source, &profiles, &mut opts)?;
     let Some(format) = monitor else {
         runtime()?.block_on(crate::bridge::run::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;
         return Ok(ExitCode::SUCCESS);
@@ -429,50 +405,6 @@ impl Job for Monitor {
         let started = crate::runtime()?.block_on(crate::bridge::run::bridge(self.0, Some(writer), err));
         started.map_err(SourceError::NotStarted)
     }
-}
-
-/// Values no bridge can run with are refused before it starts, naming where they came from —
-/// the command line's option or the configuration file's key — and the value: a bridge that
-/// accepts no connection, queues no request or times out at once fails closed, not silently.
-fn check_values(args: &Args, matches: Option<&ArgMatches>) -> anyhow::Result<()> {
-    use clap::parser::ValueSource;
-    let origin = |id: &str, key: &str, value: String| {
-        let on_command_line = matches
-            .is_some_and(|m| m.ids().any(|i| i.as_str() == id) && m.value_source(id) == Some(ValueSource::CommandLine));
-        match (&args.config, on_command_line) {
-            (Some(file), false) => format!("{}: {key} = {value}", file.display()),
-            _ => format!("--{key} {value}"),
-        }
-    };
-    let at_least_one = [
-        ("max_connections", "max-connections", args.max_connections as u64),
-        ("queue_per_client", "queue-per-client", args.queue_per_client as u64),
-        ("timeout_ms", "timeout-ms", args.timeout_ms),
-    ];
-    for (id, key, value) in at_least_one {
-        anyhow::ensure!(value > 0, "{}: expected 1 or more", origin(id, key, value.to_string()));
-    }
-    if let Some(rate) = args.rate_limit {
-        anyhow::ensure!(
-            rate.is_finite() && rate > 0.0,
-            "{}: expected requests per second above 0 (leave it out for no limit)",
-            origin("rate_limit", "rate-limit", rate.to_string())
-        );
-    }
-    Ok(())
-}
-
-/// `--config FILE` under the command line ([`crate::config::merge`]): the `[bridge]` table's
-/// settings as options ([`crate::bridge::config::options`]), replaced by any the command line
-/// gave, parsed once into one [`Args`].
-///
-/// # Errors
-/// The file cannot be read, or a setting is unknown or has a value its option refuses — each
-/// said with the file, the key and the value.
-fn merge(path: &Path, cli: Args, matches: Option<&ArgMatches>) -> anyhow::Result<Args> {
-    let mut merged: Args = crate::config::merge::under_command_line(path, matches, crate::bridge::config::options)?;
-    merged.config = cli.config;
-    Ok(merged)
 }
 
 #[cfg(test)]

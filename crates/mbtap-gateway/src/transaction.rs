@@ -15,146 +15,19 @@ use std::collections::BTreeSet;
 use std::time::Duration;
 
 use mbtap_analysis::analyzer::SerialMode;
-use mbtap_analysis::framer::LineSettings;
 use mbtap_proto::answer_end::{Verdict, judge_ascii, judge_rtu};
-use mbtap_proto::{ExceptionCode, encode_ascii, encode_rtu, parse_ascii};
+use mbtap_proto::{encode_ascii, encode_rtu, parse_ascii};
 
-use crate::answer::{Misfit, check};
+use crate::answer::check;
 
 use crate::rules::GATEWAY_TARGET_FAILED;
 use crate::timeouts::Timeouts;
 
-/// What a client gets back.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Reply {
-    /// The slave's response PDU (normal or exception), unchanged.
-    Pdu(Vec<u8>),
-    /// An exception the gateway answers itself, with this code.
-    Gateway(ExceptionCode),
-    /// Nothing to send (a broadcast, unless an immediate reply was asked for).
-    Silence,
-}
+mod steps;
+pub use steps::{EchoMode, MasterConfig, Note, Outcome, Reply, Step};
 
-/// Whether the adapter echoes what the bridge sends (an RS-485 transceiver whose receiver is
-/// not disabled while it drives the line hears every byte it sends).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum EchoMode {
-    /// Detect it from the first request whose answer cannot look like the request itself
-    /// (not 05, 06 or 08, whose normal answers echo the request).
-    #[default]
-    Auto,
-    /// The adapter echoes: consume exactly the frame sent before reading the answer; a
-    /// difference is a collision (another driver on the line).
-    On,
-    /// No echo.
-    Off,
-}
-
-/// The line and how the master treats it.
-#[derive(Debug, Clone)]
-pub struct MasterConfig {
-    pub line: LineSettings,
-    pub mode: SerialMode,
-    pub echo: EchoMode,
-    /// Retries after a timeout or a failed check.
-    pub retries: u32,
-    /// Extra quiet time after t3.5 before the next request (slow slaves need it).
-    pub turnaround: Duration,
-    /// Answer broadcast writes at once (for SCADA that insists on a reply).
-    pub broadcast_reply: bool,
-    /// How late the adapter may deliver a byte (a USB adapter's latency timer): added to the
-    /// silence that ends an answer of unknown length.
-    pub latency: Duration,
-    /// Someone watches the line (`--monitor`): the bytes heard come back as [`Note::Heard`].
-    /// Without it they are not copied (one allocation per read on the bridge's hot path).
-    pub monitored: bool,
-}
-
-impl MasterConfig {
-    /// Quiet time after the last byte before the next request: t3.5 plus the turnaround
-    /// (Serial Line v1.02 §2.5.1.1).
-    #[must_use]
-    pub fn line_guard(&self) -> Duration {
-        Duration::from_nanos(self.line.t35_ns()) + self.turnaround
-    }
-
-    /// The longest ADU the mode carries: RTU 256 bytes (Serial Line v1.02 §2.5.1.1), ASCII 513
-    /// characters (§2.5.2.1).
-    #[must_use]
-    pub fn max_adu(&self) -> usize {
-        match self.mode {
-            SerialMode::Rtu => 256,
-            SerialMode::Ascii => 513,
-        }
-    }
-
-    /// The silence that ends an answer: RTU t3.5, plus one timer tick (reads come in 1 ms
-    /// steps) and the adapter's latency; ASCII the 1 s inter-character timeout (Serial Line
-    /// v1.02 §2.5.2.1).
-    fn silence(&self) -> Duration {
-        match self.mode {
-            SerialMode::Rtu => Duration::from_nanos(self.line.t35_ns()) + Duration::from_millis(1) + self.latency,
-            SerialMode::Ascii => Duration::from_secs(1),
-        }
-    }
-}
-
-/// What the machine wants done next.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Step {
-    /// Drop stale input, write these bytes, then call [`Transaction::sent`].
-    Send(Vec<u8>),
-    /// Read until this time: call [`Transaction::bytes`] with what arrives, or
-    /// [`Transaction::tick`] when the time is reached (or a read times out early).
-    WaitUntil(Duration),
-    /// Keep the line quiet until this time, then call [`Transaction::tick`].
-    PauseUntil(Duration),
-    /// Finished: see [`Transaction::outcome`].
-    Done,
-}
-
-/// What happened on the way, for the metrics and the monitor, in order.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Note {
-    /// A request (or a retry) goes out.
-    Request,
-    /// The timeout this attempt waits.
-    UnitTimeout(Duration),
-    /// `--echo auto` found that the adapter echoes.
-    EchoFound,
-    /// The adapter was expected to echo and did not.
-    EchoMissing,
-    /// Something other than the frame came back while it was sent.
-    Collision,
-    /// A whole frame with a bad check (or bytes left at the timeout).
-    CrcError,
-    /// No answer within the timeout.
-    Timeout,
-    /// A whole timeout waited in vain.
-    WaitedInVain(Duration),
-    /// An answer to another request (late, or not fitting this one: [`crate::answer::check`]),
-    /// dropped.
-    LateAnswer(Misfit),
-    /// Bytes dropped unread because no answer can be that long: garbage.
-    Garbage(usize),
-    /// Bytes the monitor should see: port 0 requests (what was heard in place of the
-    /// request on a collision), port 1 answers.
-    Heard { port: u8, bytes: Vec<u8> },
-}
-
-/// How a transaction ended.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Outcome {
-    pub reply: Reply,
-    /// When the line last carried a byte (or the wait ended).
-    pub last: Duration,
-    /// The answer may fill the cache: neither this unit's previous request nor this one timed
-    /// out (an answer after a timeout may be a late one whose shape matched).
-    pub cacheable: bool,
-    /// After a timeout: listen this long for the unit's late answer, once the client is
-    /// answered ([`LateListener`]).
-    pub flush: Option<Duration>,
-}
+mod late;
+pub use late::{LateListener, turnaround_glitch};
 
 /// The serial master's memory between requests: learnt timeouts, whether the adapter echoes,
 /// units whose last request timed out.
@@ -539,76 +412,6 @@ impl Transaction<'_> {
     }
 }
 
-/// After a timeout: listens up to the window (at most 1 s) for what the unit says late, ending
-/// at the silence after the last late byte; noise that never stops cannot hold the line longer
-/// than twice the window, and more bytes than the longest answer without a silence are no late
-/// answer but garbage: the listening ends there (issue 38: a serial server streaming garbage
-/// held its line 2 s after every timeout, and its clients waited 4 s for their 0x0B).
-#[derive(Debug, Clone)]
-pub struct LateListener {
-    start: Duration,
-    until: Duration,
-    hard_stop: Duration,
-    silence: Duration,
-    last: Option<Duration>,
-    heard: usize,
-    max_adu: usize,
-}
-
-impl LateListener {
-    /// Starts listening at `now` for up to `window`.
-    #[must_use]
-    pub fn new(config: &MasterConfig, window: Duration, now: Duration) -> Self {
-        let window = window.min(Duration::from_secs(1));
-        let silence = Duration::from_nanos(config.line.t35_ns()) + Duration::from_millis(1) + config.latency;
-        Self {
-            start: now,
-            until: now + window,
-            hard_stop: now + window * 2,
-            silence,
-            last: None,
-            heard: 0,
-            max_adu: config.max_adu(),
-        }
-    }
-
-    /// Read until this time; at it, stop.
-    #[must_use]
-    pub fn wait_until(&self) -> Duration {
-        if self.garbage() {
-            return self.last.unwrap_or(self.start);
-        }
-        self.last.map_or(self.until, |t| (t + self.silence).min(self.hard_stop))
-    }
-
-    /// `n` bytes arrived at `now`; true for the first late bytes (one late answer, counted once).
-    pub fn bytes(&mut self, now: Duration, n: usize) -> bool {
-        let first = self.last.is_none();
-        self.last = Some(now);
-        self.heard = self.heard.saturating_add(n);
-        first
-    }
-
-    /// More bytes than the longest answer: not a late answer, and listening on is pointless.
-    #[must_use]
-    pub fn garbage(&self) -> bool {
-        self.heard > self.max_adu
-    }
-
-    /// When the line was last busy.
-    #[must_use]
-    pub fn last(&self) -> Duration {
-        self.last.unwrap_or(self.start)
-    }
-}
-
-/// Whether `buf` starts with a turnaround glitch before the awaited unit's answer: a byte a
-/// transceiver leaves when it switches (00, FE, FF), not the unit's address, followed by it.
-#[must_use]
-pub fn turnaround_glitch(buf: &[u8], unit: u8) -> bool {
-    matches!(buf, [g @ (0x00 | 0xFE | 0xFF), u, ..] if *g != unit && *u == unit)
-}
-
 /// The normal response a write would get, for `--broadcast-reply`: 05/06 echo the request,
 /// 0F/10 answer address and quantity (MAP v1.1b3 §6.5, §6.6, §6.11, §6.12).
 fn broadcast_reply(pdu: &[u8]) -> Reply {
@@ -624,6 +427,7 @@ mod tests {
 
     use super::*;
     use crate::timeouts::TimeoutMode;
+    use mbtap_analysis::framer::LineSettings;
 
     /// Read holding registers 0–1 (MAP v1.1b3 §6.3): function 03, address 0000, quantity 0002.
     const READ_TWO: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x02];
