@@ -90,9 +90,12 @@ async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerO
     }
 }
 
-/// Starts the bridge's MQTT publisher (`--mqtt`) and, with `--mqtt-writes`, the broker's writes
-/// into `opts`: they go through the bridge's admission like a client's, judged by `--mqtt-role`'s
-/// rules where roles are given.
+/// The broker's writes as the bridge's server takes them.
+pub type Writes = Arc<BrokerWrites>;
+
+/// Starts the bridge's MQTT publisher (`--mqtt`) and, with `--mqtt-writes`, the broker's writes:
+/// they go through the bridge's admission like a client's, judged by `--mqtt-role`'s rules
+/// where `roles` are given. `reverse`: reverse mode, which takes no writes from the broker.
 ///
 /// # Errors
 /// Roles without `--mqtt-role` under `--mqtt-writes` (fails closed), a role no `--role` defines,
@@ -102,35 +105,37 @@ pub fn start_publisher(
     mqtt_role: Option<&str>,
     source: &str,
     profiles: &Profiles,
-    opts: &mut super::run::BridgeOptions,
-) -> anyhow::Result<Option<Arc<Mqtt>>> {
+    roles: &super::tls::Roles,
+    reverse: bool,
+) -> anyhow::Result<(Option<Arc<Mqtt>>, Option<Writes>)> {
     use anyhow::Context as _;
     // Fails closed (issue 38): with roles, the broker's writes must be given one too — otherwise
     // anyone on the broker would pass under the plain listeners' rules.
     anyhow::ensure!(
-        !mqtt.mqtt_writes || opts.tls.role.is_empty() || mqtt_role.is_some(),
+        !mqtt.mqtt_writes || roles.is_empty() || mqtt_role.is_some(),
         "--mqtt-writes with --role rules needs --mqtt-role NAME: the role whose rules judge the broker's writes (e.g. --role ops=functions:6,16 --mqtt-role ops); without one, anyone who can publish on the broker would write under the plain listeners' rules"
     );
     // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
     let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);
-    let writer = (opts.reverse.is_none()).then_some(asks_tx);
+    let writer = (!reverse).then_some(asks_tx);
     let publisher = Mqtt::start_with(mqtt, source, profiles.clone(), true, writer)?;
+    let mut writes = None;
     if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {
         let role = match mqtt_role {
             None => None,
             Some(name) => Some(
-                opts.roles
+                roles
                     .get(name)
                     .cloned()
                     .with_context(|| format!("--mqtt-role {name:?}: no --role {name}=… defines it"))?,
             ),
         };
-        opts.broker_writes = Some(Arc::new(BrokerWrites {
+        writes = Some(Arc::new(BrokerWrites {
             asks: Mutex::new(Some(asks)),
             publisher: Arc::clone(p),
             profiles: profiles.clone(),
             role,
         }));
     }
-    Ok(publisher)
+    Ok((publisher, writes))
 }

@@ -384,7 +384,15 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         mqtt.mqtt.is_none() || monitor.is_some(),
         "--mqtt on the bridge publishes what its monitor hears: add --monitor (text, jsonl or tui)"
     );
-    let publisher = crate::bridge::broker::start_publisher(&mqtt, mqtt_role.as_deref(), &source, &profiles, &mut opts)?;
+    let (publisher, broker_writes) = crate::bridge::broker::start_publisher(
+        &mqtt,
+        mqtt_role.as_deref(),
+        &source,
+        &profiles,
+        &opts.roles,
+        opts.reverse.is_some(),
+    )?;
+    opts.broker_writes = broker_writes;
     let Some(format) = monitor else {
         runtime()?.block_on(crate::bridge::run::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;
         return Ok(ExitCode::SUCCESS);
