@@ -11,79 +11,23 @@
 //! must reach no one), and after a timeout a unit whose next answer is not trusted for the
 //! cache and whose late words are listened for and dropped once its client has its 0x0B.
 
-use std::collections::BTreeSet;
 use std::time::Duration;
 
 use mbtap_analysis::analyzer::SerialMode;
 use mbtap_proto::answer_end::{Verdict, judge_ascii, judge_rtu};
-use mbtap_proto::{encode_ascii, encode_rtu, parse_ascii};
+use mbtap_proto::parse_ascii;
 
 use crate::answer::check;
 
 use crate::rules::GATEWAY_TARGET_FAILED;
-use crate::timeouts::Timeouts;
 
 mod steps;
 pub use steps::{EchoMode, MasterConfig, Note, Outcome, Reply, Step};
 
 mod late;
+mod master;
 pub use late::{LateListener, turnaround_glitch};
-
-/// The serial master's memory between requests: learnt timeouts, whether the adapter echoes,
-/// units whose last request timed out.
-#[derive(Debug, Clone)]
-pub struct SerialMaster {
-    pub config: MasterConfig,
-    pub timeouts: Timeouts,
-    echo_found: Option<bool>,
-    suspect: BTreeSet<u8>,
-}
-
-impl SerialMaster {
-    #[must_use]
-    pub fn new(config: MasterConfig, timeouts: Timeouts) -> Self {
-        Self { config, timeouts, echo_found: None, suspect: BTreeSet::new() }
-    }
-
-    /// Starts one request to `unit`; the first step is [`Step::Send`] with its ADU.
-    pub fn transaction<'m>(&'m mut self, unit: u8, pdu: &'m [u8]) -> (Transaction<'m>, Step) {
-        let mut adu = Vec::with_capacity(pdu.len() * 2 + 5);
-        match self.config.mode {
-            SerialMode::Rtu => encode_rtu(unit, pdu, &mut adu),
-            SerialMode::Ascii => encode_ascii(unit, pdu, &mut adu),
-        }
-        let was_suspect = self.suspect.remove(&unit);
-        let mut t = Transaction {
-            master: self,
-            unit,
-            pdu,
-            function: pdu.first().copied().unwrap_or(0),
-            adu,
-            attempt: 0,
-            sent: Duration::ZERO,
-            timeout: Duration::ZERO,
-            phase: Phase::Sending,
-            notes: Vec::new(),
-            was_suspect,
-            flush: None,
-            outcome: None,
-        };
-        let step = t.attempt();
-        (t, step)
-    }
-
-    /// Whether to read the frame back before the answer: `Some(true)` when the adapter is known
-    /// to echo, `Some(false)` to find out (`auto`, first telling request), `None` not to.
-    fn echo_expected(&self, function: u8) -> Option<bool> {
-        match (self.config.echo, self.echo_found) {
-            (EchoMode::Off, _) | (EchoMode::Auto, Some(false)) => None,
-            (EchoMode::On, _) | (EchoMode::Auto, Some(true)) => Some(true),
-            // 05, 06 and 08 answer with the request itself: an echo and an answer look alike.
-            (EchoMode::Auto, None) if matches!(function, 0x05 | 0x06 | 0x08) => None,
-            (EchoMode::Auto, None) => Some(false),
-        }
-    }
-}
+pub use master::SerialMaster;
 
 #[derive(Debug)]
 enum Phase {
@@ -426,8 +370,9 @@ mod tests {
     use std::collections::{BTreeMap, VecDeque};
 
     use super::*;
-    use crate::timeouts::TimeoutMode;
+    use crate::timeouts::{TimeoutMode, Timeouts};
     use mbtap_analysis::framer::LineSettings;
+    use mbtap_proto::{encode_ascii, encode_rtu};
 
     /// Read holding registers 0–1 (MAP v1.1b3 §6.3): function 03, address 0000, quantity 0002.
     const READ_TWO: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x02];

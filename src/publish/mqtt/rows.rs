@@ -3,9 +3,9 @@
 //! analysis, and the held values flushed at a tick or at the end; the end itself (what is held
 //! goes out, `offline`, the counts said).
 
-use super::super::discovery::{control, discovery, discovery_object};
-use super::super::outbox::lock;
 use super::{Announce, FIGURES_EVERY_NS, Mqtt, Sent, State};
+use crate::publish::discovery::{control, discovery, discovery_object};
+use crate::publish::outbox::lock;
 use mbtap_device::query::rows::Row;
 use rumqttc::QoS;
 use std::collections::BTreeSet;
@@ -87,7 +87,7 @@ impl Mqtt {
     pub(super) fn tick(&self, st: &mut State, t_ns: u64) {
         if self.sparkplug {
             let mut ob = lock(&self.outbox);
-            let outs = ob.node.as_mut().map(|n| n.tick(t_ns, super::super::outbox::now_ms())).unwrap_or_default();
+            let outs = ob.node.as_mut().map(|n| n.tick(t_ns, crate::publish::outbox::now_ms())).unwrap_or_default();
             ob.send_outs(outs);
             return;
         }
@@ -195,14 +195,14 @@ impl Mqtt {
             eprintln!(
                 "mbtap: mqtt: {} messages from the broker dropped as too long (commands are at most {} bytes)",
                 ob.commands.oversized,
-                super::super::outbox::MAX_COMMAND
+                crate::publish::outbox::MAX_COMMAND
             );
         }
         if ob.commands.busy_writes > 0 {
             eprintln!(
                 "mbtap: mqtt: {} writes from the broker dropped: {} already waited for the line",
                 ob.commands.busy_writes,
-                super::super::outbox::COMMANDS_WAITING
+                crate::publish::outbox::COMMANDS_WAITING
             );
         }
         if let Some(n) = ob.node.as_ref().filter(|n| n.over_limit > 0) {

@@ -2,8 +2,8 @@
 //! forwarded in batches), gone (held from then on), and what the broker sends on a subscribed
 //! topic — a node command, a device command or a plain set — taken as an ask or refused.
 
-use super::super::spool::Spool;
 use super::{FORWARD_BATCH, Forward, MAX_COMMAND, Outbox, now_ms, qos};
+use crate::publish::spool::Spool;
 use mbtap_publish::remote::{parse_dcmd, parse_set};
 use mbtap_publish::spool::{Kind, parse_mqtt_body};
 

@@ -2,12 +2,12 @@
 //! description with its link type, description and comments, enhanced and simple packets), each
 //! with its length checked before it is read.
 
-use super::super::clock::Clock;
-use super::super::format::{
+use super::{CaptureReader, MAX_DESCRIPTION, MAX_INTERFACES, Next};
+use crate::capture::clock::Clock;
+use crate::capture::format::{
     EPB, FormatError, IDB, ISB, Interface, SHB, SPB, Step, parse_block, parse_epb, parse_idb, parse_isb,
     parse_pcap_record, parse_shb_endian, parse_spb, ticks_to_ns,
 };
-use super::{CaptureReader, MAX_DESCRIPTION, MAX_INTERFACES, Next};
 use nom::number::Endianness;
 use std::io::Read;
 

@@ -1,14 +1,12 @@
 //! What the framer emits: valid frames with their timing evidence, damaged frames and noise
-//! split at known silences, CRC twins, and what each valid frame teaches the observer learner.
+//! split at known silences (CRC twins in `twins.rs`, what a frame teaches in `learning.rs`).
 
 use super::RtuFramer;
-use super::expect::{Expect, MAX_ADDRESS, Reading, diagnostics_even_len, next_expect, sender_of};
+use super::expect::{Expect, MAX_ADDRESS, Reading, next_expect, sender_of};
 use crate::chunk::{Chunk, Timestamp};
 use crate::framer::event::{Frame, FrameEvent, Noise};
 use crate::framer::glitch::Sender;
-use crate::framer::observer::SampleSender;
 use mbtap_proto::function::EXCEPTION_FLAG;
-use mbtap_proto::length::{PduLength, request_len, response_len};
 use mbtap_proto::rtu::RTU_MIN_LEN;
 
 impl RtuFramer {
@@ -178,65 +176,6 @@ impl RtuFramer {
         Some((e, twin))
     }
 
-    /// The `n` bytes at absolute `at` end in `00` and check one byte shorter too (CRC-16's shift
-    /// property): the length to take ([`Self::twin_reading`]), with the other length kept for
-    /// the frame event (see [`Frame::alt_len`]) when it is not negligible.
-    pub(super) fn twin_len(&mut self, at: usize, n: usize, sender: Sender) -> usize {
-        let (take, other) = self.twin_reading(&self.timed.buf[at..], n, sender);
-        self.next_alt = other;
-        take
-    }
-
-    /// Which of the two readings of `s[..n]`, ending in `00` and checking one byte shorter too,
-    /// is the frame: Diagnostics' structure decides where it can, then the lengths this unit's
-    /// function was seen with, else the odds that `sender` leaves a `00` glitch — with the other
-    /// length where those odds do not make it negligible.
-    pub(super) fn twin_reading(&self, s: &[u8], n: usize, sender: Sender) -> (usize, Option<usize>) {
-        if let Some(even) = diagnostics_even_len(s, n - 1) {
-            return (even, None);
-        }
-        if let Some(len) = self.lengths.choose(s[0], s[1], sender, n - 1) {
-            return (len, None);
-        }
-        let odds = self.glitches.turn.zero_tail(sender);
-        let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
-        (take, odds.ambiguous.then_some(other))
-    }
-
-    /// Where a damaged frame at absolute `a` ends inside `a..b`, if its structure says so and a
-    /// frame of a known unit plausibly starts there.
-    pub(super) fn split_damaged(&self, a: usize, b: usize) -> Option<usize> {
-        // With timing that can show a t3.5 silence, frames were already cut at their silences;
-        // a damaged byte count would only mislead. This is for adapters whose latency hides them.
-        if self.latency < self.t35 {
-            return None;
-        }
-        let piece = &self.timed.buf[a..b];
-        if !self.looks_like_frame(piece) {
-            return None;
-        }
-        let pdu = &piece[1..];
-        let req = if piece[1] & EXCEPTION_FLAG == 0 { request_len(pdu) } else { PduLength::Unknown };
-        let mut cands: Vec<usize> = [req, response_len(pdu)]
-            .into_iter()
-            .filter_map(|c| match c {
-                PduLength::Exact(k) if k + 3 >= RTU_MIN_LEN && k + 3 + 2 <= piece.len() => Some(k + 3),
-                _ => None,
-            })
-            .collect();
-        // The expected reading first (a request after a completed transaction), then the shorter.
-        let expected_request = self.expect == Expect::Request && a == self.timed.head;
-        let req_len = match req {
-            PduLength::Exact(k) => Some(k + 3),
-            _ => None,
-        };
-        cands.sort_unstable_by_key(|&l| (!(expected_request && Some(l) == req_len), l));
-        // Only when the rest starts like a frame of a known unit: a short rest is as likely the
-        // tail of this frame read with the wrong reading (a request's response reading is 5
-        // bytes) as noise that followed it.
-        cands.into_iter().find(|&l| self.looks_like_frame_start(a - self.timed.head + l))
-    }
-
     /// Bytes `a..b` that hold no valid frame: a failed frame if they look like one, else noise;
     /// a lone byte right after a frame is its turnaround glitch.
     pub(super) fn emit_unframed<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, b: usize, emit: &mut F) {
@@ -380,64 +319,5 @@ impl RtuFramer {
         self.timed.head = b;
         self.wait_at = usize::MAX;
         self.after_frame = true;
-    }
-
-    /// A valid frame at absolute `a`, `delay` the longest apparent silence between two of its
-    /// reads (`None`: it came in one): its bytes were sent back to back, so that silence is the
-    /// observer's delay.
-    pub(super) fn learn_from(&mut self, a: usize, delay: Option<u64>) {
-        self.learner.frame();
-        let sender = match self.last_sender {
-            Sender::Master => SampleSender::Master,
-            Sender::Slave | Sender::Unknown => SampleSender::Unit(self.timed.buf[a]),
-        };
-        if let Some(d) = delay
-            && self.learner.sample(sender, d).is_some()
-        {
-            self.latency = self.learner.estimate.effective_latency_ns();
-        }
-    }
-
-    /// The longest apparent silence between two reads inside absolute `a..b`, taken at face
-    /// value (no latency allowed for); `None` when the bytes came in one read.
-    ///
-    /// A read's bytes are placed back to back before its timestamp; where the frame's last read
-    /// also holds bytes of the next frame, the silence between the two frames is hidden inside
-    /// that read and its first bytes look later than they were — by up to that silence. That
-    /// read's boundary says nothing about the observer or the sender and is left out (issue 25:
-    /// through a 16550 FIFO, which holds the tail of one frame with the head of the next, it
-    /// made healthy frames look paused). For learning the observer's delay it is kept (the
-    /// first of the pair returned): that errs high, towards fewer findings, and a glitchy
-    /// line's frames always share their last read with their glitch. One pass over the frame
-    /// gives all three: `(the longest silence the reads prove inside it, every boundary, the
-    /// boundaries the gap evidence may use)`.
-    pub(super) fn apparent_inner_silence(&self, a: usize, b: usize) -> (u64, Option<u64>, Option<u64>) {
-        let c = self.char_ns;
-        // A read began at `i` where the gap before it is bounded (inside a read it is unknown
-        // and set to `u64::MAX`).
-        let starts_read = |i: usize| self.timed.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
-        let (mut before_last, mut last) = (None::<u64>, None::<u64>);
-        // One pass over slices, the frame's longest proven gap with it (issue 40: two scans of
-        // every frame cost replay its speed).
-        let t = &self.timed;
-        let (Some(lb), Some(ub), Some(end)) = (t.gap_lb.get(a + 1..b), t.gap_ub.get(a + 1..b), t.end.get(a..b)) else {
-            return (0, None, None);
-        };
-        let mut inner_gap = 0;
-        for ((&l, &g), w) in lb.iter().zip(ub).zip(end.windows(2)) {
-            inner_gap = inner_gap.max(l);
-            if g != u64::MAX {
-                before_last = before_last.max(last);
-                last = Some(w[1].saturating_sub(c).saturating_sub(w[0]));
-            }
-        }
-        let every = before_last.max(last);
-        let last_read_spills = b < self.timed.buf.len() && !starts_read(b);
-        (inner_gap, every, if last_read_spills { before_last } else { every })
-    }
-
-    /// How far an apparent silence before a frame fell short of t3.5 after the previous frame.
-    pub(super) fn short_tolerance(&self, apparent_before: Option<u64>) -> Option<u64> {
-        apparent_before.filter(|_| self.after_frame).and_then(|g| self.t35.checked_sub(g)).filter(|&t| t > 0)
     }
 }

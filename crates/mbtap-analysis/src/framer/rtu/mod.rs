@@ -34,6 +34,8 @@ mod candidates;
 mod emit;
 mod expect;
 mod glitches;
+mod learning;
+mod twins;
 mod unknown_length;
 
 use self::buffer::TimedBuffer;

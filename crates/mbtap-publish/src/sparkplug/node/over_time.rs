@@ -2,8 +2,8 @@
 //! its rebirth when it speaks again, held updates forwarded as historical, and the host's
 //! commands (a rebirth at most once each `REBIRTH_MIN_MS`).
 
-use super::super::payload::{Payload, Value};
 use super::{BIRTH_SETTLE_NS, EdgeNode, Held, MIN_GAPS, Out, REBIRTH, REBIRTH_MIN_MS, SILENT_PERIODS, Sample, metric};
+use crate::sparkplug::payload::{Payload, Value};
 
 impl EdgeNode {
     pub(super) fn ddata(&mut self, device: &str, samples: &[Sample], historical: bool, now_ms: u64) -> Out {
