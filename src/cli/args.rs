@@ -180,6 +180,22 @@ pub struct OutputArgs {
     pub publish: crate::publish::PublishArgs,
 }
 
+/// What the live listening commands (`sniff`, `tap`) take beside their ports.
+#[derive(Debug, clap::Args)]
+pub struct LiveArgs {
+    #[command(flatten)]
+    pub line: LineArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
+    /// Record every read to this pcapng file, flushed each second (`tap`: both directions, an
+    /// interface each), which `replay` shows exactly as this session did.
+    #[arg(long)]
+    pub record: Option<std::path::PathBuf>,
+    /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
+    #[arg(long, value_name = "DURATION", value_parser = duration_arg)]
+    pub duration: Option<std::time::Duration>,
+}
+
 /// A fault to inject on the simulated line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum FaultArg {

@@ -1,10 +1,9 @@
 //! `mbtap sniff PORT`: a live serial port through the analyzer (the I/O loop: [`crate::source::sniff`]).
 
 use std::io::Write;
-use std::path::PathBuf;
 use std::process::ExitCode;
 
-use crate::cli::args::{LineArgs, OutputArgs};
+use crate::cli::args::LiveArgs;
 use crate::cli::runner::{Job, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::sniff::SniffOptions;
@@ -21,19 +20,11 @@ pub struct Args {
     /// line's settings set from the line options), its line framed by structure and CRC.
     pub port: String,
     #[command(flatten)]
-    pub line: LineArgs,
-    #[command(flatten)]
-    pub output: OutputArgs,
-    /// Record every read to this pcapng file.
-    #[arg(long)]
-    pub record: Option<PathBuf>,
-    /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
-    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
-    pub duration: Option<std::time::Duration>,
+    pub live: LiveArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { port, line, output, record, duration } = args;
+    let Args { port, live: LiveArgs { line, output, record, duration } } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
     let mut runner = Runner::from_output(port.clone(), output, settings, true)?;
     runner.recording.clone_from(&record);

@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use crate::cli::args::{LineArgs, OutputArgs};
+use crate::cli::args::LiveArgs;
 use crate::cli::runner::{Job, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::tap::TapOptions;
@@ -24,19 +24,11 @@ pub struct Args {
     #[arg(long)]
     pub link: PathBuf,
     #[command(flatten)]
-    pub line: LineArgs,
-    #[command(flatten)]
-    pub output: OutputArgs,
-    /// Record both directions to this pcapng file.
-    #[arg(long)]
-    pub record: Option<PathBuf>,
-    /// Stop after this long: `90s`, `2min`, `1h`, `500ms` (a bare number is seconds).
-    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
-    pub duration: Option<std::time::Duration>,
+    pub live: LiveArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { port, link, line, output, record, duration } = args;
+    let Args { port, link, live: LiveArgs { line, output, record, duration } } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
     let mut runner = Runner::from_output(port.clone(), output, settings, true)?;
     runner.title = format!("{port} ⇄ {}", link.display());

@@ -214,17 +214,8 @@ pub fn json(e: &Event<'_>) -> J {
             }
             J::Object(m)
         }
-        Event::Glitch(n) => json!({
-            "event": "glitch",
-            "t_ns": n.t_start.0,
-            "t_end_ns": n.t_end.0,
-            "port": n.port.0,
-            "hex": hex_compact(n.bytes),
-            "check_ok": false,
-            "len": n.bytes.len(),
-        }),
-        Event::Noise(n) => json!({
-            "event": "noise",
+        Event::Glitch(n) | Event::Noise(n) => json!({
+            "event": if matches!(e, Event::Glitch(_)) { "glitch" } else { "noise" },
             "t_ns": n.t_start.0,
             "t_end_ns": n.t_end.0,
             "port": n.port.0,
