@@ -62,7 +62,7 @@ impl RtuFramer {
 
     /// Is there a known silence (≥ t3.5) before live index `i`?
     pub(super) fn boundary_at(&self, i: usize) -> bool {
-        self.timed.gap_lb.get(self.timed.head + i).is_some_and(|&g| g >= self.t35)
+        self.timed.gap_lb.get(self.timed.head + i).is_some_and(|&g| g >= self.timing.t35)
     }
 
     /// Does a valid frame of structurally exact length start at live index `i`?
@@ -183,7 +183,7 @@ impl RtuFramer {
         }
         // Right after damage nothing is expected, and a damaged byte count can make a shorter
         // frame whose CRC matches by chance (1 in 65 536): what follows must confirm it.
-        let after_damage = self.after_damage && (g == 0 || after_glitch) && found.iter().any(Option::is_some);
+        let after_damage = self.last.after_damage && (g == 0 || after_glitch) && found.iter().any(Option::is_some);
         if unconfirmed_start || after_damage {
             // Confirmed by what follows, and well formed: no findings in its decode.
             let confirmed = |(l, is_request): (usize, bool)| {

@@ -18,18 +18,18 @@ impl RtuFramer {
         reading: Reading,
         emit: &mut F,
     ) {
-        let c = self.char_ns;
+        let c = self.timing.char_ns;
         let n = u64::try_from(chunk.bytes.len()).unwrap_or(u64::MAX);
         let mut e0 = chunk.t.0.saturating_sub((n - 1).saturating_mul(c));
         let ub = match self.timed.last_end {
             Some(prev) => {
                 e0 = e0.max(prev.saturating_add(c));
-                e0.saturating_sub(c).saturating_sub(prev.saturating_sub(self.latency))
+                e0.saturating_sub(c).saturating_sub(prev.saturating_sub(self.timing.latency))
             }
             None => u64::MAX,
         };
         let t_end = e0.saturating_add((n - 1).saturating_mul(c));
-        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
+        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.timing.latency));
         emit(FrameEvent::Frame(Frame {
             port: self.port,
             bytes: chunk.bytes,
@@ -37,7 +37,7 @@ impl RtuFramer {
             t_end: Timestamp(t_end),
             check_ok: true,
             gap_violation_ns: None,
-            short_gap_before_ns: (self.after_frame && ub < self.t35).then_some(ub),
+            short_gap_before_ns: (self.last.after_frame && ub < self.timing.t35).then_some(ub),
             gap_tolerance_ns: None,
             short_gap_tolerance_ns: self.short_tolerance(apparent_before),
             resolution_ns: self.learner.estimate.resolution_ns(),
@@ -46,18 +46,18 @@ impl RtuFramer {
             alt_len: None,
         }));
         self.known_units[usize::from(chunk.bytes[0])] = true;
-        self.last_sender = sender_of(self.expect, chunk.bytes, Some(reading));
-        self.after_damage = false;
-        self.glitches.turn.frame(self.last_sender);
+        self.last.last_sender = sender_of(self.expect, chunk.bytes, Some(reading));
+        self.last.after_damage = false;
+        self.glitches.turn.frame(self.last.last_sender);
         self.learner.frame();
         self.timed.last_end = Some(t_end);
         self.timed.last_read = self.timed.last_read.max(chunk.t.0);
-        self.after_frame = true;
-        self.wait_at = usize::MAX;
+        self.last.after_frame = true;
+        self.search.wait_at = usize::MAX;
         self.expect = next_expect(self.expect, chunk.bytes, Some(reading));
         self.glitches.frame();
         // The next byte buffered lands at the end of the (empty) live buffer.
-        self.glitch_at = Some(self.timed.buf.len());
+        self.last.glitch_at = Some(self.timed.buf.len());
     }
 
     /// Emits the first `n` live bytes, known to form no valid frame, split at known silences:
@@ -67,22 +67,22 @@ impl RtuFramer {
         let mut a = self.timed.head;
         while a < stop {
             let mut b = a + 1;
-            while b < stop && self.timed.gap_lb[b] < self.t35 {
+            while b < stop && self.timed.gap_lb[b] < self.timing.t35 {
                 b += 1;
             }
             // A slow slave pauses inside its frame: when the structure says the frame goes on
             // past this silence, and it ends at a silence or at the end of the garbage, follow it.
             if let Some(l) = self.structural_len(a, stop)
                 && a + l > b
-                && (a + l == stop || self.timed.gap_lb[a + l] >= self.t35)
-                && self.timed.gap_lb[a + 1..a + l].iter().all(|&g| g < self.incomplete_timeout)
+                && (a + l == stop || self.timed.gap_lb[a + l] >= self.timing.t35)
+                && self.timed.gap_lb[a + 1..a + l].iter().all(|&g| g < self.timing.incomplete_timeout)
             {
                 b = a + l;
             }
             self.emit_piece(a, b, emit);
             a = b;
         }
-        self.garbage = self.garbage.saturating_sub(n);
+        self.search.garbage = self.search.garbage.saturating_sub(n);
     }
 
     /// Emits bytes `a..b` (absolute, `a == self.timed.head`) that no silence divides. A frame whose
@@ -187,9 +187,9 @@ impl RtuFramer {
         // A lone byte glued to the start of a frame, after a silence: the glitch of the driver
         // switching on (seen as a `00` before answers on real lines).
         if b - a == 1
-            && self.frame_next_at == Some(b)
-            && self.timed.gap_lb[b] < self.t15
-            && self.timed.gap_lb[a] >= self.t35
+            && self.last.frame_next_at == Some(b)
+            && self.timed.gap_lb[b] < self.timing.t15
+            && self.timed.gap_lb[a] >= self.timing.t35
             && (matches!(v, 0x00 | 0xFE | 0xFF) || self.glitches.value(v))
             && !self.at_glitch(a)
         {
@@ -208,12 +208,12 @@ impl RtuFramer {
         // 6 000 frames were reported as noise behind a 16 ms timer at 19200; then 5, a slave's
         // first `FE` and `00`s after unanswered requests).
         if b - a == 1
-            && self.glitch_at == Some(a)
-            && (self.frame_next_at == Some(b)
+            && self.last.glitch_at == Some(a)
+            && (self.last.frame_next_at == Some(b)
                 || b == self.timed.buf.len()
-                || self.timed.gap_lb.get(b).is_some_and(|&g| g >= self.t35))
+                || self.timed.gap_lb.get(b).is_some_and(|&g| g >= self.timing.t35))
             && self.glitches.glitchy()
-            && (self.glitches.value_after(self.last_sender, v) || matches!(v, 0x00 | 0xFE | 0xFF))
+            && (self.glitches.value_after(self.last.last_sender, v) || matches!(v, 0x00 | 0xFE | 0xFF))
         {
             self.emit_glitch(a, emit);
             return;
@@ -223,7 +223,7 @@ impl RtuFramer {
                 // A reserved address starts no frame (Serial Line v1.02 §2.2); before this line
                 // is known to glitch, only the values drivers leave (`FE`, `FF`) count.
                 || (v > MAX_ADDRESS && (self.glitches.glitchy() || v >= 0xFE))
-                || (self.glitches.glitchy() && self.glitches.value_after(self.last_sender, v))
+                || (self.glitches.glitchy() && self.glitches.value_after(self.last.last_sender, v))
                 || ((self.glitches.glitchy() || matches!(v, 0x00 | 0xFE | 0xFF))
                     && !self.looks_like_frame_start(i)
                     && self.looks_like_frame_start(i + 1)))
@@ -251,7 +251,7 @@ impl RtuFramer {
             && self.timed.buf[a] == unit
         {
             let n = if self.timed.buf.get(a + 1) == Some(&(fc | EXCEPTION_FLAG)) { 5 } else { n };
-            if b - a > n && self.latency >= self.t35 {
+            if b - a > n && self.timing.latency >= self.timing.t35 {
                 self.emit_frame(n, None, emit);
                 self.emit_unframed(a + n, b, emit);
                 return;
@@ -270,13 +270,13 @@ impl RtuFramer {
             emit(FrameEvent::Noise(Noise {
                 port: self.port,
                 bytes: &self.timed.buf[a..b],
-                t_start: Timestamp(self.timed.end[a].saturating_sub(self.char_ns)),
+                t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
                 t_end: Timestamp(self.timed.end[b - 1]),
             }));
             self.timed.head = b;
-            self.wait_at = usize::MAX;
-            self.after_frame = false;
-            self.after_damage = true;
+            self.search.wait_at = usize::MAX;
+            self.last.after_frame = false;
+            self.last.after_damage = true;
         }
     }
 
@@ -286,38 +286,38 @@ impl RtuFramer {
         let a = self.timed.head;
         let b = a + len;
         let ub = self.timed.gap_ub[a];
-        let short_gap_before_ns = (self.after_frame && ub < self.t35).then_some(ub);
-        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.latency));
+        let short_gap_before_ns = (self.last.after_frame && ub < self.timing.t35).then_some(ub);
+        let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.timing.latency));
         let (inner_gap, every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
-        let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.t15));
+        let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.timing.t15));
         emit(FrameEvent::Frame(Frame {
             port: self.port,
             bytes: &self.timed.buf[a..b],
-            t_start: Timestamp(self.timed.end[a].saturating_sub(self.char_ns)),
+            t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
             t_end: Timestamp(self.timed.end[b - 1]),
             check_ok,
-            gap_violation_ns: (inner_gap >= self.t15).then_some(inner_gap),
+            gap_violation_ns: (inner_gap >= self.timing.t15).then_some(inner_gap),
             short_gap_before_ns,
             gap_tolerance_ns,
             short_gap_tolerance_ns: self.short_tolerance(apparent_before),
             resolution_ns: self.learner.estimate.resolution_ns(),
             gap_before_known: ub != u64::MAX,
             bad_chars: false,
-            alt_len: self.next_alt.take().filter(|_| check_ok),
+            alt_len: self.last.next_alt.take().filter(|_| check_ok),
         }));
-        self.last_sender = sender_of(self.expect, &self.timed.buf[a..b], reading);
-        self.after_damage = !check_ok;
+        self.last.last_sender = sender_of(self.expect, &self.timed.buf[a..b], reading);
+        self.last.after_damage = !check_ok;
         if check_ok {
-            self.lengths.record(&self.timed.buf[a..b], self.timed.buf.get(b).copied(), self.last_sender);
+            self.lengths.record(&self.timed.buf[a..b], self.timed.buf.get(b).copied(), self.last.last_sender);
             self.known_units[usize::from(self.timed.buf[a])] = true;
-            self.glitches.turn.frame(self.last_sender);
+            self.glitches.turn.frame(self.last.last_sender);
             self.learn_from(a, every_silence);
         }
         self.expect = next_expect(self.expect, &self.timed.buf[a..b], reading);
         self.glitches.frame();
-        self.glitch_at = Some(b);
+        self.last.glitch_at = Some(b);
         self.timed.head = b;
-        self.wait_at = usize::MAX;
-        self.after_frame = true;
+        self.search.wait_at = usize::MAX;
+        self.last.after_frame = true;
     }
 }

@@ -70,7 +70,7 @@ impl RtuFramer {
     /// Is the live byte at absolute `a` where a turnaround glitch would be: right after a
     /// frame, not known to be separated from it by 1.5 characters of silence?
     pub(super) fn at_glitch(&self, a: usize) -> bool {
-        self.glitch_at == Some(a) && self.timed.gap_lb.get(a).is_some_and(|&g| g < self.t15)
+        self.last.glitch_at == Some(a) && self.timed.gap_lb.get(a).is_some_and(|&g| g < self.timing.t15)
     }
 
     /// On a line that glitches, is the byte at live index `i` one of its glitch values, with a
@@ -88,7 +88,7 @@ impl RtuFramer {
     /// separated from the frame by 1.5 characters of silence.)
     pub(super) fn glitch_then_end(&self, i: usize) -> bool {
         i < self.timed.live_len()
-            && self.timed.gap_lb[self.timed.head + i] < self.t15
+            && self.timed.gap_lb[self.timed.head + i] < self.timing.t15
             && (self.boundary_at(i + 1) || self.exact_frame_at(i + 1))
     }
 
@@ -97,13 +97,13 @@ impl RtuFramer {
         emit(FrameEvent::Glitch(Noise {
             port: self.port,
             bytes: &self.timed.buf[a..=a],
-            t_start: Timestamp(self.timed.end[a].saturating_sub(self.char_ns)),
+            t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
             t_end: Timestamp(self.timed.end[a]),
         }));
-        let after = (self.glitch_at == Some(a)).then_some(self.last_sender);
+        let after = (self.last.glitch_at == Some(a)).then_some(self.last.last_sender);
         self.glitches.glitch(self.timed.buf[a], after);
-        self.glitch_at = None;
+        self.last.glitch_at = None;
         self.timed.head = a + 1;
-        self.wait_at = usize::MAX;
+        self.search.wait_at = usize::MAX;
     }
 }

@@ -11,14 +11,14 @@ impl RtuFramer {
     /// observer's delay.
     pub(super) fn learn_from(&mut self, a: usize, delay: Option<u64>) {
         self.learner.frame();
-        let sender = match self.last_sender {
+        let sender = match self.last.last_sender {
             Sender::Master => SampleSender::Master,
             Sender::Slave | Sender::Unknown => SampleSender::Unit(self.timed.buf[a]),
         };
         if let Some(d) = delay
             && self.learner.sample(sender, d).is_some()
         {
-            self.latency = self.learner.estimate.effective_latency_ns();
+            self.timing.latency = self.learner.estimate.effective_latency_ns();
         }
     }
 
@@ -36,7 +36,7 @@ impl RtuFramer {
     /// gives all three: `(the longest silence the reads prove inside it, every boundary, the
     /// boundaries the gap evidence may use)`.
     pub(super) fn apparent_inner_silence(&self, a: usize, b: usize) -> (u64, Option<u64>, Option<u64>) {
-        let c = self.char_ns;
+        let c = self.timing.char_ns;
         // A read began at `i` where the gap before it is bounded (inside a read it is unknown
         // and set to `u64::MAX`).
         let starts_read = |i: usize| self.timed.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
@@ -62,6 +62,9 @@ impl RtuFramer {
 
     /// How far an apparent silence before a frame fell short of t3.5 after the previous frame.
     pub(super) fn short_tolerance(&self, apparent_before: Option<u64>) -> Option<u64> {
-        apparent_before.filter(|_| self.after_frame).and_then(|g| self.t35.checked_sub(g)).filter(|&t| t > 0)
+        apparent_before
+            .filter(|_| self.last.after_frame)
+            .and_then(|g| self.timing.t35.checked_sub(g))
+            .filter(|&t| t > 0)
     }
 }

@@ -35,6 +35,7 @@ mod emit;
 mod expect;
 mod glitches;
 mod learning;
+mod state;
 mod twins;
 mod unknown_length;
 
@@ -42,10 +43,10 @@ use self::buffer::TimedBuffer;
 use self::candidates::Try;
 use self::expect::{Expect, MAX_ADDRESS, Reading};
 use self::glitches::GlitchState;
+use self::state::{LastEmitted, LineTiming, Search};
 use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::LineSettings;
 use crate::framer::event::FrameEvent;
-use crate::framer::glitch::Sender;
 use crate::framer::lengths::LearnedLengths;
 use crate::framer::observer::{ObserverEstimate, ObserverLearner};
 use mbtap_proto::rtu::{RTU_MAX_LEN, RTU_MIN_LEN};
@@ -133,44 +134,22 @@ pub struct RtuFramer {
     max_address: u8,
     /// Pasted frames (see [`FramerConfig::pasted`]).
     pasted: bool,
-    char_ns: u64,
-    t15: u64,
-    t35: u64,
-    latency: u64,
-    incomplete_timeout: u64,
+    timing: LineTiming,
     /// The bytes not yet decided, with what their timing proves.
     timed: TimedBuffer,
-    /// Live bytes from `timed.head` known not to start a valid frame.
-    garbage: usize,
-    /// The last event emitted was a frame (for the inter-frame gap check).
-    after_frame: bool,
-    /// The candidate start last found waiting (`garbage` then), and how many bytes from it
-    /// must be buffered before trying it again is worth it: skips re-parsing on every byte.
-    wait_at: usize,
-    wait_for: usize,
+    search: Search,
+    last: LastEmitted,
     /// Addresses seen in frames with a valid CRC: a failed piece that starts with one is a
     /// corrupted frame even when the corruption hit its function code.
     known_units: [bool; 256],
     /// What the next frame should be.
     expect: Expect,
-    /// Absolute buffer index right after the last frame: a lone byte there is a glitch.
-    glitch_at: Option<usize>,
     /// What the line's turnaround glitches have shown.
     glitches: GlitchState,
-    /// While the garbage before a found frame goes out: where that frame starts (a lone byte
-    /// glued to its start is the sender's driver switching on).
-    frame_next_at: Option<usize>,
-    /// Who sent the last frame emitted (whose glitch the next lone byte would be).
-    last_sender: Sender,
-    /// The other length of the frame about to be emitted, if any (see [`Frame::alt_len`]).
-    next_alt: Option<usize>,
     /// What the valid frames show of this observer's reads.
     learner: ObserverLearner,
     /// Lengths each unit's vendor functions were seen with (issue 25).
     lengths: LearnedLengths,
-    /// The last thing emitted (glitches aside) was a failed frame or noise: nothing is
-    /// expected, and a CRC match right after damage must be confirmed by what follows.
-    after_damage: bool,
 }
 
 impl RtuFramer {
@@ -178,24 +157,13 @@ impl RtuFramer {
     pub fn new(port: PortId, config: FramerConfig) -> Self {
         Self {
             port,
-            char_ns: config.line.char_ns(),
-            t15: config.line.t15_ns(),
-            t35: config.line.t35_ns(),
-            latency: config.latency_ns,
-            incomplete_timeout: config.incomplete_timeout_ns,
+            timing: LineTiming::new(&config),
             timed: TimedBuffer::new(),
-            garbage: 0,
-            after_frame: false,
-            wait_at: usize::MAX,
-            wait_for: 0,
+            search: Search::new(),
+            last: LastEmitted::new(),
             known_units: [false; 256],
             expect: Expect::Unknown,
-            glitch_at: None,
             glitches: GlitchState::new(),
-            frame_next_at: None,
-            last_sender: Sender::Unknown,
-            next_alt: None,
-            after_damage: false,
             learner: ObserverLearner::new(config.latency_ns, config.learn_latency, config.line.char_ns()),
             lengths: LearnedLengths::new(config.learn_lengths),
             max_address: if config.pasted { u8::MAX } else { MAX_ADDRESS },
@@ -233,20 +201,20 @@ impl RtuFramer {
         // What the silence before this chunk decides is decided first, exactly as a `tick` in
         // that silence would have: live and replayed input give the same events.
         if let Some(first_end) = self.first_end_estimate(chunk) {
-            self.tick(Timestamp(first_end.saturating_sub(self.char_ns)), emit);
+            self.tick(Timestamp(first_end.saturating_sub(self.timing.char_ns)), emit);
         }
         let n = chunk.bytes.len();
         if n > 0 {
             self.learner.read(n);
         }
-        let c = self.char_ns;
+        let c = self.timing.char_ns;
         if self.pending() == 0
             && let Some(reading) = Self::whole_frame(chunk.bytes)
         {
             self.emit_whole_chunk(chunk, reading, emit);
             return;
         }
-        self.timed.append(chunk.bytes, t, c, self.latency);
+        self.timed.append(chunk.bytes, t, c, self.timing.latency);
         self.process(Flush::No, emit);
     }
 
@@ -272,7 +240,7 @@ impl RtuFramer {
         if n == 0 {
             return None;
         }
-        Some(chunk.t.0.saturating_sub((n - 1) * self.char_ns))
+        Some(chunk.t.0.saturating_sub((n - 1) * self.timing.char_ns))
     }
 
     /// Tells the framer the time is `now` with nothing new received: if the line has been
@@ -282,10 +250,10 @@ impl RtuFramer {
         if self.pending() == 0 {
             return;
         }
-        let silence = now.0.saturating_sub(last).saturating_sub(self.latency);
-        if silence >= self.incomplete_timeout {
+        let silence = now.0.saturating_sub(last).saturating_sub(self.timing.latency);
+        if silence >= self.timing.incomplete_timeout {
             self.process(Flush::All, emit);
-        } else if silence >= self.t35 && self.garbage > 0 {
+        } else if silence >= self.timing.t35 && self.search.garbage > 0 {
             self.process(Flush::Garbage, emit);
         }
     }
@@ -299,46 +267,49 @@ impl RtuFramer {
         let flushing = flush == Flush::All;
         loop {
             let live_len = self.timed.live_len();
-            if self.garbage >= live_len {
+            if self.search.garbage >= live_len {
                 break;
             }
-            if !flushing && self.wait_at == self.garbage && live_len - self.garbage < self.wait_for {
+            if !flushing
+                && self.search.wait_at == self.search.garbage
+                && live_len - self.search.garbage < self.search.wait_for
+            {
                 break;
             }
-            let decided = match self.try_frame_at(self.garbage, flushing) {
-                Try::NeedMore(_) if live_len - self.garbage > MAX_WAIT => Try::NotHere,
+            let decided = match self.try_frame_at(self.search.garbage, flushing) {
+                Try::NeedMore(_) if live_len - self.search.garbage > MAX_WAIT => Try::NotHere,
                 t => t,
             };
             match decided {
                 Try::Found(len, reading, alt) => {
-                    self.frame_next_at = Some(self.timed.head + self.garbage);
-                    self.emit_garbage(self.garbage, emit);
-                    self.frame_next_at = None;
-                    self.next_alt = alt;
+                    self.last.frame_next_at = Some(self.timed.head + self.search.garbage);
+                    self.emit_garbage(self.search.garbage, emit);
+                    self.last.frame_next_at = None;
+                    self.last.next_alt = alt;
                     self.emit_frame(len, Some(reading), emit);
                 }
                 Try::NotHere => {
-                    self.garbage += 1;
-                    if self.garbage >= MAX_GARBAGE {
+                    self.search.garbage += 1;
+                    if self.search.garbage >= MAX_GARBAGE {
                         self.emit_garbage(RTU_MAX_LEN, emit);
                     }
                 }
                 Try::NeedMore(n) => {
-                    self.wait_at = self.garbage;
-                    self.wait_for = n;
+                    self.search.wait_at = self.search.garbage;
+                    self.search.wait_for = n;
                     break;
                 }
             }
         }
         match flush {
             Flush::All => {
-                let g = self.garbage;
+                let g = self.search.garbage;
                 self.emit_garbage(g, emit);
             }
             // Only whole pieces: garbage that ends at a known silence. The bytes after the
             // last such silence may still continue into the next undecided byte.
             Flush::Garbage => {
-                if let Some(b) = (1..=self.garbage).rev().find(|&b| self.boundary_at(b)) {
+                if let Some(b) = (1..=self.search.garbage).rev().find(|&b| self.boundary_at(b)) {
                     self.emit_garbage(b, emit);
                 }
             }
@@ -349,7 +320,7 @@ impl RtuFramer {
 
     fn compact(&mut self) {
         if let Some(dropped) = self.timed.compact() {
-            self.glitch_at = self.glitch_at.and_then(|g| g.checked_sub(dropped));
+            self.last.glitch_at = self.last.glitch_at.and_then(|g| g.checked_sub(dropped));
         }
     }
 }

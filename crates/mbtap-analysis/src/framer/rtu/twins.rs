@@ -15,7 +15,7 @@ impl RtuFramer {
     /// the frame event (see [`Frame::alt_len`]) when it is not negligible.
     pub(super) fn twin_len(&mut self, at: usize, n: usize, sender: Sender) -> usize {
         let (take, other) = self.twin_reading(&self.timed.buf[at..], n, sender);
-        self.next_alt = other;
+        self.last.next_alt = other;
         take
     }
 
@@ -40,7 +40,7 @@ impl RtuFramer {
     pub(super) fn split_damaged(&self, a: usize, b: usize) -> Option<usize> {
         // With timing that can show a t3.5 silence, frames were already cut at their silences;
         // a damaged byte count would only mislead. This is for adapters whose latency hides them.
-        if self.latency < self.t35 {
+        if self.timing.latency < self.timing.t35 {
             return None;
         }
         let piece = &self.timed.buf[a..b];

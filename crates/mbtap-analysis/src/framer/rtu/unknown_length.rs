@@ -158,7 +158,9 @@ impl RtuFramer {
             if l < s.len() {
                 let gap = self.timed.gap_lb[self.timed.head + g + l];
                 // Even a slow slave's frame cannot hold a whole valid frame after a silence.
-                if gap >= self.incomplete_timeout || (gap >= self.t35 && (!lenient || self.exact_frame_at(g + l))) {
+                if gap >= self.timing.incomplete_timeout
+                    || (gap >= self.timing.t35 && (!lenient || self.exact_frame_at(g + l)))
+                {
                     bounded = true;
                     break;
                 }
