@@ -180,6 +180,7 @@ pub fn guess_table<'a>(
     regs: &[(u16, &'a RegStat)],
     pair: &dyn Fn(u16) -> Option<&'a PairStat>,
     layout: Option<&Layout>,
+    still: &std::collections::BTreeMap<u16, bool>,
 ) -> Vec<Guess> {
     let mut out = Vec::new();
     let mut i = 0;
@@ -244,10 +245,36 @@ pub fn guess_table<'a>(
                 continue;
             }
         }
+        if let (Some(&high_first), Some(&(b, r2))) = (still.get(&a), regs.get(i + 1))
+            && u32::from(b) == u32::from(a) + 1
+        {
+            out.push(still_wide(a, r, r2, high_first));
+            i += 2;
+            continue;
+        }
         out.push(single(a, r));
         i += 1;
     }
     out
+}
+
+/// The pair `a`, `a + 1` as a 32-bit value whose high word never moved (its table's blocks say
+/// so: [`super::still_words`]), trusted no more than that evidence.
+fn still_wide(a: u16, r: &RegStat, r2: &RegStat, high_first: bool) -> Guess {
+    let (high, low) = if high_first { (r, r2) } else { (r2, r) };
+    let counter = low.downs == 0 && low.ups > 0;
+    Guess {
+        address: a,
+        kind: Kind::U32 { high_first, counter },
+        confidence: confidence(r.samples, low.changes).min(super::still_words::CONFIDENCE),
+        evidence: format!(
+            "{} samples; the {} word stayed {} while the other moved, as in every moving pair of its blocks: \
+             a 32-bit value whose high word did not change while recorded",
+            r.samples,
+            if high_first { "first" } else { "second" },
+            high.min,
+        ),
+    }
 }
 
 /// The pair at `regs[i]`, `regs[i + 1]` (adjacent addresses, read together, at least one

@@ -15,6 +15,7 @@ pub mod layout;
 pub mod probe;
 mod series;
 pub mod stats;
+mod still_words;
 pub mod truth;
 
 use std::collections::btree_map::Entry;
@@ -89,7 +90,8 @@ impl Unit {
             self.blocks.keys().filter(|&&(t, _, _)| t == table).map(|&(_, first, q)| (first, q)).collect();
         let heard = |a| self.regs.contains_key(&(table, a));
         let layout = layout::Layout::decide(&blocks, &pair, &heard);
-        infer::guess_table(&regs, &pair, layout.as_ref())
+        let still = still_words::still_word_pairs(&blocks, &|a| self.regs.get(&(table, a)));
+        infer::guess_table(&regs, &pair, layout.as_ref(), &still)
     }
 
     /// The last value of what `g` covers, as its type reads it (a 32-bit pair combined in its
