@@ -47,7 +47,8 @@ pub enum Item<'a> {
     /// A received chunk.
     Packet { port: PortId, t: Timestamp, data: &'a [u8] },
     /// An interface (port) was described; its description may carry line settings.
-    Interface { port: PortId, interface: Interface },
+    /// Boxed, so that an item (one per packet) stays small to move.
+    Interface { port: PortId, interface: Box<Interface> },
     /// Something was wrong; reading goes on.
     Warning(String),
 }
@@ -105,8 +106,15 @@ pub struct CaptureReader<R> {
 }
 
 enum Next {
-    Packet { port: u32, t: u64, at: usize, len: usize },
-    Interface(u32, Interface),
+    Packet {
+        port: u32,
+        t: u64,
+        at: usize,
+        len: usize,
+    },
+    /// Boxed: an interface comes once a port, a packet millions of times, and every step moves
+    /// the whole enum.
+    Interface(u32, Box<Interface>),
     Warning(String),
     Continue,
     End,

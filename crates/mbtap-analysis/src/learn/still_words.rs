@@ -104,8 +104,8 @@ mod tests {
     /// word first (it drafted "constant 73" and a u16 before), trusted at most [`CONFIDENCE`].
     #[test]
     fn regression_issue_40_the_display_s_fuel_volume_is_drafted_as_a_u32() {
-        use crate::learn::Learner;
         use super::super::kind::Kind;
+        use crate::learn::Learner;
         use mbtap_device::profile::Table;
         /// FC 04, start address 0, quantity 4.
         const READ_INPUT_0_TO_3: [u8; 5] = [0x04, 0x00, 0x00, 0x00, 0x04];

@@ -142,7 +142,7 @@ impl<R: Read> CaptureReader<R> {
         self.interfaces.push(iface.clone());
         self.warned_linktype.push(false);
         self.clocks.push((Clock::default(), 0));
-        Next::Interface(id, iface)
+        Next::Interface(id, Box::new(iface))
     }
 
     /// Keeps the latency a recording session learned for `iface`, from its comments.
