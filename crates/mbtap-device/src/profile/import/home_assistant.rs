@@ -3,11 +3,9 @@
 //! `binary_sensors` and `switches`, from a whole `configuration.yaml`, the list of hubs an
 //! `!include` names, or one hub. One device (`slave`/`device_address`) per profile.
 
-use serde_norway::Value;
+use super::ha_yaml::{Level, OTHER_PLATFORMS, hubs};
 
-use super::{Imported, Point, Problem};
-use crate::profile::Table;
-use crate::profile::format::{Access, ValueType, WordOrder};
+use super::Imported;
 
 /// Errors that stop the import as a whole (an entry that cannot be read is a [`Problem`]).
 #[derive(Debug, thiserror::Error)]
@@ -85,57 +83,19 @@ fn check_depth(yaml: &str) -> Result<(), HaError> {
     Ok(())
 }
 
-/// The hubs in a document: under `modbus:`, a list of hubs, or one hub.
-fn hubs(doc: &Value) -> Vec<&Value> {
-    let is_hub = |v: &Value| {
-        v.as_mapping().is_some_and(|m| ["sensors", "binary_sensors", "switches"].iter().any(|k| m.contains_key(*k)))
-    };
-    let v = doc.get("modbus").unwrap_or(doc);
-    match v {
-        Value::Sequence(s) => s.iter().filter(|h| is_hub(h)).collect(),
-        v if is_hub(v) => vec![v],
-        _ => Vec::new(),
-    }
-}
-
-/// The device an entry belongs to (`slave`, or `device_address` in newer releases; 0 when
-/// neither is given, as Home Assistant defaults).
-fn unit_of(entry: &Value, hub: &Value) -> u64 {
-    ["device_address", "slave"]
-        .iter()
-        .find_map(|k| entry.get(*k).and_then(Value::as_u64))
-        .or_else(|| ["device_address", "slave"].iter().find_map(|k| hub.get(*k).and_then(Value::as_u64)))
-        .unwrap_or(0)
-}
-
-fn text(v: Option<&Value>) -> Option<String> {
-    match v? {
-        Value::String(s) => Some(s.clone()),
-        Value::Number(n) => Some(n.to_string()),
-        Value::Bool(b) => Some(b.to_string()),
-        _ => None,
-    }
-}
-
 /// Reads `yaml`; with several devices, `unit` chooses one.
 ///
 /// # Errors
 /// Not YAML, no hubs, or several devices and no `unit`.
 pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u8), HaError> {
     check_depth(yaml)?;
-    let doc: Value = serde_norway::from_str(yaml).map_err(|e| HaError::Yaml(e.to_string()))?;
-    let hubs = hubs(&doc);
+    let doc: Level = serde_norway::from_str(yaml).map_err(|e| HaError::Yaml(e.to_string()))?;
+    let hubs = hubs(doc);
     if hubs.is_empty() {
         return Err(HaError::NoHubs);
     }
-    let mut units = std::collections::BTreeSet::new();
-    for hub in &hubs {
-        for kind in ["sensors", "binary_sensors", "switches"] {
-            for e in hub.get(kind).and_then(Value::as_sequence).into_iter().flatten() {
-                units.insert(unit_of(e, hub));
-            }
-        }
-    }
+    let units: std::collections::BTreeSet<u64> =
+        hubs.iter().flat_map(Level::reads).map(|r| r.unit.unwrap_or(0)).collect();
     let chosen = match (unit, units.len()) {
         (Some(u), _) => u64::from(u),
         (None, 1) => units.first().copied().unwrap_or(0),
@@ -144,26 +104,19 @@ pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u
             return Err(HaError::SeveralUnits(all.join(", ")));
         }
     };
+    let other: Vec<&str> = OTHER_PLATFORMS
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| hubs.iter().any(|h| h.other[*i]))
+        .map(|(_, k)| k)
+        .collect();
     let mut out = Imported::default();
-    for hub in &hubs {
-        for kind in ["sensors", "binary_sensors", "switches"] {
-            for (i, e) in hub.get(kind).and_then(Value::as_sequence).into_iter().flatten().enumerate() {
-                if unit_of(e, hub) != chosen {
-                    continue;
-                }
-                let name = text(e.get("name")).unwrap_or_default();
-                let at = format!("{kind}[{i}] {name:?}");
-                match entry(kind, e, &name) {
-                    Ok(p) => out.add(Point { origin: at, ..p }),
-                    Err((key, why)) => out.problems.push(Problem { at, column: Some(key.to_owned()), why }),
-                }
-            }
+    for r in hubs.into_iter().flat_map(Level::into_reads).filter(|r| r.unit.unwrap_or(0) == chosen) {
+        match r.point {
+            Ok(p) => out.add(p),
+            Err(problem) => out.problems.push(problem),
         }
     }
-    let other: Vec<&str> = ["climates", "covers", "fans", "lights"]
-        .into_iter()
-        .filter(|k| hubs.iter().any(|h| h.get(*k).is_some()))
-        .collect();
     if !other.is_empty() {
         out.notes.push(format!("not imported (no profile equivalent): {}", other.join(", ")));
     }
@@ -171,79 +124,10 @@ pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u
 }
 
 /// One entry as a point, or the key to blame and why.
-fn entry(kind: &str, e: &Value, name: &str) -> Result<Point, (&'static str, String)> {
-    let address = e.get("address").and_then(Value::as_u64).ok_or(("address", "missing or not a number".to_owned()))?;
-    let address = u16::try_from(address).map_err(|_| ("address", format!("{address} is past 65535")))?;
-    let input_type = text(e.get("input_type")).or_else(|| text(e.get("write_type")));
-    let default = if kind == "sensors" { "holding" } else { "coil" };
-    let input_type = input_type.as_deref().unwrap_or(default);
-    let table = match input_type {
-        "holding" | "holdings" => Table::HoldingRegisters,
-        "input" => Table::InputRegisters,
-        "coil" | "coils" => Table::Coils,
-        "discrete_input" => Table::DiscreteInputs,
-        other => return Err(("input_type", format!("{other:?} is not holding, input, coil or discrete_input"))),
-    };
-    let access = if kind == "switches" { Access::ReadWrite } else { Access::Read };
-    let mut p = Point {
-        table,
-        address,
-        name: if name.is_empty() { format!("reg_{address}") } else { name.to_owned() },
-        value_type: ValueType::U16,
-        word_order: WordOrder::HighFirst,
-        scale: None,
-        unit: text(e.get("unit_of_measurement")),
-        access,
-        length: None,
-        description: None,
-        origin: String::new(),
-    };
-    if kind != "sensors" || matches!(table, Table::Coils | Table::DiscreteInputs) {
-        p.value_type = ValueType::Bool;
-        return Ok(p);
-    }
-    let count = e.get("count").and_then(Value::as_u64).and_then(|c| u16::try_from(c).ok());
-    let data_type = text(e.get("data_type")).unwrap_or_else(|| "int16".to_owned());
-    p.value_type = match data_type.as_str() {
-        "int16" | "int" => ValueType::I16,
-        "uint16" | "uint" => ValueType::U16,
-        "int32" => ValueType::I32,
-        "uint32" => ValueType::U32,
-        "float32" | "float" => ValueType::F32,
-        "string" => {
-            p.length = Some(count.ok_or(("count", "a string needs its count of registers".to_owned()))?);
-            ValueType::String
-        }
-        other => {
-            return Err((
-                "data_type",
-                format!("{other:?}: not in the profile format (int16, uint16, int32, uint32, float32, string)"),
-            ));
-        }
-    };
-    match text(e.get("swap")).as_deref() {
-        None | Some("none") => {}
-        Some("word") if matches!(p.value_type, ValueType::I32 | ValueType::U32 | ValueType::F32) => {
-            p.word_order = WordOrder::LowFirst;
-        }
-        Some(other) => return Err(("swap", format!("{other:?}: byte swaps are not in the profile format"))),
-    }
-    if let Some(s) = e.get("scale") {
-        let k = s.as_f64().ok_or(("scale", "not a number".to_owned()))?;
-        if k == 0.0 || !k.is_finite() {
-            return Err(("scale", format!("{k} is not a usable scale")));
-        }
-        p.scale = ((k - 1.0).abs() > f64::EPSILON).then_some(k);
-    }
-    if e.get("offset").and_then(Value::as_f64).is_some_and(|o| o != 0.0) {
-        return Err(("offset", "offsets are not in the profile format".to_owned()));
-    }
-    Ok(p)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::profile::format::{Access, ValueType, WordOrder};
 
     const CONFIG: &str = r"
 homeassistant:
@@ -330,5 +214,31 @@ modbus:
             + &format!("# {}\nx: a{}\n", "{".repeat(200), "[".repeat(200));
         check_depth(&fine).unwrap();
         check_depth(CONFIG).unwrap();
+    }
+
+    /// Issue 39: the YAML is read into entries as it goes, no tree of the document (200 000
+    /// sensors took 540 MB as a tree). What the tree gave must hold: a hub's unit given after
+    /// its lists still names their entries; an entry that is not a mapping is a problem, not
+    /// the end of the import; an alias bomb under a key the import does not read is skipped
+    /// unexpanded (9^9 nodes if expanded), and one where a name belongs leaves the name out.
+    #[test]
+    fn regression_issue_39_the_yaml_is_read_without_a_tree_as_the_tree_read_it() {
+        let late_unit =
+            "modbus:\n  - name: hub\n    sensors:\n      - name: A\n        address: 1\n      - 42\n    slave: 7\n";
+        let (r, unit) = parse_home_assistant(late_unit, None).unwrap();
+        assert_eq!(unit, 7);
+        assert_eq!(r.points.len(), 1);
+        assert_eq!(r.problems.len(), 1, "{:?}", r.problems);
+        assert!(r.problems[0].why.contains("missing"), "{:?}", r.problems);
+        let mut bomb =
+            String::from("modbus:\n  - name: hub\n    x0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n");
+        for i in 1..10 {
+            let refs = vec![format!("*a{}", i - 1); 9].join(", ");
+            bomb.push_str(&format!("    x{i}: &a{i} [{refs}]\n"));
+        }
+        bomb.push_str("    sensors:\n      - name: *a9\n        slave: 1\n        address: 100\n");
+        let (r, unit) = parse_home_assistant(&bomb, None).unwrap();
+        assert_eq!((unit, r.points.len()), (1, 1));
+        assert_eq!(r.points[0].name, "reg_100");
     }
 }

@@ -6,6 +6,8 @@
 
 mod fields;
 pub mod grid;
+pub mod ha_entry;
+pub mod ha_yaml;
 pub mod home_assistant;
 pub mod notation;
 pub mod sheet;
