@@ -234,7 +234,7 @@ modbus:
             String::from("modbus:\n  - name: hub\n    x0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n");
         for i in 1..10 {
             let refs = vec![format!("*a{}", i - 1); 9].join(", ");
-            bomb.push_str(&format!("    x{i}: &a{i} [{refs}]\n"));
+            bomb += &["    x", &i.to_string(), ": &a", &i.to_string(), " [", &refs, "]\n"].concat();
         }
         bomb.push_str("    sensors:\n      - name: *a9\n        slave: 1\n        address: 100\n");
         let (r, unit) = parse_home_assistant(&bomb, None).unwrap();
