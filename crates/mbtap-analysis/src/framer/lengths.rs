@@ -31,6 +31,18 @@ const FIRM: u32 = 16;
 /// length nearly always.
 const FIRM_PERCENT: u64 = 98;
 
+/// What followed a frame when it was emitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum After {
+    /// This byte.
+    Byte(u8),
+    /// Nothing within the incomplete-frame timeout: no `00` (a glitch or a CRC's high byte
+    /// comes within a character) followed it.
+    Silence,
+    /// Nothing yet (the frame went out on its own structure, or at the end of the input).
+    Unknown,
+}
+
 /// Direction of a frame, for the key.
 fn dir(sender: Sender) -> Option<u8> {
     match sender {
@@ -89,9 +101,12 @@ impl LearnedLengths {
         }
     }
 
-    /// A valid frame `f` from `sender` was emitted; `next` is the byte after it, if it came.
-    pub(crate) fn record(&mut self, f: &[u8], next: Option<u8>, sender: Sender) {
-        if !self.on || next.is_none_or(|n| n == 0) {
+    /// A valid frame `f` from `sender` was emitted, and `after` it what followed. Issue 40: a
+    /// vendor request to a unit that never answers is followed by a silence, never by a byte
+    /// when it goes out — such a unit's lengths were never learned, and its frames' trailing
+    /// `00` stayed a coin toss all day.
+    pub(crate) fn record(&mut self, f: &[u8], after: After, sender: Sender) {
+        if !self.on || matches!(after, After::Unknown | After::Byte(0)) {
             return;
         }
         let (Some(d), [unit, fc, ..], Some(&last)) = (dir(sender), f, f.last()) else { return };
@@ -127,6 +142,24 @@ impl LearnedLengths {
     /// several lengths (sub-functions, variable data) decides nothing.
     pub(crate) fn choose(&self, unit: u8, fc: u8, sender: Sender, short: usize) -> Option<usize> {
         self.choose_among(unit, fc, sender, &[short, short + 1])
+    }
+
+    /// Of `short` and `short + 1` bytes, the one every sighting of this unit's function from
+    /// `sender` had, however few (one is enough): too weak to decide alone, strong enough to put
+    /// that length first, the other still shown (issue 40: a unit's second vendor request
+    /// ending in `00` was read against its first, certain one).
+    pub(crate) fn lean(&self, unit: u8, fc: u8, sender: Sender, short: usize) -> Option<usize> {
+        if !self.knows(fc) {
+            return None;
+        }
+        // Each direction the frame may have (either, after damage): its one length, if it fits.
+        let mut fits = dirs(sender).iter().filter_map(|d| {
+            let mut seen = self.seen.get(&(unit, fc, *d))?.iter().filter(|&&(_, n)| n > 0);
+            let len = usize::from(seen.next()?.0);
+            (seen.next().is_none() && (len == short || len == short + 1)).then_some(len)
+        });
+        let len = fits.next()?;
+        fits.all(|other| other == len).then_some(len)
     }
 
     /// Does a CRC match of `len` bytes contradict what this unit's function was seen with —
@@ -178,6 +211,14 @@ impl LearnedLengths {
         fits.dedup();
         match fits.as_slice() {
             [one] => Some(*one),
+            // Who sent it was guessed from the expectation, which damage misleads (a corrupted
+            // request leaves the master expected, and the answer comes): where that direction's
+            // firm length is none of the candidates, the other direction's may decide (issue
+            // 40: an answer after a corrupted request was read as the master's request with its
+            // `00` glitch, one byte short).
+            [] if sender != Sender::Unknown && candidates.iter().all(|&l| self.contradicts(unit, fc, sender, l)) => {
+                self.choose_among(unit, fc, Sender::Unknown, candidates)
+            }
             _ => None,
         }
     }
@@ -203,7 +244,7 @@ mod tests {
         for k in 0u8..=255 {
             let f = vendor(5, &[k, 1, 2]);
             if f.last() != Some(&0) {
-                l.record(&f, Some(0x11), Sender::Master);
+                l.record(&f, After::Byte(0x11), Sender::Master);
                 n += 1;
             }
             if n == 3 {
@@ -221,7 +262,7 @@ mod tests {
         for k in 0u8..=255 {
             let f = vendor(5, &[k, 1, 2, 3]);
             if f.last() != Some(&0) {
-                l.record(&f, Some(0x11), Sender::Master);
+                l.record(&f, After::Byte(0x11), Sender::Master);
                 n += 1;
             }
             if n == 3 {
@@ -232,7 +273,7 @@ mod tests {
         // Standard functions have their structure: not learned.
         let mut f = Vec::new();
         mbtap_proto::encode_rtu(5, &[0x03, 0, 1, 0, 2], &mut f);
-        l.record(&f, Some(0x11), Sender::Master);
+        l.record(&f, After::Byte(0x11), Sender::Master);
         assert_eq!(l.choose(5, 0x03, Sender::Master, 8), None);
     }
 
@@ -248,7 +289,7 @@ mod tests {
             let f = vendor(5, &[k, 1, 2]);
             k = k.wrapping_add(1);
             if f.last() != Some(&0) {
-                l.record(&f, Some(0x05), Sender::Master);
+                l.record(&f, After::Byte(0x05), Sender::Master);
                 requests += 1;
             }
             if requests == FIRM - 1 {
@@ -264,5 +305,73 @@ mod tests {
         assert!(!l.contradicts(5, 0x41, Sender::Slave, 9));
         // Another unit: nothing learned.
         assert!(!l.contradicts(6, 0x41, Sender::Master, 9));
+    }
+
+    /// Issue 40: a vendor request to a unit that never answers goes out on the silence after
+    /// it, no byte behind it; it was never learned from, and that unit's twins stayed a coin
+    /// toss all day. A silence after a frame rules out a `00` after it as surely as a byte does.
+    #[test]
+    fn regression_issue_40_a_frame_followed_by_a_silence_teaches_its_length() {
+        let mut l = LearnedLengths::new(true);
+        let (mut n, mut k) = (0, 0u8);
+        while n < SURE {
+            let f = vendor(0x21, &[k, 1, 2, 3, 4]);
+            k = k.wrapping_add(1);
+            if f.last() != Some(&0) {
+                l.record(&f, After::Unknown, Sender::Master);
+                assert_eq!(l.choose(0x21, 0x41, Sender::Master, 8), None, "nothing after it yet: learns nothing");
+                l.record(&f, After::Silence, Sender::Master);
+                n += 1;
+            }
+        }
+        assert_eq!(l.choose(0x21, 0x41, Sender::Master, 8), Some(9));
+        // A `00` after it leaves its length open: not learned from.
+        let mut m = LearnedLengths::new(true);
+        for _ in 0..4 {
+            m.record(&vendor(0x21, &[1, 1, 2, 3, 4]), After::Byte(0), Sender::Master);
+        }
+        assert_eq!(m.choose(0x21, 0x41, Sender::Master, 8), None);
+    }
+
+    /// Issue 40: one certain sighting puts that length first (with the other still shown);
+    /// a function seen at two lengths leans nowhere.
+    #[test]
+    fn regression_issue_40_one_sighting_leans_a_twin_towards_its_length() {
+        let mut l = LearnedLengths::new(true);
+        let f = (0u8..=255).map(|k| vendor(5, &[k, 1])).find(|f| f.last() != Some(&0)).unwrap_or_default();
+        l.record(&f, After::Byte(0x05), Sender::Master);
+        // Too few to decide, enough to lean: 6 bytes, between 5 and 6.
+        assert_eq!(l.choose(5, 0x41, Sender::Master, 5), None);
+        assert_eq!(l.lean(5, 0x41, Sender::Master, 5), Some(6));
+        assert_eq!(l.lean(5, 0x41, Sender::Unknown, 5), Some(6));
+        assert_eq!(l.lean(5, 0x41, Sender::Slave, 5), None);
+        assert_eq!(l.lean(5, 0x41, Sender::Master, 7), None);
+        let g = (0u8..=255).map(|k| vendor(5, &[k, 1, 2])).find(|f| f.last() != Some(&0)).unwrap_or_default();
+        l.record(&g, After::Byte(0x05), Sender::Master);
+        assert_eq!(l.lean(5, 0x41, Sender::Master, 6), None);
+    }
+
+    /// Issue 40: after a corrupted request the framer still expects one, and the answer that
+    /// follows was weighed as the master's: its twin read against the requests' length (which
+    /// fits neither reading), then the odds of the master's `00` glitch — one byte short. The
+    /// answers' length decides where the guessed direction's firm length fits neither.
+    #[test]
+    fn regression_issue_40_a_frame_whose_guessed_direction_fits_neither_twin_takes_the_other_s() {
+        let mut l = LearnedLengths::new(true);
+        let (mut n, mut k) = (0, 0u8);
+        while n < FIRM {
+            let (q, a) = (vendor(5, &[k, 1, 2]), vendor(5, &[k, 1, 2, 3, 4, 5, 6, 7]));
+            k = k.wrapping_add(1);
+            if q.last() != Some(&0) && a.last() != Some(&0) {
+                l.record(&q, After::Byte(0x05), Sender::Master);
+                l.record(&a, After::Byte(0x05), Sender::Slave);
+                n += 1;
+            }
+        }
+        // Requests 7 bytes, answers 12: a "request" that checks at 11 and 12 is an answer.
+        assert_eq!(l.choose(5, 0x41, Sender::Master, 11), Some(12));
+        assert_eq!(l.choose(5, 0x41, Sender::Slave, 11), Some(12));
+        // Where the guessed direction's length is one of the two, it decides as before.
+        assert_eq!(l.choose(5, 0x41, Sender::Master, 6), Some(7));
     }
 }

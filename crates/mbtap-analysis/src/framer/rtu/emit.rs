@@ -6,6 +6,7 @@ use super::expect::{Expect, MAX_ADDRESS, Reading, next_expect, sender_of};
 use crate::chunk::{Chunk, Timestamp};
 use crate::framer::event::{Frame, FrameEvent, Noise};
 use crate::framer::glitch::Sender;
+use crate::framer::lengths::After;
 use mbtap_proto::function::EXCEPTION_FLAG;
 use mbtap_proto::rtu::RTU_MIN_LEN;
 
@@ -308,7 +309,12 @@ impl RtuFramer {
         self.last.last_sender = sender_of(self.expect, &self.timed.buf[a..b], reading);
         self.last.after_damage = !check_ok;
         if check_ok {
-            self.lengths.record(&self.timed.buf[a..b], self.timed.buf.get(b).copied(), self.last.last_sender);
+            let after = match self.timed.buf.get(b) {
+                Some(&v) => After::Byte(v),
+                None if self.search.silent_after => After::Silence,
+                None => After::Unknown,
+            };
+            self.lengths.record(&self.timed.buf[a..b], after, self.last.last_sender);
             self.known_units[usize::from(self.timed.buf[a])] = true;
             self.glitches.turn.frame(self.last.last_sender);
             self.learn_from(a, every_silence);

@@ -252,7 +252,9 @@ impl RtuFramer {
         }
         let silence = now.0.saturating_sub(last).saturating_sub(self.timing.latency);
         if silence >= self.timing.incomplete_timeout {
+            self.search.silent_after = true;
             self.process(Flush::All, emit);
+            self.search.silent_after = false;
         } else if silence >= self.timing.t35 && self.search.garbage > 0 {
             self.process(Flush::Garbage, emit);
         }

@@ -42,11 +42,14 @@ pub(super) struct Search {
     /// must be buffered before trying it again is worth it: skips re-parsing on every byte.
     pub(super) wait_at: usize,
     pub(super) wait_for: usize,
+    /// Everything pending is being decided because the line fell silent after it (a tick past
+    /// the incomplete-frame timeout): the last frame of it was followed by nothing.
+    pub(super) silent_after: bool,
 }
 
 impl Search {
     pub(super) const fn new() -> Self {
-        Self { garbage: 0, wait_at: usize::MAX, wait_for: 0 }
+        Self { garbage: 0, wait_at: usize::MAX, wait_for: 0, silent_after: false }
     }
 }
 

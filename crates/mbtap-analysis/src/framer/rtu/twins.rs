@@ -4,7 +4,7 @@
 
 use super::RtuFramer;
 use super::expect::{Expect, diagnostics_even_len};
-use crate::framer::glitch::Sender;
+use crate::framer::glitch::{Sender, ZeroTail};
 use mbtap_proto::function::EXCEPTION_FLAG;
 use mbtap_proto::length::{PduLength, request_len, response_len};
 use mbtap_proto::rtu::RTU_MIN_LEN;
@@ -30,9 +30,23 @@ impl RtuFramer {
         if let Some(len) = self.lengths.choose(s[0], s[1], sender, n - 1) {
             return (len, None);
         }
-        let odds = self.glitches.turn.zero_tail(sender);
+        let odds = self.zero_odds(s, n - 1, sender);
         let (take, other) = if odds.glitch_likelier { (n - 1, n) } else { (n, n - 1) };
         (take, odds.ambiguous.then_some(other))
+    }
+
+    /// How to read the `00` after the `short` bytes of `s` that check both ways, where nothing
+    /// decides: this sender's odds of a `00` glitch against a CRC ending in `00`, unless this
+    /// unit's function was seen, however few times, only at one of the two lengths and the
+    /// odds say the other — then that one first, the other shown too.
+    pub(super) fn zero_odds(&self, s: &[u8], short: usize, sender: Sender) -> ZeroTail {
+        let odds = self.glitches.turn.zero_tail(sender);
+        match self.lengths.lean(s[0], s[1], sender, short) {
+            Some(len) if (len == short) != odds.glitch_likelier => {
+                ZeroTail { glitch_likelier: len == short, ambiguous: true }
+            }
+            _ => odds,
+        }
     }
 
     /// Where a damaged frame at absolute `a` ends inside `a..b`, if its structure says so and a

@@ -130,8 +130,9 @@ impl RtuFramer {
                         let shorter_boundary = self.boundary_at(g + l) && !(longer_glitch && batched);
                         let evidence = shorter_boundary || self.exact_frame_at(g + l) || longer_glitch;
                         // Nothing else decides: whether this sender's `00` glitch is likelier
-                        // than a CRC ending in `00` (1 in 256).
-                        let odds = self.glitches.turn.zero_tail(self.sender_at(g));
+                        // than a CRC ending in `00` (1 in 256), or the length this unit's
+                        // function was seen with once.
+                        let odds = self.zero_odds(s, l, self.sender_at(g));
                         let shorter_strong =
                             shorter_boundary || self.exact_frame_at(g + l) || (odds.glitch_likelier && !longer_glitch);
                         // A lone `00` between two silences is noise after the frame, or its CRC's
