@@ -96,6 +96,42 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Grid> {
     Ok(grid)
 }
 
+/// The most cells an OpenDocument workbook may expand to when opened, the cells read and the
+/// used areas laid out together (all its tables: the reader expands every one at opening).
+/// Measured: ~66 bytes of memory per cell (a 1 048 003-row area of 3 columns, 207 MB), so this
+/// keeps an opening under ~210 MB; a register sheet of 263 168 rows × 5 columns is ~2.6 M.
+pub const MAX_ODS_CELLS: u64 = 3 << 20;
+/// The most cell text an OpenDocument workbook may expand to (repeated cells copy their text).
+pub const MAX_ODS_TEXT: u64 = 64 << 20;
+
+/// Refuses an OpenDocument workbook whose repeated rows and cells expand past
+/// [`MAX_ODS_CELLS`] or [`MAX_ODS_TEXT`], counted from its `content.xml` streamed (issue 39: an
+/// 873-byte workbook expanded past 17 GB while being opened).
+fn check_ods(path: &Path) -> anyhow::Result<()> {
+    use mbtap_device::profile::import::ods_size::parse_ods_size;
+    let Ok(file) = std::fs::File::open(path) else { return Ok(()) };
+    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(()) };
+    // Not an OpenDocument file: nothing to count here.
+    let Ok(content) = zip.by_name("content.xml") else { return Ok(()) };
+    let size = parse_ods_size(std::io::BufReader::new(content.take(MAX_UNPACKED_BYTES)))
+        .with_context(|| format!("{}: reading the sheet", path.display()))?;
+    let cells = size.cells_read.saturating_add(size.area_cells);
+    if cells > MAX_ODS_CELLS || size.text_bytes > MAX_ODS_TEXT {
+        let largest = size
+            .largest
+            .map(|(name, rows, cols)| format!(" (the largest, {name:?}: {rows} rows × {cols} columns)"))
+            .unwrap_or_default();
+        return Err(too_big(
+            path,
+            &format!(
+                "its repeated rows and cells expand to {cells} cells and {} bytes of text{largest}, over the {MAX_ODS_CELLS} cells and {MAX_ODS_TEXT} bytes read from an OpenDocument sheet",
+                size.text_bytes
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`], by its
 /// central directory (the sizes it declares; the reader stops at them).
 fn check_unpacked(path: &Path) -> anyhow::Result<()> {
@@ -189,6 +225,7 @@ fn read_xlsx_cells<RS: std::io::Read + std::io::Seek>(
 /// grid's bounds, or has no such sheet (the ones it has are named).
 pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
     check_unpacked(path)?;
+    check_ods(path)?;
     let mut wb = calamine::open_workbook_auto(path).with_context(|| format!("opening {}", path.display()))?;
     let names = wb.sheet_names();
     let name = match sheet {

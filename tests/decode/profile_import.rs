@@ -426,3 +426,64 @@ fn an_import_named_like_a_built_in_is_said_to_be_shadowed() {
     assert!(err.contains("also a built-in profile"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// An OpenDocument workbook of one table whose `rows` (the XML of its `table:table-row`s) follow
+/// a header row `Address | Name`, written to a temporary file.
+fn ods(tag: &str, rows: &str) -> tempfile_path::TempProfile {
+    use std::io::Write as _;
+    let content = format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<office:document-content xmlns:office="urn:oasis:names:tc:opendocument:xmlns:office:1.0" xmlns:table="urn:oasis:names:tc:opendocument:xmlns:table:1.0" xmlns:text="urn:oasis:names:tc:opendocument:xmlns:text:1.0" office:version="1.2"><office:body><office:spreadsheet><table:table table:name="Sheet1"><table:table-row><table:table-cell office:value-type="string"><text:p>Address</text:p></table:table-cell><table:table-cell office:value-type="string"><text:p>Name</text:p></table:table-cell></table:table-row>{rows}</table:table></office:spreadsheet></office:body></office:document-content>"#
+    );
+    let mut file = tempfile_path::TempProfile::new(tag);
+    file.path.set_extension("ods");
+    let mut z = zip::ZipWriter::new(std::fs::File::create(&file.path).unwrap());
+    let stored = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    z.start_file("mimetype", stored).unwrap();
+    z.write_all(b"application/vnd.oasis.opendocument.spreadsheet").unwrap();
+    z.start_file("META-INF/manifest.xml", stored).unwrap();
+    z.write_all(br#"<?xml version="1.0" encoding="UTF-8"?><manifest:manifest xmlns:manifest="urn:oasis:names:tc:opendocument:xmlns:manifest:1.0" manifest:version="1.2"><manifest:file-entry manifest:full-path="/" manifest:media-type="application/vnd.oasis.opendocument.spreadsheet"/><manifest:file-entry manifest:full-path="content.xml" manifest:media-type="text/xml"/></manifest:manifest>"#).unwrap();
+    z.start_file("content.xml", stored).unwrap();
+    z.write_all(content.as_bytes()).unwrap();
+    z.finish().unwrap();
+    file
+}
+
+/// A row holding register `address` named `name`.
+fn ods_row(address: u16, name: &str) -> String {
+    format!(
+        r#"<table:table-row><table:table-cell office:value-type="float" office:value="{address}"><text:p>{address}</text:p></table:table-cell><table:table-cell office:value-type="string"><text:p>{name}</text:p></table:table-cell></table:table-row>"#
+    )
+}
+
+/// Issue 39: a workbook of a few hundred bytes whose repeated empty rows and cells stand for 17
+/// billion cells between two values took the import past 17 GB (ended by the kernel, or 60 s
+/// and counting); it is refused by counting them from its XML, before the reader expands them —
+/// and a plain OpenDocument sheet still imports.
+#[test]
+fn regression_issue_39_an_ods_whose_repeats_expand_past_memory_is_refused_unexpanded() {
+    let filler = r#"<table:table-row table:number-rows-repeated="1048000"><table:table-cell table:number-columns-repeated="16000"/></table:table-row>"#;
+    let wide = r#"<table:table-row><table:table-cell table:number-columns-repeated="16000"/><table:table-cell office:value-type="string"><text:p>x</text:p></table:table-cell></table:table-row>"#;
+    let bomb = ods("bomb", &format!("{}{filler}{wide}", ods_row(100, "volts")));
+    let out_path = tempfile_path::TempProfile::new("bomb-out");
+    let out = run(&["profiles", "import", bomb.path.to_str().unwrap(), "-o", out_path.path.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("expand to") && err.contains("1048003 rows × 16001 columns"), "{err}");
+    assert!(!out_path.path.exists());
+
+    let plain = ods("plain", &format!("{}{}", ods_row(100, "volts"), ods_row(101, "amps")));
+    let out_path = tempfile_path::TempProfile::new("plain-out");
+    let out = run(&[
+        "profiles",
+        "import",
+        plain.path.to_str().unwrap(),
+        "-o",
+        out_path.path.to_str().unwrap(),
+        "--table",
+        "holding",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(&out_path.path).unwrap();
+    assert!(text.contains("volts") && text.contains("amps"), "{text}");
+}

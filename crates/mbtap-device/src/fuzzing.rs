@@ -209,6 +209,21 @@ pub fn sunspec(data: &[u8]) {
     }
 }
 
+/// Any bytes as an OpenDocument `content.xml`, counted: never a panic, and the counts agree with
+/// themselves (a table's area is never counted larger than all tables'; no text without cells).
+///
+/// # Panics
+/// When they do not: that is what the fuzzer looks for.
+pub fn ods_size(data: &[u8]) {
+    use crate::profile::import::ods_size::parse_ods_size;
+    if let Ok(s) = parse_ods_size(data) {
+        if let Some((_, rows, cols)) = &s.largest {
+            assert!(rows.saturating_mul(*cols) <= s.area_cells, "{s:?}");
+        }
+        assert!(s.text_bytes == 0 || s.cells_read > 0, "{s:?}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     /// The fuzz target's seed (`fuzz/seeds/export_escape/hostile`): device with U+2028 and

@@ -10,6 +10,7 @@ pub mod ha_entry;
 pub mod ha_yaml;
 pub mod home_assistant;
 pub mod notation;
+pub mod ods_size;
 pub mod sheet;
 
 use std::collections::BTreeMap;
