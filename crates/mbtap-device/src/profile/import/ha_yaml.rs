@@ -8,9 +8,9 @@
 
 use std::fmt;
 
-use serde::de::{self, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
+use serde::de::{self, Deserializer, EnumAccess, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
-use super::ha_entry::{Entry, Read, Scalar};
+use super::ha_entry::{Entry, Read, Scalar, skip_tagged};
 
 /// A hub's list of `kind` entries, each converted as it is read; anything else where the list
 /// belongs holds none.
@@ -53,6 +53,9 @@ impl<'de> de::DeserializeSeed<'de> for EntriesOf {
             }
             fn visit_unit<E>(self) -> Result<Vec<Read>, E> {
                 Ok(Vec::new())
+            }
+            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Vec<Read>, A::Error> {
+                skip_tagged(data).map(|()| Vec::new())
             }
         }
         d.deserialize_any(V(self.0))
@@ -172,6 +175,9 @@ impl<'de> de::Deserialize<'de> for Level {
             }
             fn visit_unit<E>(self) -> Result<Level, E> {
                 Ok(Level::default())
+            }
+            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Level, A::Error> {
+                skip_tagged(data).map(|()| Level::default())
             }
         }
         d.deserialize_any(V)

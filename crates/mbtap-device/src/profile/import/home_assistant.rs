@@ -6,6 +6,7 @@
 use super::ha_yaml::{Level, OTHER_PLATFORMS, hubs};
 
 use super::Imported;
+use super::ha_entry::Read;
 
 /// Errors that stop the import as a whole (an entry that cannot be read is a [`Problem`]).
 #[derive(Debug, thiserror::Error)]
@@ -94,11 +95,13 @@ pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u
     if hubs.is_empty() {
         return Err(HaError::NoHubs);
     }
-    let units: std::collections::BTreeSet<u64> =
-        hubs.iter().flat_map(Level::reads).map(|r| r.unit.unwrap_or(0)).collect();
+    // An entry names its device, else its hub does, else it is HA's default 0 — unless it is no
+    // entry at all (a tagged node, a scalar): then it names none, and is said with any device.
+    let unit_of = |r: &Read| r.unit.or_else(|| r.point.is_ok().then_some(0));
+    let units: std::collections::BTreeSet<u64> = hubs.iter().flat_map(Level::reads).filter_map(unit_of).collect();
     let chosen = match (unit, units.len()) {
         (Some(u), _) => u64::from(u),
-        (None, 1) => units.first().copied().unwrap_or(0),
+        (None, 0 | 1) => units.first().copied().unwrap_or(0),
         (None, _) => {
             let all: Vec<String> = units.iter().map(u64::to_string).collect();
             return Err(HaError::SeveralUnits(all.join(", ")));
@@ -111,7 +114,7 @@ pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u
         .map(|(_, k)| k)
         .collect();
     let mut out = Imported::default();
-    for r in hubs.into_iter().flat_map(Level::into_reads).filter(|r| r.unit.unwrap_or(0) == chosen) {
+    for r in hubs.into_iter().flat_map(Level::into_reads).filter(|r| unit_of(r).is_none_or(|u| u == chosen)) {
         match r.point {
             Ok(p) => out.add(p),
             Err(problem) => out.problems.push(problem),
@@ -240,5 +243,33 @@ modbus:
         let (r, unit) = parse_home_assistant(&bomb, None).unwrap();
         assert_eq!((unit, r.points.len()), (1, 1));
         assert_eq!(r.points[0].name, "reg_100");
+    }
+
+    /// Tags as the round-4 probe writes them: a hub named by a Python object, a `!secret` host,
+    /// a `!lambda` sensor name, an `!include`d entry.
+    const TAGGED: &str = r"
+modbus:
+  - name: !!python/object/apply:os.system ['id']
+    type: tcp
+    host: !secret host
+    port: 502
+    sensors:
+      - name: !lambda 'return 1;'
+        slave: 1
+        address: 100
+        input_type: holding
+      - !include other.yaml
+";
+
+    /// Issue 39 (the probe's `tags.yaml`): the typed reader refused the whole file — "invalid
+    /// type: enum, expected a scalar" — over one tagged name, where the tree it replaced took a
+    /// tagged node as no value. Tags are read past as plain data, nothing resolved or run; the
+    /// `!include`d entry names no device, so it neither counts as one nor is lost.
+    #[test]
+    fn regression_issue_39_tagged_nodes_are_read_past_as_no_value() {
+        let (r, unit) = parse_home_assistant(TAGGED, None).unwrap();
+        assert_eq!((unit, r.points.len(), r.problems.len()), (1, 1, 1), "{r:?}");
+        assert_eq!((r.points[0].address, r.points[0].name.as_str()), (100, "reg_100"));
+        assert!(r.problems[0].at.starts_with("sensors[1]"), "{:?}", r.problems);
     }
 }
