@@ -150,9 +150,16 @@ pub struct Entry {
     pub offset: Option<Scalar>,
     pub slave: Option<Scalar>,
     pub device_address: Option<Scalar>,
+    /// Given as something other than a mapping of keys (a tagged node, a list, a scalar).
+    pub not_keys: bool,
 }
 
 impl Entry {
+    /// An entry given as something other than a mapping of keys.
+    fn not_keys() -> Self {
+        Self { not_keys: true, ..Self::default() }
+    }
+
     /// The unit this entry names (`device_address` first, then `slave`).
     #[must_use]
     pub fn unit(&self) -> Option<u64> {
@@ -200,28 +207,28 @@ impl<'de> de::Deserialize<'de> for Entry {
             // Not a mapping: an entry with nothing in it (the import says what is missing).
             fn visit_seq<A: SeqAccess<'de>>(self, mut s: A) -> Result<Entry, A::Error> {
                 while s.next_element::<IgnoredAny>()?.is_some() {}
-                Ok(Entry::default())
+                Ok(Entry::not_keys())
             }
             fn visit_str<E>(self, _: &str) -> Result<Entry, E> {
-                Ok(Entry::default())
+                Ok(Entry::not_keys())
             }
             fn visit_bool<E>(self, _: bool) -> Result<Entry, E> {
-                Ok(Entry::default())
+                Ok(Entry::not_keys())
             }
             fn visit_u64<E>(self, _: u64) -> Result<Entry, E> {
-                Ok(Entry::default())
+                Ok(Entry::not_keys())
             }
             fn visit_i64<E>(self, _: i64) -> Result<Entry, E> {
-                Ok(Entry::default())
+                Ok(Entry::not_keys())
             }
             fn visit_f64<E>(self, _: f64) -> Result<Entry, E> {
-                Ok(Entry::default())
+                Ok(Entry::not_keys())
             }
             fn visit_unit<E>(self) -> Result<Entry, E> {
-                Ok(Entry::default())
+                Ok(Entry::not_keys())
             }
             fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Entry, A::Error> {
-                skip_tagged(data).map(|()| Entry::default())
+                skip_tagged(data).map(|()| Entry::not_keys())
             }
         }
         d.deserialize_any(V)
@@ -233,6 +240,12 @@ fn text(v: Option<&Scalar>) -> Option<String> {
 }
 
 fn to_point(kind: &str, e: &Entry, name: &str) -> Result<Point, (&'static str, String)> {
+    if e.not_keys {
+        return Err((
+            "entry",
+            "not a mapping of keys (a tagged node such as !include, a list or a value): not read".to_owned(),
+        ));
+    }
     let address =
         e.address.as_ref().and_then(Scalar::as_u64).ok_or(("address", "missing or not a number".to_owned()))?;
     let address = u16::try_from(address).map_err(|_| ("address", format!("{address} is past 65535")))?;

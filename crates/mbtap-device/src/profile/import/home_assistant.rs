@@ -232,7 +232,7 @@ modbus:
         assert_eq!(unit, 7);
         assert_eq!(r.points.len(), 1);
         assert_eq!(r.problems.len(), 1, "{:?}", r.problems);
-        assert!(r.problems[0].why.contains("missing"), "{:?}", r.problems);
+        assert!(r.problems[0].why.contains("not a mapping of keys"), "{:?}", r.problems);
         let mut bomb =
             String::from("modbus:\n  - name: hub\n    x0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n");
         for i in 1..10 {
@@ -271,5 +271,6 @@ modbus:
         assert_eq!((unit, r.points.len(), r.problems.len()), (1, 1, 1), "{r:?}");
         assert_eq!((r.points[0].address, r.points[0].name.as_str()), (100, "reg_100"));
         assert!(r.problems[0].at.starts_with("sensors[1]"), "{:?}", r.problems);
+        assert!(r.problems[0].why.contains("tagged node such as !include"), "{:?}", r.problems);
     }
 }
