@@ -107,10 +107,8 @@ pub const MAX_ODS_TEXT: u64 = 64 << 20;
 /// Refuses an OpenDocument workbook whose repeated rows and cells expand past
 /// [`MAX_ODS_CELLS`] or [`MAX_ODS_TEXT`], counted from its `content.xml` streamed (issue 39: an
 /// 873-byte workbook expanded past 17 GB while being opened).
-fn check_ods(path: &Path) -> anyhow::Result<()> {
+fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipArchive<R>) -> anyhow::Result<()> {
     use mbtap_device::profile::import::ods_size::parse_ods_size;
-    let Ok(file) = std::fs::File::open(path) else { return Ok(()) };
-    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(()) };
     // Not an OpenDocument file: nothing to count here.
     let Ok(content) = zip.by_name("content.xml") else { return Ok(()) };
     let size = parse_ods_size(std::io::BufReader::new(content.take(MAX_UNPACKED_BYTES)))
@@ -132,12 +130,20 @@ fn check_ods(path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`], by its
-/// central directory (the sizes it declares; the reader stops at them).
-fn check_unpacked(path: &Path) -> anyhow::Result<()> {
+/// Refuses a zip-based workbook before the reader opens it: one that unpacks past
+/// [`MAX_UNPACKED_BYTES`], or an OpenDocument one whose repeats expand past its bounds
+/// ([`check_ods`]).
+fn check_zip(path: &Path) -> anyhow::Result<()> {
     let Ok(file) = std::fs::File::open(path) else { return Ok(()) };
     // Not a zip (XLS is not): nothing to check here.
     let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(()) };
+    check_unpacked(path, &mut zip)?;
+    check_ods(path, &mut zip)
+}
+
+/// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`], by its
+/// central directory (the sizes it declares; the reader stops at them).
+fn check_unpacked<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipArchive<R>) -> anyhow::Result<()> {
     let mut total = 0u64;
     for i in 0..zip.len() {
         let size = zip.by_index_raw(i).map_or(0, |f| f.size());
@@ -224,8 +230,7 @@ fn read_xlsx_cells<RS: std::io::Read + std::io::Seek>(
 /// The workbook cannot be opened, unpacks to more than [`MAX_UNPACKED_BYTES`], is over the
 /// grid's bounds, or has no such sheet (the ones it has are named).
 pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
-    check_unpacked(path)?;
-    check_ods(path)?;
+    check_zip(path)?;
     let mut wb = calamine::open_workbook_auto(path).with_context(|| format!("opening {}", path.display()))?;
     let names = wb.sheet_names();
     let name = match sheet {

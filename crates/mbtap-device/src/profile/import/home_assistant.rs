@@ -95,8 +95,9 @@ pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u
     if hubs.is_empty() {
         return Err(HaError::NoHubs);
     }
-    // An entry names its device, else its hub does, else it is HA's default 0 — unless it is no
-    // entry at all (a tagged node, a scalar): then it names none, and is said with any device.
+    // An entry names its device, else its hub does, else it is HA's default 0 — unless it could
+    // not be read and names none (a tagged node, a scalar, a mapping without its address): then
+    // it counts as no device, and is said with whichever device is chosen.
     let unit_of = |r: &Read| r.unit.or_else(|| r.point.is_ok().then_some(0));
     let units: std::collections::BTreeSet<u64> = hubs.iter().flat_map(Level::reads).filter_map(unit_of).collect();
     let chosen = match (unit, units.len()) {

@@ -125,7 +125,9 @@ pub fn parse_ods_size<R: BufRead>(xml: R) -> Result<OdsSize, OdsSizeError> {
                     });
                 } else if table.is_some() && e.name().as_ref() == b"table:table-row" {
                     row = Some(Row { repeats: repeats(&e, b"table:number-rows-repeated"), ..Row::default() });
-                } else if e.name().as_ref() == b"table:table" {
+                } else if table.is_none() && e.name().as_ref() == b"table:table" {
+                    // A table inside a table is read by the workbook reader as rows of the outer
+                    // one, until the first end of a table: counted so too.
                     let name = e
                         .attributes()
                         .flatten()
@@ -147,18 +149,22 @@ pub fn parse_ods_size<R: BufRead>(xml: R) -> Result<OdsSize, OdsSizeError> {
                     c.text = c.text.saturating_add(u64::try_from(t.len()).unwrap_or(u64::MAX));
                 }
             }
-            Event::End(_) => {
+            // Ended by name: a column declaration, a header-row group or a row group ends inside
+            // a table without ending it.
+            Event::End(e) => {
                 if let Some(c) = cell.as_mut() {
                     if c.depth > 0 {
                         c.depth -= 1;
                     } else if let (Some(c), Some(r)) = (cell.take(), row.as_mut()) {
                         end_cell(&mut size, r, &c);
                     }
-                } else if let Some(r) = row.take() {
-                    if let Some(t) = table.as_mut() {
+                } else if e.name().as_ref() == b"table:table-row" {
+                    if let (Some(r), Some(t)) = (row.take(), table.as_mut()) {
                         end_row(t, &r);
                     }
-                } else if let Some(t) = table.take() {
+                } else if e.name().as_ref() == b"table:table"
+                    && let Some(t) = table.take()
+                {
                     end_table(&mut size, t);
                 }
             }
@@ -271,5 +277,21 @@ mod tests {
         assert_eq!(s.area_cells, u64::MAX);
         let e = parse_ods_size(&b"<a><b></c"[..]).err();
         assert!(e.is_some_and(|e| e.to_string().starts_with("content.xml, byte ")));
+    }
+
+    /// Review of issue 39's count: any end tag inside a table ended it — the column
+    /// declarations spreadsheet programs write before the rows, or a header-row group, hid every
+    /// row after them from the count. Rows end at their own end tag, tables at theirs.
+    #[test]
+    fn column_declarations_and_row_groups_do_not_end_the_count() {
+        let rows = format!(
+            r#"<table:table-column table:number-columns-repeated="3"/><table:table-header-rows>{HEADER}</table:table-header-rows>{EMPTY_PLAIN}{VALUE_ROW}"#
+        );
+        let s = parse_ods_size(content(&rows).as_bytes()).unwrap_or_default();
+        assert_eq!(s.area_cells, (1 + 1_048_000 + 1) * 2);
+        // A table opened inside a table is more rows of the outer one.
+        let nested = format!(r#"{HEADER}<table:table table:name="In">{EMPTY_PLAIN}{VALUE_ROW}</table:table>"#);
+        let s = parse_ods_size(content(&nested).as_bytes()).unwrap_or_default();
+        assert_eq!((s.tables, s.area_cells), (1, (1 + 1_048_000 + 1) * 2));
     }
 }
