@@ -156,7 +156,7 @@ pub fn export_escape(data: &[u8]) -> usize {
             assert!(v.is_ok(), "TOML: {v:?}\n{}", e.text);
             v.ok().and_then(|v| serde_json::to_value(v).ok()).unwrap_or_default()
         } else {
-            let v = serde_norway::from_str::<serde_json::Value>(&e.text);
+            let v = serde_saphyr::from_str::<serde_json::Value>(&e.text);
             assert!(v.is_ok(), "YAML: {v:?}\n{}", e.text);
             v.unwrap_or_default()
         };

@@ -4,7 +4,7 @@
 
 use std::fmt;
 
-use serde::de::{self, Deserializer, EnumAccess, IgnoredAny, MapAccess, SeqAccess, VariantAccess as _, Visitor};
+use serde::de::{self, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
 use super::{Point, Problem};
 use crate::profile::Table;
@@ -22,7 +22,7 @@ pub enum Scalar {
 }
 
 impl Scalar {
-    /// A non-negative integer (as `serde_norway::Value::as_u64`).
+    /// A non-negative integer (a signed one too, when it is not negative).
     #[must_use]
     pub fn as_u64(&self) -> Option<u64> {
         match *self {
@@ -32,7 +32,7 @@ impl Scalar {
         }
     }
 
-    /// Any number (as `serde_norway::Value::as_f64`).
+    /// Any number, an integer as the float nearest it.
     #[must_use]
     #[allow(clippy::cast_precision_loss)] // YAML integers given where a float is read.
     pub fn as_f64(&self) -> Option<f64> {
@@ -58,14 +58,20 @@ impl Scalar {
     }
 }
 
-/// A tagged node (`!secret host`, `!lambda …`, `!include other.yaml`, `!!python/object …`), which
-/// the YAML reader hands over as an enum: read past, its content never looked at — a tag is
-/// plain data to the import, nothing is resolved or run (the issue-39 probe's `tags.yaml`: the
-/// typed reader refused the whole file over one tagged name, where the tree it replaced took
-/// the node as no value).
-pub(super) fn skip_tagged<'de, A: EnumAccess<'de>>(data: A) -> Result<(), A::Error> {
-    let (IgnoredAny, variant) = data.variant::<IgnoredAny>()?;
-    variant.newtype_variant::<IgnoredAny>().map(|_| ())
+/// A node's value, or `other` when it carries an application tag (`!secret host`, `!lambda …`,
+/// `!include other.yaml`, `!!python/object …`): a tag is plain data to the import — nothing is
+/// resolved or run — and its content is not the value Home Assistant would see (a secret's
+/// name is not the secret), so the node counts as no value (the issue-39 probe's `tags.yaml`).
+/// The core schema's own tags (`!!str`, `!!int`, …, and the non-specific `!`) only type it.
+pub(super) fn untagged<T>(node: serde_saphyr::Tagged<T>, other: impl FnOnce() -> T) -> T {
+    // YAML 1.2 §10.3 (core schema) and the failsafe/JSON schemas' tags, as the parser resolves
+    // `!!name` to `tag:yaml.org,2002:name`.
+    const CORE: [&str; 8] = ["str", "int", "float", "bool", "null", "map", "seq", "binary"];
+    let core = |t: &str| t == "!" || t.strip_prefix("tag:yaml.org,2002:").is_some_and(|n| CORE.contains(&n));
+    match node.1 {
+        Some(tag) if !core(&tag) => other(),
+        _ => node.0,
+    }
 }
 
 impl<'de> de::Deserialize<'de> for Scalar {
@@ -96,9 +102,6 @@ impl<'de> de::Deserialize<'de> for Scalar {
             }
             fn visit_unit<E>(self) -> Result<Scalar, E> {
                 Ok(Scalar::Other)
-            }
-            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Scalar, A::Error> {
-                skip_tagged(data).map(|()| Scalar::Other)
             }
             fn visit_seq<A: SeqAccess<'de>>(self, mut s: A) -> Result<Scalar, A::Error> {
                 while s.next_element::<IgnoredAny>()?.is_some() {}
@@ -156,7 +159,7 @@ pub struct Entry {
 
 impl Entry {
     /// An entry given as something other than a mapping of keys.
-    fn not_keys() -> Self {
+    pub(super) fn not_keys() -> Self {
         Self { not_keys: true, ..Self::default() }
     }
 
@@ -200,7 +203,7 @@ impl<'de> de::Deserialize<'de> for Entry {
                             continue;
                         }
                     };
-                    *slot = Some(m.next_value()?);
+                    *slot = Some(untagged(m.next_value()?, || Scalar::Other));
                 }
                 Ok(e)
             }
@@ -226,9 +229,6 @@ impl<'de> de::Deserialize<'de> for Entry {
             }
             fn visit_unit<E>(self) -> Result<Entry, E> {
                 Ok(Entry::not_keys())
-            }
-            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Entry, A::Error> {
-                skip_tagged(data).map(|()| Entry::not_keys())
             }
         }
         d.deserialize_any(V)

@@ -1,16 +1,18 @@
 //! Home Assistant's `modbus:` YAML read straight into what the import uses (issue 39): the hubs'
 //! `sensors`, `binary_sensors` and `switches` with the dozen keys an entry may carry, everything
-//! else skipped as it is read. No tree of the whole document is built: 200 000 sensors took
-//! 540 MB as a `serde_norway::Value` (about 30 bytes per byte of YAML).
+//! else skipped as it is read. No tree of the whole document is built (200 000 sensors took
+//! 540 MB as a `serde_norway::Value`, about 30 bytes per byte of YAML), nor a list of its events
+//! (serde_norway's reader held 201 MB of them for the same file): serde-saphyr streams.
 //!
 //! The shapes a user has: a whole `configuration.yaml` (a `modbus:` key among others), the list
 //! of hubs an `!include` names, or one hub (a mapping with entry lists).
 
 use std::fmt;
 
-use serde::de::{self, Deserializer, EnumAccess, IgnoredAny, MapAccess, SeqAccess, Visitor};
+use serde::de::{self, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
+use serde_saphyr::Tagged;
 
-use super::ha_entry::{Entry, Read, Scalar, skip_tagged};
+use super::ha_entry::{Entry, Read, Scalar, untagged};
 
 /// A hub's list of `kind` entries, each converted as it is read; anything else where the list
 /// belongs holds none.
@@ -27,8 +29,8 @@ impl<'de> de::DeserializeSeed<'de> for EntriesOf {
             }
             fn visit_seq<A: SeqAccess<'de>>(self, mut s: A) -> Result<Vec<Read>, A::Error> {
                 let mut out = Vec::new();
-                while let Some(e) = s.next_element::<Entry>()? {
-                    out.push(Read::of(self.0, out.len(), &e));
+                while let Some(e) = s.next_element::<Tagged<Entry>>()? {
+                    out.push(Read::of(self.0, out.len(), &untagged(e, Entry::not_keys)));
                 }
                 Ok(out)
             }
@@ -53,9 +55,6 @@ impl<'de> de::DeserializeSeed<'de> for EntriesOf {
             }
             fn visit_unit<E>(self) -> Result<Vec<Read>, E> {
                 Ok(Vec::new())
-            }
-            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Vec<Read>, A::Error> {
-                skip_tagged(data).map(|()| Vec::new())
             }
         }
         d.deserialize_any(V(self.0))
@@ -125,10 +124,10 @@ impl<'de> de::Deserialize<'de> for Level {
                             (l.hub, l.binary_sensors) = (true, m.next_value_seed(EntriesOf("binary_sensors"))?);
                         }
                         "switches" => (l.hub, l.switches) = (true, m.next_value_seed(EntriesOf("switches"))?),
-                        "slave" => l.slave = Some(m.next_value()?),
-                        "device_address" => l.device_address = Some(m.next_value()?),
+                        "slave" => l.slave = Some(untagged(m.next_value()?, || Scalar::Other)),
+                        "device_address" => l.device_address = Some(untagged(m.next_value()?, || Scalar::Other)),
                         "modbus" => {
-                            let v: Level = m.next_value()?;
+                            let v = untagged(m.next_value::<Tagged<Level>>()?, Level::default);
                             l.modbus = Some(match v.list {
                                 Some(hubs) => hubs,
                                 None if v.mapping => vec![v],
@@ -153,8 +152,8 @@ impl<'de> de::Deserialize<'de> for Level {
             }
             fn visit_seq<A: SeqAccess<'de>>(self, mut s: A) -> Result<Level, A::Error> {
                 let mut list = Vec::new();
-                while let Some(x) = s.next_element()? {
-                    list.push(x);
+                while let Some(x) = s.next_element::<Tagged<Level>>()? {
+                    list.push(untagged(x, Level::default));
                 }
                 Ok(Level { list: Some(list), ..Level::default() })
             }
@@ -175,9 +174,6 @@ impl<'de> de::Deserialize<'de> for Level {
             }
             fn visit_unit<E>(self) -> Result<Level, E> {
                 Ok(Level::default())
-            }
-            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Level, A::Error> {
-                skip_tagged(data).map(|()| Level::default())
             }
         }
         d.deserialize_any(V)
