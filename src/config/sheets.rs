@@ -23,7 +23,8 @@ pub const MAX_FILE_BYTES: u64 = 64 << 20;
 pub const MAX_UNPACKED_BYTES: u64 = 128 << 20;
 
 /// The largest Home Assistant YAML read (32 MiB: twice a file naming every address of two tables;
-/// a real `modbus:` configuration is kilobytes). The YAML reader's tree takes ~30 bytes per byte.
+/// a real `modbus:` configuration is kilobytes). The import holds ~6 bytes per byte of YAML (the
+/// reader streams; the entries read and their problems remain): 193 MB for a 32.9 MB file.
 pub const MAX_YAML_BYTES: u64 = 32 << 20;
 
 /// A Home Assistant YAML file, refused unread past [`MAX_YAML_BYTES`] (issue 39: a 200 MB file of
@@ -130,6 +131,52 @@ fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipAr
     Ok(())
 }
 
+/// The most cells an XLS workbook may lay out as it is opened: every sheet's value range and
+/// formula range, each from its first used cell to its last, and what a sheet's `Dimensions`
+/// record reserves. A register sheet of 65 536 rows × 40 columns is 2.6 M.
+pub const MAX_XLS_CELLS: u64 = 3 << 20;
+
+/// The compound-file signature an XLS starts with ([MS-CFB] 2.2, the header's `Signature`).
+const CFB_MAGIC: [u8; 8] = [0xD0, 0xCF, 0x11, 0xE0, 0xA1, 0xB1, 0x1A, 0xE1];
+
+/// Refuses an XLS workbook whose sheets lay out more than [`MAX_XLS_CELLS`], or whose records
+/// the reader would crash on, counted from its `Workbook` stream (issue 39: cells at A1 and
+/// IV65536 of a 5.6 kB file took 1.05 GB; a `Dimensions` record whose last row comes before
+/// its first aborted the process). Not a compound file: nothing to check here.
+fn check_xls(path: &Path) -> anyhow::Result<()> {
+    use mbtap_device::profile::import::xls_size::parse_xls_size;
+    let Ok(mut file) = std::fs::File::open(path) else { return Ok(()) };
+    let mut magic = [0u8; 8];
+    if file.read_exact(&mut magic).is_err() || magic != CFB_MAGIC {
+        return Ok(());
+    }
+    let len = file.metadata().map_or(0, |m| m.len());
+    let mut container = cfb::CompoundFile::open(std::io::BufReader::new(file))
+        .with_context(|| format!("{}: reading the XLS compound file", path.display()))?;
+    // The stream the reader opens: `Workbook` (BIFF8), else `Book` (BIFF5).
+    let Some(name) = ["/Workbook", "/Book"].into_iter().find(|n| container.is_stream(n)) else { return Ok(()) };
+    let mut stream = Vec::new();
+    container
+        .open_stream(name)
+        .and_then(|s| s.take(len).read_to_end(&mut stream))
+        .with_context(|| format!("{}: reading the XLS workbook stream", path.display()))?;
+    let size = parse_xls_size(&stream).with_context(|| format!("{}: not a readable XLS workbook", path.display()))?;
+    if size.cells > MAX_XLS_CELLS || size.reserved > MAX_XLS_CELLS {
+        let largest = size
+            .largest
+            .map(|(n, rows, cols)| format!(" (the largest, sheet {}: {rows} rows × {cols} columns)", n + 1))
+            .unwrap_or_default();
+        return Err(too_big(
+            path,
+            &format!(
+                "its sheets lay out {} cells from their first used cell to their last{largest}, and reserve {} for one sheet, over the {MAX_XLS_CELLS} read from an XLS workbook",
+                size.cells, size.reserved
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Refuses a zip-based workbook before the reader opens it: one that unpacks past
 /// [`MAX_UNPACKED_BYTES`], or an OpenDocument one whose repeats expand past its bounds
 /// ([`check_ods`]).
@@ -183,21 +230,18 @@ fn cell_ref_text(d: &DataRef<'_>) -> String {
     }
 }
 
-/// An XLSX sheet read cell by cell into rows: cells past [`MAX_COLUMNS`] counted, a row past
-/// [`MAX_ROWS`] refused — nothing is allocated for the empty space between cells.
-fn read_xlsx_cells<RS: std::io::Read + std::io::Seek>(
-    wb: &mut calamine::Xlsx<RS>,
-    name: &str,
+/// A sheet read cell by cell into rows (`next` gives each cell's row, column and text): cells
+/// past [`MAX_COLUMNS`] counted, a row past [`MAX_ROWS`] refused — nothing is allocated for the
+/// empty space between cells.
+fn grid_from_cells(
     path: &Path,
+    mut next: impl FnMut() -> anyhow::Result<Option<(u32, u32, String)>>,
 ) -> anyhow::Result<Grid> {
-    let mut cells =
-        wb.worksheet_cells_reader(name).with_context(|| format!("{}: reading sheet {name:?}", path.display()))?;
     let mut grid = Grid::new();
     let mut row: Vec<String> = Vec::new();
     let mut at_row = 0usize;
     let mut cut = 0u64;
-    while let Some(cell) = cells.next_cell().with_context(|| format!("{}: reading sheet {name:?}", path.display()))? {
-        let (r, c) = cell.get_position();
+    while let Some((r, c, text)) = next()? {
         let (r, c) = (r as usize, c as usize);
         if r >= MAX_ROWS {
             return Err(too_big(path, &format!("a cell at row {} (over {MAX_ROWS} rows)", r + 1)));
@@ -217,7 +261,7 @@ fn read_xlsx_cells<RS: std::io::Read + std::io::Seek>(
         if row.len() <= c {
             row.resize(c + 1, String::new());
         }
-        row[c] = cell_ref_text(cell.get_value());
+        row[c] = text;
     }
     grid.push_row(row.drain(..)).map_err(|e| too_big(path, &e.to_string()))?;
     grid.cut_cells += cut;
@@ -231,6 +275,24 @@ fn read_xlsx_cells<RS: std::io::Read + std::io::Seek>(
 /// grid's bounds, or has no such sheet (the ones it has are named).
 pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
     check_zip(path)?;
+    check_xls(path)?;
+    // The workbook reader indexes some records without checking their length (an XLS `BOF` or
+    // `CodePage` of fewer than 2 bytes panics it): what the checks above do not cover is still
+    // an error about this file, not a crash. Its panic message is kept out of the output.
+    let quiet = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let read = std::panic::catch_unwind(|| read_sheet(path, sheet));
+    std::panic::set_hook(quiet);
+    read.unwrap_or_else(|_| {
+        Err(anyhow::anyhow!(
+            "{}: the workbook reader failed on a malformed record; open the file in a spreadsheet and save it again, or export the register table as CSV",
+            path.display()
+        ))
+    })
+}
+
+/// [`read_workbook`] past its checks.
+fn read_sheet(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
     let mut wb = calamine::open_workbook_auto(path).with_context(|| format!("opening {}", path.display()))?;
     let names = wb.sheet_names();
     let name = match sheet {
@@ -241,11 +303,28 @@ pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
             .with_context(|| format!("{}: no sheet {s:?} (it has: {})", path.display(), names.join(", ")))?,
         None => names.first().cloned().with_context(|| format!("{}: no sheets", path.display()))?,
     };
-    if let calamine::Sheets::Xlsx(x) = &mut wb {
-        return read_xlsx_cells(x, &name, path);
+    let reading = || format!("{}: reading sheet {name:?}", path.display());
+    // XLSX and XLSB cell by cell: a cell at XFD1048576 costs one cell, not the dense range of
+    // 17 billion the range reader lays out (a 1.6 kB XLSX aborted the process on it).
+    match &mut wb {
+        calamine::Sheets::Xlsx(x) => {
+            let mut cells = x.worksheet_cells_reader(&name).with_context(reading)?;
+            return grid_from_cells(path, || {
+                let cell = cells.next_cell().with_context(reading)?;
+                Ok(cell.map(|c| (c.get_position().0, c.get_position().1, cell_ref_text(c.get_value()))))
+            });
+        }
+        calamine::Sheets::Xlsb(x) => {
+            let mut cells = x.worksheet_cells_reader(&name).with_context(reading)?;
+            return grid_from_cells(path, || {
+                let cell = cells.next_cell().with_context(reading)?;
+                Ok(cell.map(|c| (c.get_position().0, c.get_position().1, cell_ref_text(c.get_value()))))
+            });
+        }
+        _ => {}
     }
-    // XLS, XLSB and ODS have no cell-by-cell reader: their range is read whole (an XLS is at
-    // most 65 536 × 256 cells; ODS and XLSB are bounded by what they unpack to, checked above).
+    // XLS and ODS have no cell-by-cell reader: their range is read whole, bounded by what
+    // their records lay out (counted above, before opening).
     let range = wb.worksheet_range(&name).with_context(|| format!("{}: reading sheet {name:?}", path.display()))?;
     // The range starts at its first used cell; pad so rows and columns are the sheet's own.
     let (row0, col0) = range.start().map_or((0, 0), |(r, c)| (r as usize, c as usize));

@@ -487,3 +487,205 @@ fn regression_issue_39_an_ods_whose_repeats_expand_past_memory_is_refused_unexpa
     let text = std::fs::read_to_string(&out_path.path).unwrap();
     assert!(text.contains("volts") && text.contains("amps"), "{text}");
 }
+
+/// A BIFF8 record: type, size, data ([MS-XLS] 2.1.4).
+fn biff(typ: u16, data: &[u8]) -> Vec<u8> {
+    let mut v = typ.to_le_bytes().to_vec();
+    v.extend(u16::try_from(data.len()).unwrap().to_le_bytes());
+    v.extend(data);
+    v
+}
+
+/// `BOF` of BIFF8 globals (`dt` 0x0005) or a worksheet (0x0010), the rest of its 16 bytes 0.
+fn bof(dt: u16) -> Vec<u8> {
+    let mut d = 0x0600u16.to_le_bytes().to_vec();
+    d.extend(dt.to_le_bytes());
+    d.resize(16, 0);
+    biff(0x0809, &d)
+}
+
+/// `Label` at (row, col): row, column, format index 0, an 8-bit string (length, flags 0, bytes).
+fn label(row: u16, col: u16, text: &str) -> Vec<u8> {
+    let mut d = [row.to_le_bytes(), col.to_le_bytes(), [0, 0]].concat();
+    d.extend(u16::try_from(text.len()).unwrap().to_le_bytes());
+    d.push(0);
+    d.extend(text.as_bytes());
+    biff(0x0204, &d)
+}
+
+/// `Number` at (row, col): row, column, format index 0, the f64.
+fn number(row: u16, col: u16, v: f64) -> Vec<u8> {
+    let mut d = [row.to_le_bytes(), col.to_le_bytes(), [0, 0]].concat();
+    d.extend(v.to_le_bytes());
+    biff(0x0203, &d)
+}
+
+/// An XLS workbook (a compound file holding a `Workbook` stream) whose globals start with
+/// `globals` and name one sheet "regs" holding `Address | Name`, `100 | volts`, then `cells`.
+fn xls(tag: &str, globals: &[u8], cells: &[Vec<u8>]) -> tempfile_path::TempProfile {
+    use std::io::Write as _;
+    let eof = biff(0x000A, &[]);
+    // BoundSheet8: the sheet's offset, visible, a worksheet, a 4-character 8-bit name.
+    let bound = |pos: u32| biff(0x0085, &[&pos.to_le_bytes()[..], &[0, 0, 4, 0], b"regs"].concat());
+    let head = [bof(0x0005), globals.to_vec()].concat();
+    let pos = u32::try_from(head.len() + bound(0).len() + eof.len()).unwrap();
+    let mut stream = [head, bound(pos), eof.clone(), bof(0x0010)].concat();
+    for c in
+        [label(0, 0, "Address"), label(0, 1, "Name"), number(1, 0, 100.0), label(1, 1, "volts")].iter().chain(cells)
+    {
+        stream.extend(c);
+    }
+    stream.extend(eof);
+    let mut file = tempfile_path::TempProfile::new(tag);
+    file.path.set_extension("xls");
+    let mut cfb = cfb::create(&file.path).unwrap();
+    cfb.create_stream("/Workbook").unwrap().write_all(&stream).unwrap();
+    cfb.flush().unwrap();
+    file
+}
+
+/// Issue 39: XLS workbooks of a few kilobytes — cells at A1 and IV65536 (the reader lays out
+/// the 16.7 M cells between them: 1.05 GB), a `Dimensions` record whose last row comes before
+/// its first (the reader reserved ~2³² rows and the process aborted), a `BOF` too short to
+/// read (the reader panicked) — are refused saying why, and a plain one still imports.
+#[test]
+fn regression_issue_39_xls_workbooks_the_reader_would_blow_up_on_are_refused() {
+    let import = |f: &tempfile_path::TempProfile| {
+        let out_path = tempfile_path::TempProfile::new("xls-out");
+        let out = run(&[
+            "profiles",
+            "import",
+            f.path.to_str().unwrap(),
+            "-o",
+            out_path.path.to_str().unwrap(),
+            "--table",
+            "holding",
+        ]);
+        let text = std::fs::read_to_string(&out_path.path).unwrap_or_default();
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned(), text)
+    };
+    let (code, err, text) = import(&xls("plain", &[], &[]));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(text.contains("volts"), "{text}");
+
+    let (code, err, _) = import(&xls("far", &[], &[number(65_535, 255, 1.0)]));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("16777216 cells") && err.contains("65536 rows × 256 columns"), "{err}");
+
+    // Dimensions: first row 5, last row + 1 = 2, columns 0..2.
+    let dims = biff(0x0200, &[&5u32.to_le_bytes()[..], &2u32.to_le_bytes(), &[0, 0, 2, 0, 0, 0]].concat());
+    let (code, err, _) = import(&xls("dims", &[], &[dims]));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("last row comes before its first"), "{err}");
+
+    // A CodePage record of no bytes among the globals: the reader reads its 2 bytes regardless.
+    let (code, err, _) = import(&xls("codepage", &biff(0x0042, &[]), &[]));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("malformed record") && !err.contains("panicked"), "{err}");
+}
+
+/// An XLSB record ([MS-XLSB] 2.1.4): its type and size each in 7-bit groups, low first, the
+/// top bit saying another byte follows; then the data.
+fn xlsb_record(typ: u16, data: &[u8]) -> Vec<u8> {
+    let low = u8::try_from(typ & 0x7F).unwrap();
+    let mut v = if typ < 0x80 { vec![low] } else { vec![low | 0x80, u8::try_from(typ >> 7).unwrap()] };
+    let mut n = data.len();
+    loop {
+        let b = u8::try_from(n & 0x7F).unwrap();
+        n >>= 7;
+        v.push(if n > 0 { b | 0x80 } else { b });
+        if n == 0 {
+            break;
+        }
+    }
+    v.extend(data);
+    v
+}
+
+/// An XLSB workbook of one sheet "regs": `Address | Name`, `100 | volts`, and one number at
+/// `far` (row, column) if given.
+fn xlsb(tag: &str, far: Option<(u32, u32)>) -> tempfile_path::TempProfile {
+    use std::io::Write as _;
+    // A string as XLSB writes it: its length in characters (u32), UTF-16LE.
+    let wide = |s: &str| {
+        let mut v = u32::try_from(s.len()).unwrap().to_le_bytes().to_vec();
+        v.extend(s.encode_utf16().flat_map(u16::to_le_bytes));
+        v
+    };
+    // BrtRowHdr: the row, then 13 bytes of its formatting.
+    let row = |r: u32| xlsb_record(0x0000, &[&r.to_le_bytes()[..], &[0; 13]].concat());
+    // BrtCellReal: column, style, the f64; BrtCellSt: column, style, the string.
+    let real = |c: u32, v: f64| xlsb_record(0x0005, &[&c.to_le_bytes()[..], &[0; 4], &v.to_le_bytes()].concat());
+    let text = |c: u32, s: &str| xlsb_record(0x0006, &[&c.to_le_bytes()[..], &[0; 4], &wide(s)].concat());
+    // BrtBundleSh (visible, tab 1, relationship rId1, name), BrtEndBundleShs, BrtCalcProp.
+    let book = [
+        xlsb_record(0x009C, &[&0u32.to_le_bytes()[..], &1u32.to_le_bytes(), &wide("rId1"), &wide("regs")].concat()),
+        xlsb_record(0x0090, &[]),
+        xlsb_record(0x009D, &[]),
+    ]
+    .concat();
+    let (last_row, last_col) = far.unwrap_or((1, 1));
+    // BrtBeginSheet, BrtWsDim (first and last row and column), BrtBeginSheetData, the rows,
+    // BrtEndSheetData.
+    let mut sheet = [
+        xlsb_record(0x0081, &[]),
+        xlsb_record(0x0094, &[0u32, last_row, 0, last_col].map(u32::to_le_bytes).concat()),
+        xlsb_record(0x0091, &[]),
+        row(0),
+        text(0, "Address"),
+        text(1, "Name"),
+        row(1),
+        real(0, 100.0),
+        text(1, "volts"),
+    ]
+    .concat();
+    if let Some((r, c)) = far {
+        sheet.extend([row(r), real(c, 1.0)].concat());
+    }
+    sheet.extend(xlsb_record(0x0092, &[]));
+    let rels = r#"<?xml version="1.0"?><Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships"><Relationship Id="rId1" Type="http://schemas.openxmlformats.org/officeDocument/2006/relationships/worksheet" Target="worksheets/sheet1.bin"/></Relationships>"#;
+    let mut file = tempfile_path::TempProfile::new(tag);
+    file.path.set_extension("xlsb");
+    let mut z = zip::ZipWriter::new(std::fs::File::create(&file.path).unwrap());
+    let stored = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for (name, data) in [
+        ("xl/workbook.bin", &book[..]),
+        ("xl/_rels/workbook.bin.rels", rels.as_bytes()),
+        ("xl/worksheets/sheet1.bin", &sheet),
+    ] {
+        z.start_file(name, stored).unwrap();
+        z.write_all(data).unwrap();
+    }
+    z.finish().unwrap();
+    file
+}
+
+/// Issue 39: an 878-byte XLSB with one cell at XFD1048576 aborted the process (the reader laid
+/// out the 17 billion cells between A1 and it); XLSB sheets are now read cell by cell as XLSX
+/// ones are: the far row refused, a far column's cell counted, a plain sheet imported.
+#[test]
+fn regression_issue_39_an_xlsb_cell_far_away_costs_one_cell() {
+    let import = |f: &tempfile_path::TempProfile| {
+        let out_path = tempfile_path::TempProfile::new("xlsb-out");
+        let out = run(&[
+            "profiles",
+            "import",
+            f.path.to_str().unwrap(),
+            "-o",
+            out_path.path.to_str().unwrap(),
+            "--table",
+            "holding",
+        ]);
+        let text = std::fs::read_to_string(&out_path.path).unwrap_or_default();
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned(), text)
+    };
+    let (code, err, text) = import(&xlsb("plain", None));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(text.contains("volts"), "{text}");
+    let (code, err, _) = import(&xlsb("far", Some((1_048_575, 16_383))));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("a cell at row 1048576"), "{err}");
+    let (code, err, text) = import(&xlsb("wide", Some((5, 16_383))));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("1 cell(s) past column IV") && text.contains("volts"), "{err}");
+}

@@ -224,6 +224,21 @@ pub fn ods_size(data: &[u8]) {
     }
 }
 
+/// Any bytes as an XLS workbook stream, counted: never a panic, and the counts agree with
+/// themselves (the largest sheet's cells are among all sheets' cells; no cells without sheets).
+///
+/// # Panics
+/// When they do not: that is what the fuzzer looks for.
+pub fn xls_size(data: &[u8]) {
+    use crate::profile::import::xls_size::parse_xls_size;
+    if let Ok(s) = parse_xls_size(data) {
+        if let Some((sheet, rows, cols)) = s.largest {
+            assert!(sheet < s.sheets && rows.saturating_mul(cols) <= s.cells, "{s:?}");
+        }
+        assert!(s.sheets > 0 || (s.cells == 0 && s.reserved == 0), "{s:?}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     /// The fuzz target's seed (`fuzz/seeds/export_escape/hostile`): device with U+2028 and

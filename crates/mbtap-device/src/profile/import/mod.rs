@@ -12,6 +12,7 @@ pub mod home_assistant;
 pub mod notation;
 pub mod ods_size;
 pub mod sheet;
+pub mod xls_size;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
