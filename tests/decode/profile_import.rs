@@ -488,6 +488,23 @@ fn regression_issue_39_an_ods_whose_repeats_expand_past_memory_is_refused_unexpa
     assert!(text.contains("volts") && text.contains("amps"), "{text}");
 }
 
+/// `profiles import FILE --table holding` into a temporary profile: exit code, what it said,
+/// the profile written (empty if none).
+fn import_holding(f: &tempfile_path::TempProfile) -> (Option<i32>, String, String) {
+    let out_path = tempfile_path::TempProfile::new("import-out");
+    let out = run(&[
+        "profiles",
+        "import",
+        f.path.to_str().unwrap(),
+        "-o",
+        out_path.path.to_str().unwrap(),
+        "--table",
+        "holding",
+    ]);
+    let text = std::fs::read_to_string(&out_path.path).unwrap_or_default();
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned(), text)
+}
+
 /// A BIFF8 record: type, size, data ([MS-XLS] 2.1.4).
 fn biff(typ: u16, data: &[u8]) -> Vec<u8> {
     let mut v = typ.to_le_bytes().to_vec();
@@ -550,36 +567,22 @@ fn xls(tag: &str, globals: &[u8], cells: &[Vec<u8>]) -> tempfile_path::TempProfi
 /// read (the reader panicked) — are refused saying why, and a plain one still imports.
 #[test]
 fn regression_issue_39_xls_workbooks_the_reader_would_blow_up_on_are_refused() {
-    let import = |f: &tempfile_path::TempProfile| {
-        let out_path = tempfile_path::TempProfile::new("xls-out");
-        let out = run(&[
-            "profiles",
-            "import",
-            f.path.to_str().unwrap(),
-            "-o",
-            out_path.path.to_str().unwrap(),
-            "--table",
-            "holding",
-        ]);
-        let text = std::fs::read_to_string(&out_path.path).unwrap_or_default();
-        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned(), text)
-    };
-    let (code, err, text) = import(&xls("plain", &[], &[]));
+    let (code, err, text) = import_holding(&xls("plain", &[], &[]));
     assert_eq!(code, Some(0), "{err}");
     assert!(text.contains("volts"), "{text}");
 
-    let (code, err, _) = import(&xls("far", &[], &[number(65_535, 255, 1.0)]));
+    let (code, err, _) = import_holding(&xls("far", &[], &[number(65_535, 255, 1.0)]));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("16777216 cells") && err.contains("65536 rows × 256 columns"), "{err}");
 
     // Dimensions: first row 5, last row + 1 = 2, columns 0..2.
     let dims = biff(0x0200, &[&5u32.to_le_bytes()[..], &2u32.to_le_bytes(), &[0, 0, 2, 0, 0, 0]].concat());
-    let (code, err, _) = import(&xls("dims", &[], &[dims]));
+    let (code, err, _) = import_holding(&xls("dims", &[], &[dims]));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("last row comes before its first"), "{err}");
 
     // A CodePage record of no bytes among the globals: the reader reads its 2 bytes regardless.
-    let (code, err, _) = import(&xls("codepage", &biff(0x0042, &[]), &[]));
+    let (code, err, _) = import_holding(&xls("codepage", &biff(0x0042, &[]), &[]));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("malformed record") && !err.contains("panicked"), "{err}");
 }
@@ -665,27 +668,13 @@ fn xlsb(tag: &str, far: Option<(u32, u32)>) -> tempfile_path::TempProfile {
 /// ones are: the far row refused, a far column's cell counted, a plain sheet imported.
 #[test]
 fn regression_issue_39_an_xlsb_cell_far_away_costs_one_cell() {
-    let import = |f: &tempfile_path::TempProfile| {
-        let out_path = tempfile_path::TempProfile::new("xlsb-out");
-        let out = run(&[
-            "profiles",
-            "import",
-            f.path.to_str().unwrap(),
-            "-o",
-            out_path.path.to_str().unwrap(),
-            "--table",
-            "holding",
-        ]);
-        let text = std::fs::read_to_string(&out_path.path).unwrap_or_default();
-        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned(), text)
-    };
-    let (code, err, text) = import(&xlsb("plain", None));
+    let (code, err, text) = import_holding(&xlsb("plain", None));
     assert_eq!(code, Some(0), "{err}");
     assert!(text.contains("volts"), "{text}");
-    let (code, err, _) = import(&xlsb("far", Some((1_048_575, 16_383))));
+    let (code, err, _) = import_holding(&xlsb("far", Some((1_048_575, 16_383))));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("a cell at row 1048576"), "{err}");
-    let (code, err, text) = import(&xlsb("wide", Some((5, 16_383))));
+    let (code, err, text) = import_holding(&xlsb("wide", Some((5, 16_383))));
     assert_eq!(code, Some(0), "{err}");
     assert!(err.contains("1 cell(s) past column IV") && text.contains("volts"), "{err}");
 }

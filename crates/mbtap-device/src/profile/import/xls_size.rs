@@ -173,17 +173,20 @@ pub fn parse_xls_size(stream: &[u8]) -> Result<XlsSize, XlsSizeError> {
         at = next;
     }
     let mut size = XlsSize { sheets: offsets.len(), ..XlsSize::default() };
-    let mut walked: Vec<(usize, usize)> = Vec::with_capacity(offsets.len());
+    // The sheets' records walked so far, start → end: disjoint, so the walk is linear in the
+    // stream however many sheets name the same records.
+    let mut walked: std::collections::BTreeMap<usize, usize> = std::collections::BTreeMap::new();
     for (n, &start) in offsets.iter().enumerate() {
-        if start > stream.len() || walked.iter().any(|&(a, b)| start >= a && start < b) {
-            return Err(XlsSizeError::SheetOutside { sheet: n, at: start, len: stream.len() });
+        let outside = XlsSizeError::SheetOutside { sheet: n, at: start, len: stream.len() };
+        if start > stream.len() || walked.range(..=start).next_back().is_some_and(|(_, &end)| start < end) {
+            return Err(outside);
         }
         let (values, formulas, reserved, end) = sheet(stream, start)?;
         // A sheet whose records run over another's start: the reader walks those twice.
-        if walked.iter().any(|&(a, _)| a >= start && a < end) {
-            return Err(XlsSizeError::SheetOutside { sheet: n, at: start, len: stream.len() });
+        if walked.range(start..end).next().is_some() {
+            return Err(outside);
         }
-        walked.push((start, end));
+        walked.insert(start, end.max(start + 1));
         let ((vr, vc), (fr, fc)) = (values.shape(), formulas.shape());
         let cells = vr * vc + fr * fc;
         size.cells = size.cells.saturating_add(cells);
@@ -264,7 +267,7 @@ mod tests {
         let mut d = 0u32.to_le_bytes().to_vec();
         d.extend(u32::MAX.to_le_bytes());
         d.extend([0, 0, 0, 1, 0, 0]);
-        assert_eq!(parse_xls_size(&workbook(&[rec(DIMENSIONS, &d)])).unwrap().reserved, u64::from(u32::MAX - 1) * 256);
+        assert_eq!(parse_xls_size(&workbook(&[rec(DIMENSIONS, &d)])).unwrap().reserved, u64::from(u32::MAX) * 256);
     }
 
     #[test]
