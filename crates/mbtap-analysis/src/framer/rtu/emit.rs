@@ -314,7 +314,13 @@ impl RtuFramer {
                 None if self.search.silent_after => After::Silence,
                 None => After::Unknown,
             };
-            self.lengths.record(&self.timed.buf[a..b], after, self.last.last_sender);
+            // Only a frame whose length no reading fixed teaches one: a request or answer read
+            // at its protocol length (`Request`, `Response`, `Either`) is one the learner would
+            // parse again only to find that length exact and leave it (a mispredicted
+            // function-code dispatch per frame, issue 40).
+            if reading == Some(Reading::Unknown) {
+                self.lengths.record(&self.timed.buf[a..b], after, self.last.last_sender);
+            }
             self.known_units[usize::from(self.timed.buf[a])] = true;
             self.glitches.turn.frame(self.last.last_sender);
             self.learn_from(a, every_silence);
