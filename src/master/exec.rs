@@ -90,11 +90,28 @@ fn link_error(unit: u8, e: &anyhow::Error) -> String {
         }) || [format!("os error {EINPROGRESS})"), "Broken pipe".into(), "Connection reset".into(), "early eof".into()]
             .iter()
             .any(|t| text.contains(t.as_str()));
-    if closed {
-        format!("unit {unit}: the device closed the connection ({text}); the next request opens a new one")
-    } else {
-        text
+    if !closed {
+        return text;
     }
+    // The `EINPROGRESS` text ("Operation now in progress") says nothing true of what happened.
+    let einprogress = text.contains(&format!("os error {EINPROGRESS})"))
+        || e.chain()
+            .filter_map(|c| c.downcast_ref::<std::io::Error>())
+            .any(|io| io.raw_os_error() == Some(EINPROGRESS));
+    if einprogress {
+        format!("unit {unit}: {CLOSED}; the next request opens a new one")
+    } else {
+        format!("unit {unit}: {CLOSED} ({text}); the next request opens a new one")
+    }
+}
+
+/// How [`link_error`] says a connection the device closed.
+pub const CLOSED: &str = "the device closed the connection";
+
+/// Whether a failure [`link_error`] worded is a connection the device closed.
+#[must_use]
+pub fn closed(why: &str) -> bool {
+    why.contains(CLOSED)
 }
 
 /// Whether `got` values can answer `read`: registers exactly, bits padded to whole bytes
@@ -202,7 +219,8 @@ mod link_error_tests {
     #[test]
     fn a_closed_connection_is_said_as_such() {
         let e = anyhow::Error::from(std::io::Error::from_raw_os_error(115));
-        assert!(link_error(1, &e).contains("the device closed the connection"), "{}", link_error(1, &e));
+        let said = link_error(1, &e);
+        assert!(closed(&said) && !said.contains("os error") && !said.contains("in progress"), "{said}");
         let e = anyhow::anyhow!("no route");
         assert_eq!(link_error(1, &e), "no route");
     }

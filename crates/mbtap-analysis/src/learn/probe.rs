@@ -47,6 +47,9 @@ pub enum Reply {
     Exception(u8),
     /// No answer in time, or a broken link.
     NoAnswer(String),
+    /// The device closed the connection the read went out on (nothing came back on it); the
+    /// next read opens a new one.
+    Closed(String),
 }
 
 /// What the probe found in one table.
@@ -96,6 +99,9 @@ pub struct Probe {
     pub max_skip: u32,
     /// Why the probe stopped early.
     pub stopped: Option<String>,
+    /// The read now pending is a second try, on a new connection, of one whose connection the
+    /// device closed.
+    reopened: bool,
 }
 
 /// Inside an absent stretch, at most this many addresses are stepped over at once: a present
@@ -129,6 +135,7 @@ impl Probe {
             assumed_absent: 0,
             max_skip: DEFAULT_MAX_SKIP,
             stopped: None,
+            reopened: false,
         };
         p.start_table();
         p
@@ -191,6 +198,21 @@ impl Probe {
     pub fn reply(&mut self, reply: &Reply) {
         let Some((table, address, quantity)) = self.sent.take() else { return };
         let span = || format!("{} {address}..{}", table.word(), u32::from(address) + u32::from(quantity) - 1);
+        // Some devices and gateways end their connection after each request: the read that
+        // went out on the closed one goes again, once, on a new one — at the same pace, as
+        // `next` gives it (issue 39, `p3_probe.sh`: the probe stopped at its second read).
+        let reopened = std::mem::take(&mut self.reopened);
+        if let Reply::Closed(why) = reply {
+            if reopened {
+                self.stopped = Some(format!(
+                    "{}: {why} — and closed the new one too, without answering; stopped (the device takes connections but answers none: is it the right unit and port?)",
+                    span()
+                ));
+            } else {
+                self.reopened = true;
+            }
+            return;
+        }
         // A single read narrowing where an absent stretch turns present.
         if let Some((lo, hi)) = self.search
             && quantity == 1
@@ -283,13 +305,13 @@ impl Probe {
                 ));
             }
             Reply::NoAnswer(why) => {
-                let advice = if why.contains("closed the connection") {
-                    "the device ends its connection after each request, so a probe over one connection cannot go on"
-                } else {
-                    "some devices ignore reads of addresses they lack: narrow --range, or lower --rate"
-                };
-                self.stopped = Some(format!("{}: {why}; stopped ({advice})", span()));
+                self.stopped = Some(format!(
+                    "{}: {why}; stopped (some devices ignore reads of addresses they lack: narrow --range, or lower --rate)",
+                    span()
+                ));
             }
+            // Taken before the match.
+            Reply::Closed(_) => {}
         }
     }
 
@@ -386,5 +408,35 @@ mod tests {
         p.reply(&Reply::Exception(ILLEGAL_DATA_ADDRESS));
         assert_eq!(p.next(1), Step::WaitUntil(250_000_000));
         assert!(matches!(p.next(250_000_000), Step::Read { .. }));
+    }
+
+    /// Issue 39 (`p3_probe.sh`, `evil_modbus.py close`): a device that answers and then closes
+    /// its connection lost the next read, and the probe stopped at its second read. The read
+    /// goes again on the new connection and the probe maps what the open one maps, each read
+    /// tried at most twice; one that closes without ever answering stops it, said as such.
+    #[test]
+    fn regression_issue_39_a_device_closing_after_each_request_is_probed_over_new_connections() {
+        let mut open = Probe::new(&[Table::HoldingRegisters], 0, 199, 20.0);
+        let sent_open = run(&mut open, device);
+        // Every read after an answered one finds its connection closed, once.
+        let answered_last = std::cell::Cell::new(false);
+        let closing = |t, a, q| {
+            if answered_last.replace(false) {
+                return Reply::Closed("unit 1: the device closed the connection".into());
+            }
+            answered_last.set(true);
+            device(t, a, q)
+        };
+        let mut p = Probe::new(&[Table::HoldingRegisters], 0, 199, 20.0);
+        let sent = run(&mut p, closing);
+        assert!(p.stopped.is_none(), "{:?}", p.stopped);
+        assert_eq!(p.runs(Table::HoldingRegisters), open.runs(Table::HoldingRegisters));
+        assert_eq!(sent.len(), 2 * sent_open.len() - 1, "each read after the first tried twice");
+
+        let mut mute = Probe::new(&[Table::HoldingRegisters], 0, 199, 20.0);
+        let sent = run(&mut mute, |_, _, _| Reply::Closed("unit 1: the device closed the connection".into()));
+        assert_eq!(sent.len(), 2);
+        let why = mute.stopped.unwrap_or_default();
+        assert!(why.contains("closed the new one too") && why.contains("answers none"), "{why}");
     }
 }
