@@ -14,6 +14,7 @@ use std::path::Path;
 use anyhow::Context as _;
 use calamine::{Data, DataRef, Reader as _};
 use mbtap_device::profile::import::grid::{Grid, MAX_COLUMNS, MAX_ROWS};
+use mbtap_device::profile::import::xls_size::XlsSize;
 
 /// The largest CSV read (64 MiB; the largest register sheet — every address of four tables at
 /// 200 bytes a row — is ~52 MB).
@@ -136,6 +137,9 @@ fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipAr
 /// record reserves. A register sheet of 65 536 rows × 40 columns is 2.6 M.
 pub const MAX_XLS_CELLS: u64 = 3 << 20;
 
+/// Streams named as a workbook's (`Workbook`, `Book`) an XLS may hold; a workbook has one.
+const MAX_XLS_STREAMS: usize = 8;
+
 /// The compound-file signature an XLS starts with ([MS-CFB] 2.2, the header's `Signature`).
 const CFB_MAGIC: [u8; 8] = [0xD0, 0xCF, 0x11, 0xE0, 0xA1, 0xB1, 0x1A, 0xE1];
 
@@ -153,14 +157,33 @@ fn check_xls(path: &Path) -> anyhow::Result<()> {
     let len = file.metadata().map_or(0, |m| m.len());
     let mut container = cfb::CompoundFile::open(std::io::BufReader::new(file))
         .with_context(|| format!("{}: reading the XLS compound file", path.display()))?;
-    // The stream the reader opens: `Workbook` (BIFF8), else `Book` (BIFF5).
-    let Some(name) = ["/Workbook", "/Book"].into_iter().find(|n| container.is_stream(n)) else { return Ok(()) };
-    let mut stream = Vec::new();
-    container
-        .open_stream(name)
-        .and_then(|s| s.take(len).read_to_end(&mut stream))
-        .with_context(|| format!("{}: reading the XLS workbook stream", path.display()))?;
-    let size = parse_xls_size(&stream).with_context(|| format!("{}: not a readable XLS workbook", path.display()))?;
+    // The reader takes the first directory entry named `Workbook` (BIFF8), else `Book` (BIFF5),
+    // wherever it sits in the container: every stream of those names is counted, at any depth,
+    // each held to the bound. (An entry no storage links to, which the reader's linear search
+    // would also find, is not seen here; the panic guard in `read_workbook` is what remains.)
+    let streams: Vec<std::path::PathBuf> = container
+        .walk()
+        .filter(|e| e.is_stream() && ["Workbook", "Book"].iter().any(|n| e.name().eq_ignore_ascii_case(n)))
+        .map(|e| e.path().to_path_buf())
+        .collect();
+    if streams.len() > MAX_XLS_STREAMS {
+        return Err(too_big(path, &format!("{} workbook streams, a workbook has one", streams.len())));
+    }
+    for name in streams {
+        let mut stream = Vec::new();
+        container
+            .open_stream(&name)
+            .and_then(|s| s.take(len).read_to_end(&mut stream))
+            .with_context(|| format!("{}: reading the XLS workbook stream {}", path.display(), name.display()))?;
+        let size =
+            parse_xls_size(&stream).with_context(|| format!("{}: not a readable XLS workbook", path.display()))?;
+        check_xls_size(path, &size)?;
+    }
+    Ok(())
+}
+
+/// Refuses a workbook stream laying out more than [`MAX_XLS_CELLS`].
+fn check_xls_size(path: &Path, size: &XlsSize) -> anyhow::Result<()> {
     if size.cells > MAX_XLS_CELLS || size.reserved > MAX_XLS_CELLS {
         let largest = size
             .largest

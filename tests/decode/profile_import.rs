@@ -540,6 +540,11 @@ fn number(row: u16, col: u16, v: f64) -> Vec<u8> {
 /// An XLS workbook (a compound file holding a `Workbook` stream) whose globals start with
 /// `globals` and name one sheet "regs" holding `Address | Name`, `100 | volts`, then `cells`.
 fn xls(tag: &str, globals: &[u8], cells: &[Vec<u8>]) -> tempfile_path::TempProfile {
+    xls_at(tag, "/Workbook", globals, cells)
+}
+
+/// [`xls`] with its workbook stream at `stream` (a storage of its own is made for a nested one).
+fn xls_at(tag: &str, stream_path: &str, globals: &[u8], cells: &[Vec<u8>]) -> tempfile_path::TempProfile {
     use std::io::Write as _;
     let eof = biff(0x000A, &[]);
     // BoundSheet8: the sheet's offset, visible, a worksheet, a 4-character 8-bit name.
@@ -556,7 +561,10 @@ fn xls(tag: &str, globals: &[u8], cells: &[Vec<u8>]) -> tempfile_path::TempProfi
     let mut file = tempfile_path::TempProfile::new(tag);
     file.path.set_extension("xls");
     let mut cfb = cfb::create(&file.path).unwrap();
-    cfb.create_stream("/Workbook").unwrap().write_all(&stream).unwrap();
+    if let Some((storage, _)) = stream_path.rsplit_once('/').filter(|(d, _)| !d.is_empty()) {
+        cfb.create_storage_all(storage).unwrap();
+    }
+    cfb.create_stream(stream_path).unwrap().write_all(&stream).unwrap();
     cfb.flush().unwrap();
     file
 }
@@ -574,6 +582,11 @@ fn regression_issue_39_xls_workbooks_the_reader_would_blow_up_on_are_refused() {
     let (code, err, _) = import_holding(&xls("far", &[], &[number(65_535, 255, 1.0)]));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("16777216 cells") && err.contains("65536 rows × 256 columns"), "{err}");
+
+    // The same, its workbook stream inside a storage: the reader finds it by name anywhere.
+    let (code, err, _) = import_holding(&xls_at("nested", "/Deep/Workbook", &[], &[number(65_535, 255, 1.0)]));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("16777216 cells"), "{err}");
 
     // Dimensions: first row 5, last row + 1 = 2, columns 0..2.
     let dims = biff(0x0200, &[&5u32.to_le_bytes()[..], &2u32.to_le_bytes(), &[0, 0, 2, 0, 0, 0]].concat());
