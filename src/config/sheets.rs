@@ -329,21 +329,19 @@ fn read_sheet(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
     let reading = || format!("{}: reading sheet {name:?}", path.display());
     // XLSX and XLSB cell by cell: a cell at XFD1048576 costs one cell, not the dense range of
     // 17 billion the range reader lays out (a 1.6 kB XLSX aborted the process on it).
+    // The two readers are different types with the same calls (calamine gives them no trait).
+    macro_rules! cell_by_cell {
+        ($book:expr) => {{
+            let mut cells = $book.worksheet_cells_reader(&name).with_context(reading)?;
+            return grid_from_cells(path, || {
+                let cell = cells.next_cell().with_context(reading)?;
+                Ok(cell.map(|c| (c.get_position().0, c.get_position().1, cell_ref_text(c.get_value()))))
+            });
+        }};
+    }
     match &mut wb {
-        calamine::Sheets::Xlsx(x) => {
-            let mut cells = x.worksheet_cells_reader(&name).with_context(reading)?;
-            return grid_from_cells(path, || {
-                let cell = cells.next_cell().with_context(reading)?;
-                Ok(cell.map(|c| (c.get_position().0, c.get_position().1, cell_ref_text(c.get_value()))))
-            });
-        }
-        calamine::Sheets::Xlsb(x) => {
-            let mut cells = x.worksheet_cells_reader(&name).with_context(reading)?;
-            return grid_from_cells(path, || {
-                let cell = cells.next_cell().with_context(reading)?;
-                Ok(cell.map(|c| (c.get_position().0, c.get_position().1, cell_ref_text(c.get_value()))))
-            });
-        }
+        calamine::Sheets::Xlsx(x) => cell_by_cell!(x),
+        calamine::Sheets::Xlsb(x) => cell_by_cell!(x),
         _ => {}
     }
     // XLS and ODS have no cell-by-cell reader: their range is read whole, bounded by what

@@ -81,28 +81,21 @@ fn link_error(unit: u8, e: &anyhow::Error) -> String {
     let text = format!("{e:#}");
     // tokio-modbus wraps the I/O error in its own, which does not always name it as a source:
     // its text is looked at too.
-    let closed =
-        e.chain().filter_map(|c| c.downcast_ref::<std::io::Error>()).any(|io| {
-            matches!(
-                io.kind(),
-                ErrorKind::ConnectionReset | ErrorKind::BrokenPipe | ErrorKind::UnexpectedEof | ErrorKind::NotConnected
-            ) || io.raw_os_error() == Some(EINPROGRESS)
-        }) || [format!("os error {EINPROGRESS})"), "Broken pipe".into(), "Connection reset".into(), "early eof".into()]
-            .iter()
-            .any(|t| text.contains(t.as_str()));
-    if !closed {
-        return text;
-    }
-    // The `EINPROGRESS` text ("Operation now in progress") says nothing true of what happened.
-    let einprogress = text.contains(&format!("os error {EINPROGRESS})"))
-        || e.chain()
-            .filter_map(|c| c.downcast_ref::<std::io::Error>())
-            .any(|io| io.raw_os_error() == Some(EINPROGRESS));
+    let io_errors = || e.chain().filter_map(|c| c.downcast_ref::<std::io::Error>());
+    let einprogress = io_errors().any(|io| io.raw_os_error() == Some(EINPROGRESS))
+        || text.contains(&format!("os error {EINPROGRESS})"));
+    // The `EINPROGRESS` text ("Operation now in progress") says nothing true of what happened:
+    // said without it.
     if einprogress {
-        format!("unit {unit}: {CLOSED}; the next request opens a new one")
-    } else {
-        format!("unit {unit}: {CLOSED} ({text}); the next request opens a new one")
+        return format!("unit {unit}: {CLOSED}; the next request opens a new one");
     }
+    let closed = io_errors().any(|io| {
+        matches!(
+            io.kind(),
+            ErrorKind::ConnectionReset | ErrorKind::BrokenPipe | ErrorKind::UnexpectedEof | ErrorKind::NotConnected
+        )
+    }) || ["Broken pipe", "Connection reset", "early eof"].iter().any(|t| text.contains(t));
+    if closed { format!("unit {unit}: {CLOSED} ({text}); the next request opens a new one") } else { text }
 }
 
 /// How [`link_error`] says a connection the device closed.
