@@ -14,6 +14,7 @@ use mbtap_device::profile::export::Target;
 use crate::config::devices::{load_profile_file, resolve_profile, user_profile_dir};
 
 mod import;
+mod profile_file;
 use import::{import, parse_type_arg};
 
 /// Device profiles: check a profile file, or show what it defines.

@@ -92,7 +92,7 @@ pub fn profile_import(data: &[u8]) {
         let loaded = crate::profile::load("imported.toml", &toml);
         assert!(loaded.is_ok(), "an import that does not load: {loaded:?}\n{toml}");
         // The import's load-back in parts agrees with the whole load.
-        let parts = crate::profile::import::load_back("imported.toml", &toml);
+        let parts = crate::profile::import::load_back("imported.toml", toml.as_bytes());
         assert!(parts.is_ok(), "loads whole, not in parts: {parts:?}\n{toml}");
         if let Ok(p) = loaded {
             for target in [

@@ -2,10 +2,11 @@
 //! into a profile, written to the profile directory without replacing one in silence.
 
 use super::*;
-use crate::config::devices::user_profile_dir;
 use mbtap_analysis::report::format::printable;
 use mbtap_device::profile::Table;
-use mbtap_device::profile::import::sheet::{SheetOptions, parse_columns};
+use mbtap_device::profile::import::Sink as _;
+use mbtap_device::profile::import::sheet::{SheetOptions, parse_columns, read_sheet};
+use profile_file::{ProfileFile, destination};
 use std::process::ExitCode;
 
 /// The format of `path`: by extension, else by content.
@@ -56,78 +57,6 @@ pub(super) fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
         }),
         value_type: args.value_type,
     };
-    let mut all = mbtap_device::profile::import::Imported::default();
-    let mut err = std::io::stderr().lock();
-    if let Some(target) = &args.from {
-        anyhow::ensure!(
-            args.format.is_none_or(|f| f == ImportFormat::Sunspec) && args.files.is_empty(),
-            "--from reads a SunSpec device: give no files (and --format sunspec or none)"
-        );
-        let unit = args.unit.unwrap_or(1);
-        let timeout = std::time::Duration::from_secs(1);
-        let mut link = crate::master::link::Link::new(target, &args.line, timeout)?;
-        let imported = crate::cmd::runtime()?.block_on(crate::master::sunspec::import(&mut link, unit, timeout, 2))?;
-        for n in &imported.notes {
-            writeln!(err, "mbtap: {target}: {}", printable(n))?;
-        }
-        for p in &imported.problems {
-            writeln!(err, "mbtap: {target}: skipped {}", printable(&p.to_string()))?;
-        }
-        return write_imported(args, &imported, std::slice::from_ref(target), &mut err);
-    }
-    anyhow::ensure!(
-        args.format != Some(ImportFormat::Sunspec),
-        "--format sunspec reads a device: give --from HOST:PORT or a serial port"
-    );
-    for file in &args.files {
-        let format = match args.format {
-            Some(f) => f,
-            None => detect(file)?,
-        };
-        let one = match format {
-            ImportFormat::Csv => {
-                mbtap_device::profile::import::sheet::parse_sheet(&crate::config::sheets::read_csv(file)?, &opts)
-            }
-            ImportFormat::Xlsx => mbtap_device::profile::import::sheet::parse_sheet(
-                &crate::config::sheets::read_workbook(file, args.sheet.as_deref())?,
-                &opts,
-            ),
-            ImportFormat::Sunspec => anyhow::bail!("--format sunspec reads a device: give --from"),
-            ImportFormat::HomeAssistant => {
-                let yaml = crate::config::sheets::read_yaml(file)?;
-                let (imported, unit) =
-                    mbtap_device::profile::import::home_assistant::parse_home_assistant(&yaml, args.unit)
-                        .with_context(|| format!("reading {}", file.display()))?;
-                writeln!(err, "mbtap: {}: device {unit}", file.display())?;
-                imported
-            }
-        };
-        for n in &one.notes {
-            writeln!(err, "mbtap: {}: {}", file.display(), printable(n))?;
-        }
-        for p in one.problems {
-            writeln!(err, "mbtap: {}: skipped {}", file.display(), printable(&p.to_string()))?;
-            all.problems.push(p);
-        }
-        for mut p in one.points {
-            if args.files.len() > 1 {
-                p.origin = format!("{}, {}", file.display(), p.origin);
-            }
-            all.add(p);
-        }
-        all.notes.extend(one.notes.into_iter().map(|n| format!("{}: {n}", file.display())));
-    }
-    let sources: Vec<String> = args.files.iter().map(|f| f.display().to_string()).collect();
-    write_imported(args, &all, &sources, &mut err)
-}
-
-/// The profile from `all` (made from `sources`) written, loaded back and summarised.
-pub(super) fn write_imported(
-    args: &ImportArgs,
-    all: &mbtap_device::profile::import::Imported,
-    sources: &[String],
-    err: &mut impl std::io::Write,
-) -> anyhow::Result<ExitCode> {
     let stem = args
         .files
         .first()
@@ -138,34 +67,93 @@ pub(super) fn write_imported(
         !name.is_empty() && !name.contains(['/', '\\']) && name != "." && name != "..",
         "--name {name:?}: a profile name is used as a file name (no slashes)"
     );
-    let device = args.device.clone().unwrap_or_else(|| name.clone());
-    let toml = all.to_toml(&name, &device, &sources.join(", "));
-    let counts = all.counts();
-    let count = |t| counts.get(&t).copied().unwrap_or(0);
-    if all.points.is_empty() {
-        // The hint names the fix the problems point to (issue 42: "check the header row or give
-        // --columns" where every row wanted --table).
-        let said = |what: &str| all.problems.iter().any(|p| p.why.contains(what));
-        let hint = if said("give --table") {
-            "the sheet does not say which table: give --table holding|input|coils|discrete"
-        } else if said("no header row") {
-            "give the columns with --columns address=B,name=A,…"
-        } else {
-            "fix the rows named above, or give --columns, --table, --type"
-        };
-        anyhow::bail!("nothing imported ({} problem(s), listed above): {hint}", all.problems.len());
-    }
-    // What is written must load like a hand-written profile: checked before it is kept.
-    mbtap_device::profile::import::load_back(&name, &toml)
-        .context("the imported profile does not load (a bug: please report it with the sheet)")?;
-    let out = if let Some(o) = &args.output {
-        o.clone()
-    } else {
-        let dir = user_profile_dir().context("no user profile directory (set MBTAP_PROFILE_DIR or HOME), give -o")?;
-        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        dir.join(format!("{name}.toml"))
+    let out = destination(args.output.as_deref(), &name)?;
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => std::path::PathBuf::from("."),
     };
-    write_profile_file(&out, &toml, args.force)?;
+    let mut err = std::io::stderr().lock();
+    let mut sink = ProfileFile::new(&dir, &mut err)?;
+    let sources: Vec<String>;
+    if let Some(target) = &args.from {
+        anyhow::ensure!(
+            args.format.is_none_or(|f| f == ImportFormat::Sunspec) && args.files.is_empty(),
+            "--from reads a SunSpec device: give no files (and --format sunspec or none)"
+        );
+        let unit = args.unit.unwrap_or(1);
+        let timeout = std::time::Duration::from_secs(1);
+        let mut link = crate::master::link::Link::new(target, &args.line, timeout)?;
+        let imported = crate::cmd::runtime()?.block_on(crate::master::sunspec::import(&mut link, unit, timeout, 2))?;
+        sink.reading(target, false);
+        for n in imported.notes {
+            sink.note(n);
+        }
+        for p in imported.problems {
+            sink.problem(p);
+        }
+        for p in imported.points {
+            sink.point(p);
+        }
+        sources = vec![target.clone()];
+    } else {
+        anyhow::ensure!(
+            args.format != Some(ImportFormat::Sunspec),
+            "--format sunspec reads a device: give --from HOST:PORT or a serial port"
+        );
+        for file in &args.files {
+            let format = match args.format {
+                Some(f) => f,
+                None => detect(file)?,
+            };
+            sink.reading(&file.display().to_string(), args.files.len() > 1);
+            match format {
+                ImportFormat::Csv => read_sheet(&mut crate::config::sheets::csv_rows(file)?, &opts, &mut sink)?,
+                ImportFormat::Xlsx => {
+                    let mut grid = crate::config::sheets::read_workbook(file, args.sheet.as_deref())?;
+                    match read_sheet(&mut grid, &opts, &mut sink) {
+                        Ok(()) => {}
+                        Err(never) => match never {},
+                    }
+                }
+                ImportFormat::Sunspec => anyhow::bail!("--format sunspec reads a device: give --from"),
+                ImportFormat::HomeAssistant => {
+                    let unit = crate::config::sheets::read_yaml(file, args.unit, &mut sink)?;
+                    sink.note(format!("device {unit}"));
+                }
+            }
+        }
+        sources = args.files.iter().map(|f| f.display().to_string()).collect();
+    }
+    if let Some(hint) = sink.hint() {
+        anyhow::bail!("nothing imported ({} problem(s), listed above): {hint}", sink.problems());
+    }
+    let device = args.device.clone().unwrap_or_else(|| name.clone());
+    // Reserved first: a profile (or a link) already there is kept, unless --force.
+    if !args.force {
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(&out) {
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => anyhow::bail!(
+                "{} already exists (a profile or a link): kept as it is; give --force to replace it, or another --name/-o",
+                out.display()
+            ),
+            Err(e) => return Err(e).with_context(|| format!("creating {}", out.display())),
+        }
+    }
+    let tmp = out.with_extension(format!("toml.new-{}", std::process::id()));
+    // The new file replaces the path itself (a link there is replaced, not followed).
+    let written = sink
+        .write(&tmp, &name, &device, &sources.join(", "))
+        .and_then(|()| std::fs::rename(&tmp, &out).with_context(|| format!("replacing {}", out.display())));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        if !args.force {
+            let _ = std::fs::remove_file(&out);
+        }
+        return Err(e);
+    }
+    let [holding, input, coils, discrete] = sink.counts();
+    let skipped = sink.problems();
+    drop(sink);
     if args.output.is_none() && mbtap_device::profile::builtin::get(&name).is_some() {
         writeln!(
             err,
@@ -176,42 +164,9 @@ pub(super) fn write_imported(
     }
     writeln!(
         err,
-        "mbtap: wrote {} ({}): {} holding registers, {} input registers, {} coils, {} discrete inputs; {} skipped",
+        "mbtap: wrote {} ({}): {holding} holding registers, {input} input registers, {coils} coils, {discrete} discrete inputs; {skipped} skipped",
         out.display(),
         printable(&name),
-        count(Table::HoldingRegisters),
-        count(Table::InputRegisters),
-        count(Table::Coils),
-        count(Table::DiscreteInputs),
-        all.problems.len()
     )?;
     Ok(ExitCode::SUCCESS)
-}
-
-/// Writes a profile to `path` without ever writing through a link placed there: a new file is
-/// created exclusively (`O_EXCL` refuses an existing file or symlink); with `force`, the text goes
-/// to a new temporary file beside it that then replaces the path itself (a symlink is replaced,
-/// not followed).
-pub(super) fn write_profile_file(path: &std::path::Path, text: &str, force: bool) -> anyhow::Result<()> {
-    let exclusive = |p: &std::path::Path| std::fs::OpenOptions::new().write(true).create_new(true).open(p);
-    if !force {
-        let mut f = match exclusive(path) {
-            Ok(f) => f,
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => anyhow::bail!(
-                "{} already exists (a profile or a link): kept as it is; give --force to replace it, or another --name/-o",
-                path.display()
-            ),
-            Err(e) => return Err(e).with_context(|| format!("creating {}", path.display())),
-        };
-        return f.write_all(text.as_bytes()).with_context(|| format!("writing {}", path.display()));
-    }
-    let tmp = path.with_extension(format!("toml.new-{}", std::process::id()));
-    let mut f = exclusive(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-    let written = f.write_all(text.as_bytes()).and_then(|()| f.sync_all());
-    drop(f);
-    if let Err(e) = written.and_then(|()| std::fs::rename(&tmp, path)) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("replacing {}", path.display()));
-    }
-    Ok(())
 }

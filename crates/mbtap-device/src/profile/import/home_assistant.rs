@@ -5,14 +5,16 @@
 
 use super::ha_yaml::{Level, OTHER_PLATFORMS, hubs};
 
-use super::Imported;
 use super::ha_entry::Read;
+use super::{Imported, Sink};
 
 /// Errors that stop the import as a whole (an entry that cannot be read is a [`Problem`]).
 #[derive(Debug, thiserror::Error)]
 pub enum HaError {
     #[error("not YAML: {0}")]
     Yaml(String),
+    #[error("line {line}: {why}")]
+    Read { line: usize, why: String },
     #[error("no `modbus:` hubs with sensors, binary_sensors or switches found")]
     NoHubs,
     #[error("entries for several devices ({0}): choose one with --unit")]
@@ -35,10 +37,19 @@ pub const MAX_DEPTH: usize = 64;
 /// Refuses `yaml` nested deeper than [`MAX_DEPTH`] in flow collections (`[`, `{` where a value
 /// begins, outside quotes and comments) or in block indentation (each deeper indentation, and
 /// each `- ` opening a sequence on a line, one level). One pass, bounded work per byte.
-fn check_depth(yaml: &str) -> Result<(), HaError> {
+fn check_depth(yaml: impl std::io::BufRead) -> Result<(), HaError> {
     let mut indents: Vec<usize> = Vec::new();
     let mut flow = 0usize;
     for (n, line) in yaml.lines().enumerate() {
+        let line = line.map_err(|e| HaError::Read {
+            line: n + 1,
+            why: if e.kind() == std::io::ErrorKind::InvalidData {
+                "not UTF-8 text: save the file as UTF-8".into()
+            } else {
+                e.to_string()
+            },
+        })?;
+        let line = line.strip_suffix('\r').unwrap_or(&line);
         let too_deep = || HaError::TooDeep { line: n + 1 };
         let body = line.trim_start_matches(' ');
         if flow == 0 && !body.is_empty() && !body.starts_with('#') {
@@ -133,8 +144,32 @@ fn yaml_error(e: &serde_saphyr::Error) -> HaError {
 /// # Errors
 /// Not YAML, no hubs, or several devices and no `unit`.
 pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u8), HaError> {
-    check_depth(yaml)?;
-    let doc: Level = serde_saphyr::from_str_with_options(yaml, reader_options()).map_err(|e| yaml_error(&e))?;
+    let mut out = Imported::default();
+    let unit = read_home_assistant(yaml, unit, &mut out)?;
+    Ok((out, unit))
+}
+
+/// Reads `yaml` into `out` and returns the device read; with several devices, `unit` chooses one.
+///
+/// # Errors
+/// Not YAML, no hubs, or several devices and no `unit`.
+pub fn read_home_assistant(yaml: &str, unit: Option<u8>, out: &mut impl Sink) -> Result<u8, HaError> {
+    read_home_assistant_from(yaml.as_bytes(), yaml.as_bytes(), unit, out)
+}
+
+/// [`read_home_assistant`] of a file read twice, streamed: `depth` for its nesting, then `yaml`
+/// by the reader (issue 39: the file held whole was a quarter of the import's memory).
+///
+/// # Errors
+/// Not YAML, no hubs, several devices and no `unit`, or the file cannot be read.
+pub fn read_home_assistant_from(
+    depth: impl std::io::BufRead,
+    yaml: impl std::io::Read,
+    unit: Option<u8>,
+    out: &mut impl Sink,
+) -> Result<u8, HaError> {
+    check_depth(depth)?;
+    let doc: Level = serde_saphyr::from_reader_with_options(yaml, reader_options()).map_err(|e| yaml_error(&e))?;
     let hubs = hubs(doc);
     if hubs.is_empty() {
         return Err(HaError::NoHubs);
@@ -158,17 +193,16 @@ pub fn parse_home_assistant(yaml: &str, unit: Option<u8>) -> Result<(Imported, u
         .filter(|(i, _)| hubs.iter().any(|h| h.other[*i]))
         .map(|(_, k)| k)
         .collect();
-    let mut out = Imported::default();
     for r in hubs.into_iter().flat_map(Level::into_reads).filter(|r| unit_of(r).is_none_or(|u| u == chosen)) {
         match r.point {
-            Ok(p) => out.add(p),
-            Err(problem) => out.problems.push(problem),
+            Ok(p) => out.point(p),
+            Err(problem) => out.problem(problem),
         }
     }
     if !other.is_empty() {
-        out.notes.push(format!("not imported (no profile equivalent): {}", other.join(", ")));
+        out.note(format!("not imported (no profile equivalent): {}", other.join(", ")));
     }
-    Ok((out, u8::try_from(chosen).unwrap_or(0)))
+    Ok(u8::try_from(chosen).unwrap_or(0))
 }
 
 /// One entry as a point, or the key to blame and why.
@@ -260,8 +294,8 @@ modbus:
         // Brackets inside quotes, plain scalars and comments are no nesting.
         let fine = CONFIG.replace("Grid voltage", &format!("\"{}\"", "[".repeat(200)))
             + &format!("# {}\nx: a{}\n", "{".repeat(200), "[".repeat(200));
-        check_depth(&fine).unwrap();
-        check_depth(CONFIG).unwrap();
+        check_depth(fine.as_bytes()).unwrap();
+        check_depth(CONFIG.as_bytes()).unwrap();
     }
 
     /// Issue 39: the YAML is read into entries as it goes, no tree of the document (200 000

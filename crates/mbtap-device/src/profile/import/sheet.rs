@@ -4,11 +4,13 @@
 
 pub use super::fields::Field;
 use super::fields::field_of;
+use std::ops::ControlFlow;
+
 use super::grid::{Grid, Row};
 use super::notation::{
     modicon, norm, parse_access, parse_address, parse_scale, parse_table, parse_type, parse_word_order, unit_from_name,
 };
-use super::{Imported, Point, Problem};
+use super::{Imported, Point, Problem, Sink};
 use crate::profile::Table;
 use crate::profile::format::{Access, ValueType, WordOrder};
 
@@ -70,21 +72,80 @@ fn column_of(spec: &str, header: Option<Row<'_>>) -> Option<usize> {
 }
 
 /// The trimmed, non-empty text of cell `i` of `r`.
-fn cell_at<'a>(r: &Row<'a>, i: Option<usize>) -> Option<&'a str> {
-    i.and_then(|i| r.get(i)).map(str::trim).filter(|s| !s.is_empty())
+fn cell_at<'a>(r: &[&'a str], i: Option<usize>) -> Option<&'a str> {
+    i.and_then(|i| r.get(i)).map(|c| c.trim()).filter(|s| !s.is_empty())
 }
 
 /// Rows searched for the header.
 const HEADER_SEARCH: usize = 50;
 
+/// Rows of a sheet, read from the start as often as asked: the import reads a sheet up to three
+/// times (its header, its address notation, its rows), so a CSV is streamed from its file, never
+/// held (issue 39: the grid of a sheet of tiny cells was 2.5× the file).
+pub trait SheetRows {
+    /// Why the rows could not be read.
+    type Error;
+
+    /// Calls `each` with every row in order (its 0-based number, its cells) until it breaks.
+    ///
+    /// # Errors
+    /// The rows cannot be read (the file, a record, a bound).
+    fn each_row(&mut self, each: &mut dyn FnMut(usize, &[&str]) -> ControlFlow<()>) -> Result<(), Self::Error>;
+
+    /// Cells past [`super::grid::MAX_COLUMNS`] not read, as counted by the last whole pass.
+    fn cut_cells(&self) -> u64;
+}
+
+impl SheetRows for Grid {
+    type Error = std::convert::Infallible;
+
+    fn each_row(&mut self, each: &mut dyn FnMut(usize, &[&str]) -> ControlFlow<()>) -> Result<(), Self::Error> {
+        let mut cells = Vec::new();
+        for (i, r) in self.rows().enumerate() {
+            cells.clear();
+            cells.extend(r.iter());
+            if each(i, &cells).is_break() {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    fn cut_cells(&self) -> u64 {
+        self.cut_cells
+    }
+}
+
 /// Reads `rows` (cells as text; row numbers in problems are 1-based, as a spreadsheet shows).
 #[must_use]
 pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
     let mut out = Imported::default();
+    let mut rows = rows.clone();
+    match read_sheet(&mut rows, opts, &mut out) {
+        Ok(()) => {}
+        Err(never) => match never {},
+    }
+    out
+}
+
+/// Reads `rows` into `out`: the header found in the first rows, the address notation decided
+/// from every address, then each row a point or a problem.
+///
+/// # Errors
+/// The rows cannot be read.
+#[allow(clippy::too_many_lines)]
+pub fn read_sheet<S: SheetRows>(rows: &mut S, opts: &SheetOptions, out: &mut impl Sink) -> Result<(), S::Error> {
+    // The first rows, where the header is looked for.
+    let mut head = Grid::new();
+    rows.each_row(&mut |i, cells| {
+        if i >= HEADER_SEARCH || head.push_row(cells.iter()).is_err() {
+            return ControlFlow::Break(());
+        }
+        ControlFlow::Continue(())
+    })?;
     // The header: the first row naming an address column and at least one other.
-    let header = rows
+    let header = head
         .rows()
-        .take(HEADER_SEARCH)
         .position(|r| {
             let fields: Vec<Field> = r.iter().filter_map(field_of).collect();
             fields.contains(&Field::Address) && fields.len() >= 2
@@ -98,11 +159,11 @@ pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
                 .filter(|t| t.parse::<usize>().is_err() && (t.len() > 3 || !t.chars().all(|c| c.is_ascii_alphabetic())))
                 .collect();
             (!texts.is_empty()).then_some(())?;
-            rows.rows().take(HEADER_SEARCH).position(|r| texts.iter().all(|t| r.iter().any(|c| norm(c) == *t)))
+            head.rows().position(|r| texts.iter().all(|t| r.iter().any(|c| norm(c) == *t)))
         });
     let mut columns: Vec<(Field, usize)> = Vec::new();
     if let Some(h) = header {
-        for (i, c) in rows.row(h).iter().enumerate() {
+        for (i, c) in head.row(h).iter().enumerate() {
             if let Some(f) = field_of(c)
                 && !columns.iter().any(|(g, _)| *g == f)
             {
@@ -111,12 +172,12 @@ pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
         }
     }
     for (f, spec) in &opts.columns {
-        match column_of(spec, header.map(|h| rows.row(h))) {
+        match column_of(spec, header.map(|h| head.row(h))) {
             Some(i) => {
                 columns.retain(|(g, _)| g != f);
                 columns.push((*f, i));
             }
-            None => out.problems.push(Problem {
+            None => out.problem(Problem {
                 at: "--columns".into(),
                 column: Some(f.key().into()),
                 why: format!("{spec:?} is not a column (a letter, a number from 1, or a header text)"),
@@ -133,176 +194,202 @@ pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
     columns.sort();
     let col = |f: Field| columns.iter().find(|(g, _)| *g == f).map(|&(_, i)| i);
     let Some(address_col) = col(Field::Address) else {
-        out.problems.push(Problem {
-            at: format!("rows 1–{}", rows.len().min(HEADER_SEARCH)),
+        out.problem(Problem {
+            at: format!("rows 1–{}", head.len()),
             column: None,
             why: "no header row naming an address column and another (name, type, …): give the columns with --columns address=B,name=A,…".into(),
         });
-        return out;
+        return Ok(());
     };
     let described: Vec<String> = columns.iter().map(|(f, i)| format!("{}={}", f.key(), letter(*i))).collect();
-    out.notes.push(match header {
+    out.note(match header {
         Some(h) => format!("header on row {}: {}", h + 1, described.join(", ")),
         None => format!("no header row; columns given: {}", described.join(", ")),
     });
     // Nothing is guessed silently (issue 42: a sheet of floats with no type column, the type
     // said in the vendor's prose, came in as u16 without a word).
     if col(Field::Type).is_none() && opts.value_type.is_none() {
-        out.notes.push(
+        out.note(
             "warning: no type column — every register is read as u16 (coils and discrete inputs as bits); \
              if the document says otherwise (\"all values are floats\"), give --type f32 (and --word-order)"
                 .into(),
         );
     }
     let first_data = header.map_or(0, |h| h + 1);
-    if rows.cut_cells > 0 {
-        out.notes.push(format!(
-            "{} cell(s) past column {} not read (a register sheet has a dozen columns)",
-            rows.cut_cells,
-            letter(super::grid::MAX_COLUMNS - 1)
-        ));
-    }
 
     // Modicon numbers are a property of the sheet: every address reads as one (5 or 6 digits,
     // the table's digit first, counted from 1) and the sheet names no table of its own.
-    let addresses: Vec<_> =
-        rows.rows().skip(first_data).filter_map(|r| r.get(address_col).and_then(|a| parse_address(a).ok())).collect();
-    let use_modicon =
-        col(Field::Table).is_none() && !addresses.is_empty() && addresses.iter().all(|&a| modicon(a).is_some());
+    let mut use_modicon = None;
+    if col(Field::Table).is_none() {
+        rows.each_row(&mut |i, cells| {
+            let Some(a) =
+                (i >= first_data).then(|| cells.get(address_col)).flatten().and_then(|a| parse_address(a).ok())
+            else {
+                return ControlFlow::Continue(());
+            };
+            let this = modicon(a).is_some();
+            use_modicon = Some(this);
+            if this { ControlFlow::Continue(()) } else { ControlFlow::Break(()) }
+        })?;
+    }
+    let use_modicon = use_modicon == Some(true);
     if use_modicon {
-        out.notes.push(
+        out.note(
             "addresses are Modicon register numbers (30001 = input register 0, 40001 = holding register 0)".into(),
         );
     }
-    for (i, r) in rows.rows().enumerate().skip(first_data) {
-        let at = format!("row {}", i + 1);
-        if r.iter().all(|c| c.trim().is_empty()) {
-            continue;
+    rows.each_row(&mut |i, r| {
+        if i < first_data {
+            return ControlFlow::Continue(());
         }
-        let problem = |column: Option<Field>, why: String| Problem {
-            at: at.clone(),
-            column: column.and_then(|f| col(f).map(|c| format!("column {} ({})", letter(c), f.key()))),
-            why,
-        };
-        let Some(addr_text) = cell_at(&r, col(Field::Address)) else {
-            let text: Vec<&str> = r.iter().map(str::trim).filter(|c| !c.is_empty()).collect();
-            out.problems.push(problem(
-                Some(Field::Address),
-                format!("no address (a section title or a note?): {:?}", text.join(" | ")),
-            ));
-            continue;
-        };
-        // `40001-40002` or `100~101`: a range, its first address.
-        let addr_text = addr_text.split(['-', '~', '–']).next().unwrap_or(addr_text).trim();
-        let raw = match parse_address(addr_text) {
-            Ok(a) => a,
-            Err(e) => {
-                // Text alone in the row: a section heading (merged across the row).
-                let alone = r.iter().enumerate().all(|(j, c)| j == address_col || c.trim().is_empty());
-                let why = if alone { format!("no address (a section title or a note?): {addr_text:?}") } else { e };
-                out.problems.push(problem(Some(Field::Address), why));
-                continue;
-            }
-        };
-        let row_table = match cell_at(&r, col(Field::Table)).map(parse_table) {
-            Some(Err(e)) => {
-                out.problems.push(problem(Some(Field::Table), e));
-                continue;
-            }
-            Some(Ok(t)) => Some(t),
-            None => None,
-        };
-        let (table, address) = match (use_modicon.then(|| modicon(raw)).flatten(), row_table.or(opts.table)) {
-            (Some((t, a)), _) => (t, a),
-            (None, Some(t)) => {
-                let Ok(a) = u16::try_from(raw.value) else {
-                    out.problems.push(problem(Some(Field::Address), format!("{addr_text:?} is past 65535")));
-                    continue;
-                };
-                (t, a)
-            }
-            (None, None) => {
-                out.problems.push(problem(
-                    Some(Field::Address),
-                    format!(
-                        "{addr_text:?}: the sheet does not say which table; give --table holding|input|coils|discrete"
-                    ),
-                ));
-                continue;
-            }
-        };
-        let (value_type, type_len) = match cell_at(&r, col(Field::Type)).map(parse_type) {
-            Some(Err(e)) => {
-                out.problems.push(problem(Some(Field::Type), e));
-                continue;
-            }
-            Some(Ok(t)) => t,
-            None if matches!(table, Table::Coils | Table::DiscreteInputs) => (ValueType::Bool, None),
-            None => opts.value_type.unwrap_or((ValueType::U16, None)),
-        };
-        let length = match cell_at(&r, col(Field::Length)).map(|l| l.trim_end_matches(".0").parse::<u16>()) {
-            Some(Ok(n)) if n > 0 => Some(n),
-            Some(_) => {
-                out.problems.push(problem(Some(Field::Length), "not a number of registers".into()));
-                continue;
-            }
-            None => type_len,
-        };
-        if value_type == ValueType::String && length.is_none() {
-            out.problems.push(problem(
-                Some(Field::Type),
-                "a string needs its length in registers (a length column, or string(N))".into(),
-            ));
-            continue;
-        }
-        let word_order = match cell_at(&r, col(Field::WordOrder)).map(parse_word_order) {
-            Some(Err(e)) => {
-                out.problems.push(problem(Some(Field::WordOrder), e));
-                continue;
-            }
-            Some(Ok(w)) => w,
-            None => opts.word_order.unwrap_or_default(),
-        };
-        let scale = match cell_at(&r, col(Field::Scale)).map(parse_scale) {
-            Some(Err(e)) => {
-                out.problems.push(problem(Some(Field::Scale), e));
-                continue;
-            }
-            Some(Ok(s)) => s,
-            None => None,
-        };
-        let access = match cell_at(&r, col(Field::Access)).map(parse_access) {
-            Some(Err(e)) => {
-                out.problems.push(problem(Some(Field::Access), e));
-                continue;
-            }
-            Some(Ok(a)) => a,
-            None => Access::Read,
-        };
-        let (name, unit_in_name) = unit_from_name(cell_at(&r, col(Field::Name)).unwrap_or(""));
-        let name = if name.is_empty() { format!("reg_{}_{address}", table.word()) } else { name };
-        // Spelled as Home Assistant and the exports want it (`Volts` → `V`, `kWH` → `kWh`,
-        // issue 42); a unit not known is kept as written.
-        let unit = cell_at(&r, col(Field::Unit))
-            .map(str::to_owned)
-            .or(unit_in_name)
-            .map(|u| crate::profile::ha_classes::ha_class(&u).map_or(u, |c| c.unit.to_owned()));
-        let description = cell_at(&r, col(Field::Description)).map(str::to_owned).filter(|d| *d != name);
-        out.add(Point {
-            table,
-            address,
-            name,
-            value_type,
-            word_order,
-            scale,
-            unit,
-            access,
-            length: if value_type == ValueType::String { length } else { None },
-            description,
-            origin: at,
-        });
+        read_row(i, r, &columns, address_col, use_modicon, opts, out);
+        ControlFlow::Continue(())
+    })?;
+    if rows.cut_cells() > 0 {
+        out.note(format!(
+            "{} cell(s) past column {} not read (a register sheet has a dozen columns)",
+            rows.cut_cells(),
+            letter(super::grid::MAX_COLUMNS - 1)
+        ));
     }
-    out
+    Ok(())
+}
+
+/// Row `i`'s cells `r`: a point, a problem, or nothing (an empty row).
+fn read_row(
+    i: usize,
+    r: &[&str],
+    columns: &[(Field, usize)],
+    address_col: usize,
+    use_modicon: bool,
+    opts: &SheetOptions,
+    out: &mut impl Sink,
+) {
+    let col = |f: Field| columns.iter().find(|(g, _)| *g == f).map(|&(_, i)| i);
+    let at = format!("row {}", i + 1);
+    if r.iter().all(|c| c.trim().is_empty()) {
+        return;
+    }
+    let problem = |column: Option<Field>, why: String| Problem {
+        at: at.clone(),
+        column: column.and_then(|f| col(f).map(|c| format!("column {} ({})", letter(c), f.key()))),
+        why,
+    };
+    let Some(addr_text) = cell_at(r, col(Field::Address)) else {
+        let text: Vec<&str> = r.iter().map(|c| c.trim()).filter(|c| !c.is_empty()).collect();
+        out.problem(problem(
+            Some(Field::Address),
+            format!("no address (a section title or a note?): {:?}", text.join(" | ")),
+        ));
+        return;
+    };
+    // `40001-40002` or `100~101`: a range, its first address.
+    let addr_text = addr_text.split(['-', '~', '–']).next().unwrap_or(addr_text).trim();
+    let raw = match parse_address(addr_text) {
+        Ok(a) => a,
+        Err(e) => {
+            // Text alone in the row: a section heading (merged across the row).
+            let alone = r.iter().enumerate().all(|(j, c)| j == address_col || c.trim().is_empty());
+            let why = if alone { format!("no address (a section title or a note?): {addr_text:?}") } else { e };
+            out.problem(problem(Some(Field::Address), why));
+            return;
+        }
+    };
+    let row_table = match cell_at(r, col(Field::Table)).map(parse_table) {
+        Some(Err(e)) => {
+            out.problem(problem(Some(Field::Table), e));
+            return;
+        }
+        Some(Ok(t)) => Some(t),
+        None => None,
+    };
+    let (table, address) = match (use_modicon.then(|| modicon(raw)).flatten(), row_table.or(opts.table)) {
+        (Some((t, a)), _) => (t, a),
+        (None, Some(t)) => {
+            let Ok(a) = u16::try_from(raw.value) else {
+                out.problem(problem(Some(Field::Address), format!("{addr_text:?} is past 65535")));
+                return;
+            };
+            (t, a)
+        }
+        (None, None) => {
+            out.problem(problem(
+                Some(Field::Address),
+                format!("{addr_text:?}: the sheet does not say which table; give --table holding|input|coils|discrete"),
+            ));
+            return;
+        }
+    };
+    let (value_type, type_len) = match cell_at(r, col(Field::Type)).map(parse_type) {
+        Some(Err(e)) => {
+            out.problem(problem(Some(Field::Type), e));
+            return;
+        }
+        Some(Ok(t)) => t,
+        None if matches!(table, Table::Coils | Table::DiscreteInputs) => (ValueType::Bool, None),
+        None => opts.value_type.unwrap_or((ValueType::U16, None)),
+    };
+    let length = match cell_at(r, col(Field::Length)).map(|l| l.trim_end_matches(".0").parse::<u16>()) {
+        Some(Ok(n)) if n > 0 => Some(n),
+        Some(_) => {
+            out.problem(problem(Some(Field::Length), "not a number of registers".into()));
+            return;
+        }
+        None => type_len,
+    };
+    if value_type == ValueType::String && length.is_none() {
+        out.problem(problem(
+            Some(Field::Type),
+            "a string needs its length in registers (a length column, or string(N))".into(),
+        ));
+        return;
+    }
+    let word_order = match cell_at(r, col(Field::WordOrder)).map(parse_word_order) {
+        Some(Err(e)) => {
+            out.problem(problem(Some(Field::WordOrder), e));
+            return;
+        }
+        Some(Ok(w)) => w,
+        None => opts.word_order.unwrap_or_default(),
+    };
+    let scale = match cell_at(r, col(Field::Scale)).map(parse_scale) {
+        Some(Err(e)) => {
+            out.problem(problem(Some(Field::Scale), e));
+            return;
+        }
+        Some(Ok(s)) => s,
+        None => None,
+    };
+    let access = match cell_at(r, col(Field::Access)).map(parse_access) {
+        Some(Err(e)) => {
+            out.problem(problem(Some(Field::Access), e));
+            return;
+        }
+        Some(Ok(a)) => a,
+        None => Access::Read,
+    };
+    let (name, unit_in_name) = unit_from_name(cell_at(r, col(Field::Name)).unwrap_or(""));
+    let name = if name.is_empty() { format!("reg_{}_{address}", table.word()) } else { name };
+    // Spelled as Home Assistant and the exports want it (`Volts` → `V`, `kWH` → `kWh`,
+    // issue 42); a unit not known is kept as written.
+    let unit = cell_at(r, col(Field::Unit))
+        .map(str::to_owned)
+        .or(unit_in_name)
+        .map(|u| crate::profile::ha_classes::ha_class(&u).map_or(u, |c| c.unit.to_owned()));
+    let description = cell_at(r, col(Field::Description)).map(str::to_owned).filter(|d| *d != name);
+    out.point(Point {
+        table,
+        address,
+        name,
+        value_type,
+        word_order,
+        scale,
+        unit,
+        access,
+        length: if value_type == ValueType::String { length } else { None },
+        description,
+        origin: at,
+    });
 }
 
 #[cfg(test)]
