@@ -201,9 +201,6 @@ fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipAr
 /// record reserves. A register sheet of 65 536 rows × 40 columns is 2.6 M.
 pub const MAX_XLS_CELLS: u64 = 3 << 20;
 
-/// Streams named as a workbook's (`Workbook`, `Book`) an XLS may hold; a workbook has one.
-const MAX_XLS_STREAMS: usize = 8;
-
 /// The compound-file signature an XLS starts with ([MS-CFB] 2.2, the header's `Signature`).
 const CFB_MAGIC: [u8; 8] = [0xD0, 0xCF, 0x11, 0xE0, 0xA1, 0xB1, 0x1A, 0xE1];
 
@@ -212,6 +209,7 @@ const CFB_MAGIC: [u8; 8] = [0xD0, 0xCF, 0x11, 0xE0, 0xA1, 0xB1, 0x1A, 0xE1];
 /// IV65536 of a 5.6 kB file took 1.05 GB; a `Dimensions` record whose last row comes before
 /// its first aborted the process). Not a compound file: nothing to check here.
 fn check_xls(path: &Path) -> anyhow::Result<()> {
+    use mbtap_device::profile::import::xls_container::parse_xls_container;
     use mbtap_device::profile::import::xls_size::parse_xls_size;
     let Ok(mut file) = std::fs::File::open(path) else { return Ok(()) };
     let mut magic = [0u8; 8];
@@ -219,31 +217,18 @@ fn check_xls(path: &Path) -> anyhow::Result<()> {
         return Ok(());
     }
     let len = file.metadata().map_or(0, |m| m.len());
-    let mut container = cfb::CompoundFile::open(std::io::BufReader::new(file))
-        .with_context(|| format!("{}: reading the XLS compound file", path.display()))?;
-    // The reader takes the first directory entry named `Workbook` (BIFF8), else `Book` (BIFF5),
-    // wherever it sits in the container: every stream of those names is counted, at any depth,
-    // each held to the bound. (An entry no storage links to, which the reader's linear search
-    // would also find, is not seen here; the panic guard in `read_workbook` is what remains.)
-    let streams: Vec<std::path::PathBuf> = container
-        .walk()
-        .filter(|e| e.is_stream() && ["Workbook", "Book"].iter().any(|n| e.name().eq_ignore_ascii_case(n)))
-        .map(|e| e.path().to_path_buf())
-        .collect();
-    if streams.len() > MAX_XLS_STREAMS {
-        return Err(too_big(path, &format!("{} workbook streams, a workbook has one", streams.len())));
+    if len > MAX_FILE_BYTES {
+        return Err(too_big(path, &format!("{len} bytes, over the {MAX_FILE_BYTES} a sheet may have")));
     }
-    for name in streams {
-        let mut stream = Vec::new();
-        container
-            .open_stream(&name)
-            .and_then(|s| s.take(len).read_to_end(&mut stream))
-            .with_context(|| format!("{}: reading the XLS workbook stream {}", path.display(), name.display()))?;
-        let size =
-            parse_xls_size(&stream).with_context(|| format!("{}: not a readable XLS workbook", path.display()))?;
-        check_xls_size(path, &size)?;
-    }
-    Ok(())
+    // The reader reads the whole file into memory too.
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    // The stream the reader will lay out: the first directory entry named `Workbook` (else
+    // `Book`) in the directory's order, as it searches — linked into the tree or not — read as
+    // it reads it, with what would make it loop, panic or over-allocate refused.
+    let stream = parse_xls_container(&bytes)
+        .with_context(|| format!("{}: not a compound file the workbook reader can open", path.display()))?;
+    let size = parse_xls_size(&stream).with_context(|| format!("{}: not a readable XLS workbook", path.display()))?;
+    check_xls_size(path, &size)
 }
 
 /// Refuses a workbook stream laying out more than [`MAX_XLS_CELLS`].

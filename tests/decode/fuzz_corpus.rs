@@ -32,6 +32,7 @@ fn run_dir(dir: &Path) -> usize {
             "profile_import" => mbtap_device::fuzzing::profile_import,
             "ods_size" => mbtap_device::fuzzing::ods_size,
             "xls_size" => mbtap_device::fuzzing::xls_size,
+            "xls_container" => mbtap_device::fuzzing::xls_container,
             "sunspec" => mbtap_device::fuzzing::sunspec,
             "spool" => mbtap_publish::fuzzing::spool,
             "sparkplug" => mbtap_publish::fuzzing::sparkplug,

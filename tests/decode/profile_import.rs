@@ -546,6 +546,20 @@ fn xls(tag: &str, globals: &[u8], cells: &[Vec<u8>]) -> tempfile_path::TempProfi
 /// [`xls`] with its workbook stream at `stream` (a storage of its own is made for a nested one).
 fn xls_at(tag: &str, stream_path: &str, globals: &[u8], cells: &[Vec<u8>]) -> tempfile_path::TempProfile {
     use std::io::Write as _;
+    let stream = workbook_stream(globals, cells);
+    let mut file = tempfile_path::TempProfile::new(tag);
+    file.path.set_extension("xls");
+    let mut cfb = cfb::create(&file.path).unwrap();
+    if let Some((storage, _)) = stream_path.rsplit_once('/').filter(|(d, _)| !d.is_empty()) {
+        cfb.create_storage_all(storage).unwrap();
+    }
+    cfb.create_stream(stream_path).unwrap().write_all(&stream).unwrap();
+    cfb.flush().unwrap();
+    file
+}
+
+/// The BIFF8 records of [`xls`]'s workbook stream.
+fn workbook_stream(globals: &[u8], cells: &[Vec<u8>]) -> Vec<u8> {
     let eof = biff(0x000A, &[]);
     // BoundSheet8: the sheet's offset, visible, a worksheet, a 4-character 8-bit name.
     let bound = |pos: u32| biff(0x0085, &[&pos.to_le_bytes()[..], &[0, 0, 4, 0], b"regs"].concat());
@@ -558,15 +572,7 @@ fn xls_at(tag: &str, stream_path: &str, globals: &[u8], cells: &[Vec<u8>]) -> te
         stream.extend(c);
     }
     stream.extend(eof);
-    let mut file = tempfile_path::TempProfile::new(tag);
-    file.path.set_extension("xls");
-    let mut cfb = cfb::create(&file.path).unwrap();
-    if let Some((storage, _)) = stream_path.rsplit_once('/').filter(|(d, _)| !d.is_empty()) {
-        cfb.create_storage_all(storage).unwrap();
-    }
-    cfb.create_stream(stream_path).unwrap().write_all(&stream).unwrap();
-    cfb.flush().unwrap();
-    file
+    stream
 }
 
 /// Issue 39: XLS workbooks of a few kilobytes — cells at A1 and IV65536 (the reader lays out
@@ -598,6 +604,95 @@ fn regression_issue_39_xls_workbooks_the_reader_would_blow_up_on_are_refused() {
     let (code, err, _) = import_holding(&xls("codepage", &biff(0x0042, &[]), &[]));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("malformed record") && !err.contains("panicked"), "{err}");
+}
+
+/// A compound file (512-byte sectors) holding `streams` in order, as bytes to patch.
+fn compound(streams: &[(&str, Vec<u8>)]) -> Vec<u8> {
+    use std::io::Write as _;
+    let mut cfb = cfb::CompoundFile::create_with_version(cfb::Version::V3, std::io::Cursor::new(Vec::new())).unwrap();
+    for (name, data) in streams {
+        cfb.create_stream(name).unwrap().write_all(data).unwrap();
+    }
+    cfb.flush().unwrap();
+    cfb.into_inner().into_inner()
+}
+
+/// Directory entry `i`'s offset in `file` (the directory's first sector; [MS-CFB] §2.2 header
+/// field at 48, entries of 128 bytes).
+fn entry_at(file: &[u8], i: usize) -> usize {
+    let dir = u32::from_le_bytes(file[48..52].try_into().unwrap()) as usize;
+    (dir + 1) * 512 + i * 128
+}
+
+/// Entry `i`'s name, sibling and child ids ([MS-CFB] §2.6.1: name 0–63, its length 64–65,
+/// left 68, right 72, child 76).
+fn set_entry(file: &mut [u8], i: usize, name: Option<&str>, links: [u32; 3]) {
+    let at = entry_at(file, i);
+    if let Some(name) = name {
+        let units: Vec<u8> = name.encode_utf16().chain([0]).flat_map(u16::to_le_bytes).collect();
+        file[at..at + 64].fill(0);
+        file[at..at + units.len()].copy_from_slice(&units);
+        file[at + 64..at + 66].copy_from_slice(&u16::try_from(units.len()).unwrap().to_le_bytes());
+    }
+    for (k, id) in links.into_iter().enumerate() {
+        file[at + 68 + 4 * k..at + 72 + 4 * k].copy_from_slice(&id.to_le_bytes());
+    }
+}
+
+fn xls_bytes(tag: &str, bytes: &[u8]) -> tempfile_path::TempProfile {
+    let mut file = tempfile_path::TempProfile::new(tag);
+    file.path.set_extension("xls");
+    std::fs::write(&file.path, bytes).unwrap();
+    file
+}
+
+/// Issue 39: the workbook reader takes the first directory entry named `Workbook` in the
+/// directory's order — linked into the tree or not — and trusts every chain and length. The
+/// check read the container with a library that walks the tree: an entry no storage links to,
+/// holding cells at A1 and IV65536, was laid out unchecked (1 GB). Now the container is read as
+/// the reader reads it: that entry is counted and refused, and so are a chain that loops (the
+/// reader never ends) and a length past the file (the reader allocates it).
+#[test]
+fn regression_issue_39_an_xls_container_is_read_as_the_workbook_reader_reads_it() {
+    const NOSTREAM: u32 = 0xFFFF_FFFF;
+    let far = workbook_stream(&[], &[number(65_535, 255, 1.0)]);
+    let plain = workbook_stream(&[], &[]);
+    // Entries: 0 the root, 1 "Hidden" (far cells), 2 "Workbook" (plain).
+    let mut bytes = compound(&[("/Hidden", far), ("/Workbook", plain.clone())]);
+    let (code, err, _) = import_holding(&xls_bytes("linked", &bytes));
+    assert_eq!(code, Some(0), "the plain workbook, found by name: {err}");
+    // The root links only entry 2; entry 1, renamed `Workbook`, is linked by nothing — and
+    // comes first in the directory, where the reader's search finds it.
+    set_entry(&mut bytes, 0, None, [NOSTREAM, NOSTREAM, 2]);
+    set_entry(&mut bytes, 2, None, [NOSTREAM, NOSTREAM, NOSTREAM]);
+    set_entry(&mut bytes, 1, Some("Workbook"), [NOSTREAM, NOSTREAM, NOSTREAM]);
+    let (code, err, _) = import_holding(&xls_bytes("orphan", &bytes));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("16777216 cells"), "{err}");
+
+    // A workbook stream of regular sectors (≥ 4 096 bytes) whose last sector leads back to its
+    // first: the FAT (its first sector is the header's first DIFAT entry, at 76).
+    let rows: Vec<Vec<u8>> = (2..400).map(|r| number(r, 0, f64::from(r))).collect();
+    let mut bytes = compound(&[("/Workbook", workbook_stream(&[], &rows))]);
+    let fat = (u32::from_le_bytes(bytes[76..80].try_into().unwrap()) as usize + 1) * 512;
+    let start = u32::from_le_bytes(bytes[entry_at(&bytes, 1) + 116..entry_at(&bytes, 1) + 120].try_into().unwrap());
+    let (mut id, mut last) = (start, start);
+    while id != 0xFFFF_FFFE {
+        last = id;
+        id = u32::from_le_bytes(bytes[fat + 4 * id as usize..fat + 4 * id as usize + 4].try_into().unwrap());
+    }
+    bytes[fat + 4 * last as usize..fat + 4 * last as usize + 4].copy_from_slice(&start.to_le_bytes());
+    let (code, err, _) = import_holding(&xls_bytes("loop", &bytes));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("workbook chain loops"), "{err}");
+
+    // A length of 2 GiB on a file of a few kilobytes: the reader reserves it.
+    let mut bytes = compound(&[("/Workbook", plain)]);
+    let at = entry_at(&bytes, 1) + 120;
+    bytes[at..at + 4].copy_from_slice(&(1u32 << 31).to_le_bytes());
+    let (code, err, _) = import_holding(&xls_bytes("length", &bytes));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("2147483648 bytes, more than the file"), "{err}");
 }
 
 /// An XLSB record ([MS-XLSB] 2.1.4): its type and size each in 7-bit groups, low first, the

@@ -239,6 +239,18 @@ pub fn xls_size(data: &[u8]) {
     }
 }
 
+/// Any bytes as an XLS file's compound-file container: read without a panic and without a
+/// loop, and the workbook stream found is never longer than the file (each sector of a chain
+/// is read once at most; a chain that comes back is refused).
+///
+/// # Panics
+/// When it is longer: that is what the fuzzer looks for.
+pub fn xls_container(data: &[u8]) {
+    if let Ok(stream) = crate::profile::import::xls_container::parse_xls_container(data) {
+        assert!(stream.len() <= data.len(), "{} bytes from a {}-byte file", stream.len(), data.len());
+    }
+}
+
 #[cfg(test)]
 mod tests {
     /// The fuzz target's seed (`fuzz/seeds/export_escape/hostile`): device with U+2028 and

@@ -14,6 +14,7 @@ pub mod load_back;
 pub mod notation;
 pub mod ods_size;
 pub mod sheet;
+pub mod xls_container;
 pub mod xls_size;
 
 use std::collections::BTreeMap;
