@@ -302,17 +302,26 @@ fn cell_ref_text(d: &DataRef<'_>) -> String {
     }
 }
 
-/// A sheet read cell by cell into rows (`next` gives each cell's row, column and text): cells
-/// past [`MAX_COLUMNS`] counted, a row past [`MAX_ROWS`] refused — nothing is allocated for the
-/// empty space between cells.
-fn grid_from_cells(
+/// A sheet read cell by cell, handed on row by row (`next` gives each cell's row, column and
+/// text; `each` each row, the empty ones between included): cells past [`MAX_COLUMNS`] counted,
+/// a row past [`MAX_ROWS`] refused — nothing is allocated for the empty space between cells,
+/// and no row is kept once handed on.
+fn rows_from_cells(
     path: &Path,
     mut next: impl FnMut() -> anyhow::Result<Option<(u32, u32, String)>>,
-) -> anyhow::Result<Grid> {
-    let mut grid = Grid::new();
+    each: &mut dyn FnMut(usize, &[&str]) -> ControlFlow<()>,
+) -> anyhow::Result<u64> {
     let mut row: Vec<String> = Vec::new();
     let mut at_row = 0usize;
     let mut cut = 0u64;
+    let mut hand_on = |i: usize, row: &mut Vec<String>| {
+        // Trailing empty cells are not part of the row (a workbook pads rows to its widest).
+        let kept = row.iter().rposition(|c| !c.trim().is_empty()).map_or(0, |k| k + 1);
+        let cells: Vec<&str> = row.iter().take(kept).map(String::as_str).collect();
+        let flow = each(i, &cells);
+        row.clear();
+        flow
+    };
     while let Some((r, c, text)) = next()? {
         let (r, c) = (r as usize, c as usize);
         if r >= MAX_ROWS {
@@ -323,7 +332,9 @@ fn grid_from_cells(
             continue;
         }
         while at_row < r {
-            grid.push_row(row.drain(..)).map_err(|e| too_big(path, &e.to_string()))?;
+            if hand_on(at_row, &mut row).is_break() {
+                return Ok(cut);
+            }
             at_row += 1;
         }
         if c >= MAX_COLUMNS {
@@ -335,27 +346,28 @@ fn grid_from_cells(
         }
         row[c] = text;
     }
-    grid.push_row(row.drain(..)).map_err(|e| too_big(path, &e.to_string()))?;
-    grid.cut_cells += cut;
-    Ok(grid)
+    let _ = hand_on(at_row, &mut row);
+    Ok(cut)
 }
 
-/// The rows of a workbook's sheet `sheet` (by name), or its first.
-///
-/// # Errors
-/// The workbook cannot be opened, unpacks to more than [`MAX_UNPACKED_BYTES`], is over the
-/// grid's bounds, or has no such sheet (the ones it has are named).
-pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
-    check_zip(path)?;
-    check_xls(path)?;
-    // The workbook reader indexes some records without checking their length (an XLS `BOF` or
-    // `CodePage` of fewer than 2 bytes panics it): what the checks above do not cover is still
-    // an error about this file, not a crash. Its panic message is kept out of the output.
+/// A workbook's sheet as rows: XLSX and XLSB read from the file cell by cell at each pass (the
+/// rows are never held: issue 39), XLS and ODS — which the reader lays out whole when it opens
+/// them, bounded by the checks before — as a grid.
+#[derive(Debug)]
+pub enum WorkbookRows {
+    Cells { path: std::path::PathBuf, sheet: String, cut_cells: u64 },
+    Grid(Grid),
+}
+
+/// Runs `read` with the workbook reader's panics turned into an error about `path`: the reader
+/// indexes some records without checking their length (an XLS `BOF` or `CodePage` of fewer than
+/// 2 bytes panics it). Its panic message is kept out of the output.
+fn guarded<T>(path: &Path, read: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
     let quiet = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
-    let read = std::panic::catch_unwind(|| read_sheet(path, sheet));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(read));
     std::panic::set_hook(quiet);
-    read.unwrap_or_else(|_| {
+    result.unwrap_or_else(|_| {
         Err(anyhow::anyhow!(
             "{}: the workbook reader failed on a malformed record; open the file in a spreadsheet and save it again, or export the register table as CSV",
             path.display()
@@ -363,9 +375,23 @@ pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
     })
 }
 
-/// [`read_workbook`] past its checks.
-fn read_sheet(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
-    let mut wb = calamine::open_workbook_auto(path).with_context(|| format!("opening {}", path.display()))?;
+/// The rows of a workbook's sheet `sheet` (by name), or its first.
+///
+/// # Errors
+/// The workbook cannot be opened, unpacks to more than [`MAX_UNPACKED_BYTES`], is over the
+/// grid's bounds, or has no such sheet (the ones it has are named).
+pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<WorkbookRows> {
+    check_zip(path)?;
+    check_xls(path)?;
+    guarded(path, || open_sheet(path, sheet))
+}
+
+/// The workbook at `path` and the name of its sheet `sheet` (by name), or of its first.
+fn open_named(
+    path: &Path,
+    sheet: Option<&str>,
+) -> anyhow::Result<(calamine::Sheets<std::io::BufReader<std::fs::File>>, String)> {
+    let wb = calamine::open_workbook_auto(path).with_context(|| format!("opening {}", path.display()))?;
     let names = wb.sheet_names();
     let name = match sheet {
         Some(s) => names
@@ -375,26 +401,17 @@ fn read_sheet(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
             .with_context(|| format!("{}: no sheet {s:?} (it has: {})", path.display(), names.join(", ")))?,
         None => names.first().cloned().with_context(|| format!("{}: no sheets", path.display()))?,
     };
-    let reading = || format!("{}: reading sheet {name:?}", path.display());
-    // XLSX and XLSB cell by cell: a cell at XFD1048576 costs one cell, not the dense range of
-    // 17 billion the range reader lays out (a 1.6 kB XLSX aborted the process on it).
-    // The two readers are different types with the same calls (calamine gives them no trait).
-    macro_rules! cell_by_cell {
-        ($book:expr) => {{
-            let mut cells = $book.worksheet_cells_reader(&name).with_context(reading)?;
-            return grid_from_cells(path, || {
-                let cell = cells.next_cell().with_context(reading)?;
-                Ok(cell.map(|c| (c.get_position().0, c.get_position().1, cell_ref_text(c.get_value()))))
-            });
-        }};
-    }
-    match &mut wb {
-        calamine::Sheets::Xlsx(x) => cell_by_cell!(x),
-        calamine::Sheets::Xlsb(x) => cell_by_cell!(x),
-        _ => {}
+    Ok((wb, name))
+}
+
+/// [`read_workbook`] past its checks.
+fn open_sheet(path: &Path, sheet: Option<&str>) -> anyhow::Result<WorkbookRows> {
+    let (mut wb, name) = open_named(path, sheet)?;
+    if matches!(wb, calamine::Sheets::Xlsx(_) | calamine::Sheets::Xlsb(_)) {
+        return Ok(WorkbookRows::Cells { path: path.to_owned(), sheet: name, cut_cells: 0 });
     }
     // XLS and ODS have no cell-by-cell reader: their range is read whole, bounded by what
-    // their records lay out (counted above, before opening).
+    // their records lay out (counted before opening).
     let range = wb.worksheet_range(&name).with_context(|| format!("{}: reading sheet {name:?}", path.display()))?;
     // The range starts at its first used cell; pad so rows and columns are the sheet's own.
     let (row0, col0) = range.start().map_or((0, 0), |(r, c)| (r as usize, c as usize));
@@ -409,5 +426,56 @@ fn read_sheet(path: &Path, sheet: Option<&str>) -> anyhow::Result<Grid> {
         let cells = std::iter::repeat_n(String::new(), col0.min(MAX_COLUMNS)).chain(r.iter().map(cell_text));
         grid.push_row(cells).map_err(|e| too_big(path, &e.to_string()))?;
     }
-    Ok(grid)
+    Ok(WorkbookRows::Grid(grid))
+}
+
+impl SheetRows for WorkbookRows {
+    type Error = anyhow::Error;
+
+    fn each_row(&mut self, each: &mut dyn FnMut(usize, &[&str]) -> ControlFlow<()>) -> anyhow::Result<()> {
+        let (path, sheet, cut_cells) = match self {
+            Self::Grid(g) => {
+                return match g.each_row(each) {
+                    Ok(()) => Ok(()),
+                    Err(never) => match never {},
+                };
+            }
+            Self::Cells { path, sheet, cut_cells } => (path, sheet, cut_cells),
+        };
+        let reading = || format!("{}: reading sheet {sheet:?}", path.display());
+        let cut = guarded(path, || {
+            let (mut wb, name) = open_named(path, Some(sheet))?;
+            // XLSX and XLSB cell by cell: a cell at XFD1048576 costs one cell, not the dense
+            // range of 17 billion the range reader lays out (a 1.6 kB XLSX aborted the process
+            // on it). The two readers are different types with the same calls (calamine gives
+            // them no trait).
+            macro_rules! cell_by_cell {
+                ($book:expr) => {{
+                    let mut cells = $book.worksheet_cells_reader(&name).with_context(reading)?;
+                    rows_from_cells(
+                        path,
+                        || {
+                            let cell = cells.next_cell().with_context(reading)?;
+                            Ok(cell.map(|c| (c.get_position().0, c.get_position().1, cell_ref_text(c.get_value()))))
+                        },
+                        each,
+                    )
+                }};
+            }
+            match &mut wb {
+                calamine::Sheets::Xlsx(x) => cell_by_cell!(x),
+                calamine::Sheets::Xlsb(x) => cell_by_cell!(x),
+                _ => Err(anyhow::anyhow!("{}: not an XLSX or XLSB workbook any more", path.display())),
+            }
+        })?;
+        *cut_cells = cut;
+        Ok(())
+    }
+
+    fn cut_cells(&self) -> u64 {
+        match self {
+            Self::Grid(g) => g.cut_cells,
+            Self::Cells { cut_cells, .. } => *cut_cells,
+        }
+    }
 }

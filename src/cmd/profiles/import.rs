@@ -109,11 +109,11 @@ pub(super) fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             match format {
                 ImportFormat::Csv => read_sheet(&mut crate::config::sheets::csv_rows(file)?, &opts, &mut sink)?,
                 ImportFormat::Xlsx => {
-                    let mut grid = crate::config::sheets::read_workbook(file, args.sheet.as_deref())?;
-                    match read_sheet(&mut grid, &opts, &mut sink) {
-                        Ok(()) => {}
-                        Err(never) => match never {},
-                    }
+                    read_sheet(
+                        &mut crate::config::sheets::read_workbook(file, args.sheet.as_deref())?,
+                        &opts,
+                        &mut sink,
+                    )?;
                 }
                 ImportFormat::Sunspec => anyhow::bail!("--format sunspec reads a device: give --from"),
                 ImportFormat::HomeAssistant => {
