@@ -23,7 +23,14 @@ pub(super) struct TimedBuffer {
     pub(super) last_end: Option<u64>,
     /// Time of the last read.
     pub(super) last_read: u64,
+    /// Where the last [`READS_KEPT`] reads' bytes start, oldest first (0 for reads before the
+    /// first): a frame with no read starting inside it holds no boundary between reads (the
+    /// common case, one frame per read, then needs no look at its bytes' gaps).
+    read_starts: [usize; READS_KEPT],
 }
+
+/// Reads whose starts [`TimedBuffer`] keeps: a frame is decided within a read or two of its end.
+const READS_KEPT: usize = 4;
 
 impl TimedBuffer {
     pub(super) fn new() -> Self {
@@ -35,7 +42,14 @@ impl TimedBuffer {
             head: 0,
             last_end: None,
             last_read: 0,
+            read_starts: [0; READS_KEPT],
         }
+    }
+
+    /// Whether bytes `a..b` are known to lie in one read (no read starts after `a` and before
+    /// `b`); `false` when that is not known (the read holding `a` is older than those kept).
+    pub(super) fn in_one_read(&self, a: usize, b: usize) -> bool {
+        self.read_starts[0] <= a && !self.read_starts.iter().any(|&s| s > a && s < b)
     }
 
     /// Bytes waiting for a decision.
@@ -64,6 +78,8 @@ impl TimedBuffer {
                 }
                 None => (u64::MAX, u64::MAX),
             };
+            self.read_starts.rotate_left(1);
+            self.read_starts[READS_KEPT - 1] = self.buf.len();
             if let [b] = bytes {
                 // One byte per read (per-byte timestamps, a slow line): four pushes.
                 self.buf.push(*b);
@@ -104,6 +120,49 @@ impl TimedBuffer {
         self.gap_lb.drain(..head);
         self.gap_ub.drain(..head);
         self.head = 0;
+        for s in &mut self.read_starts {
+            *s = s.saturating_sub(head);
+        }
         Some(head)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The fast path of a frame's inner silence (issue 40: a frame in one read needs no look
+    /// at its bytes' gaps) rests on this: where `in_one_read` says so, no byte after the first
+    /// starts a read — its gap is unbounded and none is proven — through reads of every size
+    /// and compactions.
+    #[test]
+    fn bytes_said_to_be_in_one_read_hold_no_read_boundary() {
+        let mut t = TimedBuffer::new();
+        // A fixed pseudo-random walk of read sizes (1–12 bytes) and decisions.
+        let mut x = 0x2545_F491_u32;
+        let mut said = 0;
+        for round in 0..3000u64 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let n = 1 + (x % 12) as usize;
+            t.append(&vec![0x11; n], 1_000_000 * (round + 1), 1_000, 0);
+            let len = t.buf.len();
+            for a in t.head..len {
+                for b in a + 1..=len {
+                    if t.in_one_read(a, b) {
+                        said += 1;
+                        assert!(t.gap_ub[a + 1..b].iter().all(|&g| g == u64::MAX), "{a}..{b} of {len}");
+                        assert!(t.gap_lb[a + 1..b].iter().all(|&g| g == 0), "{a}..{b} of {len}");
+                    }
+                }
+            }
+            // Decide some bytes now and then; compact as the framer does.
+            if x.is_multiple_of(3) {
+                t.head = len - (x as usize % 4).min(len);
+                let _ = t.compact();
+            }
+        }
+        assert!(said > 10_000, "the fast path was taken {said} times");
     }
 }

@@ -36,6 +36,11 @@ impl RtuFramer {
     /// gives all three: `(the longest silence the reads prove inside it, every boundary, the
     /// boundaries the gap evidence may use)`.
     pub(super) fn apparent_inner_silence(&self, a: usize, b: usize) -> (u64, Option<u64>, Option<u64>) {
+        if self.timed.in_one_read(a, b) {
+            // Inside one read every byte after the first is back to back with the one before
+            // (no gap proven, none bounded): no silence, no boundary.
+            return (0, None, None);
+        }
         let c = self.timing.char_ns;
         // A read began at `i` where the gap before it is bounded (inside a read it is unknown
         // and set to `u64::MAX`).
