@@ -89,7 +89,8 @@ impl LearnedLengths {
     /// shows for long enough still overrules it (a profile written for another firmware).
     pub(crate) fn declare(&mut self, unit: u8, fc: u8, request: bool, len: u16) {
         let key = (unit, fc, u8::from(!request));
-        if !self.seen.contains_key(&key) && self.seen.len() >= MAX_KEYS {
+        // The map's size first: a second search of it only when it is full.
+        if self.seen.len() >= MAX_KEYS && !self.seen.contains_key(&key) {
             return;
         }
         self.functions[usize::from(key.1 / 64)] |= 1 << (key.1 % 64);
@@ -123,7 +124,8 @@ impl LearnedLengths {
         }
         let Ok(len) = u16::try_from(f.len()) else { return };
         let key = (*unit, *fc, d);
-        if !self.seen.contains_key(&key) && self.seen.len() >= MAX_KEYS {
+        // The map's size first: a second search of it only when it is full.
+        if self.seen.len() >= MAX_KEYS && !self.seen.contains_key(&key) {
             return;
         }
         self.functions[usize::from(key.1 / 64)] |= 1 << (key.1 % 64);
