@@ -8,7 +8,7 @@ use super::ha_yaml::{Level, OTHER_PLATFORMS, hubs};
 use super::ha_entry::Read;
 use super::{Imported, Sink};
 
-/// Errors that stop the import as a whole (an entry that cannot be read is a [`Problem`]).
+/// Errors that stop the import as a whole (an entry that cannot be read is a [`super::Problem`]).
 #[derive(Debug, thiserror::Error)]
 pub enum HaError {
     #[error("not YAML: {0}")]

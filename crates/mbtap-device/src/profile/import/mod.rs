@@ -1,8 +1,10 @@
 //! Profiles from what users already have (issue 27): vendor register sheets — rows of cells,
-//! read from CSV or XLSX at the edge — and Home Assistant `modbus:` YAML, turned into the points
-//! of a profile; every row or entry that cannot be read is listed with where and why, and
-//! skipped, never guessed. [`Imported::to_toml`] writes the profile (`docs/profiles.md`), which
-//! the loader then checks like any hand-written one.
+//! read from CSV or a workbook at the edge — and Home Assistant `modbus:` YAML, turned into the
+//! points of a profile; every row or entry that cannot be read is listed with where and why, and
+//! skipped, never guessed. Readers hand what they find to a [`Sink`] as they read it: the import
+//! command's writes each point out as it comes (issue 39), [`Imported`] collects (tests, SunSpec).
+//! [`header`] and [`entry`] write the profile (`docs/profiles.md`), which the loader then checks
+//! like any hand-written one ([`load_back()`]).
 
 mod fields;
 pub mod grid;
