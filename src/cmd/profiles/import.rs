@@ -124,6 +124,13 @@ pub(super) fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
         }
         sources = args.files.iter().map(|f| f.display().to_string()).collect();
     }
+    if let Some(target) = args.from.as_ref().filter(|_| sink.hint().is_some()) {
+        // A device, not a sheet: the sheet's advice (header rows, --columns) would not help.
+        anyhow::bail!(
+            "{target}: its SunSpec models (listed above) hold no point a profile can keep: no profile written; \
+             check --unit, or see what the device says with `mbtap read {target} --device sunspec`"
+        );
+    }
     if let Some(hint) = sink.hint() {
         anyhow::bail!("nothing imported ({} problem(s), listed above): {hint}", sink.problems());
     }
