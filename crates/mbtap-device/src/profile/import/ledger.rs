@@ -142,23 +142,9 @@ impl Ledger {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::profile::format::{Access, ValueType, WordOrder};
+    use crate::profile::format::ValueType;
 
-    fn point(table: Table, address: u16, value_type: ValueType, length: Option<u16>) -> Point {
-        Point {
-            table,
-            address,
-            name: format!("P{address}"),
-            value_type,
-            word_order: WordOrder::HighFirst,
-            scale: None,
-            unit: None,
-            access: Access::Read,
-            length,
-            description: None,
-            origin: format!("row {address}"),
-        }
-    }
+    use super::super::test_point as point;
 
     #[test]
     fn overlaps_and_the_end_are_found_and_points_come_out_in_address_order() {

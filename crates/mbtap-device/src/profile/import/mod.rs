@@ -228,25 +228,31 @@ pub const fn type_name(t: ValueType) -> &'static str {
     }
 }
 
+/// A point named `P{address}` from `row {address}` (the tests' shape).
+#[cfg(test)]
+pub(crate) fn test_point(table: Table, address: u16, value_type: ValueType, length: Option<u16>) -> Point {
+    Point {
+        table,
+        address,
+        name: format!("P{address}"),
+        value_type,
+        word_order: WordOrder::HighFirst,
+        scale: None,
+        unit: None,
+        access: Access::Read,
+        length,
+        description: None,
+        origin: format!("row {address}"),
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 
     fn point(table: Table, address: u16, value_type: ValueType) -> Point {
-        Point {
-            table,
-            address,
-            name: format!("P{address}"),
-            value_type,
-            word_order: WordOrder::HighFirst,
-            scale: None,
-            unit: None,
-            access: Access::Read,
-            length: None,
-            description: None,
-            origin: format!("row {address}"),
-        }
+        test_point(table, address, value_type, None)
     }
 
     /// Issue 39: 200 000 rows' profile read back whole took 300 MB; in parts it loads the same.
