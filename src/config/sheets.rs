@@ -355,7 +355,17 @@ fn rows_from_cells(
 /// them, bounded by the checks before — as a grid.
 #[derive(Debug)]
 pub enum WorkbookRows {
-    Cells { path: std::path::PathBuf, sheet: String, cut_cells: u64 },
+    Cells {
+        path: std::path::PathBuf,
+        sheet: String,
+        cut_cells: u64,
+    },
+    /// An OpenDocument spreadsheet's `content.xml`, streamed at each pass.
+    Ods {
+        path: std::path::PathBuf,
+        sheet: Option<String>,
+        cut_cells: u64,
+    },
     Grid(Grid),
 }
 
@@ -383,7 +393,21 @@ fn guarded<T>(path: &Path, read: impl FnOnce() -> anyhow::Result<T>) -> anyhow::
 pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<WorkbookRows> {
     check_zip(path)?;
     check_xls(path)?;
+    if is_ods(path) {
+        return Ok(WorkbookRows::Ods { path: path.to_owned(), sheet: sheet.map(str::to_owned), cut_cells: 0 });
+    }
     guarded(path, || open_sheet(path, sheet))
+}
+
+/// Whether `path` is an OpenDocument spreadsheet (its `mimetype` part says so, ODF v1.2 part 3
+/// §3.3): read by our own row reader, never opened by calamine, which expands every table of
+/// the file into memory (~66 bytes a cell).
+fn is_ods(path: &Path) -> bool {
+    let Ok(file) = std::fs::File::open(path) else { return false };
+    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return false };
+    let Ok(part) = zip.by_name("mimetype") else { return false };
+    let mut kind = String::new();
+    part.take(256).read_to_string(&mut kind).is_ok() && kind.trim() == "application/vnd.oasis.opendocument.spreadsheet"
 }
 
 /// The workbook at `path` and the name of its sheet `sheet` (by name), or of its first.
@@ -440,6 +464,21 @@ impl SheetRows for WorkbookRows {
                     Err(never) => match never {},
                 };
             }
+            Self::Ods { path, sheet, cut_cells } => {
+                let file = std::fs::File::open(&*path).with_context(|| format!("reading {}", path.display()))?;
+                let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file))
+                    .with_context(|| format!("{}: reading the OpenDocument file", path.display()))?;
+                let content =
+                    zip.by_name("content.xml").with_context(|| format!("{}: no content.xml", path.display()))?;
+                let read = mbtap_device::profile::import::ods_rows::parse_ods_rows(
+                    std::io::BufReader::new(content.take(MAX_UNPACKED_BYTES)),
+                    sheet.as_deref(),
+                    each,
+                )
+                .map_err(|e| too_big_or(path, &e))?;
+                *cut_cells = read.cut_cells;
+                return Ok(());
+            }
             Self::Cells { path, sheet, cut_cells } => (path, sheet, cut_cells),
         };
         let reading = || format!("{}: reading sheet {sheet:?}", path.display());
@@ -475,7 +514,16 @@ impl SheetRows for WorkbookRows {
     fn cut_cells(&self) -> u64 {
         match self {
             Self::Grid(g) => g.cut_cells,
-            Self::Cells { cut_cells, .. } => *cut_cells,
+            Self::Cells { cut_cells, .. } | Self::Ods { cut_cells, .. } => *cut_cells,
         }
+    }
+}
+
+/// An OpenDocument sheet's rows could not be read: over a bound (what to do said), or why not.
+fn too_big_or(path: &Path, e: &mbtap_device::profile::import::ods_rows::OdsRowsError) -> anyhow::Error {
+    use mbtap_device::profile::import::ods_rows::OdsRowsError;
+    match e {
+        OdsRowsError::TooManyRows(_) => too_big(path, &e.to_string()),
+        _ => anyhow::anyhow!("{}: {e}", path.display()),
     }
 }

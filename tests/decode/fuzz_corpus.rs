@@ -33,6 +33,7 @@ fn run_dir(dir: &Path) -> usize {
             "ods_size" => mbtap_device::fuzzing::ods_size,
             "xls_size" => mbtap_device::fuzzing::xls_size,
             "xls_container" => mbtap_device::fuzzing::xls_container,
+            "ods_rows" => mbtap_device::fuzzing::ods_rows,
             "sunspec" => mbtap_device::fuzzing::sunspec,
             "spool" => mbtap_publish::fuzzing::spool,
             "sparkplug" => mbtap_publish::fuzzing::sparkplug,

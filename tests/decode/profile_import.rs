@@ -855,3 +855,60 @@ fn regression_issue_39_a_streamed_import_writes_what_the_collected_one_does() {
     assert!(err.contains("row 7, column A (address): \"y\""), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Rows of every shape a spreadsheet program writes: repeated rows and cells, leading empty
+/// rows and columns, paragraphs, spaces, spans, an annotation, numbers, a percentage, a
+/// boolean, a date, a covered cell, and a million empty rows at the end.
+const ODS_SHAPES: &str = r#"<table:table-row table:number-rows-repeated="2"><table:table-cell/></table:table-row><table:table-row><table:table-cell table:number-columns-repeated="2"/><table:table-cell office:value-type="float" office:value="1.5"><text:p>1.5</text:p></table:table-cell><table:table-cell office:value-type="string"><text:p>two<text:s text:c="3"/>spaces</text:p><text:p>and <text:span>a span</text:span> &amp; more</text:p><office:annotation><text:p>not this</text:p></office:annotation></table:table-cell><table:table-cell office:value-type="boolean" office:boolean-value="true"><text:p>TRUE</text:p></table:table-cell><table:table-cell office:value-type="percentage" office:value="0.25"><text:p>25%</text:p></table:table-cell><table:table-cell office:value-type="date" office:date-value="2026-12-04"><text:p>04.12.26</text:p></table:table-cell><table:covered-table-cell office:value-type="string" office:string-value="covered"/><table:table-cell office:value-type="float" office:value="40001" table:number-columns-repeated="3"/></table:table-row><table:table-row table:number-rows-repeated="2"><table:table-cell office:value-type="float" office:value="7"><text:p>7</text:p></table:table-cell></table:table-row><table:table-row table:number-rows-repeated="5"><table:table-cell table:number-columns-repeated="4"/></table:table-row><table:table-row><table:table-cell/><table:table-cell><text:p>untyped: empty</text:p></table:table-cell><table:table-cell office:value-type="string"><text:p/></table:table-cell><table:table-cell office:value-type="float" office:value="-3"/></table:table-row><table:table-row table:number-rows-repeated="1000000"><table:table-cell table:number-columns-repeated="1024"/></table:table-row>"#;
+
+/// Issue 39: the workbook reader expands every table of an ODS into memory when it opens it
+/// (52.9 MB for a 655 kB sheet); the import now streams the sheet's rows itself. What it reads
+/// must be what the workbook reader reads: every row at the same number with the same cells.
+#[test]
+fn regression_issue_39_an_ods_sheet_streamed_reads_as_the_workbook_reader_reads_it() {
+    use calamine::Reader as _;
+    use std::io::Read as _;
+    use std::ops::ControlFlow;
+    let file = ods("shapes", ODS_SHAPES);
+    // The workbook reader's rows, padded to the sheet's own row and column numbers.
+    let mut wb = calamine::open_workbook_auto(&file.path).unwrap();
+    let range = wb.worksheet_range("Sheet1").unwrap();
+    let (row0, col0) = range.start().map(|(r, c)| (r as usize, c as usize)).unwrap();
+    let text = |d: &calamine::Data| match d {
+        calamine::Data::Float(f) if f.fract() == 0.0 => format!("{f:.0}"),
+        calamine::Data::Float(f) => f.to_string(),
+        calamine::Data::Bool(b) => b.to_string(),
+        calamine::Data::Empty => String::new(),
+        other => other.to_string(),
+    };
+    let mut theirs: Vec<(usize, Vec<String>)> = Vec::new();
+    for (i, r) in range.rows().enumerate() {
+        let mut cells: Vec<String> = std::iter::repeat_n(String::new(), col0).chain(r.iter().map(text)).collect();
+        while cells.last().is_some_and(String::is_empty) {
+            cells.pop();
+        }
+        if !cells.is_empty() {
+            theirs.push((row0 + i, cells));
+        }
+    }
+    // Ours, from content.xml.
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(&file.path).unwrap()).unwrap();
+    let mut xml = Vec::new();
+    zip.by_name("content.xml").unwrap().read_to_end(&mut xml).unwrap();
+    let mut ours: Vec<(usize, Vec<String>)> = Vec::new();
+    let read = mbtap_device::profile::import::ods_rows::parse_ods_rows(&xml[..], None, &mut |i, cells| {
+        if !cells.is_empty() {
+            ours.push((i, cells.iter().map(|c| (*c).to_owned()).collect()));
+        }
+        ControlFlow::Continue(())
+    })
+    .unwrap();
+    assert_eq!(read.cut_cells, 0);
+    assert_eq!(ours, theirs);
+    assert_eq!(ours.len(), 5, "{ours:?}");
+    assert!(ours[1].1.contains(&"two   spaces\nand a span & more".to_owned()), "{ours:?}");
+    // And the import takes its header and rows from there.
+    let (code, err, text) = import_holding(&file);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(text.contains("volts") || text.contains("[[holding_registers]]"), "{text}");
+}

@@ -251,6 +251,23 @@ pub fn xls_container(data: &[u8]) {
     }
 }
 
+/// Any bytes as a `content.xml`: its first sheet's rows come in order, each numbered after the
+/// one before, each at most [`MAX_COLUMNS`](crate::profile::import::grid::MAX_COLUMNS) cells and
+/// never more than [`MAX_ROWS`](crate::profile::import::grid::MAX_ROWS) of them.
+///
+/// # Panics
+/// When they do not: that is what the fuzzer looks for.
+pub fn ods_rows(data: &[u8]) {
+    use crate::profile::import::grid::{MAX_COLUMNS, MAX_ROWS};
+    let mut last: Option<usize> = None;
+    let _ = crate::profile::import::ods_rows::parse_ods_rows(data, None, &mut |i, cells| {
+        assert!(last.is_none_or(|l| i > l) && i < MAX_ROWS, "row {i} after {last:?}");
+        assert!(cells.len() <= MAX_COLUMNS, "{} cells", cells.len());
+        last = Some(i);
+        std::ops::ControlFlow::Continue(())
+    });
+}
+
 #[cfg(test)]
 mod tests {
     /// The fuzz target's seed (`fuzz/seeds/export_escape/hostile`): device with U+2028 and

@@ -14,6 +14,7 @@ pub mod home_assistant;
 pub mod ledger;
 pub mod load_back;
 pub mod notation;
+pub mod ods_rows;
 pub mod ods_size;
 pub mod sheet;
 pub mod xls_container;
