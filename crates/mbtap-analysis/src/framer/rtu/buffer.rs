@@ -23,14 +23,13 @@ pub(super) struct TimedBuffer {
     pub(super) last_end: Option<u64>,
     /// Time of the last read.
     pub(super) last_read: u64,
-    /// Where the last [`READS_KEPT`] reads' bytes start, oldest first (0 for reads before the
-    /// first): a frame with no read starting inside it holds no boundary between reads (the
-    /// common case, one frame per read, then needs no look at its bytes' gaps).
-    read_starts: [usize; READS_KEPT],
+    /// Where the last read's bytes start, and the read's before it (0 before there were two):
+    /// a frame inside one of them holds no boundary between reads — the common case, one frame
+    /// per read, decided when the next read shows the silence after it — and needs no look at
+    /// its bytes' gaps.
+    last_read_start: usize,
+    prev_read_start: usize,
 }
-
-/// Reads whose starts [`TimedBuffer`] keeps: a frame is decided within a read or two of its end.
-const READS_KEPT: usize = 4;
 
 impl TimedBuffer {
     pub(super) fn new() -> Self {
@@ -42,14 +41,15 @@ impl TimedBuffer {
             head: 0,
             last_end: None,
             last_read: 0,
-            read_starts: [0; READS_KEPT],
+            last_read_start: 0,
+            prev_read_start: 0,
         }
     }
 
     /// Whether bytes `a..b` are known to lie in one read (no read starts after `a` and before
-    /// `b`); `false` when that is not known (the read holding `a` is older than those kept).
+    /// `b`); `false` when that is not known (the read holding `a` is older than the last two).
     pub(super) fn in_one_read(&self, a: usize, b: usize) -> bool {
-        self.read_starts[0] <= a && !self.read_starts.iter().any(|&s| s > a && s < b)
+        a >= self.last_read_start || (a >= self.prev_read_start && b <= self.last_read_start)
     }
 
     /// Bytes waiting for a decision.
@@ -78,8 +78,9 @@ impl TimedBuffer {
                 }
                 None => (u64::MAX, u64::MAX),
             };
-            self.read_starts.rotate_left(1);
-            self.read_starts[READS_KEPT - 1] = self.buf.len();
+            // Two stores per read: on a per-byte line every byte is one.
+            self.prev_read_start = self.last_read_start;
+            self.last_read_start = self.buf.len();
             if let [b] = bytes {
                 // One byte per read (per-byte timestamps, a slow line): four pushes.
                 self.buf.push(*b);
@@ -120,9 +121,8 @@ impl TimedBuffer {
         self.gap_lb.drain(..head);
         self.gap_ub.drain(..head);
         self.head = 0;
-        for s in &mut self.read_starts {
-            *s = s.saturating_sub(head);
-        }
+        self.last_read_start = self.last_read_start.saturating_sub(head);
+        self.prev_read_start = self.prev_read_start.saturating_sub(head);
         Some(head)
     }
 }
