@@ -13,6 +13,13 @@ pub const MAX_COLUMNS: usize = 256;
 /// Bytes of cell text kept in all (64 MiB: 262 144 rows of 256 bytes).
 pub const MAX_TEXT: usize = 64 << 20;
 
+/// A number as a sheet shows it in a cell: whole numbers without `.0`, as every workbook reader
+/// of the import gives them.
+#[must_use]
+pub fn number_text(f: f64) -> String {
+    if f.fract() == 0.0 && f.abs() < 1e15 { format!("{f:.0}") } else { f.to_string() }
+}
+
 /// Why a row was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum GridFull {

@@ -60,11 +60,7 @@ fn repeats(e: &BytesStart<'_>, key: &[u8]) -> u64 {
 
 /// A number as a sheet shows it: whole numbers without `.0` (the import's text of a cell).
 fn number_text(v: &str) -> String {
-    match v.trim().parse::<f64>() {
-        Ok(f) if f.fract() == 0.0 && f.abs() < 1e15 => format!("{f:.0}"),
-        Ok(f) => f.to_string(),
-        Err(_) => v.trim().to_owned(),
-    }
+    v.trim().parse::<f64>().map_or_else(|_| v.trim().to_owned(), super::grid::number_text)
 }
 
 /// The cell a start tag opens: its value from its attributes, or `None` when its paragraphs are
