@@ -16,7 +16,6 @@ use anyhow::Context as _;
 use calamine::{Data, DataRef, Reader as _};
 use mbtap_device::profile::import::grid::{Grid, MAX_COLUMNS, MAX_ROWS};
 use mbtap_device::profile::import::sheet::SheetRows;
-use mbtap_device::profile::import::xls_size::XlsSize;
 
 /// The largest CSV read (64 MiB; the largest register sheet — every address of four tables at
 /// 200 bytes a row — is ~52 MB).
@@ -196,57 +195,80 @@ fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipAr
     Ok(())
 }
 
-/// The most cells an XLS workbook may lay out as it is opened: every sheet's value range and
-/// formula range, each from its first used cell to its last, and what a sheet's `Dimensions`
-/// record reserves. A register sheet of 65 536 rows × 40 columns is 2.6 M.
-pub const MAX_XLS_CELLS: u64 = 3 << 20;
-
 /// The compound-file signature an XLS starts with ([MS-CFB] 2.2, the header's `Signature`).
 const CFB_MAGIC: [u8; 8] = [0xD0, 0xCF, 0x11, 0xE0, 0xA1, 0xB1, 0x1A, 0xE1];
 
-/// Refuses an XLS workbook whose sheets lay out more than [`MAX_XLS_CELLS`], or whose records
-/// the reader would crash on, counted from its `Workbook` stream (issue 39: cells at A1 and
-/// IV65536 of a 5.6 kB file took 1.05 GB; a `Dimensions` record whose last row comes before
-/// its first aborted the process). Not a compound file: nothing to check here.
-fn check_xls(path: &Path) -> anyhow::Result<()> {
-    use mbtap_device::profile::import::xls_container::parse_xls_container;
-    use mbtap_device::profile::import::xls_size::parse_xls_size;
-    let Ok(mut file) = std::fs::File::open(path) else { return Ok(()) };
+/// Whether `path` starts as a compound file does (an XLS workbook).
+fn is_compound(path: &Path) -> bool {
     let mut magic = [0u8; 8];
-    if file.read_exact(&mut magic).is_err() || magic != CFB_MAGIC {
-        return Ok(());
-    }
-    let len = file.metadata().map_or(0, |m| m.len());
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == CFB_MAGIC
+}
+
+/// An XLS workbook's sheet `sheet` (by name), or its first, read by our own reader
+/// (`xls_rows.rs`): the container is read whole once to find where the workbook stream lies
+/// (then let go), the globals once — sheet names and offsets, the shared strings, kept — and
+/// the sheet's records from the file at each pass (issue 39: calamine laid every sheet out
+/// densely when it opened the file, 8.7× a 4.4 MB sheet; cells at A1 and IV65536 took 1 GB).
+fn open_xls(path: &Path, sheet: Option<&str>) -> anyhow::Result<WorkbookRows> {
+    use mbtap_device::profile::import::xls_container::parse_xls_stream;
+    use mbtap_device::profile::import::xls_rows::parse_xls_book;
+    let len = std::fs::metadata(path).with_context(|| format!("reading {}", path.display()))?.len();
     if len > MAX_FILE_BYTES {
         return Err(too_big(path, &format!("{len} bytes, over the {MAX_FILE_BYTES} a sheet may have")));
     }
-    // The reader reads the whole file into memory too.
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    // The stream the reader will lay out: the first directory entry named `Workbook` (else
-    // `Book`) in the directory's order, as it searches — linked into the tree or not — read as
-    // it reads it, with what would make it loop, panic or over-allocate refused.
-    let stream = parse_xls_container(&bytes)
-        .with_context(|| format!("{}: not a compound file the workbook reader can open", path.display()))?;
-    let size = parse_xls_size(&stream).with_context(|| format!("{}: not a readable XLS workbook", path.display()))?;
-    check_xls_size(path, &size)
+    let stream = {
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        parse_xls_stream(&bytes)
+            .with_context(|| format!("{}: not a compound file a workbook can be read from", path.display()))?
+    };
+    let book = with_xls_stream(path, &stream, |r| parse_xls_book(std::io::BufReader::new(r)))
+        .and_then(|read| read.map_err(|e| xls_error(path, &e)))?;
+    let names = || book.sheets.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ");
+    let index = match sheet {
+        Some(s) => book
+            .sheets
+            .iter()
+            .position(|n| n.name.eq_ignore_ascii_case(s))
+            .with_context(|| format!("{}: no sheet {s:?} (it has: {})", path.display(), names()))?,
+        None if book.sheets.is_empty() => anyhow::bail!("{}: no sheets", path.display()),
+        None => 0,
+    };
+    Ok(WorkbookRows::Xls { path: path.to_owned(), stream, book, sheet: index, cut_cells: 0 })
 }
 
-/// Refuses a workbook stream laying out more than [`MAX_XLS_CELLS`].
-fn check_xls_size(path: &Path, size: &XlsSize) -> anyhow::Result<()> {
-    if size.cells > MAX_XLS_CELLS || size.reserved > MAX_XLS_CELLS {
-        let largest = size
-            .largest
-            .map(|(n, rows, cols)| format!(" (the largest, sheet {}: {rows} rows × {cols} columns)", n + 1))
-            .unwrap_or_default();
-        return Err(too_big(
-            path,
-            &format!(
-                "its sheets lay out {} cells from their first used cell to their last{largest}, and reserve {} for one sheet, over the {MAX_XLS_CELLS} read from an XLS workbook",
-                size.cells, size.reserved
-            ),
-        ));
+/// Runs `read` on the workbook stream of the XLS at `path`, lying where `stream` says.
+fn with_xls_stream<T>(
+    path: &Path,
+    stream: &mbtap_device::profile::import::xls_container::WorkbookStream,
+    read: impl FnOnce(&mut dyn ReadSeek) -> T,
+) -> anyhow::Result<T> {
+    use mbtap_device::profile::import::xls_container::{StreamReader, WorkbookStream};
+    Ok(match stream {
+        WorkbookStream::Held(bytes) => read(&mut std::io::Cursor::new(bytes.as_slice())),
+        WorkbookStream::InFile(pieces) => {
+            let file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+            read(&mut StreamReader::new(std::io::BufReader::new(file), pieces))
+        }
+    })
+}
+
+/// What the XLS reader reads from.
+trait ReadSeek: std::io::Read + std::io::Seek {}
+impl<T: std::io::Read + std::io::Seek> ReadSeek for T {}
+
+/// An XLS sheet could not be read: over a bound (what to do said), or why not and what to do.
+fn xls_error(path: &Path, e: &mbtap_device::profile::import::xls_rows::XlsRowsError) -> anyhow::Error {
+    use mbtap_device::profile::import::xls_rows::XlsRowsError;
+    match e {
+        XlsRowsError::TooManyRows(_) | XlsRowsError::TooMuchText => too_big(path, &e.to_string()),
+        XlsRowsError::Password => {
+            anyhow::anyhow!("{}: {e}; save it without a password, or export the register table as CSV", path.display())
+        }
+        _ => anyhow::anyhow!(
+            "{}: {e}: a malformed record; open the file in a spreadsheet and save it again, or export the register table as CSV",
+            path.display()
+        ),
     }
-    Ok(())
 }
 
 /// Refuses a zip-based workbook before the reader opens it: one that unpacks past
@@ -301,52 +323,15 @@ fn cell_ref_text(d: &DataRef<'_>) -> String {
     }
 }
 
-/// A sheet read cell by cell, handed on row by row (`next` gives each cell's row, column and
-/// text; `each` each row, the empty ones between included): cells past [`MAX_COLUMNS`] counted,
-/// a row past [`MAX_ROWS`] refused — nothing is allocated for the empty space between cells,
-/// and no row is kept once handed on.
+/// [`rows_from_cells`] with a row past [`MAX_ROWS`] said about `path`.
 fn rows_from_cells(
     path: &Path,
-    mut next: impl FnMut() -> anyhow::Result<Option<(u32, u32, String)>>,
+    next: impl FnMut() -> anyhow::Result<Option<(u32, u32, String)>>,
     each: &mut dyn FnMut(usize, &[&str]) -> ControlFlow<()>,
 ) -> anyhow::Result<u64> {
-    let mut row: Vec<String> = Vec::new();
-    let mut at_row = 0usize;
-    let mut cut = 0u64;
-    let mut hand_on = |i: usize, row: &mut Vec<String>| {
-        // Trailing empty cells are not part of the row (a workbook pads rows to its widest).
-        let kept = row.iter().rposition(|c| !c.trim().is_empty()).map_or(0, |k| k + 1);
-        let cells: Vec<&str> = row.iter().take(kept).map(String::as_str).collect();
-        let flow = each(i, &cells);
-        row.clear();
-        flow
-    };
-    while let Some((r, c, text)) = next()? {
-        let (r, c) = (r as usize, c as usize);
-        if r >= MAX_ROWS {
-            return Err(too_big(path, &format!("a cell at row {} (over {MAX_ROWS} rows)", r + 1)));
-        }
-        if r < at_row {
-            // Rows out of order (a hand-made file): what was read is kept, the rest ignored.
-            continue;
-        }
-        while at_row < r {
-            if hand_on(at_row, &mut row).is_break() {
-                return Ok(cut);
-            }
-            at_row += 1;
-        }
-        if c >= MAX_COLUMNS {
-            cut += 1;
-            continue;
-        }
-        if row.len() <= c {
-            row.resize(c + 1, String::new());
-        }
-        row[c] = text;
-    }
-    let _ = hand_on(at_row, &mut row);
-    Ok(cut)
+    mbtap_device::profile::import::cell_rows::rows_from_cells(next, each, |r| {
+        too_big(path, &format!("a cell at row {} (over {MAX_ROWS} rows)", r + 1))
+    })
 }
 
 /// A workbook's sheet as rows: XLSX and XLSB read from the file cell by cell at each pass (the
@@ -357,6 +342,15 @@ pub enum WorkbookRows {
     Cells {
         path: std::path::PathBuf,
         sheet: String,
+        cut_cells: u64,
+    },
+    /// An XLS workbook: where its workbook stream lies, its globals, and the sheet read
+    /// from the stream at each pass.
+    Xls {
+        path: std::path::PathBuf,
+        stream: mbtap_device::profile::import::xls_container::WorkbookStream,
+        book: mbtap_device::profile::import::xls_rows::XlsBook,
+        sheet: usize,
         cut_cells: u64,
     },
     /// An OpenDocument spreadsheet's `content.xml`, streamed at each pass.
@@ -390,8 +384,10 @@ fn guarded<T>(path: &Path, read: impl FnOnce() -> anyhow::Result<T>) -> anyhow::
 /// The workbook cannot be opened, unpacks to more than [`MAX_UNPACKED_BYTES`], is over the
 /// grid's bounds, or has no such sheet (the ones it has are named).
 pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<WorkbookRows> {
+    if is_compound(path) {
+        return open_xls(path, sheet);
+    }
     check_zip(path)?;
-    check_xls(path)?;
     if is_ods(path) {
         return Ok(WorkbookRows::Ods { path: path.to_owned(), sheet: sheet.map(str::to_owned), cut_cells: 0 });
     }
@@ -478,6 +474,14 @@ impl SheetRows for WorkbookRows {
                 *cut_cells = read.cut_cells;
                 return Ok(());
             }
+            Self::Xls { path, stream, book, sheet, cut_cells } => {
+                let read = with_xls_stream(path, stream, |r| {
+                    mbtap_device::profile::import::xls_rows::parse_xls_rows(r, book, *sheet, each)
+                })?
+                .map_err(|e| xls_error(path, &e))?;
+                *cut_cells = read.cut_cells;
+                return Ok(());
+            }
             Self::Cells { path, sheet, cut_cells } => (path, sheet, cut_cells),
         };
         let reading = || format!("{}: reading sheet {sheet:?}", path.display());
@@ -513,7 +517,7 @@ impl SheetRows for WorkbookRows {
     fn cut_cells(&self) -> u64 {
         match self {
             Self::Grid(g) => g.cut_cells,
-            Self::Cells { cut_cells, .. } | Self::Ods { cut_cells, .. } => *cut_cells,
+            Self::Cells { cut_cells, .. } | Self::Ods { cut_cells, .. } | Self::Xls { cut_cells, .. } => *cut_cells,
         }
     }
 }

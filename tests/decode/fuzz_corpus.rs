@@ -31,7 +31,7 @@ fn run_dir(dir: &Path) -> usize {
             "learn" => mbtap_analysis::fuzzing::learn,
             "profile_import" => mbtap_device::fuzzing::profile_import,
             "ods_size" => mbtap_device::fuzzing::ods_size,
-            "xls_size" => mbtap_device::fuzzing::xls_size,
+            "xls_rows" => mbtap_device::fuzzing::xls_rows,
             "xls_container" => mbtap_device::fuzzing::xls_container,
             "ods_rows" => mbtap_device::fuzzing::ods_rows,
             "sunspec" => mbtap_device::fuzzing::sunspec,

@@ -575,35 +575,44 @@ fn workbook_stream(globals: &[u8], cells: &[Vec<u8>]) -> Vec<u8> {
     stream
 }
 
-/// Issue 39: XLS workbooks of a few kilobytes — cells at A1 and IV65536 (the reader lays out
-/// the 16.7 M cells between them: 1.05 GB), a `Dimensions` record whose last row comes before
-/// its first (the reader reserved ~2³² rows and the process aborted), a `BOF` too short to
-/// read (the reader panicked) — are refused saying why, and a plain one still imports.
+/// Issue 39: XLS workbooks of a few kilobytes — cells at A1 and IV65536 (calamine laid out the
+/// 16.7 M cells between them: 1.05 GB), a `Dimensions` record whose last row comes before its
+/// first (calamine reserved ~2³² rows and the process aborted), a `CodePage` too short to read
+/// (calamine panicked). Refused at first; now the sheet is read record by record, nothing laid
+/// out: the far cell is one cell (said skipped, no address), `Dimensions` is not needed, and a
+/// record too short to read is said, with its offset.
 #[test]
-fn regression_issue_39_xls_workbooks_the_reader_would_blow_up_on_are_refused() {
+fn regression_issue_39_xls_workbooks_the_reader_blew_up_on_are_read_cell_by_cell() {
     let (code, err, text) = import_holding(&xls("plain", &[], &[]));
     assert_eq!(code, Some(0), "{err}");
     assert!(text.contains("volts"), "{text}");
 
-    let (code, err, _) = import_holding(&xls("far", &[], &[number(65_535, 255, 1.0)]));
-    assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("16777216 cells") && err.contains("65536 rows × 256 columns"), "{err}");
+    let (code, err, text) = import_holding(&xls("far", &[], &[number(65_535, 255, 1.0)]));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(text.contains("volts") && err.contains("row 65536"), "{err}");
 
-    // The same, its workbook stream inside a storage: the reader finds it by name anywhere.
+    // The same, its workbook stream inside a storage: found by name anywhere.
     let (code, err, _) = import_holding(&xls_at("nested", "/Deep/Workbook", &[], &[number(65_535, 255, 1.0)]));
-    assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("16777216 cells"), "{err}");
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("row 65536"), "{err}");
 
     // Dimensions: first row 5, last row + 1 = 2, columns 0..2.
     let dims = biff(0x0200, &[&5u32.to_le_bytes()[..], &2u32.to_le_bytes(), &[0, 0, 2, 0, 0, 0]].concat());
-    let (code, err, _) = import_holding(&xls("dims", &[], &[dims]));
-    assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("last row comes before its first"), "{err}");
+    let (code, err, text) = import_holding(&xls("dims", &[], &[dims]));
+    assert_eq!(code, Some(0), "{err}");
+    assert!(text.contains("volts"), "{text}");
 
-    // A CodePage record of no bytes among the globals: the reader reads its 2 bytes regardless.
+    // A CodePage record of no bytes among the globals.
     let (code, err, _) = import_holding(&xls("codepage", &biff(0x0042, &[]), &[]));
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("malformed record") && !err.contains("panicked"), "{err}");
+    assert!(err.contains("record 0x0042 at offset 20") && err.contains("save it again"), "{err}");
+
+    // A sheet cut inside a record: said where.
+    let mut cut = workbook_stream(&[], &[]);
+    cut.truncate(cut.len() - 6);
+    let (code, err, _) = import_holding(&xls_bytes("cut", &compound(&[("/Workbook", cut)])));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("ends inside a record at offset"), "{err}");
 }
 
 /// A compound file (512-byte sectors) holding `streams` in order, as bytes to patch.
@@ -650,8 +659,9 @@ fn xls_bytes(tag: &str, bytes: &[u8]) -> tempfile_path::TempProfile {
 /// directory's order — linked into the tree or not — and trusts every chain and length. The
 /// check read the container with a library that walks the tree: an entry no storage links to,
 /// holding cells at A1 and IV65536, was laid out unchecked (1 GB). Now the container is read as
-/// the reader reads it: that entry is counted and refused, and so are a chain that loops (the
-/// reader never ends) and a length past the file (the reader allocates it).
+/// the reader reads it — that entry is the one read (cell by cell now: its far cell is said) —
+/// and a chain that loops (the reader never ended) and a length past the file (the reader
+/// allocated it) are refused.
 #[test]
 fn regression_issue_39_an_xls_container_is_read_as_the_workbook_reader_reads_it() {
     const NOSTREAM: u32 = 0xFFFF_FFFF;
@@ -667,8 +677,8 @@ fn regression_issue_39_an_xls_container_is_read_as_the_workbook_reader_reads_it(
     set_entry(&mut bytes, 2, None, [NOSTREAM, NOSTREAM, NOSTREAM]);
     set_entry(&mut bytes, 1, Some("Workbook"), [NOSTREAM, NOSTREAM, NOSTREAM]);
     let (code, err, _) = import_holding(&xls_bytes("orphan", &bytes));
-    assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("16777216 cells"), "{err}");
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("row 65536"), "the entry first in the directory is read: {err}");
 
     // A workbook stream of regular sectors (≥ 4 096 bytes) whose last sector leads back to its
     // first: the FAT (its first sector is the header's first DIFAT entry, at 76).
@@ -694,6 +704,193 @@ fn regression_issue_39_an_xls_container_is_read_as_the_workbook_reader_reads_it(
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("2147483648 bytes, more than the file"), "{err}");
 }
+
+/// `LabelSst` at (row, col): row, column, format 0, the shared string's index.
+fn label_sst(row: u16, col: u16, i: u32) -> Vec<u8> {
+    biff(0x00FD, &[&row.to_le_bytes()[..], &col.to_le_bytes(), &[0, 0], &i.to_le_bytes()].concat())
+}
+
+/// `RK` at (row, col): row, column, format 0, the `RkNumber`.
+fn rk(row: u16, col: u16, rk: u32) -> Vec<u8> {
+    biff(0x027E, &[&row.to_le_bytes()[..], &col.to_le_bytes(), &[0, 0], &rk.to_le_bytes()].concat())
+}
+
+/// `Formula` at (row, col) with the cached `value` (8 bytes), flags and cache 0, and the
+/// formula `=5` (`cce` 3: `PtgInt` 5).
+fn formula(row: u16, col: u16, value: [u8; 8]) -> Vec<u8> {
+    let fixed = [&row.to_le_bytes()[..], &col.to_le_bytes(), &[0, 0], &value, &[0, 0], &[0, 0, 0, 0]].concat();
+    biff(0x0006, &[fixed, vec![3, 0, 0x1E, 5, 0]].concat())
+}
+
+/// A `FormulaValue` that is not a number: type, the byte that says which, 0xFFFF at the end.
+fn special(kind: u8, v: u8) -> [u8; 8] {
+    [kind, 0, v, 0, 0, 0, 0xFF, 0xFF]
+}
+
+/// An 8-bit shared string: length, flags 0, the bytes.
+fn sst_8bit(s: &str) -> Vec<u8> {
+    [&u16::try_from(s.len()).unwrap().to_le_bytes()[..], &[0], s.as_bytes()].concat()
+}
+
+fn utf16(s: &str) -> Vec<u8> {
+    s.encode_utf16().flat_map(u16::to_le_bytes).collect()
+}
+
+/// Globals holding a code page (1200) and a shared-string table carried on in three `Continue`
+/// records: 8-bit and UTF-16 strings, a rich one (2 runs), one with phonetic data (6 bytes), an
+/// empty one, one split inside its characters (8-bit, then UTF-16 after the `Continue`'s own
+/// flags byte), one starting a `Continue`, one whose runs are split, then one more.
+fn xls_shared_strings() -> Vec<u8> {
+    let wide = [&7u16.to_le_bytes()[..], &[1], &utf16("Ström Ω")].concat();
+    let rich = [&4u16.to_le_bytes()[..], &[0x08], &2u16.to_le_bytes(), b"rich", &[1; 8]].concat();
+    let ext = [&3u16.to_le_bytes()[..], &[0x04], &6u32.to_le_bytes(), b"ext", &[9; 6]].concat();
+    let split = [&15u16.to_le_bytes()[..], &[0], b"abcdefghij"].concat();
+    let sst = [
+        &10u32.to_le_bytes()[..],
+        &10u32.to_le_bytes(),
+        &sst_8bit("Address"),
+        &sst_8bit("volts"),
+        &wide,
+        &rich,
+        &ext,
+        &[0, 0, 0],
+        &split,
+    ]
+    .concat();
+    let cont1 = [&[1u8][..], &utf16("Ωmega")].concat();
+    let runs_cut = [&3u16.to_le_bytes()[..], &[0x08], &1u16.to_le_bytes(), b"abc", &[2, 2]].concat();
+    let cont2 = [sst_8bit("after"), runs_cut].concat();
+    let cont3 = [&[2u8, 2][..], &sst_8bit("last")].concat();
+    [
+        biff(0x0042, &1200u16.to_le_bytes()),
+        biff(0x00FC, &sst),
+        biff(0x003C, &cont1),
+        biff(0x003C, &cont2),
+        biff(0x003C, &cont3),
+    ]
+    .concat()
+}
+
+/// Cells of every kind the workbook reader reads, then rows of numbers to put the stream in
+/// regular sectors (≥ 4 096 bytes).
+fn xls_cells_of_every_kind() -> Vec<Vec<u8>> {
+    let rk_int = |v: i32| u32::from_le_bytes((v << 2).to_le_bytes()) | 2;
+    let rk_f64 = |v: f64| u32::try_from(v.to_bits() >> 32).unwrap() & !3;
+    let mut mul = [&5u16.to_le_bytes()[..], &1u16.to_le_bytes()].concat();
+    for v in [rk_int(7), rk_f64(0.5), rk_int(250) | 1] {
+        mul.extend([0, 0]);
+        mul.extend(v.to_le_bytes());
+    }
+    mul.extend(3u16.to_le_bytes());
+    let wide_label =
+        [&7u16.to_le_bytes()[..], &2u16.to_le_bytes(), &[0, 0], &6u16.to_le_bytes(), &[1], &utf16("Wide ☃")].concat();
+    let string = [&12u16.to_le_bytes()[..], &[0], b"formula text"].concat();
+    let mut cells = vec![
+        label_sst(2, 0, 2),
+        label_sst(2, 1, 3),
+        label_sst(2, 2, 5),
+        label_sst(2, 3, 6),
+        label_sst(3, 0, 4),
+        label_sst(3, 1, 7),
+        label_sst(3, 2, 8),
+        label_sst(3, 3, 9),
+        label_sst(3, 4, 99),
+        rk(4, 0, rk_int(40_001)),
+        rk(4, 1, rk_int(123) | 1),
+        rk(4, 2, rk_int(500) | 1),
+        rk(4, 3, rk_f64(2.5)),
+        rk(4, 4, rk_f64(1234.5) | 1),
+        rk(4, 5, rk_int(-3)),
+        biff(0x00BD, &mul),
+        formula(6, 0, 3.25f64.to_le_bytes()),
+        formula(6, 1, special(1, 1)),
+        formula(6, 2, special(2, 0x07)),
+        formula(6, 3, special(0, 0)),
+        biff(0x0207, &string),
+        formula(6, 4, special(3, 0)),
+        biff(0x0205, &[&7u16.to_le_bytes()[..], &0u16.to_le_bytes(), &[0, 0, 0, 0]].concat()),
+        biff(0x0205, &[&7u16.to_le_bytes()[..], &1u16.to_le_bytes(), &[0, 0, 0x2A, 1]].concat()),
+        biff(0x0204, &wide_label),
+        number(8, 0, -0.5),
+        number(8, 1, 1e20),
+        number(8, 5, 42.0),
+    ];
+    cells.extend((9..400).map(|r| number(r, 0, f64::from(r))));
+    cells
+}
+
+/// Issue 39: calamine lays every sheet of an XLS out densely when it opens the file (38.7 MB for
+/// a 4.4 MB sheet; 1 GB for cells at A1 and IV65536); the import now reads the sheet's records
+/// itself. What it reads must be what calamine reads: every row at the same number with the same
+/// cells, for cells of every kind and shared strings carried on across `Continue` records — and
+/// the stream read in pieces from the file as from memory.
+#[test]
+fn regression_issue_39_an_xls_sheet_read_by_its_records_reads_as_the_workbook_reader_reads_it() {
+    use calamine::Reader as _;
+    use mbtap_device::profile::import::{xls_container, xls_rows};
+    use std::ops::ControlFlow;
+    // Version 3 (512-byte sectors): calamine opens a version 4 file only with a mini stream.
+    let stream = workbook_stream(&xls_shared_strings(), &xls_cells_of_every_kind());
+    let file = xls_bytes("kinds", &compound(&[("/Workbook", stream)]));
+    // calamine's rows, as the import turned its cells into text, padded to the sheet's own
+    // row and column numbers.
+    let mut wb = calamine::open_workbook_auto(&file.path).unwrap();
+    let range = wb.worksheet_range("regs").unwrap();
+    let (row0, col0) = range.start().map(|(r, c)| (r as usize, c as usize)).unwrap();
+    let text = |d: &calamine::Data| match d {
+        calamine::Data::Float(f) => mbtap_device::profile::import::grid::number_text(*f),
+        calamine::Data::Error(e) => format!("#{e:?}"),
+        calamine::Data::Empty => String::new(),
+        other => other.to_string(),
+    };
+    let mut theirs: Vec<(usize, Vec<String>)> = Vec::new();
+    for (i, r) in range.rows().enumerate() {
+        let mut cells: Vec<String> = std::iter::repeat_n(String::new(), col0).chain(r.iter().map(text)).collect();
+        while cells.last().is_some_and(String::is_empty) {
+            cells.pop();
+        }
+        theirs.push((row0 + i, cells));
+    }
+    // Ours: the stream found in the file, read in its pieces and gathered.
+    let bytes = std::fs::read(&file.path).unwrap();
+    let xls_container::WorkbookStream::InFile(pieces) = xls_container::parse_xls_stream(&bytes).unwrap() else {
+        panic!("the stream is in regular sectors");
+    };
+    let gathered = xls_container::parse_xls_container(&bytes).unwrap();
+    let read = |stream: &mut dyn FnMut() -> Box<dyn ReadSeek>| {
+        let book = xls_rows::parse_xls_book(stream()).unwrap();
+        let mut ours: Vec<(usize, Vec<String>)> = Vec::new();
+        let got = xls_rows::parse_xls_rows(stream(), &book, 0, &mut |i, cells| {
+            ours.push((i, cells.iter().map(|c| (*c).to_owned()).collect()));
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        assert_eq!(got.cut_cells, 0);
+        (book.sheets, ours)
+    };
+    let (sheets, in_pieces) =
+        read(&mut || Box::new(xls_container::StreamReader::new(std::io::Cursor::new(bytes.clone()), &pieces)));
+    let (_, held) = read(&mut || Box::new(std::io::Cursor::new(gathered.clone())));
+    assert_eq!(in_pieces, held);
+    assert_eq!(sheets.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(), ["regs"]);
+    assert_eq!(in_pieces, theirs);
+    let row = |i: usize| in_pieces[i].1.join("|");
+    assert_eq!(row(2), "Ström Ω|rich||abcdefghijΩmega");
+    assert_eq!(row(3), "ext|after|abc|last");
+    assert_eq!(row(4), "40001|1.23|5|2.5|12.345|-3");
+    assert_eq!(row(5), "|7|0.5|2.5");
+    assert_eq!(row(6), "3.25|true|#Div0|formula text");
+    assert_eq!(row(7), "false|#NA|Wide ☃");
+    assert_eq!(row(8), "-0.5|100000000000000000000||||42");
+    // And the import reads its header and rows from there.
+    let (code, err, text) = import_holding(&file);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(text.contains("volts"), "{text}");
+}
+
+/// What the XLS reader reads from, boxed.
+trait ReadSeek: std::io::Read + std::io::Seek {}
+impl<T: std::io::Read + std::io::Seek> ReadSeek for T {}
 
 /// An XLSB record ([MS-XLSB] 2.1.4): its type and size each in 7-bit groups, low first, the
 /// top bit saying another byte follows; then the data.

@@ -224,30 +224,45 @@ pub fn ods_size(data: &[u8]) {
     }
 }
 
-/// Any bytes as an XLS workbook stream, counted: never a panic, and the counts agree with
-/// themselves (the largest sheet's cells are among all sheets' cells; no cells without sheets).
+/// Any bytes as an XLS workbook stream: its globals and its first sheets read without a panic,
+/// each sheet's rows handed on in order — numbered 0, 1, 2… — each of at most
+/// [`MAX_COLUMNS`](crate::profile::import::grid::MAX_COLUMNS) cells, never past
+/// [`MAX_ROWS`](crate::profile::import::grid::MAX_ROWS).
 ///
 /// # Panics
-/// When they do not: that is what the fuzzer looks for.
-pub fn xls_size(data: &[u8]) {
-    use crate::profile::import::xls_size::parse_xls_size;
-    if let Ok(s) = parse_xls_size(data) {
-        if let Some((sheet, rows, cols)) = s.largest {
-            assert!(sheet < s.sheets && rows.saturating_mul(cols) <= s.cells, "{s:?}");
-        }
-        assert!(s.sheets > 0 || (s.cells == 0 && s.reserved == 0), "{s:?}");
+/// When they are not: that is what the fuzzer looks for.
+pub fn xls_rows(data: &[u8]) {
+    use crate::profile::import::grid::{MAX_COLUMNS, MAX_ROWS};
+    use crate::profile::import::xls_rows::{parse_xls_book, parse_xls_rows};
+    let Ok(book) = parse_xls_book(data) else { return };
+    for sheet in 0..book.sheets.len().min(4) {
+        let mut next = 0usize;
+        let _ = parse_xls_rows(std::io::Cursor::new(data), &book, sheet, &mut |i, cells| {
+            assert!(i == next && i < MAX_ROWS && cells.len() <= MAX_COLUMNS, "row {i} after {next}");
+            next += 1;
+            std::ops::ControlFlow::Continue(())
+        });
     }
 }
 
 /// Any bytes as an XLS file's compound-file container: read without a panic and without a
-/// loop, and the workbook stream found is never longer than the file (each sector of a chain
-/// is read once at most; a chain that comes back is refused).
+/// loop, the workbook stream found never longer than the file (each sector of a chain is read
+/// once at most; a chain that comes back is refused), and the same read from its pieces of the
+/// file as gathered.
 ///
 /// # Panics
 /// When it is longer: that is what the fuzzer looks for.
 pub fn xls_container(data: &[u8]) {
-    if let Ok(stream) = crate::profile::import::xls_container::parse_xls_container(data) {
+    use crate::profile::import::xls_container::{StreamReader, WorkbookStream, parse_xls_container, parse_xls_stream};
+    use std::io::Read as _;
+    if let Ok(stream) = parse_xls_container(data) {
         assert!(stream.len() <= data.len(), "{} bytes from a {}-byte file", stream.len(), data.len());
+        // The stream read from its pieces of the file is the stream gathered.
+        if let Ok(WorkbookStream::InFile(pieces)) = parse_xls_stream(data) {
+            let mut read = Vec::new();
+            assert!(StreamReader::new(std::io::Cursor::new(data), &pieces).read_to_end(&mut read).is_ok());
+            assert!(read == stream, "{} bytes read from the pieces, {} gathered", read.len(), stream.len());
+        }
     }
 }
 

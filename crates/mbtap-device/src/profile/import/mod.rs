@@ -6,6 +6,7 @@
 //! [`header`] and [`entry`] write the profile (`docs/profiles.md`), which the loader then checks
 //! like any hand-written one ([`load_back()`]).
 
+pub mod cell_rows;
 mod fields;
 pub mod grid;
 pub mod ha_entry;
@@ -18,7 +19,7 @@ pub mod ods_rows;
 pub mod ods_size;
 pub mod sheet;
 pub mod xls_container;
-pub mod xls_size;
+pub mod xls_rows;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;

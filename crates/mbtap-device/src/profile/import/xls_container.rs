@@ -1,15 +1,19 @@
-//! The compound file an XLS workbook lives in, read the way the workbook reader (calamine 0.32)
-//! reads it, so that the stream sized by [`super::xls_size`] is the stream it will lay out
-//! (issue 39). The reader takes the first directory entry *in the directory's order* named
-//! `Workbook` (else `Book`), linked into the directory tree or not; a container library that
-//! walks the tree never sees an entry no storage links to. The reader also trusts the file:
-//! a sector chain that loops grows without end, a length field is allocated as given, a sector
-//! number past the allocation table panics. Each of those is refused here, said, before it opens.
+//! The compound file an XLS workbook lives in, read to find its workbook stream the way
+//! Excel's readers (calamine 0.32 among them) find it: the first directory entry *in the
+//! directory's order* named `Workbook` (else `Book`), linked into the directory tree or not.
+//! The file is not trusted: a sector chain that loops, a length past the file, a sector number
+//! past the allocation table or a mini sector outside the mini stream is refused, said (issue 39:
+//! calamine looped forever, allocated the length given, or panicked on them). The stream is not
+//! gathered: [`parse_xls_stream`] says which pieces of the file it lies in, and
+//! [`StreamReader`] reads them as one stream (`xls_rows.rs` reads the sheet from there), so the
+//! import never holds the stream beside the file.
 //!
 //! Layout as [MS-CFB] lays it out: a 512-byte header (§2.2), sectors of 512 or 4 096 bytes
 //! numbered from the one after the header, a FAT of next-sector numbers (§2.3) reached through
 //! the DIFAT (§2.5), 128-byte directory entries (§2.6), a mini stream of 64-byte sectors for
 //! streams under 4 096 bytes (§2.4).
+
+use std::ops::Range;
 
 /// The header's signature ([MS-CFB] §2.2).
 const MAGIC: [u8; 8] = [0xD0, 0xCF, 0x11, 0xE0, 0xA1, 0xB1, 0x1A, 0xE1];
@@ -61,40 +65,55 @@ struct Sectors<'a> {
 }
 
 impl<'a> Sectors<'a> {
-    /// Sector `id`: as the reader reads it (a last sector cut short by the end of the file is
-    /// what there is of it); one starting past the end is refused (the reader panics).
-    fn get(&self, id: u32, chain: &'static str) -> Result<&'a [u8], ContainerError> {
-        let beyond = |why| ContainerError::Chain { chain, sector: id, why };
+    /// Sector `id`'s bytes in the file: as the reader reads it (a last sector cut short by the
+    /// end of the file is what there is of it); one starting past the end is refused (the
+    /// reader panics).
+    fn range(&self, id: u32, chain: &'static str) -> Result<Range<usize>, ContainerError> {
+        let beyond = || ContainerError::Chain { chain, sector: id, why: "names a sector past the end of the file" };
         if id > self.max {
-            return Err(beyond("names a sector past the end of the file"));
+            return Err(beyond());
         }
-        let start = (id as usize).checked_mul(self.size).ok_or(beyond("names a sector past the end of the file"))?;
+        let start = (id as usize).checked_mul(self.size).ok_or_else(beyond)?;
         if start > self.data.len() {
-            return Err(beyond("names a sector past the end of the file"));
+            return Err(beyond());
         }
-        Ok(self.data.get(start..start.saturating_add(self.size).min(self.data.len())).unwrap_or_default())
+        // The sectors start after the header, one sector into the file.
+        let end = start.saturating_add(self.size).min(self.data.len());
+        Ok(start + self.size..end + self.size)
+    }
+
+    /// Sector `id`'s bytes (see [`Self::range`]).
+    fn get(&self, id: u32, chain: &'static str) -> Result<&'a [u8], ContainerError> {
+        let r = self.range(id, chain)?;
+        Ok(self.data.get(r.start - self.size..r.end - self.size).unwrap_or_default())
     }
 }
 
-/// The chain from `start` through `next`, cut to `len` when `len` is not 0, as the reader reads
-/// it (each sector from `sector`). More steps than `limit` — the sectors there are — is a loop
-/// (the reader never ends); a next sector outside `next` panics the reader.
-fn chain<'s>(
+/// The pieces of a source the chain from `start` through `next` covers, cut to `len` when `len`
+/// is not 0, as the reader reads it (each sector's place from `sector`). More steps than
+/// `limit` — the sectors there are — is a loop (the reader never ends); a next sector outside
+/// `next` panics the reader.
+fn chain_pieces(
     start: u32,
     next: &[u32],
     len: u64,
     limit: usize,
     name: &'static str,
-    sector: impl Fn(u32) -> Result<&'s [u8], ContainerError>,
-) -> Result<Vec<u8>, ContainerError> {
-    let mut out = Vec::new();
+    sector: impl Fn(u32) -> Result<Range<usize>, ContainerError>,
+) -> Result<Vec<Range<usize>>, ContainerError> {
+    let mut out: Vec<Range<usize>> = Vec::new();
     let (mut id, mut steps) = (start, 0usize);
     while id != ENDOFCHAIN {
         steps += 1;
         if steps > limit {
             return Err(ContainerError::Chain { chain: name, sector: id, why: "loops" });
         }
-        out.extend_from_slice(sector(id)?);
+        let r = sector(id)?;
+        // Sectors one after another in the source make one piece.
+        match out.last_mut() {
+            Some(last) if last.end == r.start => last.end = r.end,
+            _ => out.push(r),
+        }
         id = *next.get(id as usize).ok_or(ContainerError::Chain {
             chain: name,
             sector: id,
@@ -102,9 +121,37 @@ fn chain<'s>(
         })?;
     }
     if len > 0 {
-        out.truncate(usize::try_from(len).unwrap_or(usize::MAX));
+        let mut left = usize::try_from(len).unwrap_or(usize::MAX);
+        out.retain_mut(|r| {
+            let keep = left > 0;
+            r.end = r.end.min(r.start.saturating_add(left));
+            left -= r.len();
+            keep
+        });
     }
     Ok(out)
+}
+
+/// [`chain_pieces`] of `source`, gathered.
+fn chain(
+    source: &[u8],
+    start: u32,
+    next: &[u32],
+    len: u64,
+    limit: usize,
+    name: &'static str,
+    sector: impl Fn(u32) -> Result<Range<usize>, ContainerError>,
+) -> Result<Vec<u8>, ContainerError> {
+    Ok(gather(source, &chain_pieces(start, next, len, limit, name, sector)?))
+}
+
+/// The bytes of `pieces` of `source`, one after another.
+fn gather(source: &[u8], pieces: &[Range<usize>]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(pieces.iter().map(ExactSizeIterator::len).sum());
+    for r in pieces {
+        out.extend_from_slice(source.get(r.clone()).unwrap_or_default());
+    }
+    out
 }
 
 /// `b` as little-endian u32s; the reader asserts a whole number of them.
@@ -123,13 +170,16 @@ fn u32_at(b: &[u8], at: usize) -> u32 {
     b.get(at..at + 4).map_or(0, |w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
 }
 
-/// The workbook stream the reader will read from `file` (a whole XLS file): the first entry
-/// named `Workbook`, else — also when that one cannot be read — the first named `Book`.
+/// Where the workbook stream the reader will read lies in `file` (a whole XLS file): the first
+/// entry named `Workbook`, else — also when that one cannot be read — the first named `Book`.
+///
+/// Contract: any bytes; work linear in the file (each chain visits a sector once at most, a
+/// chain that comes back is refused); the pieces found lie inside the file.
 ///
 /// # Errors
 /// Whatever would make the reader loop, panic, allocate past the file, or read another stream.
 #[allow(clippy::too_many_lines)]
-pub fn parse_xls_container(file: &[u8]) -> Result<Vec<u8>, ContainerError> {
+pub fn parse_xls_stream(file: &[u8]) -> Result<WorkbookStream, ContainerError> {
     let header = file.get(..512).ok_or(ContainerError::NotCompound)?;
     if header.get(..8) != Some(&MAGIC[..]) {
         return Err(ContainerError::NotCompound);
@@ -206,7 +256,7 @@ pub fn parse_xls_container(file: &[u8]) -> Result<Vec<u8>, ContainerError> {
         fat.extend(words(sectors.get(id, "FAT")?, "FAT", id)?);
     }
     let sectors = &sectors;
-    let regular = |name: &'static str| move |id: u32| sectors.get(id, name);
+    let regular = |name: &'static str| move |id: u32| sectors.range(id, name);
     // A chain visits each sector once at most: more steps than sectors is a loop.
     let limit = sectors.max as usize + 1;
 
@@ -215,7 +265,7 @@ pub fn parse_xls_container(file: &[u8]) -> Result<Vec<u8>, ContainerError> {
     if let Some(e) = too_long("directory length", dir_bytes) {
         return Err(e);
     }
-    let dirs = chain(dir_start, &fat, dir_bytes, limit, "directory", regular("directory"))?;
+    let dirs = chain(file, dir_start, &fat, dir_bytes, limit, "directory", regular("directory"))?;
     let mut entries = Vec::new();
     for raw in dirs.chunks(ENTRY) {
         if raw.len() < 124 + if size == 512 { 0 } else { 4 } {
@@ -245,18 +295,18 @@ pub fn parse_xls_container(file: &[u8]) -> Result<Vec<u8>, ContainerError> {
         if root.len > file.len() as u64 {
             return Err(ContainerError::Length { index: 0, name: root.name.clone(), len: root.len, file: file.len() });
         }
-        let ministream = chain(root.start, &fat, root.len, limit, "mini stream", regular("mini stream"))?;
+        let ministream = chain(file, root.start, &fat, root.len, limit, "mini stream", regular("mini stream"))?;
         let mini_fat_bytes = mini_fat_len.saturating_mul(size as u64);
         if let Some(e) = too_long("mini FAT length", mini_fat_bytes) {
             return Err(e);
         }
-        let raw = chain(mini_fat_start, &fat, mini_fat_bytes, limit, "mini FAT", regular("mini FAT"))?;
+        let raw = chain(file, mini_fat_start, &fat, mini_fat_bytes, limit, "mini FAT", regular("mini FAT"))?;
         (words(&raw, "mini FAT", mini_fat_start)?, ministream)
     } else {
         (Vec::new(), Vec::new())
     };
     let mini_max = sectors.max.saturating_mul(8);
-    let mini_sector = |id: u32| -> Result<&[u8], ContainerError> {
+    let mini_sector = |id: u32| -> Result<Range<usize>, ContainerError> {
         let outside = ContainerError::Chain {
             chain: "mini stream",
             sector: id,
@@ -267,23 +317,142 @@ pub fn parse_xls_container(file: &[u8]) -> Result<Vec<u8>, ContainerError> {
         }
         let start = (id as usize) * MINI;
         // Past the mini stream the reader reads whatever the file holds next: refused.
-        ministream.get(start..start + MINI).ok_or(outside)
+        if start + MINI > ministream.len() {
+            return Err(outside);
+        }
+        Ok(start..start + MINI)
     };
 
     // The stream, as the reader finds it: by name, in the directory's order.
-    let stream = |name: &str| -> Result<Vec<u8>, ContainerError> {
+    let stream = |name: &str| -> Result<WorkbookStream, ContainerError> {
         let (index, e) = entries.iter().enumerate().find(|(_, e)| e.name == name).ok_or(ContainerError::NoWorkbook)?;
         if e.len > file.len() as u64 {
             return Err(ContainerError::Length { index, name: e.name.clone(), len: e.len, file: file.len() });
         }
         if e.len < MINI_CUTOFF {
-            chain(e.start, &mini_fat, e.len, ministream.len() / MINI, "workbook (mini)", mini_sector)
+            let pieces =
+                chain_pieces(e.start, &mini_fat, e.len, ministream.len() / MINI, "workbook (mini)", mini_sector)?;
+            Ok(WorkbookStream::Held(gather(&ministream, &pieces)))
         } else {
-            chain(e.start, &fat, e.len, limit, "workbook", regular("workbook"))
+            let pieces = chain_pieces(e.start, &fat, e.len, limit, "workbook", regular("workbook"))?;
+            Ok(WorkbookStream::InFile(pieces.into_iter().map(|r| r.start as u64..r.end as u64).collect()))
         }
     };
     stream("Workbook").or_else(|first| match stream("Book") {
         Err(ContainerError::NoWorkbook) => Err(first),
         other => other,
     })
+}
+
+/// Where an XLS file's workbook stream is: pieces of the file, in order (a stream of 4 096
+/// bytes or more lives in regular sectors), or — a small one, from the mini stream — its bytes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum WorkbookStream {
+    InFile(Vec<Range<u64>>),
+    Held(Vec<u8>),
+}
+
+impl WorkbookStream {
+    /// The stream's length in bytes.
+    #[must_use]
+    pub fn len(&self) -> u64 {
+        match self {
+            Self::InFile(p) => p.iter().map(|r| r.end - r.start).sum(),
+            Self::Held(b) => b.len() as u64,
+        }
+    }
+
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The workbook stream the reader will read from `file` (a whole XLS file), gathered: see
+/// [`parse_xls_stream`].
+///
+/// # Errors
+/// As [`parse_xls_stream`].
+pub fn parse_xls_container(file: &[u8]) -> Result<Vec<u8>, ContainerError> {
+    Ok(match parse_xls_stream(file)? {
+        WorkbookStream::Held(b) => b,
+        WorkbookStream::InFile(pieces) => {
+            let at = |p: u64| usize::try_from(p).unwrap_or(usize::MAX);
+            let pieces: Vec<Range<usize>> = pieces.into_iter().map(|r| at(r.start)..at(r.end)).collect();
+            gather(file, &pieces)
+        }
+    })
+}
+
+/// A workbook stream lying in pieces of a file, read as one stream: reading and seeking it
+/// reads and seeks the file, and pieces one after another are read without a seek (a
+/// `BufReader` keeps its buffer).
+#[derive(Debug)]
+pub struct StreamReader<R> {
+    inner: R,
+    /// Each piece: where it starts in the stream, and its bytes in the file.
+    pieces: Vec<(u64, Range<u64>)>,
+    len: u64,
+    pos: u64,
+    /// Where `inner` is, when known.
+    inner_pos: Option<u64>,
+}
+
+impl<R: std::io::Read + std::io::Seek> StreamReader<R> {
+    /// The stream lying in `pieces` of `inner` (see [`WorkbookStream::InFile`]).
+    #[must_use]
+    pub fn new(inner: R, pieces: &[Range<u64>]) -> Self {
+        let mut at = 0u64;
+        let pieces = pieces
+            .iter()
+            .map(|r| {
+                let start = at;
+                at = at.saturating_add(r.end.saturating_sub(r.start));
+                (start, r.clone())
+            })
+            .collect();
+        Self { inner, pieces, len: at, pos: 0, inner_pos: None }
+    }
+}
+
+impl<R: std::io::Read + std::io::Seek> std::io::Read for StreamReader<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        // The piece holding `pos`: the last one starting at or before it.
+        let k = self.pieces.partition_point(|(start, _)| *start <= self.pos);
+        let Some((start, range)) = k.checked_sub(1).and_then(|k| self.pieces.get(k)) else { return Ok(0) };
+        let into = self.pos - start;
+        let left = (range.end - range.start).saturating_sub(into);
+        if left == 0 {
+            return Ok(0);
+        }
+        let at = range.start + into;
+        if self.inner_pos != Some(at) {
+            self.inner.seek(std::io::SeekFrom::Start(at))?;
+        }
+        let want = buf.len().min(usize::try_from(left).unwrap_or(usize::MAX));
+        let n = match self.inner.read(&mut buf[..want]) {
+            Ok(n) => n,
+            Err(e) => {
+                self.inner_pos = None;
+                return Err(e);
+            }
+        };
+        self.pos += n as u64;
+        self.inner_pos = Some(at + n as u64);
+        Ok(n)
+    }
+}
+
+impl<R: std::io::Read + std::io::Seek> std::io::Seek for StreamReader<R> {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        let pos = match to {
+            std::io::SeekFrom::Start(p) => Some(p),
+            std::io::SeekFrom::End(d) => self.len.checked_add_signed(d),
+            std::io::SeekFrom::Current(d) => self.pos.checked_add_signed(d),
+        };
+        self.pos = pos.ok_or_else(|| {
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, "a seek before the workbook stream's start")
+        })?;
+        Ok(self.pos)
+    }
 }
