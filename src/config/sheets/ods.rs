@@ -1,0 +1,109 @@
+//! OpenDocument and zip-based workbooks: the zip checked before anything is unpacked, an ODS
+//! sheet's rows streamed from its `content.xml` by our own row reader at each pass (issue 39).
+
+use std::io::Read as _;
+use std::ops::ControlFlow;
+use std::path::Path;
+
+use anyhow::Context as _;
+
+use super::{MAX_UNPACKED_BYTES, too_big};
+
+/// The most cells an OpenDocument workbook may expand to when opened, the cells read and the
+/// used areas laid out together (all its tables: the reader expands every one at opening).
+/// Measured: ~66 bytes of memory per cell (a 1 048 003-row area of 3 columns, 207 MB), so this
+/// keeps an opening under ~210 MB; a register sheet of 263 168 rows × 5 columns is ~2.6 M.
+pub const MAX_ODS_CELLS: u64 = 3 << 20;
+/// The most cell text an OpenDocument workbook may expand to (repeated cells copy their text).
+pub const MAX_ODS_TEXT: u64 = 64 << 20;
+
+/// Refuses an OpenDocument workbook whose repeated rows and cells expand past
+/// [`MAX_ODS_CELLS`] or [`MAX_ODS_TEXT`], counted from its `content.xml` streamed (issue 39: an
+/// 873-byte workbook expanded past 17 GB while being opened).
+fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipArchive<R>) -> anyhow::Result<()> {
+    use mbtap_device::profile::import::ods_size::parse_ods_size;
+    // Not an OpenDocument file: nothing to count here.
+    let Ok(content) = zip.by_name("content.xml") else { return Ok(()) };
+    let size = parse_ods_size(std::io::BufReader::new(content.take(MAX_UNPACKED_BYTES)))
+        .with_context(|| format!("{}: reading the sheet", path.display()))?;
+    let cells = size.cells_read.saturating_add(size.area_cells);
+    if cells > MAX_ODS_CELLS || size.text_bytes > MAX_ODS_TEXT {
+        let largest = size
+            .largest
+            .map(|(name, rows, cols)| format!(" (the largest, {name:?}: {rows} rows × {cols} columns)"))
+            .unwrap_or_default();
+        return Err(too_big(
+            path,
+            &format!(
+                "its repeated rows and cells expand to {cells} cells and {} bytes of text{largest}, over the {MAX_ODS_CELLS} cells and {MAX_ODS_TEXT} bytes read from an OpenDocument sheet",
+                size.text_bytes
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a zip-based workbook before the reader opens it: one that unpacks past
+/// [`MAX_UNPACKED_BYTES`], or an OpenDocument one whose repeats expand past its bounds
+/// ([`check_ods`]).
+pub(super) fn check_zip(path: &Path) -> anyhow::Result<()> {
+    let Ok(file) = std::fs::File::open(path) else { return Ok(()) };
+    // Not a zip (XLS is not): nothing to check here.
+    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(()) };
+    check_unpacked(path, &mut zip)?;
+    check_ods(path, &mut zip)
+}
+
+/// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`], by its
+/// central directory (the sizes it declares; the reader stops at them).
+fn check_unpacked<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipArchive<R>) -> anyhow::Result<()> {
+    let mut total = 0u64;
+    for i in 0..zip.len() {
+        let size = zip.by_index_raw(i).map_or(0, |f| f.size());
+        total = total.saturating_add(size);
+    }
+    if total > MAX_UNPACKED_BYTES {
+        return Err(too_big(path, &format!("unpacks to {total} bytes, over the {MAX_UNPACKED_BYTES} read")));
+    }
+    Ok(())
+}
+
+/// Whether `path` is an OpenDocument spreadsheet (its `mimetype` part says so, ODF v1.2 part 3
+/// §3.3): read by our own row reader, never opened by calamine, which expands every table of
+/// the file into memory (~66 bytes a cell).
+pub(super) fn is_ods(path: &Path) -> bool {
+    let Ok(file) = std::fs::File::open(path) else { return false };
+    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return false };
+    let Ok(part) = zip.by_name("mimetype") else { return false };
+    let mut kind = String::new();
+    part.take(256).read_to_string(&mut kind).is_ok() && kind.trim() == "application/vnd.oasis.opendocument.spreadsheet"
+}
+
+/// One pass over the ODS at `path`'s sheet `sheet` (or its first): the cells past the last
+/// column kept.
+pub(super) fn each_row(
+    path: &Path,
+    sheet: Option<&str>,
+    each: &mut dyn FnMut(usize, &[&str]) -> ControlFlow<()>,
+) -> anyhow::Result<u64> {
+    let file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file))
+        .with_context(|| format!("{}: reading the OpenDocument file", path.display()))?;
+    let content = zip.by_name("content.xml").with_context(|| format!("{}: no content.xml", path.display()))?;
+    let read = mbtap_device::profile::import::ods_rows::parse_ods_rows(
+        std::io::BufReader::new(content.take(MAX_UNPACKED_BYTES)),
+        sheet,
+        each,
+    )
+    .map_err(|e| too_big_or(path, &e))?;
+    Ok(read.cut_cells)
+}
+
+/// An OpenDocument sheet's rows could not be read: over a bound (what to do said), or why not.
+fn too_big_or(path: &Path, e: &mbtap_device::profile::import::ods_rows::OdsRowsError) -> anyhow::Error {
+    use mbtap_device::profile::import::ods_rows::OdsRowsError;
+    match e {
+        OdsRowsError::TooManyRows(_) => too_big(path, &e.to_string()),
+        _ => anyhow::anyhow!("{}: {e}", path.display()),
+    }
+}
