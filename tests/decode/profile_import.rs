@@ -819,23 +819,12 @@ fn xls_cells_of_every_kind() -> Vec<Vec<u8>> {
     cells
 }
 
-/// Issue 39: calamine lays every sheet of an XLS out densely when it opens the file (38.7 MB for
-/// a 4.4 MB sheet; 1 GB for cells at A1 and IV65536); the import now reads the sheet's records
-/// itself. What it reads must be what calamine reads: every row at the same number with the same
-/// cells, for cells of every kind and shared strings carried on across `Continue` records — and
-/// the stream read in pieces from the file as from memory.
-#[test]
-fn regression_issue_39_an_xls_sheet_read_by_its_records_reads_as_the_workbook_reader_reads_it() {
+/// calamine's rows of `sheet`, each cell as the import turns a calamine cell into text, padded
+/// to the sheet's own row and column numbers, trailing empty cells left off.
+fn calamine_rows(path: &std::path::Path, sheet: &str) -> Vec<(usize, Vec<String>)> {
     use calamine::Reader as _;
-    use mbtap_device::profile::import::{xls_container, xls_rows};
-    use std::ops::ControlFlow;
-    // Version 3 (512-byte sectors): calamine opens a version 4 file only with a mini stream.
-    let stream = workbook_stream(&xls_shared_strings(), &xls_cells_of_every_kind());
-    let file = xls_bytes("kinds", &compound(&[("/Workbook", stream)]));
-    // calamine's rows, as the import turned its cells into text, padded to the sheet's own
-    // row and column numbers.
-    let mut wb = calamine::open_workbook_auto(&file.path).unwrap();
-    let range = wb.worksheet_range("regs").unwrap();
+    let mut wb = calamine::open_workbook_auto(path).unwrap();
+    let range = wb.worksheet_range(sheet).unwrap();
     let (row0, col0) = range.start().map(|(r, c)| (r as usize, c as usize)).unwrap();
     let text = |d: &calamine::Data| match d {
         calamine::Data::Float(f) => mbtap_device::profile::import::grid::number_text(*f),
@@ -851,6 +840,22 @@ fn regression_issue_39_an_xls_sheet_read_by_its_records_reads_as_the_workbook_re
         }
         theirs.push((row0 + i, cells));
     }
+    theirs
+}
+
+/// Issue 39: calamine lays every sheet of an XLS out densely when it opens the file (38.7 MB for
+/// a 4.4 MB sheet; 1 GB for cells at A1 and IV65536); the import now reads the sheet's records
+/// itself. What it reads must be what calamine reads: every row at the same number with the same
+/// cells, for cells of every kind and shared strings carried on across `Continue` records — and
+/// the stream read in pieces from the file as from memory.
+#[test]
+fn regression_issue_39_an_xls_sheet_read_by_its_records_reads_as_the_workbook_reader_reads_it() {
+    use mbtap_device::profile::import::{xls_container, xls_rows};
+    use std::ops::ControlFlow;
+    // Version 3 (512-byte sectors): calamine opens a version 4 file only with a mini stream.
+    let stream = workbook_stream(&xls_shared_strings(), &xls_cells_of_every_kind());
+    let file = xls_bytes("kinds", &compound(&[("/Workbook", stream)]));
+    let theirs = calamine_rows(&file.path, "regs");
     // Ours: the stream found in the file, read in its pieces and gathered.
     let bytes = std::fs::read(&file.path).unwrap();
     let xls_container::WorkbookStream::InFile(pieces) = xls_container::parse_xls_stream(&bytes).unwrap() else {
@@ -1063,31 +1068,12 @@ const ODS_SHAPES: &str = r#"<table:table-row table:number-rows-repeated="2"><tab
 /// must be what the workbook reader reads: every row at the same number with the same cells.
 #[test]
 fn regression_issue_39_an_ods_sheet_streamed_reads_as_the_workbook_reader_reads_it() {
-    use calamine::Reader as _;
     use std::io::Read as _;
     use std::ops::ControlFlow;
     let file = ods("shapes", ODS_SHAPES);
-    // The workbook reader's rows, padded to the sheet's own row and column numbers.
-    let mut wb = calamine::open_workbook_auto(&file.path).unwrap();
-    let range = wb.worksheet_range("Sheet1").unwrap();
-    let (row0, col0) = range.start().map(|(r, c)| (r as usize, c as usize)).unwrap();
-    let text = |d: &calamine::Data| match d {
-        calamine::Data::Float(f) if f.fract() == 0.0 => format!("{f:.0}"),
-        calamine::Data::Float(f) => f.to_string(),
-        calamine::Data::Bool(b) => b.to_string(),
-        calamine::Data::Empty => String::new(),
-        other => other.to_string(),
-    };
-    let mut theirs: Vec<(usize, Vec<String>)> = Vec::new();
-    for (i, r) in range.rows().enumerate() {
-        let mut cells: Vec<String> = std::iter::repeat_n(String::new(), col0).chain(r.iter().map(text)).collect();
-        while cells.last().is_some_and(String::is_empty) {
-            cells.pop();
-        }
-        if !cells.is_empty() {
-            theirs.push((row0 + i, cells));
-        }
-    }
+    // The workbook reader's rows, the empty ones left out (our reader does not hand them on).
+    let mut theirs = calamine_rows(&file.path, "Sheet1");
+    theirs.retain(|(_, cells)| !cells.is_empty());
     // Ours, from content.xml.
     let mut zip = zip::ZipArchive::new(std::fs::File::open(&file.path).unwrap()).unwrap();
     let mut xml = Vec::new();
