@@ -18,13 +18,19 @@ use mbtap_device::profile::import::{Clash, Ledger, Point, Problem, Sink, entry, 
 /// Scratch bytes at most (the entries of every address of the four tables with long names and
 /// descriptions fit many times over).
 const MAX_SCRATCH: u64 = 1 << 31;
+/// Records are written to the scratch file in blocks of about this many bytes.
+const PENDING_BLOCK: usize = 64 << 10;
 
 /// Points and problems as they are read, written out.
 pub struct ProfileFile<'e> {
     /// Entries as they come: per point a record of its name's and origin's lengths (u32 LE
     /// each), its name, its origin, then its `[[table]]` entry.
     scratch: File,
+    /// Where the records end (those in `pending` included).
     end: u64,
+    /// Records not yet written to `scratch`, from `end - pending.len()` on: written a block at a
+    /// time, not a system call per point.
+    pending: Vec<u8>,
     /// Each point's record's offset in `scratch`.
     offsets: Vec<u64>,
     ledger: Ledger,
@@ -59,6 +65,7 @@ impl<'e> ProfileFile<'e> {
         Ok(Self {
             scratch,
             end: 0,
+            pending: Vec::with_capacity(PENDING_BLOCK),
             offsets: Vec::new(),
             ledger: Ledger::default(),
             text: String::new(),
@@ -88,15 +95,33 @@ impl<'e> ProfileFile<'e> {
         }
     }
 
-    /// Record `n`: its bytes.
-    fn record(&self, n: u32) -> std::io::Result<Vec<u8>> {
+    /// Record `n`'s bytes into `buf` (from the scratch file, or from the block not yet written).
+    fn record(&self, n: u32, buf: &mut Vec<u8>) -> std::io::Result<()> {
         let i = n as usize;
         let (Some(&from), to) = (self.offsets.get(i), self.offsets.get(i + 1).copied().unwrap_or(self.end)) else {
             return Err(std::io::Error::other("no such point"));
         };
-        let mut buf = vec![0; usize::try_from(to - from).map_err(std::io::Error::other)?];
-        self.scratch.read_exact_at(&mut buf, from)?;
-        Ok(buf)
+        let len = usize::try_from(to - from).map_err(std::io::Error::other)?;
+        buf.clear();
+        // Blocks are written whole records at a time: a record is on disk or pending, not split.
+        let written = self.end - self.pending.len() as u64;
+        if let Some(at) = from.checked_sub(written) {
+            let at = usize::try_from(at).map_err(std::io::Error::other)?;
+            buf.extend_from_slice(
+                self.pending.get(at..at + len).ok_or_else(|| std::io::Error::other("no such point"))?,
+            );
+            return Ok(());
+        }
+        buf.resize(len, 0);
+        self.scratch.read_exact_at(buf, from)
+    }
+
+    /// Writes the pending block to the scratch file.
+    fn flush(&mut self) -> std::io::Result<()> {
+        let written = self.end - self.pending.len() as u64;
+        self.scratch.write_all_at(&self.pending, written)?;
+        self.pending.clear();
+        Ok(())
     }
 
     /// Record `n` split: name, origin, entry.
@@ -114,19 +139,22 @@ impl<'e> ProfileFile<'e> {
         self.text.clear();
         entry(&mut self.text, p);
         let lens = |s: &str| u32::try_from(s.len()).map_err(std::io::Error::other).map(u32::to_le_bytes);
-        let mut record = Vec::with_capacity(8 + p.name.len() + p.origin.len() + self.text.len());
+        let len = 8 + p.name.len() + p.origin.len() + self.text.len();
+        let len = u64::try_from(len).map_err(std::io::Error::other)?;
+        if self.end + len > MAX_SCRATCH {
+            return Err(std::io::Error::other(format!("over {MAX_SCRATCH} bytes of profile entries")));
+        }
+        let record = &mut self.pending;
         record.extend_from_slice(&lens(&p.name)?);
         record.extend_from_slice(&lens(&p.origin)?);
         record.extend_from_slice(p.name.as_bytes());
         record.extend_from_slice(p.origin.as_bytes());
         record.extend_from_slice(self.text.as_bytes());
-        let len = u64::try_from(record.len()).map_err(std::io::Error::other)?;
-        if self.end + len > MAX_SCRATCH {
-            return Err(std::io::Error::other(format!("over {MAX_SCRATCH} bytes of profile entries")));
-        }
-        self.scratch.write_all_at(&record, self.end)?;
         self.offsets.push(self.end);
         self.end += len;
+        if self.pending.len() >= PENDING_BLOCK {
+            self.flush()?;
+        }
         Ok(())
     }
 
@@ -167,8 +195,9 @@ impl<'e> ProfileFile<'e> {
         let mut out = BufWriter::new(file);
         let wrote = (|| -> std::io::Result<File> {
             out.write_all(header(name, device, sources, &self.notes, self.problems).as_bytes())?;
+            let mut record = Vec::new();
             for n in self.ledger.in_order() {
-                let record = self.record(n)?;
+                self.record(n, &mut record)?;
                 let (_, _, entry) = Self::parts(&record).ok_or_else(|| std::io::Error::other("a damaged entry"))?;
                 out.write_all(entry)?;
             }
@@ -198,11 +227,12 @@ impl Sink for ProfileFile<'_> {
                 }
             }
             Err(clash) => {
+                let mut buf = Vec::new();
                 let record = match clash {
-                    Clash::Overlaps(n) => self.record(n).ok(),
+                    Clash::Overlaps(n) => self.record(n, &mut buf).ok().map(|()| buf.as_slice()),
                     Clash::PastEnd => None,
                 };
-                let other = record.as_deref().and_then(Self::parts).map(|(name, origin, _)| (name, origin));
+                let other = record.and_then(Self::parts).map(|(name, origin, _)| (name, origin));
                 let problem = self.ledger.problem(&p, clash, other);
                 self.problem(problem);
             }

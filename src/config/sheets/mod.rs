@@ -75,8 +75,7 @@ pub fn read_workbook(path: &Path, sheet: Option<&str>) -> anyhow::Result<Workboo
     if xls::is_compound(path) {
         return xls::open_xls(path, sheet);
     }
-    ods::check_zip(path)?;
-    if ods::is_ods(path) {
+    if ods::check_zip(path)? {
         return Ok(WorkbookRows::Ods { path: path.to_owned(), sheet: sheet.map(str::to_owned), cut_cells: 0 });
     }
     calamine_cells::guarded(path, || calamine_cells::open_sheet(path, sheet))

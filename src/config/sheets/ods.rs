@@ -43,15 +43,18 @@ fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipAr
     Ok(())
 }
 
-/// Refuses a zip-based workbook before the reader opens it: one that unpacks past
-/// [`MAX_UNPACKED_BYTES`], or an OpenDocument one whose repeats expand past its bounds
-/// ([`check_ods`]).
-pub(super) fn check_zip(path: &Path) -> anyhow::Result<()> {
-    let Ok(file) = std::fs::File::open(path) else { return Ok(()) };
+/// Refuses a zip-based workbook before anything reads it: one that unpacks past
+/// [`MAX_UNPACKED_BYTES`], or whose OpenDocument repeats expand past their bounds
+/// ([`check_ods`]: our row reader hands on every repeat, calamine lays them out); then says
+/// whether it is an OpenDocument spreadsheet, for our row reader. The zip's directory is read
+/// once for all three.
+pub(super) fn check_zip(path: &Path) -> anyhow::Result<bool> {
+    let Ok(file) = std::fs::File::open(path) else { return Ok(false) };
     // Not a zip (XLS is not): nothing to check here.
-    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(()) };
+    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(false) };
     check_unpacked(path, &mut zip)?;
-    check_ods(path, &mut zip)
+    check_ods(path, &mut zip)?;
+    Ok(is_ods(&mut zip))
 }
 
 /// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`], by its
@@ -68,12 +71,10 @@ fn check_unpacked<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::
     Ok(())
 }
 
-/// Whether `path` is an OpenDocument spreadsheet (its `mimetype` part says so, ODF v1.2 part 3
+/// Whether the zip is an OpenDocument spreadsheet (its `mimetype` part says so, ODF v1.2 part 3
 /// §3.3): read by our own row reader, never opened by calamine, which expands every table of
 /// the file into memory (~66 bytes a cell).
-pub(super) fn is_ods(path: &Path) -> bool {
-    let Ok(file) = std::fs::File::open(path) else { return false };
-    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return false };
+fn is_ods<R: std::io::Read + std::io::Seek>(zip: &mut zip::ZipArchive<R>) -> bool {
     let Ok(part) = zip.by_name("mimetype") else { return false };
     let mut kind = String::new();
     part.take(256).read_to_string(&mut kind).is_ok() && kind.trim() == "application/vnd.oasis.opendocument.spreadsheet"
