@@ -19,6 +19,7 @@ pub mod ods_rows;
 pub mod ods_size;
 pub mod sheet;
 pub mod xls_container;
+mod xls_records;
 pub mod xls_rows;
 
 use std::collections::BTreeMap;
