@@ -8,7 +8,7 @@
 
 use std::io::Read;
 
-use super::xls_rows::XlsRowsError;
+use super::grid::MAX_ROWS;
 
 /// `Continue` [MS-XLS] 2.4.58: the record before goes on here.
 pub(super) const CONTINUE: u16 = 0x003C;
@@ -17,6 +17,31 @@ pub(super) const SST: u16 = 0x00FC;
 /// The most shared-string text kept (the stream is at most 64 MiB, and 8-bit text at most
 /// doubles as UTF-8).
 pub(super) const MAX_STRING_TEXT: usize = 128 << 20;
+
+/// Why the sheet could not be read: what, and where in the workbook stream.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum XlsRowsError {
+    #[error("reading the workbook stream: {0}")]
+    Io(String),
+    #[error("the workbook stream ends inside a record at offset {0}")]
+    Cut(u64),
+    #[error("record {typ:#06x} at offset {offset} of the workbook stream: {why}")]
+    Malformed { offset: u64, typ: u16, why: &'static str },
+    #[error("the workbook is encrypted")]
+    Password,
+    #[error("the workbook's code page {0} is not one the reader knows")]
+    CodePage(u16),
+    #[error("more than {MAX_ROWS} rows (a cell at row {}): not a register sheet", .0 + 1)]
+    TooManyRows(usize),
+    #[error("more than {} MiB of shared strings", MAX_STRING_TEXT >> 20)]
+    TooMuchText,
+}
+
+impl From<std::io::Error> for XlsRowsError {
+    fn from(e: std::io::Error) -> Self {
+        Self::Io(e.to_string())
+    }
+}
 
 /// The shared strings, compact: all text in one string, each string an end offset.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]

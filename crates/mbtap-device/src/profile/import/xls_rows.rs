@@ -18,8 +18,9 @@ use std::io::{Read, Seek, SeekFrom};
 use std::ops::ControlFlow;
 
 use super::cell_rows::rows_from_cells;
-use super::grid::{MAX_ROWS, number_text};
-use super::xls_records::{MAX_STRING_TEXT, Records, SST, Strings, biff8_text, shared_strings, u16_at, u32_at};
+use super::grid::number_text;
+pub use super::xls_records::XlsRowsError;
+use super::xls_records::{Records, SST, Strings, biff8_text, shared_strings, u16_at, u32_at};
 
 /// `Formula` [MS-XLS] 2.4.127: row, column, format, the cached value (8 bytes), flags, formula.
 const FORMULA: u16 = 0x0006;
@@ -48,31 +49,6 @@ const STRING: u16 = 0x0207;
 const RK: u16 = 0x027E;
 /// `BOF` [MS-XLS] 2.4.21: the BIFF version (u16), the substream's type.
 const BOF: u16 = 0x0809;
-
-/// Why the sheet could not be read: what, and where in the workbook stream.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum XlsRowsError {
-    #[error("reading the workbook stream: {0}")]
-    Io(String),
-    #[error("the workbook stream ends inside a record at offset {0}")]
-    Cut(u64),
-    #[error("record {typ:#06x} at offset {offset} of the workbook stream: {why}")]
-    Malformed { offset: u64, typ: u16, why: &'static str },
-    #[error("the workbook is encrypted")]
-    Password,
-    #[error("the workbook's code page {0} is not one the reader knows")]
-    CodePage(u16),
-    #[error("more than {MAX_ROWS} rows (a cell at row {}): not a register sheet", .0 + 1)]
-    TooManyRows(usize),
-    #[error("more than {} MiB of shared strings", MAX_STRING_TEXT >> 20)]
-    TooMuchText,
-}
-
-impl From<std::io::Error> for XlsRowsError {
-    fn from(e: std::io::Error) -> Self {
-        Self::Io(e.to_string())
-    }
-}
 
 /// A sheet the workbook names: its name, and where its records start in the stream.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -318,12 +294,12 @@ fn cells_of<R: Read>(
 /// row by row (its number from 0, its cells), until it breaks or the sheet's `EOF`.
 ///
 /// Contract: any bytes; one record held at a time and one row being built (cells out of row
-/// order are ignored, as a hand-made file's); rows past [`MAX_ROWS`] refused; work linear in
+/// order are ignored, as a hand-made file's); rows past [`MAX_ROWS`](super::grid::MAX_ROWS) refused; work linear in
 /// the sheet's records.
 ///
 /// # Errors
 /// The stream cannot be read or ends inside a record, a cell record is malformed (which, and
-/// its offset), or the sheet is past [`MAX_ROWS`]; an unknown sheet index reads as empty.
+/// its offset), or the sheet is past [`MAX_ROWS`](super::grid::MAX_ROWS); an unknown sheet index reads as empty.
 pub fn parse_xls_rows<R: Read + Seek>(
     mut stream: R,
     book: &XlsBook,
