@@ -144,7 +144,7 @@ impl Cell {
 /// (case-insensitive; `None`: the first) with its 0-based row number, until `each` breaks.
 ///
 /// Contract: any bytes; memory is one row of at most [`MAX_COLUMNS`] cells of at most
-/// [`MAX_CELL_TEXT`] bytes each, and the XML reader's buffer for one event; rows past
+/// 64 KiB each (`MAX_CELL_TEXT`), and the XML reader's buffer for one event; rows past
 /// [`MAX_ROWS`] are an error; time linear in the input.
 ///
 /// # Errors
