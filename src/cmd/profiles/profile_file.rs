@@ -1,10 +1,11 @@
 //! The imported profile written as it is read (issue 39: the points and the profile's text held
 //! in memory took 20× a sheet of tiny rows). Each point's entry goes to a scratch file beside the
 //! profile as the point comes (unlinked at once: nothing is left behind if the import is
-//! killed); memory keeps the addresses taken (1 MiB) and 8 bytes per point. At the end the
-//! profile is its header and the entries in address order, written to a new file, loaded back
-//! from that file a part at a time, and only then put in place — never replacing a profile in
-//! silence, never writing through a link.
+//! killed), in blocks of 64 KiB; memory keeps the addresses taken (1 MiB, each holding the
+//! offset of its point's record) and nothing per point. At the end the profile is its header
+//! and the entries in address order, written to a new file, loaded back from that file a part
+//! at a time, and only then put in place — never replacing a profile in silence, never writing
+//! through a link.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -20,6 +21,11 @@ use mbtap_device::profile::import::{Clash, Ledger, Point, Problem, Sink, entry, 
 const MAX_SCRATCH: u64 = 1 << 31;
 /// Records are written to the scratch file in blocks of about this many bytes.
 const PENDING_BLOCK: usize = 64 << 10;
+/// A record's header: its name's, origin's and entry's lengths (u32 LE each), then the point's
+/// first address (u16 LE).
+const RECORD_HEAD: usize = 14;
+/// A record's first read from the scratch file (most records are shorter).
+const FIRST_READ: u64 = 512;
 
 /// Points and problems as they are read, written out.
 pub struct ProfileFile<'e> {
@@ -31,8 +37,6 @@ pub struct ProfileFile<'e> {
     /// Records not yet written to `scratch`, from `end - pending.len()` on: written a block at a
     /// time, not a system call per point.
     pending: Vec<u8>,
-    /// Each point's record's offset in `scratch`.
-    offsets: Vec<u64>,
     ledger: Ledger,
     text: String,
     /// The first write error (a sink cannot return one): said at the end.
@@ -66,7 +70,6 @@ impl<'e> ProfileFile<'e> {
             scratch,
             end: 0,
             pending: Vec::with_capacity(PENDING_BLOCK),
-            offsets: Vec::new(),
             ledger: Ledger::default(),
             text: String::new(),
             failed: None,
@@ -95,25 +98,53 @@ impl<'e> ProfileFile<'e> {
         }
     }
 
-    /// Record `n`'s bytes into `buf` (from the scratch file, or from the block not yet written).
-    fn record(&self, n: u32, buf: &mut Vec<u8>) -> std::io::Result<()> {
-        let i = n as usize;
-        let (Some(&from), to) = (self.offsets.get(i), self.offsets.get(i + 1).copied().unwrap_or(self.end)) else {
-            return Err(std::io::Error::other("no such point"));
-        };
-        let len = usize::try_from(to - from).map_err(std::io::Error::other)?;
-        buf.clear();
-        // Blocks are written whole records at a time: a record is on disk or pending, not split.
+    /// The record keyed `key` (its offset) into `buf`: from the scratch file, or from the block
+    /// not yet written (blocks are written whole records at a time: a record is on disk or
+    /// pending, never split).
+    fn record(&self, key: u32, buf: &mut Vec<u8>) -> std::io::Result<()> {
+        let damaged = || std::io::Error::other("a damaged entry");
+        let from = u64::from(key);
         let written = self.end - self.pending.len() as u64;
+        buf.clear();
         if let Some(at) = from.checked_sub(written) {
             let at = usize::try_from(at).map_err(std::io::Error::other)?;
-            buf.extend_from_slice(
-                self.pending.get(at..at + len).ok_or_else(|| std::io::Error::other("no such point"))?,
-            );
+            let len = self.pending.get(at..).and_then(Self::record_len).ok_or_else(damaged)?;
+            buf.extend_from_slice(self.pending.get(at..at + len).ok_or_else(damaged)?);
             return Ok(());
         }
-        buf.resize(len, 0);
-        self.scratch.read_exact_at(buf, from)
+        // One read holds most records whole; a longer one takes a second.
+        let first = usize::try_from((written - from).min(FIRST_READ)).map_err(std::io::Error::other)?;
+        buf.resize(first, 0);
+        self.scratch.read_exact_at(buf, from)?;
+        let len = Self::record_len(buf).ok_or_else(damaged)?;
+        if len > first {
+            buf.resize(len, 0);
+            self.scratch.read_exact_at(&mut buf[first..], from + first as u64)?;
+        } else {
+            buf.truncate(len);
+        }
+        Ok(())
+    }
+
+    /// The length of the record `record` starts with, from its header.
+    fn record_len(record: &[u8]) -> Option<usize> {
+        let len = |at: usize| -> Option<usize> {
+            Some(u32::from_le_bytes(record.get(at..at + 4)?.try_into().ok()?) as usize)
+        };
+        RECORD_HEAD.checked_add(len(0)?)?.checked_add(len(4)?)?.checked_add(len(8)?)
+    }
+
+    /// A record split: name, origin, first address, entry.
+    fn parts(record: &[u8]) -> Option<(&str, &str, u16, &[u8])> {
+        let len = |at: usize| -> Option<usize> {
+            Some(u32::from_le_bytes(record.get(at..at + 4)?.try_into().ok()?) as usize)
+        };
+        let (n, o, e) = (len(0)?, len(4)?, len(8)?);
+        let address = u16::from_le_bytes(record.get(12..14)?.try_into().ok()?);
+        let h = RECORD_HEAD;
+        let name = std::str::from_utf8(record.get(h..h + n)?).ok()?;
+        let origin = std::str::from_utf8(record.get(h + n..h + n + o)?).ok()?;
+        Some((name, origin, address, record.get(h + n + o..h + n + o + e)?))
     }
 
     /// Writes the pending block to the scratch file.
@@ -124,22 +155,12 @@ impl<'e> ProfileFile<'e> {
         Ok(())
     }
 
-    /// Record `n` split: name, origin, entry.
-    fn parts(record: &[u8]) -> Option<(&str, &str, &[u8])> {
-        let len = |at: usize| -> Option<usize> {
-            Some(u32::from_le_bytes(record.get(at..at + 4)?.try_into().ok()?) as usize)
-        };
-        let (n, o) = (len(0)?, len(4)?);
-        let name = std::str::from_utf8(record.get(8..8 + n)?).ok()?;
-        let origin = std::str::from_utf8(record.get(8 + n..8 + n + o)?).ok()?;
-        Some((name, origin, record.get(8 + n + o..)?))
-    }
-
+    /// Appends `p`'s record (keyed by where it starts: [`Self::end`] before the call).
     fn append(&mut self, p: &Point) -> std::io::Result<()> {
         self.text.clear();
         entry(&mut self.text, p);
         let lens = |s: &str| u32::try_from(s.len()).map_err(std::io::Error::other).map(u32::to_le_bytes);
-        let len = 8 + p.name.len() + p.origin.len() + self.text.len();
+        let len = RECORD_HEAD + p.name.len() + p.origin.len() + self.text.len();
         let len = u64::try_from(len).map_err(std::io::Error::other)?;
         if self.end + len > MAX_SCRATCH {
             return Err(std::io::Error::other(format!("over {MAX_SCRATCH} bytes of profile entries")));
@@ -147,10 +168,11 @@ impl<'e> ProfileFile<'e> {
         let record = &mut self.pending;
         record.extend_from_slice(&lens(&p.name)?);
         record.extend_from_slice(&lens(&p.origin)?);
+        record.extend_from_slice(&lens(&self.text)?);
+        record.extend_from_slice(&p.address.to_le_bytes());
         record.extend_from_slice(p.name.as_bytes());
         record.extend_from_slice(p.origin.as_bytes());
         record.extend_from_slice(self.text.as_bytes());
-        self.offsets.push(self.end);
         self.end += len;
         if self.pending.len() >= PENDING_BLOCK {
             self.flush()?;
@@ -198,7 +220,7 @@ impl<'e> ProfileFile<'e> {
             let mut record = Vec::new();
             for n in self.ledger.in_order() {
                 self.record(n, &mut record)?;
-                let (_, _, entry) = Self::parts(&record).ok_or_else(|| std::io::Error::other("a damaged entry"))?;
+                let (_, _, _, entry) = Self::parts(&record).ok_or_else(|| std::io::Error::other("a damaged entry"))?;
                 out.write_all(entry)?;
             }
             let file = out.into_inner().map_err(std::io::IntoInnerError::into_error)?;
@@ -218,8 +240,10 @@ impl Sink for ProfileFile<'_> {
         if let Some(prefix) = &self.origin_prefix {
             p.origin = format!("{prefix}, {}", p.origin);
         }
-        match self.ledger.take(&p) {
-            Ok(_) => {
+        // The key is where the point's record will start (under MAX_SCRATCH: it fits).
+        let key = u32::try_from(self.end).unwrap_or(u32::MAX);
+        match self.ledger.take(&p, key) {
+            Ok(()) => {
                 if let Err(e) = self.append(&p)
                     && self.failed.is_none()
                 {
@@ -229,11 +253,11 @@ impl Sink for ProfileFile<'_> {
             Err(clash) => {
                 let mut buf = Vec::new();
                 let record = match clash {
-                    Clash::Overlaps(n) => self.record(n, &mut buf).ok().map(|()| buf.as_slice()),
-                    Clash::PastEnd => None,
+                    Clash::Overlaps(key) => self.record(key, &mut buf).ok().map(|()| buf.as_slice()),
+                    Clash::PastEnd | Clash::NoKey => None,
                 };
-                let other = record.and_then(Self::parts).map(|(name, origin, _)| (name, origin));
-                let problem = self.ledger.problem(&p, clash, other);
+                let other = record.and_then(Self::parts).map(|(name, origin, address, _)| (name, origin, address));
+                let problem = Ledger::problem(&p, clash, other);
                 self.problem(problem);
             }
         }
@@ -261,4 +285,65 @@ pub fn destination(output: Option<&Path>, name: &str) -> anyhow::Result<PathBuf>
         .context("no user profile directory (set MBTAP_PROFILE_DIR or HOME), give -o")?;
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     Ok(dir.join(format!("{name}.toml")))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use mbtap_device::profile::Table;
+    use mbtap_device::profile::format::{Access, ValueType, WordOrder};
+
+    /// A u16 holding register at `address` named `name`.
+    fn point(address: u16, name: &str) -> Point {
+        Point {
+            table: Table::HoldingRegisters,
+            address,
+            name: name.to_owned(),
+            value_type: ValueType::U16,
+            word_order: WordOrder::HighFirst,
+            scale: None,
+            unit: None,
+            access: Access::Read,
+            length: None,
+            description: None,
+            origin: format!("row {address}"),
+        }
+    }
+
+    /// Issue 39 review: records go to the scratch file in 64 KiB blocks and the ledger keeps
+    /// their offsets, nothing per point. A clash names the other point whether its record is
+    /// still in the block, on disk, or on disk and longer than one read; the profile lists every
+    /// point in address order.
+    #[test]
+    fn regression_issue_39_a_clash_names_the_other_point_from_the_block_or_the_disk() {
+        let dir = std::env::temp_dir().join(format!("mbtap-profile-file-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut err = Vec::new();
+        let mut sink = ProfileFile::new(&dir, &mut err).unwrap();
+        sink.reading("regs.csv", false);
+        let long = "L".repeat(700);
+        sink.point(point(1, &long));
+        // Enough points, added from the top down, for several blocks to be written.
+        for a in (2..3000u16).rev() {
+            sink.point(point(a * 2, &format!("reg{a}")));
+        }
+        assert!(sink.end - sink.pending.len() as u64 > 2 * PENDING_BLOCK as u64, "blocks were written");
+        sink.point(point(1, "again")); // the long one, on disk
+        sink.point(point(5998, "again")); // the first of the loop, on disk
+        sink.point(point(4, "again")); // the last of the loop, in the block
+        assert_eq!(sink.counts(), [2999, 0, 0, 0]);
+        let tmp = dir.join("out.toml");
+        sink.write(&tmp, "regs", "dev", "regs.csv").unwrap();
+        drop(sink);
+        let said = String::from_utf8(err).unwrap();
+        let text = std::fs::read_to_string(&tmp).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(said.contains(&format!("overlaps \"{long}\" (row 1, address 1)")), "{said}");
+        assert!(said.contains("overlaps \"reg2999\" (row 5998, address 5998)"), "{said}");
+        assert!(said.contains("overlaps \"reg2\" (row 4, address 4)"), "{said}");
+        let at = |name: &str| text.find(&format!("name = \"{name}\"")).unwrap();
+        assert!(at(&long) < at("reg2") && at("reg2") < at("reg3") && at("reg1000") < at("reg2999"));
+        assert_eq!(text.matches("[[holding_registers]]").count(), 2999);
+    }
 }

@@ -123,15 +123,17 @@ impl Imported {
     /// Adds `p` unless it overlaps a point already imported (a profile defines each address
     /// once per table), which becomes a problem naming both.
     pub fn add(&mut self, p: Point) {
-        match self.ledger.take(&p) {
-            Ok(_) => self.points.push(p),
+        let key = u32::try_from(self.points.len()).unwrap_or(u32::MAX);
+        match self.ledger.take(&p, key) {
+            Ok(()) => self.points.push(p),
             Err(clash) => {
                 let other = match clash {
-                    Clash::Overlaps(n) => self.points.get(n as usize).map(|q| (q.name.as_str(), q.origin.as_str())),
-                    Clash::PastEnd => None,
+                    Clash::Overlaps(n) => {
+                        self.points.get(n as usize).map(|q| (q.name.as_str(), q.origin.as_str(), q.address))
+                    }
+                    Clash::PastEnd | Clash::NoKey => None,
                 };
-                let problem = self.ledger.problem(&p, clash, other);
-                self.problems.push(problem);
+                self.problems.push(Ledger::problem(&p, clash, other));
             }
         }
     }
