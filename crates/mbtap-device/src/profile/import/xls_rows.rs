@@ -329,3 +329,74 @@ pub fn parse_xls_rows<R: Read + Seek>(
     )?;
     Ok(XlsRows { cut_cells })
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    /// A record: type, size, data ([MS-XLS] 2.1.4).
+    fn rec(typ: u16, data: &[u8]) -> Vec<u8> {
+        [&typ.to_le_bytes()[..], &u16::try_from(data.len()).unwrap().to_le_bytes(), data].concat()
+    }
+
+    /// A workbook stream: `BOF` of `version`, `globals`, a `BoundSheet8` named by `name` (its
+    /// bytes as the version writes them), `EOF`; then the sheet: `BOF`, `cells`, `EOF`.
+    fn stream(version: u16, globals: &[Vec<u8>], name: &[u8], cells: &[Vec<u8>]) -> Vec<u8> {
+        let bof = |dt: u16| rec(BOF, &[&version.to_le_bytes()[..], &dt.to_le_bytes(), &[0; 4]].concat());
+        let mut head = bof(0x0005);
+        head.extend(globals.concat());
+        let bound_len = rec(BOUND_SHEET, &[&[0u8; 6][..], name].concat()).len();
+        let sheet_at = u32::try_from(head.len() + bound_len + 4).unwrap();
+        head.extend(rec(BOUND_SHEET, &[&sheet_at.to_le_bytes()[..], &[0, 0], name].concat()));
+        head.extend(rec(EOF, &[]));
+        head.extend(bof(0x0010));
+        head.extend(cells.concat());
+        head.extend(rec(EOF, &[]));
+        head
+    }
+
+    /// Every row of sheet 0, as owned text.
+    fn rows(s: &[u8]) -> (Vec<String>, Vec<Vec<String>>) {
+        let book = parse_xls_book(s).unwrap();
+        let mut out = Vec::new();
+        parse_xls_rows(std::io::Cursor::new(s), &book, 0, &mut |_, cells| {
+            out.push(cells.iter().map(|c| (*c).to_owned()).collect());
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        (book.sheets.into_iter().map(|s| s.name).collect(), out)
+    }
+
+    /// `Напряжение` in code page 1251 (Windows Cyrillic).
+    const VOLTAGE_1251: [u8; 10] = [0xCD, 0xE0, 0xEF, 0xF0, 0xFF, 0xE6, 0xE5, 0xED, 0xE8, 0xE5];
+
+    /// BIFF5 (Excel 5/95) text is bytes in the workbook's code page ([MS-XLS] 2.4.52): a
+    /// Cyrillic `Label` and sheet name read as Cyrillic. (calamine widened the bytes to UTF-16
+    /// first for a code page of more than one byte a character.)
+    #[test]
+    fn biff5_text_is_read_in_the_workbook_s_code_page() {
+        let name = [&[4u8][..], b"regs"].concat();
+        // Label: row 0, column 1, format 0, a u16 length, the bytes.
+        let label = rec(LABEL, &[&[0, 0, 1, 0, 0, 0][..], &10u16.to_le_bytes(), &VOLTAGE_1251].concat());
+        let s = stream(0x0500, &[rec(CODE_PAGE, &1251u16.to_le_bytes())], &name, &[label.clone()]);
+        assert_eq!(rows(&s), (vec!["regs".to_owned()], vec![vec![String::new(), "Напряжение".to_owned()]]));
+        // No code page named: each byte is its own character.
+        let s = stream(0x0500, &[], &name, &[label]);
+        assert_eq!(rows(&s).1[0][1], "Íàïðÿæåíèå");
+        // A code page nobody knows: said, not guessed.
+        let s = stream(0x0500, &[rec(CODE_PAGE, &9u16.to_le_bytes())], &name, &[]);
+        assert_eq!(parse_xls_book(&s[..]).map(|_| ()), Err(XlsRowsError::CodePage(9)));
+    }
+
+    /// BIFF8 text is Unicode whatever the `CodePage` record says ([MS-XLS] 2.5.294): 8-bit
+    /// strings are the low bytes of UTF-16 units, not bytes in the code page.
+    #[test]
+    fn biff8_text_is_unicode_whatever_the_code_page() {
+        let name = [&[4u8, 0][..], b"regs"].concat();
+        // Label: row 0, column 0, format 0, length 3, flags 0 (8-bit), `é` `°` `C`.
+        let label = rec(LABEL, &[&[0u8, 0, 0, 0, 0, 0][..], &3u16.to_le_bytes(), &[0, 0xE9, 0xB0, b'C']].concat());
+        let s = stream(0x0600, &[rec(CODE_PAGE, &1251u16.to_le_bytes())], &name, &[label]);
+        assert_eq!(rows(&s).1, vec![vec!["é°C".to_owned()]]);
+    }
+}
