@@ -379,7 +379,7 @@ mod tests {
         let name = [&[4u8][..], b"regs"].concat();
         // Label: row 0, column 1, format 0, a u16 length, the bytes.
         let label = rec(LABEL, &[&[0, 0, 1, 0, 0, 0][..], &10u16.to_le_bytes(), &VOLTAGE_1251].concat());
-        let s = stream(0x0500, &[rec(CODE_PAGE, &1251u16.to_le_bytes())], &name, &[label.clone()]);
+        let s = stream(0x0500, &[rec(CODE_PAGE, &1251u16.to_le_bytes())], &name, std::slice::from_ref(&label));
         assert_eq!(rows(&s), (vec!["regs".to_owned()], vec![vec![String::new(), "Напряжение".to_owned()]]));
         // No code page named: each byte is its own character.
         let s = stream(0x0500, &[], &name, &[label]);
