@@ -126,20 +126,23 @@ impl<'e> ProfileFile<'e> {
         Ok(())
     }
 
-    /// The length of the record `record` starts with, from its header.
-    fn record_len(record: &[u8]) -> Option<usize> {
+    /// The lengths a record's header gives: its name's, origin's and entry's.
+    fn head(record: &[u8]) -> Option<[usize; 3]> {
         let len = |at: usize| -> Option<usize> {
             Some(u32::from_le_bytes(record.get(at..at + 4)?.try_into().ok()?) as usize)
         };
-        RECORD_HEAD.checked_add(len(0)?)?.checked_add(len(4)?)?.checked_add(len(8)?)
+        Some([len(0)?, len(4)?, len(8)?])
+    }
+
+    /// The length of the record `record` starts with, from its header.
+    fn record_len(record: &[u8]) -> Option<usize> {
+        let [n, o, e] = Self::head(record)?;
+        RECORD_HEAD.checked_add(n)?.checked_add(o)?.checked_add(e)
     }
 
     /// A record split: name, origin, first address, entry.
     fn parts(record: &[u8]) -> Option<(&str, &str, u16, &[u8])> {
-        let len = |at: usize| -> Option<usize> {
-            Some(u32::from_le_bytes(record.get(at..at + 4)?.try_into().ok()?) as usize)
-        };
-        let (n, o, e) = (len(0)?, len(4)?, len(8)?);
+        let [n, o, e] = Self::head(record)?;
         let address = u16::from_le_bytes(record.get(12..14)?.try_into().ok()?);
         let h = RECORD_HEAD;
         let name = std::str::from_utf8(record.get(h..h + n)?).ok()?;

@@ -50,8 +50,7 @@ fn rows_from_cells(
 }
 
 /// Runs `read` with the workbook reader's panics turned into an error about `path`: the reader
-/// indexes some records without checking their length (an XLS `BOF` or `CodePage` of fewer than
-/// 2 bytes panics it). Its panic message is kept out of the output.
+/// indexes some records without checking its input everywhere. Its panic message is kept out of the output.
 pub(super) fn guarded<T>(path: &Path, read: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
     let quiet = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
@@ -89,8 +88,8 @@ pub(super) fn open_sheet(path: &Path, sheet: Option<&str>) -> anyhow::Result<Wor
     if matches!(wb, calamine::Sheets::Xlsx(_) | calamine::Sheets::Xlsb(_)) {
         return Ok(WorkbookRows::Cells { path: path.to_owned(), sheet: name, cut_cells: 0 });
     }
-    // XLS and ODS have no cell-by-cell reader: their range is read whole, bounded by what
-    // their records lay out (counted before opening).
+    // What else calamine opens (an ODS without its `mimetype`) has no cell-by-cell reader: its
+    // range is read whole, bounded by what its repeats expand to (counted before opening).
     let range = wb.worksheet_range(&name).with_context(|| format!("{}: reading sheet {name:?}", path.display()))?;
     // The range starts at its first used cell; pad so rows and columns are the sheet's own.
     let (row0, col0) = range.start().map_or((0, 0), |(r, c)| (r as usize, c as usize));

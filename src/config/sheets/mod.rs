@@ -38,9 +38,10 @@ fn too_big(path: &Path, what: &str) -> anyhow::Error {
     )
 }
 
-/// A workbook's sheet as rows: XLSX and XLSB read from the file cell by cell at each pass (the
-/// rows are never held: issue 39), XLS and ODS — which the reader lays out whole when it opens
-/// them, bounded by the checks before — as a grid.
+/// A workbook's sheet as rows: XLSX and XLSB read from the file cell by cell at each pass, XLS
+/// and ODS by our own readers at each pass (the rows are never held: issue 39); only a workbook
+/// calamine opens some other way (an ODS without its `mimetype`) is laid out as a grid, bounded
+/// by the checks before.
 #[derive(Debug)]
 pub enum WorkbookRows {
     Cells {

@@ -132,19 +132,6 @@ fn chain_pieces(
     Ok(out)
 }
 
-/// [`chain_pieces`] of `source`, gathered.
-fn chain(
-    source: &[u8],
-    start: u32,
-    next: &[u32],
-    len: u64,
-    limit: usize,
-    name: &'static str,
-    sector: impl Fn(u32) -> Result<Range<usize>, ContainerError>,
-) -> Result<Vec<u8>, ContainerError> {
-    Ok(gather(source, &chain_pieces(start, next, len, limit, name, sector)?))
-}
-
 /// The bytes of `pieces` of `source`, one after another.
 fn gather(source: &[u8], pieces: &[Range<usize>]) -> Vec<u8> {
     let mut out = Vec::with_capacity(pieces.iter().map(ExactSizeIterator::len).sum());
@@ -265,7 +252,7 @@ pub fn parse_xls_stream(file: &[u8]) -> Result<WorkbookStream, ContainerError> {
     if let Some(e) = too_long("directory length", dir_bytes) {
         return Err(e);
     }
-    let dirs = chain(file, dir_start, &fat, dir_bytes, limit, "directory", regular("directory"))?;
+    let dirs = gather(file, &chain_pieces(dir_start, &fat, dir_bytes, limit, "directory", regular("directory"))?);
     let mut entries = Vec::new();
     for raw in dirs.chunks(ENTRY) {
         if raw.len() < 124 + if size == 512 { 0 } else { 4 } {
@@ -295,12 +282,14 @@ pub fn parse_xls_stream(file: &[u8]) -> Result<WorkbookStream, ContainerError> {
         if root.len > file.len() as u64 {
             return Err(ContainerError::Length { index: 0, name: root.name.clone(), len: root.len, file: file.len() });
         }
-        let ministream = chain(file, root.start, &fat, root.len, limit, "mini stream", regular("mini stream"))?;
+        let ministream =
+            gather(file, &chain_pieces(root.start, &fat, root.len, limit, "mini stream", regular("mini stream"))?);
         let mini_fat_bytes = mini_fat_len.saturating_mul(size as u64);
         if let Some(e) = too_long("mini FAT length", mini_fat_bytes) {
             return Err(e);
         }
-        let raw = chain(file, mini_fat_start, &fat, mini_fat_bytes, limit, "mini FAT", regular("mini FAT"))?;
+        let raw =
+            gather(file, &chain_pieces(mini_fat_start, &fat, mini_fat_bytes, limit, "mini FAT", regular("mini FAT"))?);
         (words(&raw, "mini FAT", mini_fat_start)?, ministream)
     } else {
         (Vec::new(), Vec::new())

@@ -161,8 +161,8 @@ impl<R: Read> Records<R> {
 pub(super) fn biff8_text(d: &[u8], left: usize, wide: bool, out: &mut String) -> (usize, usize) {
     if wide {
         let n = left.min(d.len() / 2);
-        let units: Vec<u16> = d[..2 * n].chunks_exact(2).map(|u| u16::from_le_bytes([u[0], u[1]])).collect();
-        out.push_str(&String::from_utf16_lossy(&units));
+        let units = d[..2 * n].chunks_exact(2).map(|u| u16::from_le_bytes([u[0], u[1]]));
+        out.extend(char::decode_utf16(units).map(|c| c.unwrap_or(char::REPLACEMENT_CHARACTER)));
         (n, 2 * n)
     } else {
         let n = left.min(d.len());
