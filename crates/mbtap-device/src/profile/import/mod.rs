@@ -21,6 +21,7 @@ pub mod sheet;
 pub mod xls_container;
 mod xls_records;
 pub mod xls_rows;
+mod xls_stream;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
