@@ -19,10 +19,13 @@ fn good_frames(jsonl: &str) -> Vec<String> {
         .collect()
 }
 
-/// Every byte of every frame and noise burst, in order: nothing lost or added.
+/// Every byte of every frame, noise burst and turnaround glitch, in order: nothing lost or
+/// added. (A glitch is a byte of the line too: when the pty's jitter puts a pause before a
+/// damaged frame's last `00`, the framer may cut that byte as a glitch; leaving glitches out
+/// made this test fail once under load with every byte there.)
 fn all_bytes(jsonl: &str) -> String {
     events(jsonl)
-        .filter(|j| j["event"] == "frame" || j["event"] == "noise")
+        .filter(|j| j["event"] == "frame" || j["event"] == "noise" || j["event"] == "glitch")
         .map(|j| j["hex"].as_str().unwrap().to_owned())
         .collect()
 }

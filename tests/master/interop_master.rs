@@ -104,7 +104,7 @@ fn heard_while(write_args: &[&str]) -> (Output, Vec<serde_json::Value>) {
     let events = String::from_utf8_lossy(&out.stdout)
         .lines()
         .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
-        .filter(|e| e["event"] == "frame" || e["event"] == "noise")
+        .filter(|e| e["event"] == "frame" || e["event"] == "noise" || e["event"] == "glitch")
         .collect();
     (o, events)
 }
