@@ -67,7 +67,7 @@ fn watch_vs_mbpoll(d: &Path) {
     watch(&link, 500, "10ms");
     // mbpoll polls until killed, one poll every `-l` ms (10 at least, start to start): count
     // its answers over 5 s. It does not say how long each read took; BENCHMARKS.md compares
-    // one read from the command line (mbpoll -1 against mbtap read) with farm-bench.
+    // one read from the command line (mbpoll -1 against mbtap read) with benches/paired.sh.
     let mut child = Command::new("mbpoll")
         .args([
             "-m", "rtu", "-b", "19200", "-P", "even", "-a", "1", "-t", "3", "-r", "430", "-c", "4", "-0", "-l", "10",
