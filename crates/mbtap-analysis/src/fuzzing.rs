@@ -177,6 +177,7 @@ pub fn framer(data: &[u8]) {
         fed += bytes.len();
         rtu.push(&chunk, &mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());
         assert!(rtu.pending() <= crate::framer::rtu::MAX_PENDING, "the RTU framer holds {} bytes", rtu.pending());
+        assert!(rtu.held() <= crate::framer::rtu::MAX_HELD_BYTES, "the twin hold keeps {} bytes", rtu.held());
         ascii.push(&chunk, &mut |_e: FrameEvent<'_>| {});
         if step % 7 == 0 {
             rtu.tick(Timestamp(t.wrapping_add(step)), &mut |e: FrameEvent<'_>| out_rtu += e.bytes().len());

@@ -34,6 +34,7 @@ mod candidates;
 mod emit;
 mod expect;
 mod glitches;
+mod hold;
 mod learning;
 mod state;
 mod twins;
@@ -43,6 +44,8 @@ use self::buffer::TimedBuffer;
 use self::candidates::Try;
 use self::expect::{Expect, MAX_ADDRESS, Reading};
 use self::glitches::GlitchState;
+use self::hold::TwinHold;
+pub use self::hold::{HOLD_NS, MAX_HELD_BYTES};
 use self::state::{LastEmitted, LineTiming, Search};
 use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::LineSettings;
@@ -74,6 +77,10 @@ pub struct FramerConfig {
     /// Whether the lengths each unit's vendor functions were seen with decide CRC-`00` twins
     /// (see [`super::lengths`]); off only to measure what it does.
     pub learn_lengths: bool,
+    /// How long (bus time, ns) a frame that checks at two lengths nothing decides yet is held,
+    /// with what follows it, for the line to teach its length (see [`hold`]; default
+    /// [`HOLD_NS`]); 0: never held, frames go out as they come.
+    pub hold_twins_ns: u64,
 }
 
 /// Default for [`FramerConfig::incomplete_timeout_ns`]: 50 ms.
@@ -88,6 +95,7 @@ impl Default for FramerConfig {
             learn_latency: true,
             pasted: false,
             learn_lengths: true,
+            hold_twins_ns: HOLD_NS,
         }
     }
 }
@@ -150,6 +158,8 @@ pub struct RtuFramer {
     learner: ObserverLearner,
     /// Lengths each unit's vendor functions were seen with (issue 25).
     lengths: LearnedLengths,
+    /// Undecided twins held until the line tells their length (issue 40).
+    hold: TwinHold,
 }
 
 impl RtuFramer {
@@ -166,6 +176,7 @@ impl RtuFramer {
             glitches: GlitchState::new(),
             learner: ObserverLearner::new(config.latency_ns, config.learn_latency, config.line.char_ns()),
             lengths: LearnedLengths::new(config.learn_lengths),
+            hold: TwinHold::new(config.hold_twins_ns),
             max_address: if config.pasted { u8::MAX } else { MAX_ADDRESS },
             pasted: config.pasted,
         }
@@ -195,13 +206,57 @@ impl RtuFramer {
         self.timed.live_len()
     }
 
-    /// Feeds one chunk; emits every event it decides.
+    /// Bytes of decided events held behind an undecided twin (see [`hold`]).
+    #[must_use]
+    pub fn held(&self) -> usize {
+        self.hold.held()
+    }
+
+    /// Feeds one chunk; emits every event it decides (in order; behind an undecided twin, when
+    /// the line tells its length or the hold's bound passes).
     pub fn push<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
+        let mut hold = std::mem::take(&mut self.hold);
+        // What the bound lets out goes first, as a tick before this chunk would have (live
+        // and replayed input give the same events).
+        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
+        self.push_events(chunk, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
+        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
+        self.hold = hold;
+    }
+
+    /// Feeds a chunk known to be exactly one frame; see [`Self::push_events_whole`].
+    pub fn push_whole<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
+        let mut hold = std::mem::take(&mut self.hold);
+        // What the bound lets out goes first, as a tick before this chunk would have (live
+        // and replayed input give the same events).
+        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
+        self.push_events_whole(chunk, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
+        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
+        self.hold = hold;
+    }
+
+    /// Tells the framer the time is `now` with nothing new received; see [`Self::tick_events`].
+    pub fn tick<F: FnMut(FrameEvent<'_>)>(&mut self, now: Timestamp, emit: &mut F) {
+        let mut hold = std::mem::take(&mut self.hold);
+        self.tick_events(now, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
+        hold.settle(&self.lengths, Some(now.0), self.timing.char_ns, emit);
+        self.hold = hold;
+    }
+
+    /// End of input: decides everything pending, and lets out everything held.
+    pub fn finish<F: FnMut(FrameEvent<'_>)>(&mut self, emit: &mut F) {
+        let mut hold = std::mem::take(&mut self.hold);
+        self.process(Flush::All, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
+        hold.settle(&self.lengths, None, self.timing.char_ns, emit);
+        self.hold = hold;
+    }
+
+    fn push_events<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
         let t = chunk.t.0;
         // What the silence before this chunk decides is decided first, exactly as a `tick` in
         // that silence would have: live and replayed input give the same events.
         if let Some(first_end) = self.first_end_estimate(chunk) {
-            self.tick(Timestamp(first_end.saturating_sub(self.timing.char_ns)), emit);
+            self.tick_events(Timestamp(first_end.saturating_sub(self.timing.char_ns)), emit);
         }
         let n = chunk.bytes.len();
         if n > 0 {
@@ -223,9 +278,9 @@ impl RtuFramer {
     /// complete before it, and it goes out whole at once, whatever its function code (a vendor
     /// frame need not wait for the silence after it). A chunk that fails its CRC takes the
     /// general path.
-    pub fn push_whole<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
+    fn push_events_whole<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
         if chunk.bytes.len() < RTU_MIN_LEN || !Self::crc_ok(chunk.bytes) {
-            self.push(chunk, emit);
+            self.push_events(chunk, emit);
             return;
         }
         if self.pending() > 0 {
@@ -245,7 +300,7 @@ impl RtuFramer {
 
     /// Tells the framer the time is `now` with nothing new received: if the line has been
     /// silent longer than t3.5 (plus latency), pending bytes are decided.
-    pub fn tick<F: FnMut(FrameEvent<'_>)>(&mut self, now: Timestamp, emit: &mut F) {
+    fn tick_events<F: FnMut(FrameEvent<'_>)>(&mut self, now: Timestamp, emit: &mut F) {
         let Some(last) = self.timed.last_end else { return };
         if self.pending() == 0 {
             return;
@@ -258,11 +313,6 @@ impl RtuFramer {
         } else if silence >= self.timing.t35 && self.search.garbage > 0 {
             self.process(Flush::Garbage, emit);
         }
-    }
-
-    /// End of input: decides everything pending.
-    pub fn finish<F: FnMut(FrameEvent<'_>)>(&mut self, emit: &mut F) {
-        self.process(Flush::All, emit);
     }
 
     fn process<F: FnMut(FrameEvent<'_>)>(&mut self, flush: Flush, emit: &mut F) {
