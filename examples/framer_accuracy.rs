@@ -107,7 +107,8 @@ fn main() {
 }
 
 /// With `DUMP_FALSE_VALID` set: each frame reported valid that was never on the wire, with the
-/// truth around it (what the wire really held there), for finding out why.
+/// truth around it (what the wire really held there), for finding out why; with
+/// `DUMP_WRONG_FIRST` too, the frames shown with two lengths the wrong one first, apart.
 fn dump_false_valid(wire: &mbtap_sim::traffic::Wire, decided: &[mbtap_sim::traffic::Decided], model: Observation) {
     use mbtap_sim::traffic::TruthKind;
     let good: std::collections::HashSet<(usize, usize)> =
@@ -143,6 +144,20 @@ fn dump_false_valid(wire: &mbtap_sim::traffic::Wire, decided: &[mbtap_sim::traff
             println!("AMBIGUOUS {model:?} {}..{} alt {:?}", d.range.start, d.range.end, d.alt_len);
         }
         if good.contains(&(d.range.start, d.range.end)) {
+            continue;
+        }
+        if std::env::var_os("DUMP_WRONG_FIRST").is_some()
+            && d.alt_len.is_some_and(|n| good.contains(&(d.range.start, d.range.start + n)))
+        {
+            let around = wire.truth_around(&(d.range.start.saturating_sub(40)..d.range.end + 60), 0);
+            println!(
+                "WRONG FIRST {model:?} {}..{} [{}] alt {:?}\n    truth: {}",
+                d.range.start,
+                d.range.end,
+                wire.hex(d.range.clone()),
+                d.alt_len,
+                around.join("\n           ")
+            );
             continue;
         }
         let around = wire.truth_around(&d.range, 2);
