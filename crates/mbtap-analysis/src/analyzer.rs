@@ -141,10 +141,20 @@ impl Analyzer {
         &self.config
     }
 
+    #[inline]
     fn port_index(&mut self, port: PortId) -> usize {
-        if let Some(i) = self.ports.iter().position(|(p, _)| *p == port) {
-            return i;
+        match self.ports.iter().position(|(p, _)| *p == port) {
+            Some(i) => i,
+            None => self.add_port(port),
         }
+    }
+
+    /// A port heard for the first time gets its framer. Apart from [`Self::port_index`], which
+    /// every chunk asks: a framer is built on the stack (kilobytes of tables), and the frame
+    /// that takes cost every call its set-up while it was inline (33 instructions a chunk).
+    #[cold]
+    #[inline(never)]
+    fn add_port(&mut self, port: PortId) -> usize {
         let framer = match self.config.mode {
             SerialMode::Rtu => {
                 let mut f = RtuFramer::new(port, self.config.framer);
@@ -160,6 +170,7 @@ impl Analyzer {
     }
 
     /// Feeds one chunk.
+    #[inline]
     pub fn push<S: Sink>(&mut self, chunk: &Chunk<'_>, sink: &mut S) {
         let i = self.port_index(chunk.port);
         let (pairing, scratch) = (&mut self.pairing, &mut self.scratch);

@@ -31,21 +31,24 @@ impl RtuFramer {
         };
         let t_end = e0.saturating_add((n - 1).saturating_mul(c));
         let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.timing.latency));
-        emit(FrameEvent::Frame(Frame {
-            port: self.port,
-            bytes: chunk.bytes,
-            t_start: Timestamp(e0.saturating_sub(c)),
-            t_end: Timestamp(t_end),
-            check_ok: true,
-            gap_violation_ns: None,
-            short_gap_before_ns: (self.last.after_frame && ub < self.timing.t35).then_some(ub),
-            gap_tolerance_ns: None,
-            short_gap_tolerance_ns: self.short_tolerance(apparent_before),
-            resolution_ns: self.learner.estimate.resolution_ns(),
-            gap_before_known: ub != u64::MAX,
-            bad_chars: false,
-            alt_len: None,
-        }));
+        self.hold.pass(
+            FrameEvent::Frame(Frame {
+                port: self.port,
+                bytes: chunk.bytes,
+                t_start: Timestamp(e0.saturating_sub(c)),
+                t_end: Timestamp(t_end),
+                check_ok: true,
+                gap_violation_ns: None,
+                short_gap_before_ns: (self.last.after_frame && ub < self.timing.t35).then_some(ub),
+                gap_tolerance_ns: None,
+                short_gap_tolerance_ns: self.short_tolerance(apparent_before),
+                resolution_ns: self.learner.estimate.resolution_ns(),
+                gap_before_known: ub != u64::MAX,
+                bad_chars: false,
+                alt_len: None,
+            }),
+            emit,
+        );
         self.known_units[usize::from(chunk.bytes[0])] = true;
         self.last.last_sender = sender_of(self.expect, chunk.bytes, Some(reading));
         self.last.after_damage = false;
@@ -268,12 +271,15 @@ impl RtuFramer {
         if self.looks_like_frame(&self.timed.buf[a..b]) {
             self.emit_frame(b - a, None, emit);
         } else {
-            emit(FrameEvent::Noise(Noise {
-                port: self.port,
-                bytes: &self.timed.buf[a..b],
-                t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
-                t_end: Timestamp(self.timed.end[b - 1]),
-            }));
+            self.hold.pass(
+                FrameEvent::Noise(Noise {
+                    port: self.port,
+                    bytes: &self.timed.buf[a..b],
+                    t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
+                    t_end: Timestamp(self.timed.end[b - 1]),
+                }),
+                emit,
+            );
             self.timed.head = b;
             self.search.wait_at = usize::MAX;
             self.last.after_frame = false;
@@ -291,21 +297,24 @@ impl RtuFramer {
         let apparent_before = (ub != u64::MAX).then(|| ub.saturating_sub(self.timing.latency));
         let (inner_gap, every_silence, evidence_silence) = self.apparent_inner_silence(a, b);
         let gap_tolerance_ns = evidence_silence.and_then(|s| s.checked_sub(self.timing.t15));
-        emit(FrameEvent::Frame(Frame {
-            port: self.port,
-            bytes: &self.timed.buf[a..b],
-            t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
-            t_end: Timestamp(self.timed.end[b - 1]),
-            check_ok,
-            gap_violation_ns: (inner_gap >= self.timing.t15).then_some(inner_gap),
-            short_gap_before_ns,
-            gap_tolerance_ns,
-            short_gap_tolerance_ns: self.short_tolerance(apparent_before),
-            resolution_ns: self.learner.estimate.resolution_ns(),
-            gap_before_known: ub != u64::MAX,
-            bad_chars: false,
-            alt_len: self.last.next_alt.take().filter(|_| check_ok),
-        }));
+        self.hold.pass(
+            FrameEvent::Frame(Frame {
+                port: self.port,
+                bytes: &self.timed.buf[a..b],
+                t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
+                t_end: Timestamp(self.timed.end[b - 1]),
+                check_ok,
+                gap_violation_ns: (inner_gap >= self.timing.t15).then_some(inner_gap),
+                short_gap_before_ns,
+                gap_tolerance_ns,
+                short_gap_tolerance_ns: self.short_tolerance(apparent_before),
+                resolution_ns: self.learner.estimate.resolution_ns(),
+                gap_before_known: ub != u64::MAX,
+                bad_chars: false,
+                alt_len: self.last.next_alt.take().filter(|_| check_ok),
+            }),
+            emit,
+        );
         self.last.last_sender = sender_of(self.expect, &self.timed.buf[a..b], reading);
         self.last.after_damage = !check_ok;
         if check_ok {

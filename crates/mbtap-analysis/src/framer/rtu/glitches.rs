@@ -94,12 +94,15 @@ impl RtuFramer {
 
     /// Emits the live byte at absolute `a` (`== self.timed.head`) as a turnaround glitch.
     pub(super) fn emit_glitch<F: FnMut(FrameEvent<'_>)>(&mut self, a: usize, emit: &mut F) {
-        emit(FrameEvent::Glitch(Noise {
-            port: self.port,
-            bytes: &self.timed.buf[a..=a],
-            t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
-            t_end: Timestamp(self.timed.end[a]),
-        }));
+        self.hold.pass(
+            FrameEvent::Glitch(Noise {
+                port: self.port,
+                bytes: &self.timed.buf[a..=a],
+                t_start: Timestamp(self.timed.end[a].saturating_sub(self.timing.char_ns)),
+                t_end: Timestamp(self.timed.end[a]),
+            }),
+            emit,
+        );
         let after = (self.last.glitch_at == Some(a)).then_some(self.last.last_sender);
         self.glitches.glitch(self.timed.buf[a], after);
         self.last.glitch_at = None;

@@ -215,42 +215,35 @@ impl RtuFramer {
     /// Feeds one chunk; emits every event it decides (in order; behind an undecided twin, when
     /// the line tells its length or the hold's bound passes).
     pub fn push<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
-        let mut hold = std::mem::take(&mut self.hold);
         // What the bound lets out goes first, as a tick before this chunk would have (live
         // and replayed input give the same events).
-        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
-        self.push_events(chunk, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
-        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
-        self.hold = hold;
+        self.hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
+        self.push_events(chunk, emit);
+        self.hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
     }
 
     /// Feeds a chunk known to be exactly one frame; see [`Self::push_events_whole`].
     pub fn push_whole<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
-        let mut hold = std::mem::take(&mut self.hold);
-        // What the bound lets out goes first, as a tick before this chunk would have (live
-        // and replayed input give the same events).
-        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
-        self.push_events_whole(chunk, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
-        hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
-        self.hold = hold;
+        self.hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
+        self.push_events_whole(chunk, emit);
+        self.hold.settle(&self.lengths, Some(chunk.t.0), self.timing.char_ns, emit);
     }
 
     /// Tells the framer the time is `now` with nothing new received; see [`Self::tick_events`].
     pub fn tick<F: FnMut(FrameEvent<'_>)>(&mut self, now: Timestamp, emit: &mut F) {
-        let mut hold = std::mem::take(&mut self.hold);
-        self.tick_events(now, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
-        hold.settle(&self.lengths, Some(now.0), self.timing.char_ns, emit);
-        self.hold = hold;
+        self.tick_events(now, emit);
+        self.hold.settle(&self.lengths, Some(now.0), self.timing.char_ns, emit);
     }
 
     /// End of input: decides everything pending, and lets out everything held.
     pub fn finish<F: FnMut(FrameEvent<'_>)>(&mut self, emit: &mut F) {
-        let mut hold = std::mem::take(&mut self.hold);
-        self.process(Flush::All, &mut |e: FrameEvent<'_>| hold.pass(e, emit));
-        hold.settle(&self.lengths, None, self.timing.char_ns, emit);
-        self.hold = hold;
+        self.process(Flush::All, emit);
+        self.hold.settle(&self.lengths, None, self.timing.char_ns, emit);
     }
 
+    // Kept out of line: with the hold's two checks around it inlined into one function, a
+    // per-frame replay measured 0.6 % slower in wall time (0.2557 s against 0.2541 s).
+    #[inline(never)]
     fn push_events<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
         let t = chunk.t.0;
         // What the silence before this chunk decides is decided first, exactly as a `tick` in
