@@ -217,7 +217,15 @@ impl Analyzer {
                 PortFramer::Ascii(f) => f.tick(now, &mut emit),
             }
         }
-        self.pairing.tick(now, &mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
+        // A request's answer may be held behind an undecided twin (issue 40): pairing gives up
+        // on nothing later than what is held, or a live session would call a request
+        // unanswered whose answer a replay of the same bytes pairs with it.
+        let held = self.ports.iter().filter_map(|(_, f)| match f {
+            PortFramer::Rtu(f) => f.held_since(),
+            PortFramer::Ascii(_) => None,
+        });
+        let upto = held.fold(now, std::cmp::Ord::min);
+        self.pairing.tick(upto, &mut |t: Transaction<'_>| sink.event(&Event::Transaction(&t)));
     }
 
     /// End of input. The sink is told what each RTU port's framer learned about its reads.
@@ -337,5 +345,30 @@ mod declared_length_tests {
         // Nothing declared, nothing learned yet: the odds of a line never seen to glitch take
         // the longest reading, the glitch inside the frame.
         assert_eq!(frames(&[]), [(7, true), (15, true)]);
+    }
+
+    /// Issue 40: the answer, a twin nothing decides, is held (see `framer::rtu::hold`); a live
+    /// session's ticks go on meanwhile. They called the request unanswered at its timeout, and
+    /// the held answer an orphan when it came out — where a replay of the same bytes, which
+    /// ticks only as frames come, pairs them.
+    #[test]
+    fn regression_issue_40_a_request_is_not_given_up_while_its_answer_is_held() {
+        use crate::pairing::Outcome;
+        let mut a = Analyzer::new(AnalyzerConfig::default());
+        let outcomes = std::cell::RefCell::new(Vec::new());
+        let mut sink = |e: &Event<'_>| {
+            if let Event::Transaction(t) = e {
+                outcomes.borrow_mut().push(t.outcome);
+            }
+        };
+        let ms = 1_000_000;
+        a.push(&Chunk { port: PortId(0), t: Timestamp(10 * ms), bytes: &REQUEST }, &mut sink);
+        a.push(&Chunk { port: PortId(0), t: Timestamp(30 * ms), bytes: &ANSWER_AND_GLITCH }, &mut sink);
+        for s in 1..=5 {
+            a.tick(Timestamp(30 * ms + s * 1000 * ms), &mut sink);
+        }
+        assert!(outcomes.borrow().is_empty(), "{:?}", outcomes.borrow());
+        a.finish(&mut sink);
+        assert_eq!(*outcomes.borrow(), [Outcome::Ok]);
     }
 }

@@ -85,6 +85,14 @@ impl TwinHold {
         self.bytes.len()
     }
 
+    /// When the first held event began, if any: nothing after it has reached the consumer.
+    pub(crate) fn since(&self) -> Option<Timestamp> {
+        self.events.first().map(|h| match h {
+            Held::Frame { frame, .. } => frame.t_start,
+            Held::Noise { noise, .. } => noise.t_start,
+        })
+    }
+
     /// An event the framer decided: out at once, unless a twin is held (then behind it) or it
     /// is an undecided twin (then the hold begins). Every event of a replay passes here: the
     /// common case is one test, inlined, and the event goes out where it was built.

@@ -212,6 +212,13 @@ impl RtuFramer {
         self.hold.held()
     }
 
+    /// When the first event held behind an undecided twin began (see [`hold`]): whoever times
+    /// out what waits for a frame must not judge past it — the frame may be in the hold.
+    #[must_use]
+    pub fn held_since(&self) -> Option<Timestamp> {
+        self.hold.since()
+    }
+
     /// Feeds one chunk; emits every event it decides (in order; behind an undecided twin, when
     /// the line tells its length or the hold's bound passes).
     pub fn push<F: FnMut(FrameEvent<'_>)>(&mut self, chunk: &Chunk<'_>, emit: &mut F) {
