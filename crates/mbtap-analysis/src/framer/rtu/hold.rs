@@ -200,9 +200,9 @@ impl TwinHold {
     ) -> usize {
         let Some(&Held::Frame { frame, at, len }) = self.events.get(i) else { return i };
         let b = &self.bytes;
-        match taught {
+        match (taught, self.events.get(i + 1)) {
             // Read long, taught short: the frame without its last byte, which was a glitch.
-            Some(n) if n + 1 == len => {
+            (Some(n), _) if n + 1 == len => {
                 let glitch_start = frame.t_end.0.saturating_sub(char_ns).max(frame.t_start.0);
                 let short: Frame<'_> = frame;
                 emit(FrameEvent::Frame(Frame {
@@ -220,22 +220,19 @@ impl TwinHold {
                 i + 1
             }
             // Read short, taught long: the `00` glitch after it was its CRC's high byte.
-            Some(n) if n == len + 1 => match self.events.get(i + 1) {
-                Some(Held::Noise { noise, len: 1, glitch: true, .. }) if b.get(at + len) == Some(&0) => {
-                    let long: Frame<'_> = frame;
-                    emit(FrameEvent::Frame(Frame {
-                        bytes: &b[at..at + n],
-                        t_end: noise.t_end,
-                        alt_len: Some(len),
-                        ..long
-                    }));
-                    i + 2
-                }
-                _ => {
-                    self.emit_held(self.events[i], emit);
-                    i + 1
-                }
-            },
+            (Some(n), Some(Held::Noise { noise, len: 1, glitch: true, .. }))
+                if n == len + 1 && b.get(at + len) == Some(&0) =>
+            {
+                let long: Frame<'_> = frame;
+                emit(FrameEvent::Frame(Frame {
+                    bytes: &b[at..at + n],
+                    t_end: noise.t_end,
+                    alt_len: Some(len),
+                    ..long
+                }));
+                i + 2
+            }
+            // Taught as read, not taught, or the bytes do not allow the other reading.
             _ => {
                 self.emit_held(self.events[i], emit);
                 i + 1
