@@ -4,7 +4,7 @@
 
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -13,7 +13,7 @@ use tokio::time::Instant;
 
 use super::request::{Client, Pending, Routes, ServerOptions, request};
 use mbtap_gateway::admit::Role;
-use mbtap_gateway::giveup::GiveUp;
+use mbtap_gateway::lifetime::{Fate, Ids, Lifetime};
 use mbtap_gateway::queue::ClientId;
 use mbtap_proto::tcp::{Streaming, parse_tcp_frame};
 use mbtap_proto::{encode_rtu, encode_tcp};
@@ -44,13 +44,16 @@ pub(super) async fn connection<S>(
     let mut client = Client::new(client, role, peer, routes, opts);
     let (mut rd, mut wr) = tokio::io::split(stream);
     let (tx, mut rx) = mpsc::channel::<(u64, Pending)>(64);
-    // Requests numbered as they come; the writer says how many have their answers written, the
-    // reader which ones the client gave up on (`mbtap_gateway::giveup`).
-    let answered = Arc::new(AtomicU64::new(0));
-    let (give_up, mut given_up) = watch::channel(0u64);
+    // Requests numbered as they come; whether the client still waits for each, and what its
+    // answer becomes, is the gateway core's one rule (`mbtap_gateway::lifetime`): MBAP clients
+    // have ids, RTU-over-TCP clients do not. The reader tells the writer which requests the
+    // client gave up on.
     let rtu = opts.rtu_over_tcp;
+    let lifetime = Arc::new(Mutex::new(Lifetime::new(if rtu { Ids::None } else { Ids::Has })));
+    let (give_up, mut given_up) = watch::channel(0u64);
+    let born = Instant::now();
     let writer = {
-        let (answered, counts) = (Arc::clone(&answered), Arc::clone(routes));
+        let (lifetime, counts) = (Arc::clone(&lifetime), Arc::clone(routes));
         tokio::spawn(async move {
             let mut out = Vec::with_capacity(300);
             while let Some((seq, p)) = rx.recv().await {
@@ -71,11 +74,22 @@ pub(super) async fn connection<S>(
                         } => None,
                     }
                 };
-                answered.store(seq + 1, Ordering::Release);
-                let Some(pdu) = pdu else {
+                let fate = {
+                    let mut l = lifetime.lock().unwrap_or_else(PoisonError::into_inner);
+                    match &pdu {
+                        None => Fate::Withhold,
+                        Some(None) => {
+                            l.unanswered(seq);
+                            Fate::Deliver
+                        }
+                        Some(Some(_)) => l.answer(seq, born.elapsed()),
+                    }
+                };
+                let Some(pdu) = pdu.filter(|_| fate == Fate::Deliver) else {
                     counts.server.abandoned(1);
                     continue;
                 };
+                // A broadcast: nobody answers it.
                 let Some(pdu) = pdu else { continue };
                 out.clear();
                 if rtu {
@@ -89,15 +103,14 @@ pub(super) async fn connection<S>(
             }
         })
     };
-    let mut patience = GiveUp::new();
     let mut next_seq = 0u64;
-    let born = Instant::now();
     // Numbers a request, notes whether the client gave up on the older ones, and hands it to
     // the writer; false once the writer is gone.
     let mut hand_on = async |pending: Pending| {
         let seq = next_seq;
         next_seq += 1;
-        if let Some(below) = patience.asked(seq, born.elapsed(), answered.load(Ordering::Acquire)) {
+        let gave_up = lifetime.lock().unwrap_or_else(PoisonError::into_inner).asked(seq, born.elapsed());
+        if let Some(below) = gave_up {
             let _ = give_up.send(below);
         }
         tx.send((seq, pending)).await.is_ok()

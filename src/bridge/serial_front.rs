@@ -6,6 +6,7 @@
 //! between them. The two masters never see each other's traffic: each hears only its own
 //! port. Units no line serves get silence, as on a line where no slave has that address.
 
+use std::collections::VecDeque;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -16,7 +17,9 @@ use super::request::{Client, Routes, ServerOptions, request};
 use mbtap_analysis::analyzer::SerialMode;
 use mbtap_analysis::framer::LineSettings;
 use mbtap_gateway::admit::Role;
+use mbtap_gateway::lifetime::{Fate, Ids, Lifetime};
 use mbtap_gateway::queue::ClientId;
+use mbtap_sim::RequestFrame;
 
 /// The serial front's place in the fair queue: apart from TCP (counting up from 1) and UDP
 /// (from 2^48) clients.
@@ -81,21 +84,70 @@ async fn serve_port(
     let peer = SocketAddr::from(([0, 0, 0, 0], 0));
     let mut client = Client::new(SERIAL_CLIENT, Role::Plain, peer, routes, opts);
     let mut heard = super::slave_port::Requests::default();
+    // A serial master asks one thing at a time and has no ids (`mbtap_gateway::lifetime`): its
+    // next request — to any unit — means it gave up on the last; an answer that would reach it
+    // after its own timeout (learnt from when it asks again) is never written.
+    let mut lifetime = Lifetime::new(Ids::None);
+    let born = tokio::time::Instant::now();
+    let mut next_seq = 0u64;
+    let mut backlog: VecDeque<RequestFrame> = VecDeque::new();
     loop {
-        let (requests, _) = heard.next(port, front.mode, front.line).await?;
-        for r in requests {
-            if !opts.policy.serves(r.unit) {
-                continue;
-            }
-            let broadcast = r.unit == 0;
-            let pending = request(&mut client, 0, r.unit, r.pdu, routes, opts);
-            // The answer of the line, the cache or the gateway (0A, 0B, a refusal's code).
-            let Some(pdu) = pending.answer_pdu().await else { continue };
-            if broadcast {
-                // Broadcasts are never answered (Serial Line v1.02 §2.1).
-                continue;
-            }
-            super::slave_port::answer(port, &front.rs485, front.mode, front.turnaround, r.unit, &pdu).await?;
+        let Some(r) = backlog.pop_front() else {
+            let (requests, _) = heard.next(port, front.mode, front.line).await?;
+            backlog.extend(requests);
+            continue;
+        };
+        let seq = next_seq;
+        next_seq += 1;
+        lifetime.asked(seq, born.elapsed());
+        if !opts.policy.serves(r.unit) {
+            // Another slave's request on a shared line: not ours to answer.
+            continue;
         }
+        let broadcast = r.unit == 0;
+        let pending = request(&mut client, 0, r.unit, r.pdu, routes, opts);
+        // The answer of the line, the cache or the gateway (0A, 0B, a refusal's code) — while
+        // the port is listened to: a request heard meanwhile means the master stopped waiting.
+        let answer = pending.answer_pdu();
+        tokio::pin!(answer);
+        let pdu = loop {
+            tokio::select! {
+                pdu = &mut answer => break Some(pdu),
+                more = heard.next(port, front.mode, front.line) => {
+                    let (requests, _) = more?;
+                    if !requests.is_empty() {
+                        backlog.extend(requests);
+                        break None;
+                    }
+                }
+            }
+        };
+        let Some(pdu) = pdu else {
+            // Given up: dropping the answer's receiver keeps it off the line if it has not
+            // started; an answer already coming is never written.
+            routes.server.abandoned(1);
+            continue;
+        };
+        let Some(pdu) = pdu else {
+            lifetime.unanswered(seq);
+            continue;
+        };
+        if broadcast {
+            // Broadcasts are never answered (Serial Line v1.02 §2.1).
+            lifetime.unanswered(seq);
+            continue;
+        }
+        // When the answer's last character reaches the master: after the turnaround and its
+        // own time on the wire (RTU: one byte a character; ASCII: two characters a byte + 5).
+        let chars = match front.mode {
+            SerialMode::Rtu => pdu.len() + 3,
+            SerialMode::Ascii => pdu.len() * 2 + 9,
+        };
+        let on_wire = Duration::from_nanos(front.line.char_ns().saturating_mul(chars as u64));
+        if lifetime.answer(seq, born.elapsed() + front.turnaround + on_wire) == Fate::Withhold {
+            routes.server.abandoned(1);
+            continue;
+        }
+        super::slave_port::answer(port, &front.rs485, front.mode, front.turnaround, r.unit, &pdu).await?;
     }
 }

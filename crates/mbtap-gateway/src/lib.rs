@@ -16,8 +16,8 @@
 //!   for each unit.
 //! - [`transaction`]: one serial request with its echo, answer, retries and late answers, as a
 //!   state machine fed bytes and time.
-//! - [`giveup`]: when a client has given up on its unanswered requests (its own timeout), so
-//!   they take no line time and their answers do not meet its next request.
+//! - [`lifetime`]: whether a request's asker still waits for it, and what its answer becomes
+//!   (delivered or withheld): one rule for clients with ids (MBAP) and without (RTU framing).
 //! - [`seats`]: which open connection gives up its seat to a newcomer.
 //! - [`rules`]: the read-only allow-list and the exceptions the gateway answers with.
 //!
@@ -29,7 +29,7 @@ pub mod answer;
 pub mod breaker;
 pub mod cache;
 pub mod fuzzing;
-pub mod giveup;
+pub mod lifetime;
 pub mod parse;
 pub mod queue;
 pub mod rfc2217;
