@@ -7,8 +7,8 @@ mod common;
 
 mod agent;
 mod config;
-mod gave_up;
 mod hardware;
+mod lifetime;
 mod listen_serial;
 mod one_path;
 mod serial;

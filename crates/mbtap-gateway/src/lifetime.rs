@@ -17,10 +17,11 @@
 //!   for the reply or its response timeout before the next request). Its next request means it
 //!   gave up on every earlier one; those answers, late or not, never reach it.
 //!
-//! For a one-at-a-time asker (without ids, or shown sequential) the shortest wait after which
-//! it asked again is learnt: its own response timeout is no longer than that. An answer that
-//! would reach it later than that after its request is withheld too — it would sit in the
-//! asker's input and meet the next request. Nothing is withheld before any give-up was seen.
+//! For a one-at-a-time asker (without ids, or shown sequential) the wait after which it asked
+//! again is learnt: its own response timeout is no longer than that. Once two give-ups were
+//! seen, an answer that would reach it later after its request than the longer of the last two
+//! such waits is withheld too — it would sit in the asker's input and meet the next request. One
+//! odd give-up (a master that moved on early once) withholds nothing.
 //!
 //! Sans-IO: the caller numbers requests (from 0, one more each time), gives the time on one
 //! clock of its choice, and says when an answer is ready to go out.
@@ -82,9 +83,9 @@ pub struct Lifetime {
     given_up_below: u64,
     /// When the last answer was written.
     last_answer: Option<Duration>,
-    /// The shortest wait after which this asker asked again with a request unanswered: its
-    /// response timeout is no longer.
-    patience: Option<Duration>,
+    /// The last two waits after which this asker asked again with a request unanswered,
+    /// newest first: its response timeout is no longer than either.
+    gave_up_after: [Option<Duration>; 2],
 }
 
 impl Lifetime {
@@ -97,7 +98,7 @@ impl Lifetime {
             waiting: VecDeque::new(),
             given_up_below: 0,
             last_answer: None,
-            patience: None,
+            gave_up_after: [None, None],
         }
     }
 
@@ -113,7 +114,11 @@ impl Lifetime {
                 self.conduct = if outstanding.is_some() {
                     Conduct::Pipelines
                 } else if self.last_answer.is_some_and(|t| now.saturating_sub(t) <= REACTION) {
-                    if reactions + 1 >= PROOF { Conduct::Sequential } else { Conduct::Unknown { reactions: reactions + 1 } }
+                    if reactions + 1 >= PROOF {
+                        Conduct::Sequential
+                    } else {
+                        Conduct::Unknown { reactions: reactions + 1 }
+                    }
                 } else {
                     Conduct::Unknown { reactions: 0 }
                 };
@@ -124,8 +129,7 @@ impl Lifetime {
             // The newest unanswered request waited this long before the asker moved on: its
             // timeout is no longer than that.
             if let Some(&(_, at)) = self.waiting.back() {
-                let waited = now.saturating_sub(at);
-                self.patience = Some(self.patience.map_or(waited, |p| p.min(waited)));
+                self.gave_up_after = [Some(now.saturating_sub(at)), self.gave_up_after[0]];
             }
             self.waiting.clear();
             self.given_up_below = self.given_up_below.max(seq);
@@ -144,13 +148,14 @@ impl Lifetime {
     /// a serial front's turnaround and the frame's time on the wire). Whether it goes out;
     /// either way the request is no longer waiting.
     pub fn answer(&mut self, seq: u64, arrives: Duration) -> Fate {
-        let asked = self.waiting.iter().position(|&(s, _)| s == seq).and_then(|i| self.waiting.remove(i)).map(|(_, at)| at);
+        let asked =
+            self.waiting.iter().position(|&(s, _)| s == seq).and_then(|i| self.waiting.remove(i)).map(|(_, at)| at);
         if seq < self.given_up_below {
             return Fate::Withhold;
         }
         let one_at_a_time = self.ids == Ids::None || self.conduct == Conduct::Sequential;
         if one_at_a_time
-            && let (Some(at), Some(patience)) = (asked, self.patience)
+            && let (Some(at), Some(patience)) = (asked, self.patience())
             && arrives.saturating_sub(at) > patience
         {
             return Fate::Withhold;
@@ -172,10 +177,14 @@ impl Lifetime {
         seq < self.given_up_below
     }
 
-    /// The longest this asker has been seen to wait (its timeout is no longer), once learnt.
+    /// How long this asker waits for an answer, at most, once two give-ups taught it: the
+    /// longer of the last two waits after which it asked again.
     #[must_use]
     pub fn patience(&self) -> Option<Duration> {
-        self.patience
+        match self.gave_up_after {
+            [Some(a), Some(b)] => Some(a.max(b)),
+            _ => None,
+        }
     }
 
     /// Whether a client with ids has shown it pipelines (nothing of it is ever given up).
@@ -252,12 +261,8 @@ mod tests {
         assert_eq!(l.asked(slow, ms(t)), None);
         assert_eq!(l.asked(slow + 1, ms(t + 555)), Some(slow + 1), "it waited 555 ms and moved on");
         assert_eq!(l.answer(slow, ms(t + 800)), Fate::Withhold, "the late 0x0B never meets the next request");
-        assert_eq!(l.patience(), Some(ms(555)));
-        // The next request also waits too long: withheld by the learnt patience though the
-        // client has not asked again yet.
-        assert_eq!(l.answer(slow + 1, ms(t + 555 + 700)), Fate::Withhold);
-        assert_eq!(l.asked(slow + 2, ms(t + 1_300)), None);
-        assert_eq!(l.answer(slow + 2, ms(t + 1_302)), Fate::Deliver);
+        assert_eq!(l.patience(), None, "one give-up teaches no timeout");
+        assert_eq!(l.answer(slow + 1, ms(t + 557)), Fate::Deliver);
     }
 
     /// A poller on a timer (every 150 ms, whatever the answers do) never shows it waits for
@@ -291,8 +296,8 @@ mod tests {
     }
 
     /// A serial master with a 200 ms timeout asking again 10 ms after it, to a unit answering in
-    /// 300 ms: once seen, every answer later than 210 ms is withheld — even before the master
-    /// asks again.
+    /// 300 ms: once seen twice, every answer later than 210 ms is withheld — even when the
+    /// master pauses before it asks again.
     #[test]
     fn a_serial_masters_timeout_is_learnt_and_later_answers_withheld() {
         let mut l = Lifetime::new(Ids::None);
@@ -300,11 +305,21 @@ mod tests {
         assert_eq!(l.answer(0, ms(300)), Fate::Deliver, "no give-up seen yet: delivered");
         assert_eq!(l.asked(1, ms(1_000)), None);
         assert_eq!(l.asked(2, ms(1_210)), Some(2));
-        assert_eq!(l.patience(), Some(ms(210)));
         assert_eq!(l.answer(1, ms(1_300)), Fate::Withhold);
-        assert_eq!(l.answer(2, ms(1_510)), Fate::Withhold, "300 ms > 210 ms: the master stopped waiting");
-        assert_eq!(l.asked(3, ms(2_000)), None);
-        assert_eq!(l.answer(3, ms(2_060)), Fate::Deliver, "a 60 ms answer is in time");
+        assert_eq!(l.patience(), None);
+        assert_eq!(l.asked(3, ms(1_420)), Some(3));
+        assert_eq!(l.patience(), Some(ms(210)));
+        assert_eq!(l.answer(3, ms(1_720)), Fate::Withhold, "300 ms > 210 ms: the master stopped waiting");
+        assert_eq!(l.asked(4, ms(3_000)), None);
+        assert_eq!(l.answer(4, ms(3_060)), Fate::Deliver, "a 60 ms answer is in time");
+    }
+
+    #[test]
+    fn one_early_give_up_withholds_nothing_later() {
+        let mut l = Lifetime::new(Ids::None);
+        assert_eq!(l.asked(0, ms(0)), None);
+        assert_eq!(l.asked(1, ms(20)), Some(1));
+        assert_eq!(l.answer(1, ms(620)), Fate::Deliver);
     }
 
     #[test]
