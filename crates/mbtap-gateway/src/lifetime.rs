@@ -251,7 +251,7 @@ mod tests {
     fn a_client_shown_sequential_gave_up_when_it_asks_again_unanswered() {
         let mut l = Lifetime::new(Ids::Has);
         let mut t = 0;
-        for seq in 0..PROOF + 1 {
+        for seq in 0..=PROOF {
             let seq = u64::from(seq);
             assert_eq!(l.asked(seq, ms(t)), None);
             t += 2;
