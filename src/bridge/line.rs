@@ -222,7 +222,8 @@ impl Port<'_> {
     /// last busy (None: the port was lost meanwhile).
     async fn flush_late(&mut self, unit: u8, window: Duration, config: &MasterConfig) -> Option<Instant> {
         let shared = self.shared;
-        let mut listener = LateListener::new(config, window, shared.now());
+        // At most 1 s: a slow unit's late words cost the other clients' requests little.
+        let mut listener = LateListener::new(config, window.min(Duration::from_secs(1)), shared.now());
         let mut chunk = [0u8; 512];
         loop {
             let port = self.stream.as_mut()?;

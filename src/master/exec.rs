@@ -119,6 +119,16 @@ fn fits(read: Read, got: usize) -> bool {
 pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retries: u32) -> (Answer, Duration) {
     let mut tries = 0;
     loop {
+        // The link is opened, and a late answer to a request given up heard out, before this
+        // request's own time starts: listening for the late answer is no part of its timeout.
+        if let Err(e) = link.context(unit).await {
+            let answer = Answer::Failed(link_error(unit, &e));
+            if tries < retries {
+                tries += 1;
+                continue;
+            }
+            return (answer, Duration::ZERO);
+        }
         let started = Instant::now();
         let answer = match tokio::time::timeout(timeout, once(link, unit, op)).await {
             Ok(Ok(Ok(Some(v)))) => match op {

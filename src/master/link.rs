@@ -7,33 +7,39 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use mbtap_analysis::analyzer::SerialMode;
+use mbtap_gateway::transaction::{EchoMode, LateListener, MasterConfig};
 use tokio_modbus::client::Context;
 use tokio_modbus::{Slave, prelude::rtu, prelude::tcp};
 
-/// After a timeout, the line is listened to for one more timeout before the next request:
-/// what comes then is the late answer to the request given up (or the tail of one), dropped —
-/// a late answer of the same shape as the next request's would otherwise be taken as its answer,
-/// its values shown under the next request's registers (issue 39, hostile round 3
-/// `watch_swap.sh`: 16 of 20 values under the wrong register). Listening stops early once
-/// bytes came and the line has been quiet for [`QUIET`].
-async fn drain_late_answer<S: tokio::io::AsyncRead + Unpin>(stream: &mut S, window: Duration) {
+/// How late the master's port may deliver a byte, for the silence that ends a late answer: a USB
+/// adapter's latency timer (16 ms by default) with room for the scheduler. The master does not
+/// learn its adapter, so it takes a bound that holds for the common ones.
+const ADAPTER_LATENCY: Duration = Duration::from_millis(40);
+
+/// After a timeout the line is listened to, by the gateway core's rule for late answers
+/// ([`LateListener`]), before the next request: what comes then is the late answer to the
+/// request given up (or the tail of one), dropped — a late answer of the same shape as the next
+/// request's would otherwise be taken as its answer, its values shown under the next request's
+/// registers. `origin` is the timeout's instant; the result, when the first late byte came after
+/// it, if any did.
+async fn drain_late_answer<S: tokio::io::AsyncRead + Unpin>(
+    stream: &mut S,
+    mut listener: LateListener,
+    origin: tokio::time::Instant,
+) -> Option<Duration> {
     use tokio::io::AsyncReadExt as _;
-    /// Quiet after the late bytes that ends the listening: longer than any pause inside an
-    /// answer at 1200 baud (t3.5 is 32 ms there, Serial Line v1.02 §2.5.1.1).
-    const QUIET: Duration = Duration::from_millis(50);
-    let end = tokio::time::Instant::now() + window;
     let mut buf = [0u8; 256];
-    let mut heard = false;
     loop {
-        let now = tokio::time::Instant::now();
-        if now >= end {
-            return;
+        let until = origin + listener.wait_until();
+        if tokio::time::Instant::now() >= until || listener.garbage() {
+            return listener.first();
         }
-        let wait = if heard { QUIET.min(end - now) } else { end - now };
-        match tokio::time::timeout(wait, stream.read(&mut buf)).await {
-            Ok(Ok(n)) if n > 0 => heard = true,
-            // Quiet after the late bytes, closed, an error, or the window over: done.
-            _ => return,
+        match tokio::time::timeout_at(until, stream.read(&mut buf)).await {
+            Ok(Ok(n)) if n > 0 => {
+                listener.bytes(origin.elapsed(), n);
+            }
+            // Quiet until the listener's time, closed, or an error: done.
+            _ => return listener.first(),
         }
     }
 }
@@ -77,8 +83,12 @@ pub struct Link {
     mode: SerialMode,
     connect_timeout: Duration,
     context: Option<Context>,
-    /// The last request timed out: listen for its late answer before the next one.
-    after_timeout: bool,
+    /// The last request timed out at this instant: listen for its late answer before the next.
+    timed_out_at: Option<tokio::time::Instant>,
+    /// How long after a timeout a late answer was last heard beginning: the next listening
+    /// lasts at least this long (and one timeout at least), so a unit that answers later than
+    /// twice the timeout is still heard out before the next request.
+    late_by: Duration,
 }
 
 impl std::fmt::Debug for Link {
@@ -90,7 +100,8 @@ impl std::fmt::Debug for Link {
             .field("mode", &self.mode)
             .field("connect_timeout", &self.connect_timeout)
             .field("open", &self.context.is_some())
-            .field("after_timeout", &self.after_timeout)
+            .field("timed_out_at", &self.timed_out_at)
+            .field("late_by", &self.late_by)
             .finish()
     }
 }
@@ -110,7 +121,15 @@ impl Link {
             "--mode ascii: {target} is Modbus TCP, framed by MBAP, not ASCII; leave --mode out, or give rtu+tcp://{} for a converter that passes ASCII frames",
             target.trim_start_matches("tcp://")
         );
-        Ok(Self { endpoint, line: settings, mode, connect_timeout, context: None, after_timeout: false })
+        Ok(Self {
+            endpoint,
+            line: settings,
+            mode,
+            connect_timeout,
+            context: None,
+            timed_out_at: None,
+            late_by: Duration::ZERO,
+        })
     }
 
     /// The endpoint, for messages.
@@ -142,9 +161,7 @@ impl Link {
                     // Bytes the port holds from before (a late answer to another process's request)
                     // are not an answer to ours: the input buffer is emptied at every open.
                     let _ = tokio_serial::SerialPort::clear(&port, tokio_serial::ClearBuffer::Input);
-                    if std::mem::take(&mut self.after_timeout) {
-                        drain_late_answer(&mut port, self.connect_timeout).await;
-                    }
+                    self.hear_out_late_answer(&mut port).await;
                     match self.mode {
                         SerialMode::Rtu => rtu::attach_slave(port, slave),
                         SerialMode::Ascii => rtu::attach_slave(super::ascii::AsciiStream::new(port), slave),
@@ -163,9 +180,7 @@ impl Link {
                         .await
                         .with_context(|| format!("connecting to {addr}: no answer within {:?}", self.connect_timeout))?
                         .with_context(|| format!("connecting to {addr}"))?;
-                    if std::mem::take(&mut self.after_timeout) {
-                        drain_late_answer(&mut stream, self.connect_timeout).await;
-                    }
+                    self.hear_out_late_answer(&mut stream).await;
                     match self.mode {
                         SerialMode::Rtu => rtu::attach_slave(stream, slave),
                         SerialMode::Ascii => rtu::attach_slave(super::ascii::AsciiStream::new(stream), slave),
@@ -179,9 +194,32 @@ impl Link {
         Ok(ctx)
     }
 
-    /// Drops the connection; the next request opens a new one.
+    /// Drops the connection; the next request opens a new one, once a late answer to the
+    /// request given up has been heard out.
     pub fn reset(&mut self) {
         self.context = None;
-        self.after_timeout = true;
+        self.timed_out_at = Some(tokio::time::Instant::now());
+    }
+
+    /// After a timeout: listens for one timeout after it (or, when the unit was heard later than
+    /// that before, that long and a little more), dropping what comes; learns how late the unit
+    /// was.
+    async fn hear_out_late_answer<S: tokio::io::AsyncRead + Unpin>(&mut self, stream: &mut S) {
+        let Some(origin) = self.timed_out_at.take() else { return };
+        let config = MasterConfig {
+            line: self.line,
+            mode: self.mode,
+            echo: EchoMode::Off,
+            retries: 0,
+            turnaround: Duration::ZERO,
+            broadcast_reply: false,
+            latency: ADAPTER_LATENCY,
+            monitored: false,
+        };
+        let window = self.connect_timeout.max(self.late_by + self.late_by / 4);
+        let listener = LateListener::new(&config, window, Duration::ZERO);
+        if let Some(first) = drain_late_answer(stream, listener, origin).await {
+            self.late_by = first;
+        }
     }
 }

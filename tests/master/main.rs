@@ -11,6 +11,7 @@ mod interop_emulate;
 mod interop_master;
 mod interop_mbpoll;
 mod interop_pymodbus;
+mod late_answer;
 mod probe;
 mod read_write;
 mod sunspec;

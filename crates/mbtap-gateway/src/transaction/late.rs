@@ -5,7 +5,7 @@
 use super::MasterConfig;
 use std::time::Duration;
 
-/// After a timeout: listens up to the window (at most 1 s) for what the unit says late, ending
+/// After a timeout: listens up to the window for what the unit says late, ending
 /// at the silence after the last late byte; noise that never stops cannot hold the line longer
 /// than twice the window, and more bytes than the longest answer without a silence are no late
 /// answer but garbage: the listening ends there (issue 38: a serial server streaming garbage
@@ -17,15 +17,17 @@ pub struct LateListener {
     hard_stop: Duration,
     silence: Duration,
     last: Option<Duration>,
+    /// When the first late byte came (meaningful once `last` is set).
+    first_at: Duration,
     heard: usize,
     max_adu: usize,
 }
 
 impl LateListener {
-    /// Starts listening at `now` for up to `window`.
+    /// Starts listening at `now` for up to `window` (the caller bounds it: the bridge's line to
+    /// 1 s, so a slow unit costs the other clients little; mbtap's own master to its timeout).
     #[must_use]
     pub fn new(config: &MasterConfig, window: Duration, now: Duration) -> Self {
-        let window = window.min(Duration::from_secs(1));
         let silence = Duration::from_nanos(config.line.t35_ns()) + Duration::from_millis(1) + config.latency;
         Self {
             start: now,
@@ -33,6 +35,7 @@ impl LateListener {
             hard_stop: now + window * 2,
             silence,
             last: None,
+            first_at: now,
             heard: 0,
             max_adu: config.max_adu(),
         }
@@ -50,6 +53,9 @@ impl LateListener {
     /// `n` bytes arrived at `now`; true for the first late bytes (one late answer, counted once).
     pub fn bytes(&mut self, now: Duration, n: usize) -> bool {
         let first = self.last.is_none();
+        if first {
+            self.first_at = now;
+        }
         self.last = Some(now);
         self.heard = self.heard.saturating_add(n);
         first
@@ -59,6 +65,12 @@ impl LateListener {
     #[must_use]
     pub fn garbage(&self) -> bool {
         self.heard > self.max_adu
+    }
+
+    /// When the first late byte came, if one did.
+    #[must_use]
+    pub fn first(&self) -> Option<Duration> {
+        self.last.map(|_| self.first_at)
     }
 
     /// When the line was last busy.
