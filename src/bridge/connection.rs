@@ -86,7 +86,11 @@ pub(super) async fn connection<S>(
                     }
                 };
                 let Some(pdu) = pdu.filter(|_| fate == Fate::Deliver) else {
-                    counts.server.abandoned(1);
+                    if rtu {
+                        counts.server.abandoned(1);
+                    } else {
+                        counts.server.withheld_sequential();
+                    }
                     continue;
                 };
                 // A broadcast: nobody answers it.

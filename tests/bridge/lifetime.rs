@@ -8,7 +8,8 @@
 //! answered under its own id; a client shown sequential that asks again unanswered, an
 //! RTU-over-TCP client that asks again before its answer, a serial master with a timeout
 //! shorter than the line — the given-up answer never written, never an answer under another
-//! request; `mbtap_bridge_abandoned_total` counts exactly those.
+//! request. `mbtap_bridge_abandoned_total` counts what clients without ids gave up,
+//! `mbtap_bridge_withheld_sequential_total` what a sequential client with ids did.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::io::{Read, Write};
@@ -228,7 +229,9 @@ fn a_client_shown_sequential_never_gets_the_late_answer_under_its_next_request()
     assert_eq!(call(&mut c, 6, 1, &READ_TWO), honest(&READ_TWO), "its own answer, under its id");
     assert!(silent_for(&mut c, Duration::from_millis(600)), "the given-up request's 0x0B is never written");
     assert_eq!(asked.load(Ordering::SeqCst), 6);
-    assert_eq!(counter(b.metrics.as_deref().unwrap(), "mbtap_bridge_abandoned_total"), 1);
+    let metrics = b.metrics.as_deref().unwrap();
+    assert_eq!(counter(metrics, "mbtap_bridge_withheld_sequential_total"), 1);
+    assert_eq!(counter(metrics, "mbtap_bridge_abandoned_total"), 0, "counts clients without ids only");
 }
 
 /// A client with ids that has not shown it waits for answers gets the 0x0B of a dead unit under
@@ -346,6 +349,10 @@ fn a_serial_master_with_a_short_timeout_never_gets_another_reads_values() {
         assert_eq!(right + silent, 12);
         if line_ms < timeout_ms && !load {
             assert_eq!(right, 12, "a unit faster than the master's timeout: every answer");
+        }
+        if line_ms > timeout_ms {
+            let abandoned = counter(b.metrics.as_deref().unwrap(), "mbtap_bridge_abandoned_total");
+            assert!(abandoned >= 11, "each request given up at the next one: {abandoned}");
         }
         std::fs::remove_dir_all(&d).ok();
     }

@@ -37,9 +37,15 @@ impl Metrics {
             counter(
                 &mut s,
                 "mbtap_bridge_abandoned_total",
-                "Requests a client gave up on (it asked again, unanswered, after its own timeout): their answers withheld.",
+                "Requests a client without ids (RTU over TCP, a serial master) gave up on by asking again, or answered after its learnt timeout: their answers withheld.",
             );
             let _ = writeln!(s, "mbtap_bridge_abandoned_total {}", m.abandoned);
+            counter(
+                &mut s,
+                "mbtap_bridge_withheld_sequential_total",
+                "Answers withheld from Modbus TCP clients shown to ask one thing at a time (each request right after the last answer) that asked again unanswered: their own timeout had run out.",
+            );
+            let _ = writeln!(s, "mbtap_bridge_withheld_sequential_total {}", m.withheld_sequential);
             s
         })
     }

@@ -45,8 +45,11 @@ struct Inner {
     connections: u64,
     connections_open: i64,
     refused: BTreeMap<&'static str, u64>,
-    /// Requests a client gave up on (`mbtap_gateway::giveup`): answers withheld.
+    /// Requests a client without ids gave up on (`mbtap_gateway::lifetime`): answers withheld.
     abandoned: u64,
+    /// Answers withheld from a client with ids shown to ask one thing at a time, which asked
+    /// again unanswered or waits no longer (`mbtap_gateway::lifetime`).
+    withheld_sequential: u64,
     /// Answers the answer check dropped, by why (`mbtap_gateway::answer::Misfit::reason`).
     misfits: BTreeMap<&'static str, u64>,
     /// Bytes dropped unread: more than the longest answer.
@@ -218,9 +221,15 @@ impl Metrics {
         self.with(|m| *m.refused.entry(reason).or_default() += 1);
     }
 
-    /// `n` requests their clients gave up on: their answers withheld.
+    /// `n` requests their clients without ids gave up on: their answers withheld.
     pub fn abandoned(&self, n: u64) {
         self.with(|m| m.abandoned += n);
+    }
+
+    /// An answer withheld from a client with ids that asks one thing at a time and no longer
+    /// waits for it.
+    pub fn withheld_sequential(&self) {
+        self.with(|m| m.withheld_sequential += 1);
     }
 
     /// Keeps the latest event worth telling (a port lost).
