@@ -95,7 +95,7 @@ pub type Writes = Arc<BrokerWrites>;
 
 /// Starts the bridge's MQTT publisher (`--mqtt`) and, with `--mqtt-writes`, the broker's writes:
 /// they go through the bridge's admission like a client's, judged by `--mqtt-role`'s rules
-/// where `roles` are given. `reverse`: reverse mode, which takes no writes from the broker.
+/// where `roles` are given.
 ///
 /// # Errors
 /// Roles without `--mqtt-role` under `--mqtt-writes` (fails closed), a role no `--role` defines,
@@ -106,7 +106,6 @@ pub fn start_publisher(
     source: &str,
     profiles: &Profiles,
     roles: &super::tls::Roles,
-    reverse: bool,
 ) -> anyhow::Result<(Option<Arc<Mqtt>>, Option<Writes>)> {
     use anyhow::Context as _;
     // Fails closed (issue 38): with roles, the broker's writes must be given one too — otherwise
@@ -117,7 +116,7 @@ pub fn start_publisher(
     );
     // The broker's writes (`--mqtt-writes`) go through the bridge's admission like a client's.
     let (asks_tx, asks) = std::sync::mpsc::sync_channel(crate::publish::outbox::COMMANDS_WAITING);
-    let writer = (!reverse).then_some(asks_tx);
+    let writer = Some(asks_tx);
     let publisher = Mqtt::start_with(mqtt, source, profiles.clone(), true, writer)?;
     let mut writes = None;
     if let Some(p) = publisher.as_ref().filter(|_| mqtt.mqtt_writes) {

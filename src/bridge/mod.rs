@@ -9,8 +9,10 @@
 //! it last brought bytes in, for eviction), [`connection`] (one TCP client,
 //! on its own), [`request`] (each request through admission, cache and queue), [`udp`] (Modbus
 //! UDP clients), [`emulated`] (devices emulated in this process in place of a line),
-//! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`reverse`] (an RTU slave on
-//! the serial side, a Modbus TCP client behind), [`run`] (starts them all), [`config`] (the
+//! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`serial_front`] (a serial
+//! port on which the bridge is the slave: `--listen-serial`, and reverse mode with a `tcp://`
+//! line behind it), [`slave_port`] (that port's request framing and answers), [`device`] (a
+//! Modbus TCP device as a line's back), [`run`] (starts them all), [`config`] (the
 //! configuration file), [`modes`] (the command line's enums), [`broker`] (writes from the MQTT
 //! broker through the same admission).
 
@@ -24,7 +26,6 @@ pub mod metrics;
 pub mod modes;
 pub mod port;
 pub mod request;
-pub mod reverse;
 pub mod run;
 pub mod serial_front;
 pub mod server;

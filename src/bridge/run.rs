@@ -15,7 +15,6 @@ use tokio::sync::mpsc;
 use crate::bridge::line::{self, LineOptions, MonitorChunk};
 use crate::bridge::metrics::Metrics;
 use crate::bridge::request::{Route, Routes, ServerOptions};
-use crate::bridge::reverse::ReverseOptions;
 use crate::bridge::server;
 use crate::bridge::shared::LineShared;
 use crate::output::EventWriter;
@@ -38,9 +37,9 @@ pub struct BridgeOptions {
     pub queue_per_client: usize,
     pub metrics: Option<String>,
     pub duration: Option<Duration>,
-    /// Reverse mode instead of `lines` and the listeners: answer as slaves on a serial line,
-    /// forwarding to a Modbus TCP server.
-    pub reverse: Option<ReverseOptions>,
+    /// The monitor watches the serial front (`--listen-serial`) instead of the lines: reverse
+    /// mode, where the serial bus is the line the user looks at and the back is a TCP device.
+    pub monitor_front: bool,
     /// The Modbus/TCP Security listener, when asked for.
     pub tls: crate::bridge::tls::TlsArgs,
     /// `--role` rules, parsed once: the TLS listener's and the broker's (`--mqtt-role`).
@@ -99,7 +98,7 @@ impl BridgeOptions {
             queue_per_client: 32,
             metrics: None,
             duration,
-            reverse: None,
+            monitor_front: false,
             tls: crate::bridge::tls::TlsArgs::default(),
             roles: Arc::default(),
             broker_writes: None,
@@ -121,17 +120,13 @@ pub struct EmulatedFronts {
 /// What the bridge serves, for the metrics endpoint and the notes on stderr.
 enum Served {
     Lines(Arc<Routes>),
-    Reverse(Arc<Metrics>),
 }
 
 impl Served {
     /// The Prometheus text: one line's families as they are; several lines' series told
     /// apart by a `line` label.
     fn render(&self) -> String {
-        let routes = match self {
-            Self::Reverse(m) => return m.render(),
-            Self::Lines(routes) => routes,
-        };
+        let Self::Lines(routes) = self;
         let mut body = String::new();
         for (i, r) in routes.iter().enumerate() {
             let text = r.line.metrics.render_line();
@@ -159,10 +154,8 @@ impl Served {
 
     /// Messages for the operator (a port lost, reopened) since the last call.
     fn notes(&self) -> Vec<String> {
-        match self {
-            Self::Reverse(m) => m.take_note().into_iter().collect(),
-            Self::Lines(routes) => routes.iter().filter_map(|r| r.line.metrics.take_note()).collect(),
-        }
+        let Self::Lines(routes) = self;
+        routes.iter().filter_map(|r| r.line.metrics.take_note()).collect()
     }
 }
 
@@ -180,34 +173,14 @@ pub async fn bridge<W: Write>(
     let monitoring = writer.is_some();
     // What the monitor's analyzer is told: the line settings, and which port says what.
     let (mode, settings, pairing);
-    let served = if let Some(rev) = opts.reverse.clone() {
-        let units = if rev.units.is_empty() {
-            "every unit".to_owned()
-        } else {
-            rev.units.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
-        };
-        let _ = writeln!(
-            err,
-            "mbtap: reverse bridge: answering as {units} on {} at {} {}, forwarding to {}",
-            rev.port,
-            rev.line,
-            rev.mode.name(),
-            rev.target
-        );
-        (mode, settings) = (rev.mode, rev.line);
-        // Port 0 is all the line carries (other slaves' answers too); port 1 our answers.
-        pairing = PairingConfig { response_port: Some(PortId(1)), ..Default::default() };
-        let metrics = Arc::new(Metrics::default());
-        tokio::spawn(crate::bridge::reverse::run(rev, Arc::clone(&metrics), monitoring.then(|| monitor_tx.clone())));
-        Served::Reverse(metrics)
-    } else {
+    let served = {
         let mut routes = Vec::new();
         for (units, line_opts) in &opts.lines {
             // One bound for all of a line's clients together: what --max-connections clients
             // with full queues hold (UDP senders, the broker and the polls included).
             let total = opts.server.max_connections.saturating_mul(opts.queue_per_client);
             let shared = LineShared::new(opts.queue_per_client, total, line_opts.cache.clone());
-            let monitor = monitoring.then(|| monitor_tx.clone());
+            let monitor = (monitoring && !opts.monitor_front).then(|| monitor_tx.clone());
             if let Some(emulated) = &line_opts.emulated {
                 tokio::spawn(super::emulated::run(Arc::clone(emulated), Arc::clone(&shared)));
             } else {
@@ -251,7 +224,8 @@ pub async fn bridge<W: Write>(
                 front.mode.name()
             );
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, ..opts.server.clone() });
-            tokio::spawn(crate::bridge::serial_front::serve(front.clone(), Arc::clone(&routes), server_opts));
+            let monitor = (monitoring && opts.monitor_front).then(|| monitor_tx.clone());
+            tokio::spawn(crate::bridge::serial_front::serve(front.clone(), Arc::clone(&routes), server_opts, monitor));
         }
         if let Some(addr) = &opts.listen_udp {
             let socket =
@@ -288,12 +262,19 @@ pub async fn bridge<W: Write>(
                 Arc::clone(&connections),
             ));
         }
-        (mode, settings) = opts.lines.first().map_or(
-            (mbtap_analysis::analyzer::SerialMode::Rtu, mbtap_analysis::framer::LineSettings::default()),
-            |(_, l)| (l.mode, l.line),
-        );
-        // The bridge knows who said what: requests on port 0, responses on port 1.
-        pairing = PairingConfig { request_port: Some(PortId(0)), response_port: Some(PortId(1)), ..Default::default() };
+        if let Some(front) = opts.listen_serial.as_ref().filter(|_| opts.monitor_front) {
+            (mode, settings) = (front.mode, front.line);
+            // Port 0 is all the bus carries (other slaves' answers too); port 1 our answers.
+            pairing = PairingConfig { response_port: Some(PortId(1)), ..Default::default() };
+        } else {
+            (mode, settings) = opts.lines.first().map_or(
+                (mbtap_analysis::analyzer::SerialMode::Rtu, mbtap_analysis::framer::LineSettings::default()),
+                |(_, l)| (l.mode, l.line),
+            );
+            // The bridge knows who said what: requests on port 0, responses on port 1.
+            pairing =
+                PairingConfig { request_port: Some(PortId(0)), response_port: Some(PortId(1)), ..Default::default() };
+        }
         Served::Lines(routes)
     };
     drop(monitor_tx);

@@ -5,13 +5,20 @@
 //! a client of its own) and its answers come from the line or the cache; TCP clients are served
 //! between them. The two masters never see each other's traffic: each hears only its own
 //! port. Units no line serves get silence, as on a line where no slave has that address.
+//!
+//! Reverse mode (`--reverse`, an RTU master reaching Modbus TCP devices) is this front with a
+//! `tcp://` or `rtu-over-tcp://` line behind it, answering as the `--answer-as` addresses: the
+//! same admission, queue, timeouts, retries, breaker, cache, answer check and lifetime.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeSet, VecDeque};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
+use tokio::sync::mpsc;
 use tokio_serial::{SerialPortBuilderExt, SerialStream};
+
+use super::line::MonitorChunk;
 
 use super::request::{Client, Routes, ServerOptions, request};
 use mbtap_analysis::analyzer::SerialMode;
@@ -34,11 +41,40 @@ pub struct SerialFront {
     /// Time from the end of a request to the answer, at least (a slave's turnaround).
     pub turnaround: Duration,
     pub rs485: crate::source::rs485::Rs485Args,
+    /// The addresses answered as (`--answer-as`); empty: every unit a line serves.
+    pub answer_as: BTreeSet<u8>,
+}
+
+impl SerialFront {
+    /// Whether a request to `unit` is this front's to answer (broadcasts always are).
+    fn answers(&self, unit: u8) -> bool {
+        unit == 0 || self.answer_as.is_empty() || self.answer_as.contains(&unit)
+    }
+}
+
+/// Where the front's traffic goes for `--monitor`: what the port heard (port 0) and the answers
+/// written (port 1).
+type Monitor = Option<mpsc::UnboundedSender<MonitorChunk>>;
+
+/// Bytes the port heard, stamped when the read returned.
+fn observe_heard(monitor: &Monitor, bytes: &[u8]) {
+    if let Some(m) = monitor.as_ref().filter(|_| !bytes.is_empty()) {
+        let _ = m.send((mbtap_analysis::chunk::PortId(0), crate::source::serial::now(), bytes.to_vec(), false));
+    }
+}
+
+/// An answer written: one whole frame, stamped when its last character leaves.
+fn observe_answer(monitor: &Monitor, bytes: &[u8], char_ns: u64) {
+    if let Some(m) = monitor {
+        let on_wire = char_ns.saturating_mul(bytes.len() as u64);
+        let t = mbtap_analysis::chunk::Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
+        let _ = m.send((mbtap_analysis::chunk::PortId(1), t, bytes.to_vec(), true));
+    }
 }
 
 /// Serves the port until the process ends; a port that goes away is reopened every second,
 /// said once per spell.
-pub async fn serve(front: SerialFront, routes: Arc<Routes>, opts: Arc<ServerOptions>) {
+pub async fn serve(front: SerialFront, routes: Arc<Routes>, opts: Arc<ServerOptions>, monitor: Monitor) {
     let mut said = false;
     loop {
         let opened = front
@@ -60,7 +96,7 @@ pub async fn serve(front: SerialFront, routes: Arc<Routes>, opts: Arc<ServerOpti
             }
         };
         said = false;
-        if let Err(e) = serve_port(&front, &mut port, &routes, &opts).await {
+        if let Err(e) = serve_port(&front, &mut port, &routes, &opts, &monitor).await {
             note(&routes, &format!("--listen-serial {}: lost ({e}); reopening", front.port));
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
@@ -79,6 +115,7 @@ async fn serve_port(
     port: &mut SerialStream,
     routes: &Routes,
     opts: &ServerOptions,
+    monitor: &Monitor,
 ) -> std::io::Result<()> {
     // A serial master has no address: the priority class by address never holds for it.
     let peer = SocketAddr::from(([0, 0, 0, 0], 0));
@@ -93,14 +130,15 @@ async fn serve_port(
     let mut backlog: VecDeque<RequestFrame> = VecDeque::new();
     loop {
         let Some(r) = backlog.pop_front() else {
-            let (requests, _) = heard.next(port, front.mode, front.line).await?;
+            let (requests, bytes) = heard.next(port, front.mode, front.line).await?;
+            observe_heard(monitor, &bytes);
             backlog.extend(requests);
             continue;
         };
         let seq = next_seq;
         next_seq += 1;
         lifetime.asked(seq, born.elapsed());
-        if !opts.policy.serves(r.unit) {
+        if !front.answers(r.unit) || !opts.policy.serves(r.unit) {
             // Another slave's request on a shared line: not ours to answer.
             continue;
         }
@@ -114,7 +152,8 @@ async fn serve_port(
             tokio::select! {
                 pdu = &mut answer => break Some(pdu),
                 more = heard.next(port, front.mode, front.line) => {
-                    let (requests, _) = more?;
+                    let (requests, bytes) = more?;
+                    observe_heard(monitor, &bytes);
                     if !requests.is_empty() {
                         backlog.extend(requests);
                         break None;
@@ -148,6 +187,7 @@ async fn serve_port(
             routes.server.abandoned(1);
             continue;
         }
-        super::slave_port::answer(port, &front.rs485, front.mode, front.turnaround, r.unit, &pdu).await?;
+        let written = super::slave_port::answer(port, &front.rs485, front.mode, front.turnaround, r.unit, &pdu).await?;
+        observe_answer(monitor, &written, front.line.char_ns());
     }
 }

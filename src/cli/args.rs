@@ -65,7 +65,7 @@ pub struct LineArgs {
     /// valid frames (a delayed read inside one shows the delay; the summary says what was
     /// learned); given, it is kept. [default: live ports: the adapter's latency timer, at least
     /// 1 ms; captures: what they were recorded with; else 0]
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::numbers::millis)]
     pub latency_ms: Option<f64>,
 }
 
@@ -168,7 +168,7 @@ pub struct OutputArgs {
     #[arg(long)]
     pub report: bool,
     /// Also give the report so far every SECONDS of bus time, while it runs (implies --report).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = crate::cli::numbers::seconds)]
     pub report_every: Option<f64>,
     /// Draft a register map from what is heard, as `mbtap learn` does, and keep it up to date
     /// (rewritten every 10 s of line time and at the end): in this file, the first unit's

@@ -2,4 +2,5 @@
 //! one runner of the analyzing commands ([`runner`]). The commands themselves are in `cmd/`.
 
 pub mod args;
+pub mod numbers;
 pub mod runner;

@@ -95,7 +95,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub retries: u32,
     /// Extra quiet time after t3.5 before the next request, ms.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = crate::cli::numbers::millis)]
     pub turnaround_ms: f64,
     /// Answer broadcast writes (unit 0) at once instead of not at all (implies --allow-broadcast).
     #[arg(long)]
@@ -120,7 +120,7 @@ pub struct Args {
     #[arg(long, default_value = "300s", value_name = "DURATION", value_parser = crate::cli::args::duration_arg)]
     pub idle_timeout: std::time::Duration,
     /// Requests per second per connection; above it exception 0x06 (busy).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::numbers::rate)]
     pub rate_limit: Option<f64>,
     /// Requests a client may have waiting; more get exception 0x06.
     #[arg(long, default_value_t = 32)]
@@ -131,9 +131,11 @@ pub struct Args {
     /// Serve Prometheus metrics on this address (GET /metrics).
     #[arg(long, value_name = "ADDR:PORT")]
     pub metrics: Option<String>,
-    /// Reverse: answer as serial slaves (--answer-as) and forward to the Modbus TCP server
-    /// --target (or the RTU-over-TCP server --target-rtu), so an RTU master reaches TCP devices.
-    #[arg(long, requires = "reverse_target")]
+    /// Reverse: answer as serial slaves (--answer-as) on --serial and forward to the Modbus TCP
+    /// server --target (or the RTU-over-TCP server --target-rtu), so an RTU master reaches TCP
+    /// devices. The same as `--listen-serial PORT --serial tcp://TARGET`: every option of the
+    /// bridge works with it (timeouts, retries, cache, --listen for TCP clients beside the master).
+    #[arg(long, requires = "reverse_target", conflicts_with = "listen_serial")]
     pub reverse: bool,
     /// Reverse mode: the Modbus TCP server to forward to.
     #[arg(long, value_name = "HOST:PORT", group = "reverse_target")]
@@ -142,7 +144,8 @@ pub struct Args {
     /// cheap Ethernet-to-RS-485 converter): RTU frames with their CRC over the TCP stream.
     #[arg(long, value_name = "HOST:PORT", group = "reverse_target")]
     pub target_rtu: Option<String>,
-    /// Reverse mode: serial addresses to answer as, e.g. 1,5,10-20 (default: all).
+    /// The serial front's (reverse mode's, --listen-serial's) addresses to answer as, e.g.
+    /// 1,5,10-20 (default: every unit a line serves).
     #[arg(long, value_name = "UNITS")]
     pub answer_as: Option<String>,
     /// Show the bridged traffic: text, jsonl or tui.
@@ -255,39 +258,23 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         routes: Vec::new(),
         broadcast: allow_broadcast || broadcast_reply,
     };
-    let reverse = if reverse {
+    // Reverse mode is the serial front on --serial with the TCP target as its line.
+    let (serial, listen_serial) = if reverse {
         let port = serial.clone().context("--reverse needs --serial PORT: the line to answer on")?;
-        let (target, target_rtu) = match (target, target_rtu) {
-            (Some(t), _) => (t, false),
-            (None, Some(t)) => (t, true),
+        let back = match (target, target_rtu) {
+            (Some(t), _) => format!("tcp://{t}"),
+            (None, Some(t)) => format!("rtu-over-tcp://{t}"),
             (None, None) => anyhow::bail!(
                 "--reverse needs --target HOST:PORT (a Modbus TCP server) or --target-rtu HOST:PORT (RTU over TCP)"
             ),
         };
-        Some(crate::bridge::reverse::ReverseOptions {
-            port,
-            line: settings,
-            mode,
-            units: mbtap_gateway::parse::parse_units(answer_as.as_deref().unwrap_or(""))?,
-            target,
-            target_rtu,
-            timeout: std::time::Duration::from_millis(timeout_ms),
-            turnaround: std::time::Duration::from_secs_f64(turnaround_ms.max(0.0) / 1000.0),
-            // Reverse mode answers as every unit it serves: one route for all; --map-unit maps TCP
-            // unit ids, which reverse mode's requests do not carry.
-            policy: mbtap_gateway::admit::Policy {
-                routes: vec![0..=255],
-                unit_map: std::collections::BTreeMap::new(),
-                ..policy.clone()
-            },
-            rs485,
-        })
+        (Some(back), Some(port))
     } else {
-        None
+        (serial, listen_serial)
     };
+    let answer_as = mbtap_gateway::parse::parse_units(answer_as.as_deref().unwrap_or(""))?;
     anyhow::ensure!(
-        reverse.is_some()
-            || listen.is_some()
+        listen.is_some()
             || listen_rtu.is_some()
             || listen_udp.is_some()
             || listen_serial.is_some()
@@ -330,13 +317,13 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         let (units, port) = mbtap_gateway::parse::parse_route(r)?;
         lines.push((units, line_for(port)));
     }
-    if let (Some(port), None) = (serial, &reverse) {
+    if let Some(port) = serial {
         // The plain --serial line serves every unit the routes do not.
         lines.push((1..=247, line_for(port)));
     }
-    anyhow::ensure!(reverse.is_some() || !lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
+    anyhow::ensure!(!lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
     // Direction control the port cannot do is refused now, never a silent fallback.
-    for port in lines.iter().map(|(_, l)| l.port.as_str()).chain(reverse.as_ref().map(|r| r.port.as_str())) {
+    for port in lines.iter().map(|(_, l)| l.port.as_str()).chain(listen_serial.as_deref()) {
         if rs485.rs485 != crate::source::rs485::Rs485Mode::Off {
             anyhow::ensure!(
                 !crate::source::stream::Transport::of(port).networked(),
@@ -366,7 +353,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         queue_per_client,
         metrics,
         duration,
-        reverse,
+        monitor_front: reverse,
         roles: std::sync::Arc::new(crate::bridge::tls::parse_roles(&tls.role)?),
         tls,
         broker_writes: None,
@@ -376,6 +363,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             mode,
             turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
             rs485,
+            answer_as,
         }),
     };
     let mut opts = opts;
@@ -384,14 +372,8 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         mqtt.mqtt.is_none() || monitor.is_some(),
         "--mqtt on the bridge publishes what its monitor hears: add --monitor (text, jsonl or tui)"
     );
-    let (publisher, broker_writes) = crate::bridge::broker::start_publisher(
-        &mqtt,
-        mqtt_role.as_deref(),
-        &source,
-        &profiles,
-        &opts.roles,
-        opts.reverse.is_some(),
-    )?;
+    let (publisher, broker_writes) =
+        crate::bridge::broker::start_publisher(&mqtt, mqtt_role.as_deref(), &source, &profiles, &opts.roles)?;
     opts.broker_writes = broker_writes;
     let Some(format) = monitor else {
         runtime()?.block_on(crate::bridge::run::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;

@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long = "fault", value_enum)]
     pub faults: Vec<FaultArg>,
     /// Line time per wall-clock time: 1 is real time, 10 ten times faster, 0 as fast as it goes.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::cli::numbers::speed)]
     pub speed: f64,
     /// Listen through a UART at these settings instead of the line's 19200 8E1 ("9600 8N1"):
     /// what a sniffer set up wrong gets.

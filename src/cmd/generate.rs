@@ -28,20 +28,20 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = ObserveArg::PerByte)]
     pub observe: ObserveArg,
     /// Probability of a noise burst before a transaction.
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = 0.02, value_parser = crate::cli::numbers::probability)]
     pub noise: f64,
     /// Probability that a frame has a corrupted byte.
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = 0.02, value_parser = crate::cli::numbers::probability)]
     pub corrupt: f64,
     /// Probability that a response pauses inside (a slow slave).
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = 0.02, value_parser = crate::cli::numbers::probability)]
     pub slow: f64,
     /// Probability that a frame is followed by a turnaround glitch byte (`00` after the
     /// master, `FE`/`FF` after a slave): a line without fail-safe biasing.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = crate::cli::numbers::probability)]
     pub glitch: f64,
     /// Probability that a register-read answer is a CRC look-alike (its CRC's high byte 00).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = crate::cli::numbers::probability)]
     pub lookalike: f64,
     /// Instead of random traffic, send these frames (one per line, hex or `:ASCII`, as
     /// `decode` reads them) back to back with a 5 ms turnaround, one read per byte.

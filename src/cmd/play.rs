@@ -15,11 +15,11 @@ pub struct Args {
     #[command(flatten)]
     pub line: CaptureLineArgs,
     /// Speed factor (2 = twice as fast).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::cli::numbers::speed)]
     pub speed: f64,
     /// Play a silence in the capture longer than this many seconds as this long (a clock step
     /// or a corrupt timestamp must not make play wait for hours).
-    #[arg(long, value_name = "SECONDS", default_value_t = 5.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0, value_parser = crate::cli::numbers::seconds)]
     pub max_gap: f64,
     #[command(flatten)]
     pub rs485: crate::source::rs485::Rs485Args,

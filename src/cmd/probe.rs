@@ -38,7 +38,7 @@ pub struct Args {
     #[arg(long, default_value = "0-999")]
     pub range: String,
     /// Requests per second at most.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = crate::cli::numbers::rate)]
     pub rate: f64,
     /// Read every address of absent stretches too (by default up to 3 at a time are stepped
     /// over, so a present stretch shorter than 4 between absent ones may be missed).

@@ -88,7 +88,7 @@ pub struct Args {
     pub duration: Option<std::time::Duration>,
     /// A device's time from the end of a request to its answer, ms (default: a recording's
     /// own median, 3 ms for a profile's device).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::numbers::millis)]
     pub turnaround_ms: Option<f64>,
     /// Take the line's time when answering: requests end when their characters would have
     /// crossed the line, answers leave at the character rate.
@@ -225,6 +225,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                     mode,
                     turnaround: Duration::ZERO,
                     rs485,
+                    answer_as: std::collections::BTreeSet::new(),
                 }),
             };
             let bridge = crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts);

@@ -14,6 +14,7 @@ mod fuzz_corpus;
 mod health;
 mod messages;
 mod mk4_examples;
+mod numeric_options;
 mod observer_latency;
 mod profile_import;
 mod profiles;
