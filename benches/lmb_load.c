@@ -2,7 +2,7 @@
  * answer counted, every error counted. Prints one JSON line: clients, answers, errors,
  * answers_per_s. Builds against libmodbus (the trial's static build or Debian's libmodbus-dev):
  *   cc -O2 -I$INC benches/lmb_load.c $LIB/libmodbus.a -o lmb_load
- * usage: lmb_load HOST PORT UNIT ADDRESS COUNT CLIENTS SECONDS */
+ * usage: lmb_load HOST PORT UNIT holding|input ADDRESS COUNT CLIENTS SECONDS */
 #include <modbus.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -18,14 +18,15 @@ static double now(void) {
 }
 
 int main(int argc, char **argv) {
-    if (argc != 8) {
-        fprintf(stderr, "usage: %s HOST PORT UNIT ADDRESS COUNT CLIENTS SECONDS\n", argv[0]);
+    if (argc != 9) {
+        fprintf(stderr, "usage: %s HOST PORT UNIT holding|input ADDRESS COUNT CLIENTS SECONDS\n", argv[0]);
         return 2;
     }
     const char *host = argv[1];
-    int port = atoi(argv[2]), unit = atoi(argv[3]), addr = atoi(argv[4]), count = atoi(argv[5]);
-    int clients = atoi(argv[6]);
-    double seconds = atof(argv[7]);
+    int port = atoi(argv[2]), unit = atoi(argv[3]), addr = atoi(argv[5]), count = atoi(argv[6]);
+    int input = argv[4][0] == 'i';
+    int clients = atoi(argv[7]);
+    double seconds = atof(argv[8]);
     int fds[256][2];
     if (clients < 1 || clients > 256 || count < 1 || count > 125) return 2;
     for (int c = 0; c < clients; c++) {
@@ -38,7 +39,9 @@ int main(int argc, char **argv) {
             if (modbus_connect(ctx) == 0) {
                 double end = now() + seconds;
                 while (now() < end) {
-                    if (modbus_read_registers(ctx, addr, count, regs) == count) ok++; else bad++;
+                    int rc = input ? modbus_read_input_registers(ctx, addr, count, regs)
+                                   : modbus_read_registers(ctx, addr, count, regs);
+                    if (rc == count) ok++; else bad++;
                 }
             } else {
                 bad = 1;
