@@ -182,6 +182,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         }
     }
     eprint!("{notes}");
+    // On a real bus the emulated devices answer at their own addresses only: another unit's
+    // request is another slave's to answer, as a real slave stays silent for it.
+    let own_units: std::collections::BTreeSet<u8> = emulated.iter().map(mbtap_sim::Device::address).collect();
     let shared = Arc::new(crate::source::emulated::Emulated {
         devices: Mutex::new(emulated),
         started: Instant::now(),
@@ -225,7 +228,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                     mode,
                     turnaround: Duration::ZERO,
                     rs485,
-                    answer_as: std::collections::BTreeSet::new(),
+                    answer_as: own_units,
                 }),
             };
             let bridge = crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts);

@@ -481,7 +481,8 @@ fn report_every_gives_the_report_so_far_by_bus_time() {
         .output()
         .unwrap();
     assert!(!bad.status.success());
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("--report-every 0"));
+    let said = String::from_utf8_lossy(&bad.stderr);
+    assert!(said.contains("--report-every") && said.contains("'0'") && said.contains("above 0"), "{said}");
 }
 
 /// The frames of `n` transactions of the demo bus at `sent`, as a receiver at `heard` got them:

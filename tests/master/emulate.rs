@@ -304,3 +304,57 @@ fn replayed_values_start_as_first_heard_last_heard_without() {
     assert_eq!(common::call(&mut connect(&replayed), 1, *unit, request), first.1.1);
     assert_eq!(common::call(&mut connect(&held), 1, *unit, request), last.1.1);
 }
+
+/// `simulate --serial` on a real bus answers at its own devices' addresses only: a request to
+/// another unit (a battery, a second meter beside it) gets silence, not exception 0B — a real
+/// slave does not answer for its neighbours.
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn an_emulated_device_on_a_serial_bus_is_silent_for_other_units() {
+    use std::io::{Read, Write};
+    let d = std::env::temp_dir().join(format!("mbtap-emulate-silent-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    let (_socat, device_side, master_side) = common::socat_pair(&d);
+    let mut sim = Command::new(BIN)
+        .args(["simulate", "--device", "mk4@1", "--serial", device_side.to_str().unwrap(), "--duration", "30"])
+        .args(["--turnaround-ms", "0"])
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(700));
+    let mut port = std::fs::OpenOptions::new().read(true).write(true).open(&master_side).unwrap();
+    // One reader for the whole test: every byte the bus brings, in order.
+    let (tx, heard) = std::sync::mpsc::channel::<Vec<u8>>();
+    let mut reader = port.try_clone().unwrap();
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 64];
+        while let Ok(n) = reader.read(&mut buf) {
+            if n == 0 || tx.send(buf[..n].to_vec()).is_err() {
+                return;
+            }
+        }
+    });
+    let mut ask = |unit: u8| -> Vec<u8> {
+        // Read input register 430, one (MAP v1.1b3 §6.4): FC 04, address 01AE, quantity 0001.
+        let mut frame = Vec::new();
+        mbtap_proto::encode_rtu(unit, &[0x04, 0x01, 0xAE, 0x00, 0x01], &mut frame);
+        port.write_all(&frame).unwrap();
+        let mut got = Vec::new();
+        let until = std::time::Instant::now() + std::time::Duration::from_millis(700);
+        while let Some(left) = until.checked_duration_since(std::time::Instant::now()) {
+            match heard.recv_timeout(left) {
+                Ok(bytes) => got.extend_from_slice(&bytes),
+                Err(_) => break,
+            }
+        }
+        got
+    };
+    let other = ask(3);
+    let own = ask(1);
+    let _ = sim.kill();
+    let _ = sim.wait();
+    std::fs::remove_dir_all(&d).ok();
+    assert!(other.is_empty(), "unit 3 is not emulated here: silence, not {other:02x?}");
+    // Unit 1, FC 04, 2 bytes: the MK4's L1 voltage.
+    assert_eq!(own.get(..3), Some(&[0x01, 0x04, 0x02][..]), "unit 1 is emulated: {own:02x?}");
+}
