@@ -28,7 +28,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { file, out, line } = args;
     let input = crate::output::progress::open_capture(&file, true)?;
-    let output = std::fs::File::create(&out).with_context(|| format!("creating {}", out.display()))?;
+    let output = crate::output::whole_file::WholeFile::create(&out)?;
     let export = mbtap_analysis::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
     let mut sink = ExportSink { export, error: None };
     mbtap_analysis::replay::replay_into(input, line.overrides(), &mut sink)
@@ -38,7 +38,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         return Err(e).with_context(|| format!("writing {}", out.display()));
     }
     let frames = sink.export.frames;
-    sink.export.finish().with_context(|| format!("writing {}", out.display()))?;
+    let written = sink.export.finish().with_context(|| format!("writing {}", out.display()))?;
+    written
+        .into_inner()
+        .map_err(io::IntoInnerError::into_error)
+        .with_context(|| format!("writing {}", out.display()))?
+        .commit()?;
     eprintln!("mbtap: exported {frames} frames to {}", out.display());
     Ok(ExitCode::SUCCESS)
 }

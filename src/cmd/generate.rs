@@ -71,9 +71,9 @@ fn frames(args: &Args, list: &Path) -> anyhow::Result<ExitCode> {
             .map_err(|e| anyhow::anyhow!("{}:{}: {e}", list.display(), i + 1))?;
         frames.push(wire);
     }
-    let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut file = io::BufWriter::new(crate::output::whole_file::WholeFile::create(out)?);
     let n = mbtap_sim::traffic::capture::write_frames(
-        io::BufWriter::new(file),
+        &mut file,
         &frames,
         mode,
         settings,
@@ -81,6 +81,10 @@ fn frames(args: &Args, list: &Path) -> anyhow::Result<ExitCode> {
         model(*observe),
     )
     .with_context(|| format!("writing {}", out.display()))?;
+    file.into_inner()
+        .map_err(io::IntoInnerError::into_error)
+        .with_context(|| format!("writing {}", out.display()))?
+        .commit()?;
     eprintln!("mbtap: wrote {} ({} frames, {n} bytes, {settings} {})", out.display(), frames.len(), mode.name());
     Ok(ExitCode::SUCCESS)
 }
@@ -107,9 +111,13 @@ fn random(args: &Args) -> anyhow::Result<ExitCode> {
         ..TrafficConfig::default()
     };
     let model = model(*observe);
-    let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
-    let (chunks, bytes) = mbtap_sim::traffic::capture::write_capture(io::BufWriter::new(file), &cfg, model)
+    let mut file = io::BufWriter::new(crate::output::whole_file::WholeFile::create(out)?);
+    let (chunks, bytes) = mbtap_sim::traffic::capture::write_capture(&mut file, &cfg, model)
         .with_context(|| format!("writing {}", out.display()))?;
+    file.into_inner()
+        .map_err(io::IntoInnerError::into_error)
+        .with_context(|| format!("writing {}", out.display()))?
+        .commit()?;
     eprintln!(
         "mbtap: wrote {} ({transactions} transactions, {bytes} bytes in {chunks} packets, {settings}, {})",
         out.display(),

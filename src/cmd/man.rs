@@ -133,7 +133,7 @@ fn write_all(dir: &Path) -> anyhow::Result<usize> {
     let pages = pages()?;
     for (name, page) in &pages {
         let path = dir.join(name);
-        std::fs::write(&path, page).with_context(|| format!("writing {}", path.display()))?;
+        crate::output::whole_file::write_whole(&path, page)?;
     }
     Ok(pages.len())
 }

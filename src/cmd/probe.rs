@@ -163,7 +163,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let skeleton = probe.skeleton(args.unit, &args.target);
         mbtap_device::profile::load("skeleton", &skeleton)
             .context("the skeleton does not load (a bug: please report it)")?;
-        std::fs::write(out, skeleton).with_context(|| format!("writing {}", out.display()))?;
+        crate::output::whole_file::write_whole(out, skeleton.as_bytes())?;
         eprintln!("mbtap: wrote {}", out.display());
     }
     let mut stdout = std::io::stdout().lock();

@@ -236,7 +236,7 @@ fn export(args: &ExportArgs) -> anyhow::Result<ExitCode> {
     };
     let e = mbtap_device::profile::export::export(&p, args.unit, target);
     match &args.output {
-        Some(o) => std::fs::write(o, &e.text).with_context(|| format!("writing {}", o.display()))?,
+        Some(o) => crate::output::whole_file::write_whole(o, e.text.as_bytes())?,
         None => std::io::stdout().lock().write_all(e.text.as_bytes())?,
     }
     let mut err = std::io::stderr().lock();

@@ -87,5 +87,5 @@ fn write_image(
     } else {
         img.to_csv(profiles)
     };
-    std::fs::write(path, text).with_context(|| format!("writing the register image {}", path.display()))
+    crate::output::whole_file::write_whole(path, text.as_bytes()).context("the register image")
 }

@@ -45,11 +45,10 @@ fn one_file_for_many(path: &Path, units: &[u8]) -> String {
     )
 }
 
-/// Writes one file atomically (a temporary file renamed).
+/// Writes one file atomically, through the one writer of whole files (no planted link is
+/// followed).
 fn write_atomic(file: &Path, text: &str) -> anyhow::Result<()> {
-    let tmp = file.with_extension("toml.tmp");
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, file).with_context(|| format!("writing {}", file.display()))
+    super::whole_file::write_whole(file, text.as_bytes())
 }
 
 /// Writes the drafts of `learner` to `to`; the files written.

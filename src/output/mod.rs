@@ -4,6 +4,7 @@
 
 pub mod learn_draft;
 pub mod progress;
+pub mod whole_file;
 
 use std::io::{self, Read, Write};
 

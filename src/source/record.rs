@@ -25,7 +25,18 @@ impl Recorder {
     /// # Errors
     /// The file cannot be created or its header written (at start, nothing is lost yet).
     pub fn create(path: &Path, interfaces: &[(&str, &str)]) -> anyhow::Result<Self> {
-        let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        // A recording grows while the line is heard: written in place (what was heard before a
+        // crash stays), but never through a link planted at its name.
+        let file = {
+            use std::os::unix::fs::OpenOptionsExt as _;
+            std::fs::OpenOptions::new()
+                .write(true)
+                .create(true)
+                .truncate(true)
+                .custom_flags(nix::fcntl::OFlag::O_NOFOLLOW.bits())
+                .open(path)
+                .with_context(|| format!("creating {} (a symbolic link there is not followed)", path.display()))?
+        };
         let mut w = PcapNgWriter::new(BufWriter::new(file)).with_context(|| format!("writing {}", path.display()))?;
         for (name, description) in interfaces {
             w.add_serial_interface(name, description).with_context(|| format!("writing {}", path.display()))?;

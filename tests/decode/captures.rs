@@ -337,3 +337,28 @@ fn the_binary_replays_every_capture_as_the_library_writes_it() {
         }
     });
 }
+
+/// `learn --dir D` writes its drafts through the one writer of whole files: a symbolic link
+/// planted at the name an older writer used for its temporary (`learned-unit-1.toml.tmp`), or at
+/// the draft's own name, never makes it write into the file the link points to.
+#[test]
+fn learn_never_writes_through_a_planted_link() {
+    let dir = std::env::temp_dir().join(format!("mbtap-learn-links-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let drafts = dir.join("drafts");
+    std::fs::create_dir_all(&drafts).unwrap();
+    let victim = dir.join("victim.txt");
+    std::fs::write(&victim, "keep me").unwrap();
+    std::os::unix::fs::symlink(&victim, drafts.join("learned-unit-1.toml.tmp")).unwrap();
+    std::os::unix::fs::symlink(&victim, drafts.join("learned-unit-1.toml")).unwrap();
+    let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-rtu.pcapng");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["learn", capture, "--dir", drafts.to_str().unwrap(), "--format", "json"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep me");
+    let draft = drafts.join("learned-unit-1.toml");
+    assert!(!draft.is_symlink() && std::fs::read_to_string(&draft).unwrap().contains("[profile]"));
+    std::fs::remove_dir_all(&dir).ok();
+}
