@@ -105,8 +105,9 @@ pub fn set_value(
                 || def.as_ref().and_then(|d| d.on.as_deref()).is_some_and(|on| on.eq_ignore_ascii_case(text.trim()));
             vec![u16::from(on)]
         }
-        (Some(d), Some(v)) => mbtap_device::query::encode::encode_number(v, d)
-            .ok_or_else(|| format!("{}: not a number register", item.text))?,
+        (Some(d), Some(v)) => {
+            mbtap_device::query::encode::encode_number(v, d).map_err(|why| format!("{}: {why}", item.text))?
+        }
         (Some(d), None) => {
             let raw = d
                 .labels
@@ -118,8 +119,7 @@ pub fn set_value(
             // A label's raw value, at the register's scale (labels are raw values).
             #[allow(clippy::cast_precision_loss)]
             let value = raw as f64 * d.scale.unwrap_or(1.0);
-            mbtap_device::query::encode::encode_number(value, d)
-                .ok_or_else(|| format!("{}: not a number register", item.text))?
+            mbtap_device::query::encode::encode_number(value, d).map_err(|why| format!("{}: {why}", item.text))?
         }
         (None, _) => text
             .split(',')

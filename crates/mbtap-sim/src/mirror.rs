@@ -101,8 +101,16 @@ impl MirrorMap {
                 })?;
                 Ok((t.table, t.first, t.last))
             };
+            let served_span = span(to, served, "the served")?;
+            // One source per served register: a name mapped twice would have the last win, silently.
+            if let Some(first) = entries.iter().find(|e: &&Entry| {
+                let (t, a, b) = e.served;
+                t == served_span.0 && a <= served_span.2 && served_span.1 <= b
+            }) {
+                return Err(bad(format!("the served registers are already mapped by {:?}: map each once", first.spec)));
+            }
             entries.push(Entry {
-                served: span(to, served, "the served")?,
+                served: served_span,
                 source: span(from, source, "the source")?,
                 how: How::Scaled(factor),
                 spec: part.to_owned(),
@@ -158,16 +166,18 @@ impl MirrorMap {
             };
             let (tt, ta, _) = e.served;
             let encoded = match e.how {
-                How::Copy => Some(words),
+                How::Copy => Ok(words),
                 How::Scaled(k) => rows(0, st, sa, &words, Some(source))
                     .first()
                     .and_then(|r| r.value.as_f64())
                     .zip(served.slot(tt, ta).map(|(_, d)| d))
+                    .ok_or_else(|| "the source's value is not a number".to_owned())
                     .and_then(|(v, def)| encode_number(v * k, def)),
             };
             match encoded {
-                Some(w) => out.extend((ta..).zip(w).map(|(a, v)| ((tt, a), v))),
-                None => missing.push(format!("{}: the source's value is not a number", e.spec)),
+                Ok(w) => out.extend((ta..).zip(w).map(|(a, v)| ((tt, a), v))),
+                // Never clamped: a value the served register cannot hold is not served.
+                Err(why) => missing.push(format!("{}: {why}", e.spec)),
             }
         }
         (out, missing)
@@ -186,6 +196,25 @@ mod tests {
     const SERVED: &str = "[profile]\nname = \"fake-meter\"\ndevice = \"Fake meter\"\n\n\
         [[input_registers]]\naddress = 0\nname = \"V1\"\ntype = \"f32\"\nunit = \"V\"\n\n\
         [[input_registers]]\naddress = 10\nname = \"P\"\ntype = \"u16\"\nscale = 0.1\nunit = \"W\"\n";
+
+    #[test]
+    fn a_served_register_mapped_twice_is_refused_naming_the_first_mapping() {
+        let served = mbtap_device::profile::loader::load("fake-meter.toml", SERVED).unwrap();
+        let e = MirrorMap::parse("V1=input 430, V1=input 431", &served, &profile("mk4")).unwrap_err();
+        assert!(e.to_string().contains("already mapped by \"V1=input 430\""), "{e}");
+    }
+
+    #[test]
+    fn a_value_the_served_register_cannot_hold_is_not_served_and_said() {
+        let served = mbtap_device::profile::loader::load("fake-meter.toml", SERVED).unwrap();
+        let mk4 = profile("mk4");
+        // P is a u16 at 0.1 W: 230.5 V × 1e9 is far beyond 6553.5 W.
+        let map = MirrorMap::parse("P=input 430*1000000000", &served, &mk4).unwrap();
+        let values = BTreeMap::from([((Table::InputRegisters, 430), 2305)]);
+        let (set, missing) = map.apply(&values, &served, &mk4);
+        assert!(set.is_empty(), "never clamped to 65535: {set:?}");
+        assert!(missing[0].contains("0 to 6553.5"), "{missing:?}");
+    }
 
     #[test]
     fn a_value_is_read_by_one_profile_and_written_by_another() {

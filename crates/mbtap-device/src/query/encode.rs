@@ -104,6 +104,9 @@ fn parse_bool(s: &str, def: Option<&Def>) -> Option<bool> {
 /// A number at the register's scale: `1.50` at 0.01 is raw 150.
 fn scaled(c: &Check<'_>, text: &str, def: &Def) -> Result<i64, QueryError> {
     let v: f64 = text.trim().parse().map_err(|_| c.hard(format!("{text:?} is not a number")))?;
+    if !v.is_finite() {
+        return Err(c.hard(format!("{text:?} is not a finite number")));
+    }
     let scale = def.scale.unwrap_or(1.0);
     let raw = v / scale;
     let rounded = raw.round();
@@ -187,6 +190,12 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
     match def.value_type {
         ValueType::F32 => {
             let v: f32 = text.trim().parse().map_err(|_| c.hard(format!("{text:?} is not a number")))?;
+            if !v.is_finite() {
+                return Err(c.hard(format!(
+                    "{text:?} does not fit the register's 32-bit float (a finite number within ±{:e})",
+                    f32::MAX
+                )));
+            }
             Ok(words32(v.to_bits(), def.word_order))
         }
         ValueType::String => {
@@ -194,6 +203,11 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
             let room = usize::from(def.width) * per;
             if !text.is_ascii() || text.len() > room {
                 return Err(c.hard(format!("the text must be ASCII, at most {room} characters")));
+            }
+            if let Some(bad) = text.bytes().find(u8::is_ascii_control) {
+                return Err(c.hard(format!(
+                    "the text holds the control character 0x{bad:02X}: only printable ASCII is written"
+                )));
             }
             let mut bytes: Vec<u8> = text.bytes().collect();
             bytes.resize(room, 0);
@@ -264,25 +278,45 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
     }
 }
 
-/// A number as the registers of `def` hold it, rounded to the register's scale and held to the
-/// type's bounds: a value computed by mbtap (a mirrored device's, `simulate --mirror`), not typed
-/// by a user, so no range or representability refusal. `None` for text and dates.
-#[must_use]
-pub fn encode_number(value: f64, def: &Def) -> Option<Vec<u16>> {
+/// A number as the registers of `def` hold it, rounded to the register's scale (a value computed
+/// by mbtap — a mirrored device's — or set by a client of the emulator: `--values-from`, MQTT).
+///
+/// # Errors
+/// What the register cannot hold, with its range in the value's units: not finite, outside the
+/// type's bounds at the register's scale (never clamped), beyond a 32-bit float, or a text or
+/// date register.
+pub fn encode_number(value: f64, def: &Def) -> Result<Vec<u16>, String> {
     if !value.is_finite() {
-        return None;
+        return Err(format!("{value} is not a finite number"));
     }
     match def.value_type {
-        // Rounded to the nearest f32 (IEEE 754 binary32), as any device holding one would.
-        #[allow(clippy::cast_possible_truncation)]
-        ValueType::F32 => Some(words32((value as f32).to_bits(), def.word_order)),
-        ValueType::String | ValueType::Datetime => None,
+        ValueType::F32 => {
+            // Rounded to the nearest f32 (IEEE 754 binary32), as any device holding one would;
+            // beyond its range it would be infinity, which is no measurement.
+            #[allow(clippy::cast_possible_truncation)]
+            let v = value as f32;
+            if v.is_finite() {
+                Ok(words32(v.to_bits(), def.word_order))
+            } else {
+                Err(format!("{value} does not fit the register's 32-bit float (within ±{:e})", f32::MAX))
+            }
+        }
+        ValueType::String | ValueType::Datetime => Err("a text or date register takes no number".to_owned()),
         t => {
             let (lo, hi) = bounds(t);
-            // Within i64 once clamped to the type's bounds (both well inside it).
-            #[allow(clippy::cast_possible_truncation, clippy::cast_precision_loss)]
-            let raw = ((value / def.scale.unwrap_or(1.0)).round()).clamp(lo as f64, hi as f64) as i64;
-            Some(match t {
+            let scale = def.scale.unwrap_or(1.0);
+            let raw = (value / scale).round();
+            #[allow(clippy::cast_precision_loss)]
+            if !raw.is_finite() || raw < lo as f64 || raw > hi as f64 {
+                #[allow(clippy::cast_precision_loss)]
+                let (a, b) = (trim(lo as f64 * scale), trim(hi as f64 * scale));
+                let (a, b) = if a <= b { (a, b) } else { (b, a) };
+                return Err(format!("{value} is outside what the register holds ({a} to {b})"));
+            }
+            // Within i64: checked against the type's bounds just above.
+            #[allow(clippy::cast_possible_truncation)]
+            let raw = raw as i64;
+            Ok(match t {
                 ValueType::U32 | ValueType::I32 => words32(bits32(raw), def.word_order),
                 _ => vec![word(raw)],
             })
@@ -398,6 +432,50 @@ mod tests {
         assert!(e.contains("cannot be written"), "{e}");
         let e = write("Operating mode=sideways", false).unwrap_err().to_string();
         assert!(e.contains("\"fill by level sensors\""), "{e}");
+    }
+
+    /// A number register of `value_type` at `scale`, as a profile would give it.
+    fn number_def(value_type: ValueType, scale: Option<f64>) -> Def {
+        let text = format!(
+            "[profile]\nname = \"t\"\ndevice = \"t\"\n\n[[holding_registers]]\naddress = 0\nname = \"X\"\ntype = \"{}\"\n{}",
+            match value_type {
+                ValueType::F32 => "f32",
+                ValueType::I16 => "i16",
+                ValueType::U32 => "u32",
+                _ => "u16",
+            },
+            scale.map(|s| format!("scale = {s}\n")).unwrap_or_default()
+        );
+        let p = crate::profile::loader::load("t.toml", &text).unwrap();
+        p.slot(Table::HoldingRegisters, 0).unwrap().1.clone()
+    }
+
+    #[test]
+    fn a_value_the_register_cannot_hold_is_refused_with_its_range_never_clamped() {
+        let e = encode_number(229e9, &number_def(ValueType::U16, None)).unwrap_err();
+        assert!(e.contains("0 to 65535"), "{e}");
+        let e = encode_number(-1.0, &number_def(ValueType::U16, None)).unwrap_err();
+        assert!(e.contains("0 to 65535"), "{e}");
+        let e = encode_number(229.0, &number_def(ValueType::U16, Some(0.001))).unwrap_err();
+        assert!(e.contains("0 to 65.535"), "{e}");
+        let e = encode_number(-40_000.0, &number_def(ValueType::I16, None)).unwrap_err();
+        assert!(e.contains("-32768 to 32767"), "{e}");
+        assert!(encode_number(5e9, &number_def(ValueType::U32, None)).is_err());
+        let e = encode_number(1e39, &number_def(ValueType::F32, None)).unwrap_err();
+        assert!(e.contains("32-bit float"), "{e}");
+        assert!(encode_number(f64::INFINITY, &number_def(ValueType::F32, None)).is_err());
+        assert!(encode_number(f64::NAN, &number_def(ValueType::U16, None)).is_err());
+        // In range: held exactly as before.
+        assert_eq!(encode_number(229.5, &number_def(ValueType::U16, Some(0.1))), Ok(vec![2295]));
+        assert_eq!(encode_number(-81.0, &number_def(ValueType::I16, None)), Ok(vec![0xFFAF]));
+    }
+
+    #[test]
+    fn a_typed_value_that_is_not_finite_or_holds_a_control_character_is_refused() {
+        let e = write("Level 2 set point=NaN", true).unwrap_err().to_string();
+        assert!(e.contains("not a finite number") && !e.contains("nearest"), "{e}");
+        let e = write("Device name in SMS=\u{1b}[2J", true).unwrap_err().to_string();
+        assert!(e.contains("control character 0x1B"), "{e}");
     }
 
     #[test]
