@@ -24,6 +24,10 @@ use mbtap_analysis::chunk::{Chunk, PortId};
 use mbtap_analysis::framer::FramerConfig;
 use mbtap_analysis::pairing::PairingConfig;
 
+/// The line's response timeout unless told (`--timeout-ms`), ms: a dead unit's 0x0B reaches a
+/// client before its own 1 s timeout (mbpoll's, many SCADAs'). Emulated lines use it too.
+pub const DEFAULT_TIMEOUT_MS: u64 = 800;
+
 /// Everything the bridge needs.
 #[derive(Debug, Clone)]
 pub struct BridgeOptions {
@@ -69,7 +73,7 @@ impl BridgeOptions {
             port: "emulated".to_owned(),
             line,
             mode,
-            timeout: Duration::from_secs(1),
+            timeout: Duration::from_millis(DEFAULT_TIMEOUT_MS),
             timeout_mode: mbtap_gateway::timeouts::TimeoutMode::Fixed,
             unit_timeouts: std::collections::BTreeMap::new(),
             echo: mbtap_gateway::transaction::EchoMode::default(),
@@ -115,6 +119,14 @@ pub struct EmulatedFronts {
     pub listen_udp: Option<String>,
     /// A real serial port, on which the devices answer as slaves.
     pub listen_serial: Option<crate::bridge::serial_front::SerialFront>,
+}
+
+/// Says when a listener is open on every interface with no `--allow-ip` to say who may connect.
+fn open_to_all(err: &mut dyn Write, local: std::net::SocketAddr, allow_ips: &[mbtap_gateway::admit::IpNet]) {
+    if local.ip().is_unspecified() && allow_ips.is_empty() {
+        let _ =
+            writeln!(err, "mbtap: warning: {local} is open on every interface and no --allow-ip says who may connect");
+    }
 }
 
 /// What the bridge serves, for the metrics endpoint and the notes on stderr.
@@ -208,10 +220,12 @@ pub async fn bridge<W: Write>(
         let connections: Arc<server::Table> = Arc::default();
         for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
             let Some(addr) = addr else { continue };
-            let listener = TcpListener::bind(addr).await.with_context(|| format!("listening on {addr}"))?;
+            let addr = crate::cli::args::bind_addr(addr);
+            let listener = TcpListener::bind(&addr).await.with_context(|| format!("listening on {addr}"))?;
             let local = listener.local_addr().with_context(|| format!("listening on {addr}"))?;
             let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
             let _ = writeln!(err, "mbtap: bridge listening on {local} ({what})");
+            open_to_all(err, local, &opts.server.allow_ips);
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: rtu, ..opts.server.clone() });
             tokio::spawn(server::serve(listener, Arc::clone(&routes), server_opts, None, Arc::clone(&connections)));
         }
@@ -228,18 +242,21 @@ pub async fn bridge<W: Write>(
             tokio::spawn(crate::bridge::serial_front::serve(front.clone(), Arc::clone(&routes), server_opts, monitor));
         }
         if let Some(addr) = &opts.listen_udp {
+            let addr = crate::cli::args::bind_addr(addr);
             let socket =
-                tokio::net::UdpSocket::bind(addr).await.with_context(|| format!("--listen-udp: binding {addr}"))?;
+                tokio::net::UdpSocket::bind(&addr).await.with_context(|| format!("--listen-udp: binding {addr}"))?;
             let local = socket.local_addr().with_context(|| format!("--listen-udp: binding {addr}"))?;
             let _ = writeln!(err, "mbtap: bridge listening on {local} (Modbus UDP)");
+            open_to_all(err, local, &opts.server.allow_ips);
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, ..opts.server.clone() });
             tokio::spawn(super::udp::serve_udp(socket, Arc::clone(&routes), server_opts));
         }
         if let Some(addr) = &opts.tls.listen_tls {
             // Files are read (and checked) before listening: a bad certificate stops the start.
             let tls = crate::bridge::tls::Tls::start(&opts.tls, Arc::clone(&opts.roles))?;
+            let addr = crate::cli::args::bind_addr(addr);
             let listener =
-                TcpListener::bind(addr).await.with_context(|| format!("--listen-tls: listening on {addr}"))?;
+                TcpListener::bind(&addr).await.with_context(|| format!("--listen-tls: listening on {addr}"))?;
             let local = listener.local_addr().with_context(|| format!("--listen-tls: listening on {addr}"))?;
             let _ =
                 writeln!(err, "mbtap: bridge listening on {local} (Modbus/TCP Security, TLS with client certificates)");
@@ -280,7 +297,8 @@ pub async fn bridge<W: Write>(
     drop(monitor_tx);
     let served = Arc::new(served);
     if let Some(addr) = &opts.metrics {
-        let listener = TcpListener::bind(addr).await.with_context(|| format!("metrics: listening on {addr}"))?;
+        let addr = crate::cli::args::bind_addr(addr);
+        let listener = TcpListener::bind(&addr).await.with_context(|| format!("metrics: listening on {addr}"))?;
         let local = listener.local_addr().with_context(|| format!("metrics: listening on {addr}"))?;
         let _ = writeln!(err, "mbtap: metrics at http://{local}/metrics");
         tokio::spawn(serve_metrics(listener, Arc::clone(&served)));

@@ -59,7 +59,7 @@ pub struct Args {
     pub routes: Vec<String>,
     /// Response timeout per request, ms; then retries, then exception 0x0B. The default answers
     /// a dead unit's 0x0B before a client's own 1 s timeout (mbpoll's, many SCADAs').
-    #[arg(long, default_value_t = 800)]
+    #[arg(long, default_value_t = crate::bridge::run::DEFAULT_TIMEOUT_MS)]
     pub timeout_ms: u64,
     /// `fixed`: --timeout-ms for every unit. `auto`: each unit's timeout learnt from its
     /// answers (3 × its slowest of the last 32 + 10 ms, at least 20 ms, at most --timeout-ms,
