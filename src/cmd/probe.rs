@@ -146,8 +146,8 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
                     let reply = match send(&mut link, args.unit, Op::Read(read), timeout, 0).await.0 {
                         Answer::Values(v) => Reply::Values(v),
                         Answer::Exception(c) => Reply::Exception(c),
-                        Answer::Failed(why) if crate::master::exec::closed(&why) => Reply::Closed(why),
-                        Answer::Failed(why) => Reply::NoAnswer(why),
+                        Answer::Failed(why) if why.closed() => Reply::Closed(why.to_string()),
+                        Answer::Failed(why) => Reply::NoAnswer(why.to_string()),
                         Answer::Done => Reply::NoAnswer("an answer of a write to a read".into()),
                     };
                     probe.reply(&reply);

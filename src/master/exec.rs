@@ -23,8 +23,40 @@ pub enum Answer {
     Done,
     /// An exception answer (MAP v1.1b3 §7).
     Exception(u8),
-    /// No usable answer: why.
-    Failed(String),
+    /// No usable answer: why, typed.
+    Failed(Failure),
+}
+
+/// Why a request got no usable answer. Classified from the error's type (the I/O error's kind,
+/// tokio-modbus's transport or protocol error), never from its words.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Failure {
+    /// Nothing (usable) came within the timeout.
+    #[error("no answer from unit {unit} within {ms} ms")]
+    Timeout { unit: u8, ms: u128 },
+    /// An answer that does not fit the request: another request's (a late one) or a damaged one.
+    #[error(
+        "unit {unit} answered {got} {what} to a request for {asked} (a late answer to another request, or a damaged one)"
+    )]
+    Misfit { unit: u8, got: usize, what: &'static str, asked: u16 },
+    /// The device (or the converter in front of it) closed the connection.
+    #[error("unit {unit}: {CLOSED} ({detail}); the next request opens a new one")]
+    Closed { unit: u8, detail: String },
+    /// The answer broke the protocol (tokio-modbus's check: a header or function that does not
+    /// match).
+    #[error("unit {unit}: {detail}")]
+    Protocol { unit: u8, detail: String },
+    /// The link could not be opened or failed otherwise: the I/O error's kind and words.
+    #[error("{detail}")]
+    Io { kind: std::io::ErrorKind, detail: String },
+}
+
+impl Failure {
+    /// Whether the device closed the connection.
+    #[must_use]
+    pub const fn closed(&self) -> bool {
+        matches!(self, Self::Closed { .. })
+    }
 }
 
 impl Answer {
@@ -34,7 +66,7 @@ impl Answer {
         match self {
             Self::Values(_) | Self::Done => None,
             Self::Exception(c) => Some(format!("exception {}", ExceptionCode::from(*c))),
-            Self::Failed(why) => Some(why.clone()),
+            Self::Failed(why) => Some(why.to_string()),
         }
     }
 }
@@ -71,41 +103,39 @@ async fn once(link: &mut Link, unit: u8, op: Op<'_>) -> anyhow::Result<Result<Op
     Ok(r?.map_err(u8::from))
 }
 
-/// A failed request's error in words: a connection the device closed (reset, broken pipe, end of
-/// stream, or the `EINPROGRESS` a write on a socket closed underneath gives) is said as such —
-/// the raw OS text named neither what happened nor what comes next (issue 39, `p3_probe.sh`).
-fn link_error(unit: u8, e: &anyhow::Error) -> String {
+/// A failed request's error, typed: a connection the device closed (reset, broken pipe, end of
+/// stream, not connected, or the `EINPROGRESS` a write on a socket closed underneath gives) is
+/// [`Failure::Closed`] — the raw OS text named neither what happened nor what comes next.
+fn link_error(unit: u8, e: &anyhow::Error) -> Failure {
     use std::io::ErrorKind;
     /// `EINPROGRESS` on Linux.
     const EINPROGRESS: i32 = 115;
-    let text = format!("{e:#}");
-    // tokio-modbus wraps the I/O error in its own, which does not always name it as a source:
-    // its text is looked at too.
-    let io_errors = || e.chain().filter_map(|c| c.downcast_ref::<std::io::Error>());
-    let einprogress = io_errors().any(|io| io.raw_os_error() == Some(EINPROGRESS))
-        || text.contains(&format!("os error {EINPROGRESS})"));
-    // The `EINPROGRESS` text ("Operation now in progress") says nothing true of what happened:
-    // said without it.
-    if einprogress {
-        return format!("unit {unit}: {CLOSED}; the next request opens a new one");
+    let detail = format!("{e:#}");
+    // tokio-modbus's error is transparent over the I/O error: looked for as itself, and the I/O
+    // error of a link that did not open as itself.
+    let modbus = e.chain().find_map(|c| c.downcast_ref::<tokio_modbus::Error>());
+    if let Some(tokio_modbus::Error::Protocol(p)) = modbus {
+        return Failure::Protocol { unit, detail: p.to_string() };
     }
-    let closed = io_errors().any(|io| {
-        matches!(
-            io.kind(),
-            ErrorKind::ConnectionReset | ErrorKind::BrokenPipe | ErrorKind::UnexpectedEof | ErrorKind::NotConnected
-        )
-    }) || ["Broken pipe", "Connection reset", "early eof"].iter().any(|t| text.contains(t));
-    if closed { format!("unit {unit}: {CLOSED} ({text}); the next request opens a new one") } else { text }
+    let io = match modbus {
+        Some(tokio_modbus::Error::Transport(io)) => Some(io),
+        _ => e.chain().find_map(|c| c.downcast_ref::<std::io::Error>()),
+    };
+    let Some(io) = io else { return Failure::Io { kind: ErrorKind::Other, detail } };
+    if io.raw_os_error() == Some(EINPROGRESS) {
+        // Its text ("Operation now in progress") says nothing true of what happened.
+        return Failure::Closed { unit, detail: "the socket was closed under the request".to_owned() };
+    }
+    match io.kind() {
+        ErrorKind::ConnectionReset | ErrorKind::BrokenPipe | ErrorKind::UnexpectedEof | ErrorKind::NotConnected => {
+            Failure::Closed { unit, detail }
+        }
+        kind => Failure::Io { kind, detail },
+    }
 }
 
-/// How [`link_error`] says a connection the device closed.
+/// How a closed connection is said.
 pub const CLOSED: &str = "the device closed the connection";
-
-/// Whether a failure [`link_error`] worded is a connection the device closed.
-#[must_use]
-pub fn closed(why: &str) -> bool {
-    why.contains(CLOSED)
-}
 
 /// Whether `got` values can answer `read`: registers exactly, bits padded to whole bytes
 /// (MAP v1.1b3 §6.1–6.4).
@@ -136,12 +166,12 @@ pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retr
                     // Another request's answer (a late one), or a damaged one: never values
                     // (issue 24: a 4-register answer to a 2-register read gave rc=0).
                     link.reset();
-                    Answer::Failed(format!(
-                        "unit {unit} answered {} {} to a request for {} (a late answer to another request, or a damaged one)",
-                        v.len(),
-                        if is_bits(r.table) { "bits" } else { "registers" },
-                        r.quantity
-                    ))
+                    Answer::Failed(Failure::Misfit {
+                        unit,
+                        got: v.len(),
+                        what: if is_bits(r.table) { "bits" } else { "registers" },
+                        asked: r.quantity,
+                    })
                 }
                 _ => Answer::Values(v),
             },
@@ -154,7 +184,7 @@ pub async fn send(link: &mut Link, unit: u8, op: Op<'_>, timeout: Duration, retr
             Err(_) => {
                 // A late answer must not be taken for the next request's: start afresh.
                 link.reset();
-                Answer::Failed(format!("no answer from unit {unit} within {} ms", timeout.as_millis()))
+                Answer::Failed(Failure::Timeout { unit, ms: timeout.as_millis() })
             }
         };
         let took = started.elapsed();
@@ -217,14 +247,30 @@ mod tests {
 mod link_error_tests {
     use super::*;
 
-    /// Issue 39 (`p3_probe.sh`): a device closing its connection after each request was said as
-    /// "Operation now in progress (os error 115)" alone.
+    /// A device closing its connection after each request was said as "Operation now in
+    /// progress (os error 115)" alone.
     #[test]
     fn a_closed_connection_is_said_as_such() {
         let e = anyhow::Error::from(std::io::Error::from_raw_os_error(115));
-        let said = link_error(1, &e);
-        assert!(closed(&said) && !said.contains("os error") && !said.contains("in progress"), "{said}");
+        let f = link_error(1, &e);
+        let said = f.to_string();
+        assert!(f.closed() && !said.contains("os error") && !said.contains("in progress"), "{said}");
         let e = anyhow::anyhow!("no route");
-        assert_eq!(link_error(1, &e), "no route");
+        assert_eq!(link_error(1, &e), Failure::Io { kind: std::io::ErrorKind::Other, detail: "no route".into() });
+    }
+
+    /// Classified by type, not by words: a reset inside tokio-modbus's transport error is a
+    /// closed connection whatever its text; a text that merely says "Broken pipe" is not.
+    #[test]
+    fn a_failure_is_classified_by_its_type_not_its_words() {
+        let reset = tokio_modbus::Error::Transport(std::io::Error::new(std::io::ErrorKind::ConnectionReset, "x"));
+        assert!(link_error(1, &anyhow::Error::from(reset)).closed());
+        let words = anyhow::anyhow!("Broken pipe");
+        assert!(!link_error(1, &words).closed());
+        let timed_out = std::io::Error::new(std::io::ErrorKind::TimedOut, "t");
+        assert!(matches!(
+            link_error(1, &anyhow::Error::from(timed_out)),
+            Failure::Io { kind: std::io::ErrorKind::TimedOut, .. }
+        ));
     }
 }
