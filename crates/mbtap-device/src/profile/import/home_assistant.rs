@@ -108,8 +108,18 @@ pub const MAX_NODES: usize = 8 << 20;
 /// reader's default (a million) let an alias bomb hold 109 MB before it was refused.
 pub const MAX_ANCHOR_EVENTS: usize = 1 << 16;
 
+/// Bytes the anchors may hold, recorded (an anchor holding aliases records their expansion): a
+/// configuration's templates are a few hundred bytes; a nested bomb's anchors pass it at once.
+pub const MAX_ANCHOR_BYTES: usize = 1 << 20;
+
+/// Scalar bytes the reader may produce, replayed aliases included: what an expansion makes is
+/// bounded here, whatever the ratio of aliases to anchors (an honest file merges one
+/// `&defaults` into hundreds of sensors: 119 aliases of 1 anchor were refused as a bomb).
+pub const MAX_SCALAR_BYTES: usize = 64 << 20;
+
 /// The YAML reader streams (no list of the document's events: serde_norway held 201 MB of them
-/// for 200 000 sensors); its budgets bound what an alias may expand to.
+/// for 200 000 sensors); its budgets bound what an alias may expand to — nodes, events, anchor
+/// bytes and scalar bytes produced — not the ratio of aliases to anchors.
 fn reader_options() -> serde_saphyr::Options {
     serde_saphyr::options! {
         budget: serde_saphyr::budget! {
@@ -117,6 +127,9 @@ fn reader_options() -> serde_saphyr::Options {
             max_events: 2 * MAX_NODES,
             max_depth: MAX_DEPTH,
             max_recorded_anchor_events: MAX_ANCHOR_EVENTS,
+            max_recorded_anchor_bytes: MAX_ANCHOR_BYTES,
+            max_total_scalar_bytes: MAX_SCALAR_BYTES,
+            enforce_alias_anchor_ratio: false,
         },
         // One line: the error names its line and column; the import says the file.
         with_snippet: false,
@@ -266,6 +279,38 @@ modbus:
             r.problems[0].to_string(),
             "sensors[2] \"Odd\", data_type: \"int64\": not in the profile format (int16, uint16, int32, uint32, float32, string)"
         );
+    }
+
+    /// The usual pattern: one `&defaults` sensor, every other `<<: *defaults` with its own name
+    /// and address. Hundreds of aliases of one anchor are honest: they import.
+    #[test]
+    fn one_template_merged_into_hundreds_of_sensors_imports() {
+        use std::fmt::Write as _;
+        let mut yaml = String::from(
+            "- name: hub\n  type: tcp\n  host: 127.0.0.1\n  port: 502\n  sensors:\n    - &defaults\n      name: S0\n      slave: 1\n      address: 0\n      input_type: holding\n      data_type: int16\n",
+        );
+        for i in 1..300 {
+            let _ = write!(yaml, "    - <<: *defaults\n      name: S{i}\n      address: {i}\n");
+        }
+        let (r, unit) = parse_home_assistant(&yaml, None).unwrap();
+        assert_eq!((unit, r.points.len()), (1, 300), "{:?}", r.problems);
+    }
+
+    /// A bomb is refused by what its expansion produces: one 1 MB anchor named by 100 aliases is
+    /// 100 MB of text.
+    #[test]
+    fn an_alias_bomb_is_refused_by_the_bytes_its_expansion_produces() {
+        use std::fmt::Write as _;
+        let mut yaml = format!(
+            "- name: hub\n  type: tcp\n  sensors:\n    - name: &big {}\n      slave: 1\n      address: 0\n",
+            "x".repeat(1 << 20)
+        );
+        for i in 1..100 {
+            let _ = write!(yaml, "    - name: *big\n      slave: 1\n      address: {i}\n");
+        }
+        let e = parse_home_assistant(&yaml, None).unwrap_err();
+        assert!(matches!(e, HaError::TooLarge { .. }), "{e}");
+        assert!(e.to_string().contains("ScalarBytes"), "{e}");
     }
 
     #[test]
