@@ -1095,3 +1095,33 @@ fn regression_issue_39_an_ods_sheet_streamed_reads_as_the_workbook_reader_reads_
     assert_eq!(code, Some(0), "{err}");
     assert!(text.contains("volts") || text.contains("[[holding_registers]]"), "{text}");
 }
+
+/// A sheet saved by Excel as "CSV" on a Western system (Windows-1252) and as "Unicode text"
+/// (UTF-16 with its mark) imports with its accents and degree signs right, and says how it was
+/// read.
+#[test]
+fn a_csv_in_windows_1252_or_utf16_is_read_right_and_said() {
+    let dir = std::env::temp_dir().join(format!("mbtap-csv-encodings-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = "Address;Name;Type;Unit\n0;Température;uint16;°C\n";
+    // é is E9 and ° B0 in Windows-1252.
+    let latin = dir.join("latin.csv");
+    std::fs::write(&latin, b"Address;Name;Type;Unit\n0;Temp\xe9rature;uint16;\xb0C\n").unwrap();
+    let utf16 = dir.join("utf16.csv");
+    let mut bytes = vec![0xFF, 0xFE];
+    bytes.extend(text.encode_utf16().flat_map(u16::to_le_bytes));
+    std::fs::write(&utf16, bytes).unwrap();
+    for (file, said) in [(&latin, "Windows-1252"), (&utf16, "UTF-16")] {
+        let out = dir.join("out.toml");
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+            .args(["profiles", "import", file.to_str().unwrap(), "--table", "holding", "--name", "enc"])
+            .args(["-o", out.to_str().unwrap(), "--force"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success() && err.contains(said), "{}: {err}", file.display());
+        let profile = std::fs::read_to_string(&out).unwrap();
+        assert!(profile.contains("name = \"Température\"") && profile.contains("unit = \"°C\""), "{profile}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -107,7 +107,13 @@ pub(super) fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             };
             sink.reading(&file.display().to_string(), args.files.len() > 1);
             match format {
-                ImportFormat::Csv => read_sheet(&mut crate::config::sheets::csv_rows(file)?, &opts, &mut sink)?,
+                ImportFormat::Csv => {
+                    let mut rows = crate::config::sheets::csv_rows(file)?;
+                    if let Some(note) = rows.encoding_note() {
+                        sink.note(note.to_owned());
+                    }
+                    read_sheet(&mut rows, &opts, &mut sink)?;
+                }
                 ImportFormat::Xlsx => {
                     read_sheet(
                         &mut crate::config::sheets::read_workbook(file, args.sheet.as_deref())?,

@@ -8,11 +8,13 @@ use anyhow::Context as _;
 use mbtap_device::profile::import::grid::{MAX_COLUMNS, MAX_ROWS};
 use mbtap_device::profile::import::sheet::SheetRows;
 
+use super::encoding::{Encoding, Utf16ToUtf8, detect, windows_1252};
 use super::{MAX_FILE_BYTES, too_big};
 
 /// A CSV file's rows, streamed from the file at each pass (the delimiter sniffed: `,`, `;` or
-/// tab; bytes that are not UTF-8 kept as replacement characters): nothing but the record being
-/// read is held (issue 39: the file read whole and laid out in a grid took 3.5× the file).
+/// tab; the encoding found from the whole file: UTF-8, UTF-16 by its mark, else Windows-1252 —
+/// [`super::encoding`]): nothing but the record being read is held (the file read whole and laid
+/// out in a grid took 3.5× the file).
 #[derive(Debug)]
 pub struct CsvRows {
     path: std::path::PathBuf,
@@ -22,6 +24,15 @@ pub struct CsvRows {
     /// terminator of its own).
     len: u64,
     ends_with_newline: bool,
+    encoding: Encoding,
+}
+
+impl CsvRows {
+    /// What to tell the user of the file's encoding (`None`: UTF-8).
+    #[must_use]
+    pub const fn encoding_note(&self) -> Option<&'static str> {
+        self.encoding.note()
+    }
 }
 
 /// The rows of the CSV file at `path`, checked for size and its delimiter sniffed.
@@ -36,8 +47,24 @@ pub fn csv_rows(path: &Path) -> anyhow::Result<CsvRows> {
     }
     // The delimiter the first lines use most: European sheets use `;` (the comma is their
     // decimal point), exports from databases tabs.
+    let encoding = detect(std::io::BufReader::new(&file).take(MAX_FILE_BYTES))
+        .with_context(|| format!("reading {}", path.display()))?;
     let mut head = Vec::new();
-    file.take(64 << 10).read_to_end(&mut head).with_context(|| format!("reading {}", path.display()))?;
+    let opened = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    match encoding {
+        Encoding::Utf16Le | Encoding::Utf16Be => {
+            // Past the mark, as text: the delimiters are sniffed in characters, not bytes.
+            let mut raw = opened.take(128 << 10);
+            let mut mark = [0u8; 2];
+            raw.read_exact(&mut mark).with_context(|| format!("reading {}", path.display()))?;
+            Utf16ToUtf8::new(raw, encoding == Encoding::Utf16Be)
+                .read_to_end(&mut head)
+                .with_context(|| format!("reading {}", path.display()))?;
+        }
+        Encoding::Utf8 | Encoding::Windows1252 => {
+            opened.take(64 << 10).read_to_end(&mut head).with_context(|| format!("reading {}", path.display()))?;
+        }
+    }
     let lines: Vec<&[u8]> = head.split(|&b| b == b'\n').take(20).collect();
     // A sniff over at most 20 lines: counting byte by byte is fine here.
     #[allow(clippy::naive_bytecount)]
@@ -49,7 +76,7 @@ pub fn csv_rows(path: &Path) -> anyhow::Result<CsvRows> {
         let file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
         file.read_exact_at(&mut last, len - 1).is_ok() && last[0] == b'\n'
     };
-    Ok(CsvRows { path: path.to_owned(), delimiter, cut_cells: 0, len, ends_with_newline })
+    Ok(CsvRows { path: path.to_owned(), delimiter, cut_cells: 0, len, ends_with_newline, encoding })
 }
 
 impl SheetRows for CsvRows {
@@ -58,13 +85,26 @@ impl SheetRows for CsvRows {
     fn each_row(&mut self, each: &mut dyn FnMut(usize, &[&str]) -> ControlFlow<()>) -> anyhow::Result<()> {
         let path = &self.path;
         let file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
-        let mut input = std::io::BufReader::new(file.take(MAX_FILE_BYTES + 1));
-        // A byte-order mark is not part of the first cell.
+        let mut raw = std::io::BufReader::new(file.take(MAX_FILE_BYTES + 1));
         let mut data_len = self.len;
-        if input.fill_buf().with_context(|| format!("reading {}", path.display()))?.starts_with(b"\xEF\xBB\xBF") {
-            input.consume(3);
-            data_len -= 3;
-        }
+        let input: Box<dyn std::io::Read> = match self.encoding {
+            Encoding::Utf16Le | Encoding::Utf16Be => {
+                // The mark is not text. The decoded length is not the file's: where the last
+                // record ends is told by the file's own last byte (a newline either way).
+                raw.consume(2);
+                data_len = u64::MAX;
+                Box::new(Utf16ToUtf8::new(raw, self.encoding == Encoding::Utf16Be))
+            }
+            Encoding::Utf8 | Encoding::Windows1252 => {
+                // A byte-order mark is not part of the first cell.
+                if raw.fill_buf().with_context(|| format!("reading {}", path.display()))?.starts_with(b"\xEF\xBB\xBF") {
+                    raw.consume(3);
+                    data_len -= 3;
+                }
+                Box::new(raw)
+            }
+        };
+        let latin = self.encoding == Encoding::Windows1252;
         let mut reader =
             csv::ReaderBuilder::new().has_headers(false).flexible(true).delimiter(self.delimiter).from_reader(input);
         let mut record = csv::ByteRecord::new();
@@ -90,7 +130,13 @@ impl SheetRows for CsvRows {
             }
             cut += u64::try_from(record.len().saturating_sub(MAX_COLUMNS)).unwrap_or(u64::MAX);
             let text: Vec<std::borrow::Cow<'_, str>> =
-                record.iter().take(MAX_COLUMNS).map(String::from_utf8_lossy).collect();
+                record
+                    .iter()
+                    .take(MAX_COLUMNS)
+                    .map(|cell| {
+                        if latin { std::borrow::Cow::Owned(windows_1252(cell)) } else { String::from_utf8_lossy(cell) }
+                    })
+                    .collect();
             // Trailing empty cells are not part of the row (as a workbook's padding is not).
             let kept = text.iter().rposition(|c| !c.trim().is_empty()).map_or(0, |k| k + 1);
             let cells: Vec<&str> = text.iter().take(kept).map(AsRef::as_ref).collect();

@@ -10,6 +10,7 @@
 
 mod calamine_cells;
 mod csv;
+pub mod encoding;
 mod ods;
 mod xls;
 mod yaml;
