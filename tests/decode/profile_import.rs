@@ -1125,3 +1125,99 @@ fn a_csv_in_windows_1252_or_utf16_is_read_right_and_said() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A minimal XLSX (ECMA-376 SpreadsheetML): one sheet whose rows are `rows`, each cell either a
+/// number or the index of a shared string (`t="s"`), and the shared strings.
+fn xlsx_with_shared_strings(path: &std::path::Path, strings: &[String], rows: &[Vec<(bool, String)>]) {
+    use std::fmt::Write as _;
+    use std::io::Write as _;
+    let mut z = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
+    let o: zip::write::SimpleFileOptions = zip::write::SimpleFileOptions::default();
+    let mut put = |name: &str, text: &str| {
+        z.start_file(name, o).unwrap();
+        z.write_all(text.as_bytes()).unwrap();
+    };
+    put(
+        "[Content_Types].xml",
+        r#"<?xml version="1.0" encoding="UTF-8"?><Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types"><Default Extension="rels" ContentType="application/vnd.openxmlformats-package.relationships+xml"/><Default Extension="xml" ContentType="application/xml"/><Override PartName="/xl/workbook.xml" ContentType="application/vnd.openxmlformats-officedocument.spreadsheetml.sheet.main+xml"/><Override PartName="/xl/worksheets/sheet1.xml" ContentType="application/vnd.openxmlformats-officedocument.spreadsheetml.worksheet+xml"/><Override PartName="/xl/sharedStrings.xml" ContentType="application/vnd.openxmlformats-officedocument.spreadsheetml.sharedStrings+xml"/></Types>"#,
+    );
+    put(
+        "_rels/.rels",
+        r#"<?xml version="1.0" encoding="UTF-8"?><Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships"><Relationship Id="rId1" Type="http://schemas.openxmlformats.org/officeDocument/2006/relationships/officeDocument" Target="xl/workbook.xml"/></Relationships>"#,
+    );
+    put(
+        "xl/workbook.xml",
+        r#"<?xml version="1.0" encoding="UTF-8"?><workbook xmlns="http://schemas.openxmlformats.org/spreadsheetml/2006/main" xmlns:r="http://schemas.openxmlformats.org/officeDocument/2006/relationships"><sheets><sheet name="Map" sheetId="1" r:id="rId1"/></sheets></workbook>"#,
+    );
+    put(
+        "xl/_rels/workbook.xml.rels",
+        r#"<?xml version="1.0" encoding="UTF-8"?><Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships"><Relationship Id="rId1" Type="http://schemas.openxmlformats.org/officeDocument/2006/relationships/worksheet" Target="worksheets/sheet1.xml"/><Relationship Id="rId2" Type="http://schemas.openxmlformats.org/officeDocument/2006/relationships/sharedStrings" Target="sharedStrings.xml"/></Relationships>"#,
+    );
+    let mut sst = format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?><sst xmlns="http://schemas.openxmlformats.org/spreadsheetml/2006/main" count="{0}" uniqueCount="{0}">"#,
+        strings.len()
+    );
+    for s in strings {
+        let _ = write!(sst, "<si><t>{s}</t></si>");
+    }
+    sst.push_str("</sst>");
+    put("xl/sharedStrings.xml", &sst);
+    let mut sheet = String::from(
+        r#"<?xml version="1.0" encoding="UTF-8"?><worksheet xmlns="http://schemas.openxmlformats.org/spreadsheetml/2006/main"><sheetData>"#,
+    );
+    for (r, row) in rows.iter().enumerate() {
+        let _ = write!(sheet, "<row r=\"{}\">", r + 1);
+        for (c, (shared, v)) in row.iter().enumerate() {
+            let col = char::from(b'A' + u8::try_from(c).unwrap());
+            let t = if *shared { " t=\"s\"" } else { "" };
+            let _ = write!(sheet, "<c r=\"{col}{}\"{t}><v>{v}</v></c>", r + 1);
+        }
+        sheet.push_str("</row>");
+    }
+    sheet.push_str("</sheetData></worksheet>");
+    put("xl/worksheets/sheet1.xml", &sheet);
+    z.finish().unwrap();
+}
+
+/// Three shared strings of 65 535 characters cited by 2 000 rows: a 35 kB XLSX that would make
+/// a 787 MB profile. Refused at the row where the text passes the budget, naming it; nothing
+/// written. The same sheet with short names imports.
+#[test]
+fn shared_strings_cited_many_times_are_counted_at_each_citation() {
+    let dir = std::env::temp_dir().join(format!("mbtap-shared-strings-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let header = |names: usize| -> Vec<(bool, String)> {
+        vec![(true, names.to_string()), (true, (names + 1).to_string()), (true, (names + 2).to_string())]
+    };
+    let run = |strings: Vec<String>, file: &str| {
+        let n = strings.len();
+        let mut all = strings;
+        all.extend(["Address".to_owned(), "Name".to_owned(), "Description".to_owned()]);
+        let mut rows = vec![header(n)];
+        for a in 0..2000 {
+            rows.push(vec![(false, a.to_string()), (true, (a % n).to_string()), (true, ((a + 1) % n).to_string())]);
+        }
+        let path = dir.join(file);
+        xlsx_with_shared_strings(&path, &all, &rows);
+        let out = dir.join(format!("{file}.toml"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+            .args(["profiles", "import", path.to_str().unwrap(), "--table", "holding", "--name", "ss"])
+            .args(["-o", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        (o, out, std::fs::metadata(&path).unwrap().len())
+    };
+    let long: Vec<String> = (b'a'..=b'c').map(|c| String::from(char::from(c)).repeat(65_535)).collect();
+    let (o, out, size) = run(long, "long.xlsx");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(size < 100_000, "the file is small: {size} bytes");
+    assert!(!o.status.success() && err.contains("nothing imported") && err.contains("16777216"), "{err}");
+    assert!(err.contains("row "), "the row where it ran over is named: {err}");
+    assert!(!out.exists(), "no profile written");
+    assert!(err.lines().all(|l| l.chars().count() < 1_000), "no line quotes the long text whole");
+    let short: Vec<String> = ["Voltage", "Current", "Power"].map(String::from).to_vec();
+    let (o, out, _) = run(short, "short.xlsx");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read_to_string(&out).unwrap().contains("address = 1999"));
+    std::fs::remove_dir_all(&dir).ok();
+}

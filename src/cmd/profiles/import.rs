@@ -137,6 +137,12 @@ pub(super) fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
              check --unit, or see what the device says with `mbtap read {target} --device sunspec`"
         );
     }
+    if sink.unsaid() > 0 {
+        eprintln!("mbtap: … and {} more problems like those above, not listed", sink.unsaid());
+    }
+    if let Some(why) = sink.refused() {
+        anyhow::bail!("nothing imported: {why}");
+    }
     if let Some(hint) = sink.hint() {
         anyhow::bail!("nothing imported ({} problem(s), listed above): {hint}", sink.problems());
     }

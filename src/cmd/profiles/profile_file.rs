@@ -26,6 +26,10 @@ const PENDING_BLOCK: usize = 64 << 10;
 const RECORD_HEAD: usize = 14;
 /// A record's first read from the scratch file (most records are shorter).
 const FIRST_READ: u64 = 512;
+/// Problems said one by one; past them only counted (a sheet of 200 000 bad rows printed 2 GB).
+const SAID_PROBLEMS: usize = 200;
+/// Characters of one line said, at most (a problem quoting a 120 kB cell is cut there).
+const SAID_CHARS: usize = 400;
 
 /// Points and problems as they are read, written out.
 pub struct ProfileFile<'e> {
@@ -42,6 +46,8 @@ pub struct ProfileFile<'e> {
     /// The first write error (a sink cannot return one): said at the end.
     failed: Option<std::io::Error>,
     problems: usize,
+    /// The source made the import produce past its budget: why (nothing is written).
+    refused: Option<String>,
     /// Whether a problem asked for `--table`, or found no header row: the hint at the end.
     wanted_table: bool,
     wanted_header: bool,
@@ -74,6 +80,7 @@ impl<'e> ProfileFile<'e> {
             text: String::new(),
             failed: None,
             problems: 0,
+            refused: None,
             wanted_table: false,
             wanted_header: false,
             notes: Vec::new(),
@@ -91,7 +98,12 @@ impl<'e> ProfileFile<'e> {
 
     /// Says `line` on standard error; a failure to say it is kept for the end.
     fn say(&mut self, line: &str) {
-        if let Err(e) = writeln!(self.err, "mbtap: {}: {}", self.source, printable(line))
+        let shown: String = if line.chars().count() > SAID_CHARS {
+            line.chars().take(SAID_CHARS).chain("…".chars()).collect()
+        } else {
+            line.to_owned()
+        };
+        if let Err(e) = writeln!(self.err, "mbtap: {}: {}", self.source, printable(&shown))
             && self.failed.is_none()
         {
             self.failed = Some(e);
@@ -190,6 +202,18 @@ impl<'e> ProfileFile<'e> {
     }
 
     /// Problems said.
+    /// Why the import is refused (a budget passed), if it is.
+    #[must_use]
+    pub fn refused(&self) -> Option<&str> {
+        self.refused.as_deref()
+    }
+
+    /// Problems past those said one by one, for the end (`… and N more problems`).
+    #[must_use]
+    pub fn unsaid(&self) -> usize {
+        self.problems.saturating_sub(SAID_PROBLEMS)
+    }
+
     pub fn problems(&self) -> usize {
         self.problems
     }
@@ -270,7 +294,16 @@ impl Sink for ProfileFile<'_> {
         self.problems += 1;
         self.wanted_table |= p.why.contains("give --table");
         self.wanted_header |= p.why.contains("no header row");
-        self.say(&format!("skipped {p}"));
+        // Bounded by what is printed, not by what the sheet holds: the first problems in full
+        // (each line at most SAID_CHARS), then only counted, said once at the end.
+        if self.problems <= SAID_PROBLEMS {
+            self.say(&format!("skipped {p}"));
+        }
+    }
+
+    fn over_budget(&mut self, p: Problem) {
+        self.say(&format!("refused {p}"));
+        self.refused = Some(p.to_string());
     }
 
     fn note(&mut self, n: String) {

@@ -92,6 +92,11 @@ pub trait Sink {
     fn problem(&mut self, p: Problem);
     /// How the source was read, in words.
     fn note(&mut self, n: String);
+    /// The source made the import produce more than its budget: nothing is to be written. By
+    /// default a problem like any other.
+    fn over_budget(&mut self, p: Problem) {
+        self.problem(p);
+    }
 }
 
 /// What an import found, collected.

@@ -116,6 +116,11 @@ impl SheetRows for Grid {
     }
 }
 
+/// Bytes of cell text, in the columns the import reads, that a sheet may make it build: a
+/// register map of 65 536 rows with a 200-byte description each is 13 MB; the profile written
+/// from it stays under the 16 MiB said in the README.
+pub const MAX_TEXT_PRODUCED: usize = 16 << 20;
+
 /// Reads `rows` (cells as text; row numbers in problems are 1-based, as a spreadsheet shows).
 #[must_use]
 pub fn parse_sheet(rows: &Grid, opts: &SheetOptions) -> Imported {
@@ -238,9 +243,23 @@ pub fn read_sheet<S: SheetRows>(rows: &mut S, opts: &SheetOptions, out: &mut imp
             "addresses are Modicon register numbers (30001 = input register 0, 40001 = holding register 0)".into(),
         );
     }
+    // What the rows make the import build, counted as it is built — a shared string counts at
+    // each cell citing it, a repeated row at each repeat — whatever the file's size says.
+    let mut produced = 0usize;
     rows.each_row(&mut |i, r| {
         if i < first_data {
             return ControlFlow::Continue(());
+        }
+        produced = columns.iter().filter_map(|&(_, c)| r.get(c)).fold(produced, |n, c| n.saturating_add(c.len()));
+        if produced > MAX_TEXT_PRODUCED {
+            out.over_budget(Problem {
+                at: format!("row {}", i + 1),
+                column: None,
+                why: format!(
+                    "the rows up to here hold {produced} bytes of text in the columns read, over the {MAX_TEXT_PRODUCED} a profile may be built from (the same long text cited by many cells?); nothing imported"
+                ),
+            });
+            return ControlFlow::Break(());
         }
         read_row(i, r, &columns, address_col, use_modicon, opts, out);
         ControlFlow::Continue(())
