@@ -1221,3 +1221,59 @@ fn shared_strings_cited_many_times_are_counted_at_each_citation() {
     assert!(std::fs::read_to_string(&out).unwrap().contains("address = 1999"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// An XLSX whose local and central headers both say 1 000 bytes for a `sharedStrings.xml` that
+/// inflates past the 128 MiB read: the sizes are claims; what inflates is counted, and the
+/// inflater stops at the budget. Refused naming the part.
+#[test]
+fn a_zip_part_that_lies_about_its_size_is_refused_by_what_it_inflates_to() {
+    use std::io::Write as _;
+    let dir = std::env::temp_dir().join(format!("mbtap-zip-lies-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("lies.xlsx");
+    let strings = vec!["Address".to_owned(), "Name".to_owned()];
+    xlsx_with_shared_strings(&path, &strings, &[vec![(true, "0".into()), (true, "1".into())]]);
+    // Rewritten with a 129 MiB sharedStrings.xml (compressible: the file stays small).
+    let mut zin = zip::ZipArchive::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let lying = dir.join("lying.xlsx");
+    let mut z = zip::ZipWriter::new(std::fs::File::create(&lying).unwrap());
+    let o: zip::write::SimpleFileOptions = zip::write::SimpleFileOptions::default();
+    for i in 0..zin.len() {
+        let mut part = zin.by_index(i).unwrap();
+        let name = part.name().to_owned();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut part, &mut bytes).unwrap();
+        z.start_file(name.as_str(), o).unwrap();
+        if name == "xl/sharedStrings.xml" {
+            let chunk = vec![b' '; 1 << 20];
+            for _ in 0..129 {
+                z.write_all(&chunk).unwrap();
+            }
+        }
+        z.write_all(&bytes).unwrap();
+    }
+    z.finish().unwrap();
+    // Both headers of that part now say 1 000 bytes unpacked (APPNOTE 4.3.7 and 4.3.12: the
+    // local header's uncompressed size at +22, the central directory's at +24).
+    let mut data = std::fs::read(&lying).unwrap();
+    let name = b"xl/sharedStrings.xml";
+    let mut at = 0;
+    while let Some(j) = data[at..].windows(name.len()).position(|w| w == name).map(|p| p + at) {
+        if j >= 30 && data[j - 30..j - 26] == *b"PK\x03\x04" {
+            data[j - 30 + 22..j - 30 + 26].copy_from_slice(&1000u32.to_le_bytes());
+        } else if j >= 46 && data[j - 46..j - 42] == *b"PK\x01\x02" {
+            data[j - 46 + 24..j - 46 + 28].copy_from_slice(&1000u32.to_le_bytes());
+        }
+        at = j + 1;
+    }
+    std::fs::write(&lying, &data).unwrap();
+    assert!(data.len() < 2 << 20, "a small file: {} bytes", data.len());
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["profiles", "import", lying.to_str().unwrap(), "--table", "holding", "--name", "lies"])
+        .args(["-o", dir.join("lies.toml").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("xl/sharedStrings.xml") && err.contains("says 1000 bytes"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -57,16 +57,35 @@ pub(super) fn check_zip(path: &Path) -> anyhow::Result<bool> {
     Ok(is_ods(&mut zip))
 }
 
-/// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`], by its
-/// central directory (the sizes it declares; the reader stops at them).
+/// Refuses a zip-based workbook whose parts unpack to more than [`MAX_UNPACKED_BYTES`]: first by
+/// the sizes its central directory declares, then by inflating every part and counting what
+/// comes out — the headers are claims, and a part that says 1 000 bytes may inflate to 512 MiB
+/// (the workbook reader would hold all of it). Inflating stops at the budget: memory stays flat.
 fn check_unpacked<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipArchive<R>) -> anyhow::Result<()> {
-    let mut total = 0u64;
+    let mut declared = 0u64;
     for i in 0..zip.len() {
         let size = zip.by_index_raw(i).map_or(0, |f| f.size());
-        total = total.saturating_add(size);
+        declared = declared.saturating_add(size);
     }
-    if total > MAX_UNPACKED_BYTES {
-        return Err(too_big(path, &format!("unpacks to {total} bytes, over the {MAX_UNPACKED_BYTES} read")));
+    if declared > MAX_UNPACKED_BYTES {
+        return Err(too_big(path, &format!("unpacks to {declared} bytes, over the {MAX_UNPACKED_BYTES} read")));
+    }
+    let mut total = 0u64;
+    for i in 0..zip.len() {
+        let Ok(part) = zip.by_index(i) else { continue };
+        let (name, says) = (part.name().to_owned(), part.size());
+        let left = MAX_UNPACKED_BYTES.saturating_sub(total);
+        // A part that cannot be inflated is the workbook reader's to report.
+        let got = std::io::copy(&mut part.take(left.saturating_add(1)), &mut std::io::sink()).unwrap_or(0);
+        total = total.saturating_add(got);
+        if total > MAX_UNPACKED_BYTES {
+            return Err(too_big(
+                path,
+                &format!(
+                    "its part {name:?} says {says} bytes but inflates past the {MAX_UNPACKED_BYTES} bytes read (the zip's sizes are not what it holds)"
+                ),
+            ));
+        }
     }
     Ok(())
 }
