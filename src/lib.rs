@@ -8,7 +8,8 @@
 //! - [`cmd`] — one file per command: its options and its `run`; `main` parses and dispatches.
 //! - [`cli`] — what the commands share: the options several take ([`cli::args`]) and the one
 //!   runner of the analyzing commands ([`cli::runner`]: the UI or stdout, publishers, the end).
-//! - [`bridge`] — Modbus TCP ⇄ serial: server, line masters, reverse mode, metrics, its config file.
+//! - [`bridge`] — Modbus TCP ⇄ serial: server, line masters, the serial front (and reverse mode
+//!   through it), metrics, its config file.
 //! - [`tui`] — the terminal UI (ratatui), rendered from the model the events build.
 //! - [`source`] — live serial ports, pseudo-terminals and the clock: the I/O loops.
 //! - [`master`] — `read`/`write`/`watch`: requests to a device through tokio-modbus (RTU on a

@@ -220,7 +220,7 @@ pub async fn bridge<W: Write>(
         let connections: Arc<server::Table> = Arc::default();
         for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
             let Some(addr) = addr else { continue };
-            let addr = crate::cli::args::bind_addr(addr);
+            let addr = crate::source::listen::bind_addr(addr);
             let listener = TcpListener::bind(&addr).await.with_context(|| format!("listening on {addr}"))?;
             let local = listener.local_addr().with_context(|| format!("listening on {addr}"))?;
             let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
@@ -242,7 +242,7 @@ pub async fn bridge<W: Write>(
             tokio::spawn(crate::bridge::serial_front::serve(front.clone(), Arc::clone(&routes), server_opts, monitor));
         }
         if let Some(addr) = &opts.listen_udp {
-            let addr = crate::cli::args::bind_addr(addr);
+            let addr = crate::source::listen::bind_addr(addr);
             let socket =
                 tokio::net::UdpSocket::bind(&addr).await.with_context(|| format!("--listen-udp: binding {addr}"))?;
             let local = socket.local_addr().with_context(|| format!("--listen-udp: binding {addr}"))?;
@@ -254,7 +254,7 @@ pub async fn bridge<W: Write>(
         if let Some(addr) = &opts.tls.listen_tls {
             // Files are read (and checked) before listening: a bad certificate stops the start.
             let tls = crate::bridge::tls::Tls::start(&opts.tls, Arc::clone(&opts.roles))?;
-            let addr = crate::cli::args::bind_addr(addr);
+            let addr = crate::source::listen::bind_addr(addr);
             let listener =
                 TcpListener::bind(&addr).await.with_context(|| format!("--listen-tls: listening on {addr}"))?;
             let local = listener.local_addr().with_context(|| format!("--listen-tls: listening on {addr}"))?;
@@ -297,7 +297,7 @@ pub async fn bridge<W: Write>(
     drop(monitor_tx);
     let served = Arc::new(served);
     if let Some(addr) = &opts.metrics {
-        let addr = crate::cli::args::bind_addr(addr);
+        let addr = crate::source::listen::bind_addr(addr);
         let listener = TcpListener::bind(&addr).await.with_context(|| format!("metrics: listening on {addr}"))?;
         let local = listener.local_addr().with_context(|| format!("metrics: listening on {addr}"))?;
         let _ = writeln!(err, "mbtap: metrics at http://{local}/metrics");

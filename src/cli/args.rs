@@ -242,13 +242,6 @@ pub fn duration_arg(s: &str) -> Result<std::time::Duration, String> {
     mbtap_analysis::duration::parse_duration(s, std::time::Duration::ZERO, std::time::Duration::from_hours(24 * 100))
 }
 
-/// A listening address as users type it: `:PORT` is every interface (`0.0.0.0:PORT`, as
-/// `ss`, Go and most servers read it); anything else is kept as given.
-#[must_use]
-pub fn bind_addr(addr: &str) -> String {
-    if addr.starts_with(':') { format!("0.0.0.0{addr}") } else { addr.to_owned() }
-}
-
 /// The faults named on the command line (`all`: every one, taking turns).
 pub fn fault_list(args: &[FaultArg]) -> Vec<mbtap_sim::bus::Fault> {
     use mbtap_sim::bus::Fault;
@@ -292,17 +285,4 @@ pub fn add_reports<W: std::io::Write>(writer: &mut EventWriter<W>, o: &OutputArg
         writer.learn = Some(crate::output::learn_draft::LiveDraft::new(Some(to), "the line mbtap listened to".into()));
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::bind_addr;
-
-    #[test]
-    fn a_bare_port_listens_on_every_interface_and_the_rest_stays_as_typed() {
-        assert_eq!(bind_addr(":502"), "0.0.0.0:502");
-        assert_eq!(bind_addr("127.0.0.1:0"), "127.0.0.1:0");
-        assert_eq!(bind_addr("[::1]:502"), "[::1]:502");
-        assert_eq!(bind_addr("localhost:1502"), "localhost:1502");
-    }
 }

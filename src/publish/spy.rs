@@ -62,7 +62,7 @@ fn bits(v: &[u16]) -> Vec<bool> {
 impl Spy {
     /// Binds `addr` and serves on a thread of its own.
     pub fn start(addr: &str, max_age: Option<Duration>, live: bool) -> anyhow::Result<Arc<Self>> {
-        let listener = std::net::TcpListener::bind(crate::cli::args::bind_addr(addr))
+        let listener = std::net::TcpListener::bind(crate::source::listen::bind_addr(addr))
             .with_context(|| format!("--serve {addr}: cannot listen there"))?;
         listener.set_nonblocking(true).context("--serve: setting the socket non-blocking")?;
         let bound = listener.local_addr().context("--serve: the bound address")?;

@@ -8,6 +8,7 @@ pub mod emulate_from;
 pub mod emulated;
 pub mod image_file;
 pub mod link;
+pub mod listen;
 pub mod pace;
 pub mod play;
 pub mod pty;
