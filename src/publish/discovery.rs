@@ -4,7 +4,21 @@
 use mbtap_device::profile::Table;
 use mbtap_device::query::rows::Row;
 
-use super::mqtt_options::topic_level;
+/// A Home Assistant discovery id: HA takes node and object ids of `[a-zA-Z0-9_-]` only and
+/// ignores, with a log line the user never sees, a config whose topic has anything else (a
+/// target's dots: `mbtap_vm_127.0.0.1_17502`). Every other character becomes `_`; when any did,
+/// a hash of the original follows, so two prefixes that differ only there stay two devices. The
+/// same prefix gives the same id on every run.
+pub(super) fn ha_id(s: &str) -> String {
+    let clean: String =
+        s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' }).collect();
+    if clean == s && !clean.is_empty() {
+        return clean;
+    }
+    // FNV-1a, 32 bits: stable across runs and builds (a std hasher is not).
+    let hash = s.bytes().fold(0x811c_9dc5_u32, |h, b| (h ^ u32::from(b)).wrapping_mul(0x0100_0193));
+    format!("{clean}_{hash:08x}")
+}
 
 /// The discovery object id of a row: `u1_holding_registers_105`.
 pub(super) fn discovery_object(r: &Row) -> String {
@@ -26,7 +40,7 @@ pub fn discovery(
     profile: Option<&mbtap_device::profile::Profile>,
     state_topic: &str,
 ) -> (String, String, &'static str, serde_json::Value) {
-    let node = topic_level(&prefix.replace('/', "_"));
+    let node = ha_id(&prefix.replace('/', "_"));
     let object = discovery_object(r);
     let mut device = serde_json::json!({
         "identifiers": [format!("{node}_u{}", r.unit)],
@@ -124,6 +138,22 @@ pub fn control(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Home Assistant takes `[a-zA-Z0-9_-]` ids only: a prefix holding a target's address became a
+    /// topic HA logged as illegal and ignored. Ids stay in the alphabet, stable, and apart.
+    #[test]
+    fn discovery_ids_use_home_assistants_alphabet_and_stay_apart() {
+        use mbtap_device::profile::Table;
+        let mk4 = mbtap_device::profile::builtin::get("mk4").unwrap().unwrap();
+        let regs = mbtap_device::query::rows::rows(2, Table::InputRegisters, 430, &[2304], Some(&mk4));
+        let (node, object, _, config) = discovery("mbtap/vm/127.0.0.1:17502", &regs[0], Some(&mk4), "t");
+        let legal = |s: &str| !s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        assert!(legal(&node) && legal(&object), "{node} {object}");
+        assert!(legal(config["unique_id"].as_str().unwrap()) && legal(config["object_id"].as_str().unwrap()));
+        assert_eq!(node, ha_id("mbtap_vm_127.0.0.1:17502"), "the same on every run");
+        assert_ne!(ha_id("a.b"), ha_id("a_b"), "two prefixes, two devices");
+        assert_eq!(ha_id("mbtap_site"), "mbtap_site", "a legal id is kept as it is");
+    }
 
     /// Issue 42: no config had a device or state class (no long-term statistics, nothing for
     /// the Energy dashboard), and `via_device` named a device no config announced. The MK4's
