@@ -2,11 +2,13 @@
 //! for is checked by the profile as `mbtap write` checks it (name, scale, documented range,
 //! access), then by the bridge's own admission policy — read-only, `--allow-function`, routes and,
 //! with `--mqtt-role`, that role's rules — exactly as a Modbus TCP client's request would be, and
-//! only then queued on its line like any client's. A refusal never reaches the line; it is counted
-//! with the bridge's refusals and published back.
+//! only then queued on its line like any client's, under the same `--rate-limit` a connection
+//! gets and the same queue bound. A refusal never reaches the line; it is counted with the
+//! bridge's refusals and published back. Each write waits for its own answer (the line answers
+//! every request it takes: the device's reply, 0x0B at its timeout, 0x0A without a port), one at
+//! a time: no answer can reach another write.
 
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::Duration;
 
 use tokio::sync::oneshot;
 use tokio::time::Instant;
@@ -48,19 +50,28 @@ pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Routes>, opts: Arc<ServerOp
     let writes = Arc::clone(writes);
     let handle = tokio::runtime::Handle::current();
     let _ = std::thread::Builder::new().name("broker-writes".into()).spawn(move || {
+        // The broker is one client: `--rate-limit` holds for it as for a connection.
+        let now = || routes.first().map_or(std::time::Duration::ZERO, |r| r.line.now());
+        let mut bucket = opts.rate_limit.map(|rate| mbtap_gateway::admit::RateLimit::new(rate, now()));
         for ask in asks {
             if crate::signals::stop_requested() {
                 // Stopping: what still waits is not carried out (the bound keeps it short).
                 break;
             }
-            let outcome = handle.block_on(apply(&ask, &writes, &routes, &opts));
+            let outcome = handle.block_on(apply(&ask, &writes, &routes, &opts, bucket.as_mut()));
             writes.publisher.write_result(&ask, &outcome, crate::source::serial::now().0);
         }
     });
 }
 
 /// One write: the profile's checks, the bridge's admission, the line.
-async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerOptions) -> Outcome {
+async fn apply(
+    ask: &Ask,
+    writes: &BrokerWrites,
+    routes: &Routes,
+    opts: &ServerOptions,
+    bucket: Option<&mut mbtap_gateway::admit::RateLimit>,
+) -> Outcome {
     let text = &ask.item.text;
     let profile = writes.profiles.get(&ask.unit);
     let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;
@@ -69,7 +80,7 @@ async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerO
     let role = Role::Broker(writes.role.as_ref());
     let first = routes.first().ok_or_else(|| format!("{text}: the bridge has no serial line"))?;
     let asked = Asked { unit: ask.unit, pdu: &pdu, role, peer_high: false };
-    let admitted = opts.policy.admit(asked, None, first.line.now()).map_err(|why| {
+    let admitted = opts.policy.admit(asked, bucket, first.line.now()).map_err(|why| {
         routes.server.refused(why.reason());
         format!("{text}: refused by the bridge ({}, exception {})", why.reason(), why.exception())
     })?;
@@ -78,15 +89,15 @@ async fn apply(ask: &Ask, writes: &BrokerWrites, routes: &Routes, opts: &ServerO
     let write = route.line.write_pending(admitted.target, &pdu);
     let job = Job { unit: admitted.target, pdu, reply: tx, queued: Instant::now(), high: false, write };
     route.line.submit(BROKER_CLIENT, job).map_err(|_| format!("{text}: the line's queue is full"))?;
-    match tokio::time::timeout(Duration::from_secs(30), rx).await {
-        Ok(Ok(Reply::Pdu(answer))) if answer.first().is_some_and(|f| f & mbtap_proto::EXCEPTION_FLAG == 0) => Ok(None),
-        Ok(Ok(Reply::Pdu(answer))) => Err(format!(
+    match rx.await {
+        Ok(Reply::Pdu(answer)) if answer.first().is_some_and(|f| f & mbtap_proto::EXCEPTION_FLAG == 0) => Ok(None),
+        Ok(Reply::Pdu(answer)) => Err(format!(
             "{text}: the device answered exception {}",
             mbtap_proto::ExceptionCode::from(answer.get(1).copied().unwrap_or(0))
         )),
-        Ok(Ok(Reply::Gateway(code))) => Err(format!("{text}: the bridge answered exception {code}")),
-        Ok(Ok(Reply::Silence)) => Ok(None),
-        Ok(Err(_)) | Err(_) => Err(format!("{text}: no answer from the line")),
+        Ok(Reply::Gateway(code)) => Err(format!("{text}: the bridge answered exception {code}")),
+        Ok(Reply::Silence) => Ok(None),
+        Err(_) => Err(format!("{text}: no answer from the line")),
     }
 }
 

@@ -665,6 +665,19 @@ fn the_brokers_writes_through_the_bridge_pass_its_rules() {
         assert!(o["refused"].as_str().unwrap().contains(reason), "{o}");
         assert_eq!(raw_through(&tcp, 105), 250, "{prefix}: the refused 7.5 never reached the line");
     }
+    // The broker is a client like any other: `--rate-limit` holds for its writes too (one a
+    // thousand seconds here: the first passes, the second is refused, exception 06).
+    let (_bridge, tcp) =
+        monitored_bridge(&bus, port, "rate", &["--device", "1=mk4", "--mqtt-writes", "--rate-limit", "0.001"]);
+    std::thread::sleep(Duration::from_millis(500));
+    publish(port, "rate/unit/1/holding_registers/105/set", "3.5");
+    sub.wait_for("the first write's outcome", |g| !outcomes(g, "rate").is_empty());
+    publish(port, "rate/unit/1/holding_registers/105/set", "4.5");
+    sub.wait_for("the second write's outcome", |g| outcomes(g, "rate").len() >= 2);
+    let o = outcomes(&sub.got(), "rate");
+    assert_eq!(o[0]["ok"], true, "{o:#?}");
+    assert!(o[1]["ok"] == false && o[1]["refused"].as_str().unwrap().contains("rate_limit"), "{o:#?}");
+    assert_eq!(raw_through(&tcp, 105), 350, "the refused 4.5 never reached the line");
 }
 
 /// A retained message on `topic` (the payload given by `payload`: `-m TEXT` or `-f FILE`), left
@@ -780,4 +793,28 @@ fn values_set_over_mqtt_appear_at_the_next_read_of_an_emulated_meter() {
     assert_eq!(answer[..2], [0x04, 4], "{answer:02X?}");
     let volts = f32::from_bits(u32::from_be_bytes([answer[2], answer[3], answer[4], answer[5]]));
     assert!((volts - 231.7).abs() < 1e-4, "{volts}");
+}
+
+/// A prefix holding a target's address (`watch 127.0.0.1:17502 …`'s default has its dots): Home
+/// Assistant matches every discovery topic against its own pattern (`[a-zA-Z0-9_-]` ids) and
+/// ignored each one, logging "illegal discovery topic". Every topic now passes that pattern and
+/// the schemas, both checked with Home Assistant's own code.
+#[test]
+#[ignore = "needs mosquitto and the homeassistant package; .ci/run installs them and runs this with --ignored"]
+fn discovery_topics_pass_home_assistants_pattern_whatever_the_prefix() {
+    let d = dir("ha-topic");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    let sub = Sub::start(port, "homeassistant/#");
+    let out = Command::new(BIN)
+        .args(["demo", "--format", "summary", "--speed", "0", "--duration", "3"])
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/vm/127.0.0.1:17502"])
+        .args(["--mqtt-discovery", "homeassistant"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    sub.wait_for("the MK4's discovery", |g| g.iter().any(|(t, _)| t.contains("/u1_")));
+    std::thread::sleep(Duration::from_millis(300));
+    let verdict = home_assistant_check(&sub.got());
+    assert!(verdict["checked"].as_u64().unwrap() > 10, "{verdict}");
 }

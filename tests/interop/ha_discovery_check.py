@@ -10,6 +10,9 @@ import sys
 # persistent_notification components that a direct import of the MQTT platforms runs into.
 import homeassistant.bootstrap  # noqa: F401
 from homeassistant.components.mqtt import binary_sensor, number, select, sensor, switch
+# The pattern Home Assistant matches a discovery topic against (after its prefix): node and object
+# ids of [a-zA-Z0-9_-] only; a topic it does not match is logged as illegal and ignored.
+from homeassistant.components.mqtt.discovery import TOPIC_MATCHER
 
 schemas = {
     "sensor": sensor.DISCOVERY_SCHEMA,
@@ -25,6 +28,9 @@ for line in sys.stdin:
     if len(parts) < 4 or parts[-1] != "config" or not payload:
         continue
     component = parts[1]
+    if not TOPIC_MATCHER.match("/".join(parts[1:])):
+        refused.append([topic, "Home Assistant's discovery topic pattern does not match it (ids must be [a-zA-Z0-9_-])"])
+        continue
     schema = schemas.get(component)
     if schema is None:
         refused.append([topic, f"component {component} is not one mbtap announces"])
