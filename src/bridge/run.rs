@@ -232,10 +232,11 @@ pub async fn bridge<W: Write>(
         if let Some(front) = &opts.listen_serial {
             let _ = writeln!(
                 err,
-                "mbtap: bridge answering as the slave on {} at {} {} (--listen-serial)",
+                "mbtap: answering as the slave on {} at {} {} ({})",
                 front.port,
                 front.line,
-                front.mode.name()
+                front.mode.name(),
+                front.option
             );
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, ..opts.server.clone() });
             let monitor = (monitoring && opts.monitor_front).then(|| monitor_tx.clone());

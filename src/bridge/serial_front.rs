@@ -43,6 +43,9 @@ pub struct SerialFront {
     pub rs485: crate::source::rs485::Rs485Args,
     /// The addresses answered as (`--answer-as`); empty: every unit a line serves.
     pub answer_as: BTreeSet<u8>,
+    /// The option the user gave for it, for what is said at start (`--listen-serial`,
+    /// `--reverse`, `simulate --serial`).
+    pub option: &'static str,
 }
 
 impl SerialFront {

@@ -364,6 +364,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
             rs485,
             answer_as,
+            option: if reverse { "--reverse" } else { "--listen-serial" },
         }),
     };
     let mut opts = opts;

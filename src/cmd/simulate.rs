@@ -156,7 +156,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         specs.iter().map(|d| emulate_from::parse_device(d)).collect::<anyhow::Result<_>>()?;
     let mut notes = String::new();
     for spec in &from {
-        emulated.extend(emulate_from::from_capture(spec, replay_values, &mut notes)?);
+        emulated.extend(emulate_from::from_capture(spec, replay_values, turnaround_ms, &mut notes)?);
     }
     let mirroring = match (&mirror, &mirror_device) {
         (Some(target), Some(source)) => {
@@ -229,6 +229,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                     turnaround: Duration::ZERO,
                     rs485,
                     answer_as: own_units,
+                    option: "simulate --serial",
                 }),
             };
             let bridge = crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts);

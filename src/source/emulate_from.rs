@@ -42,10 +42,15 @@ pub fn profile_at(spec: &str, what: &str) -> anyhow::Result<(mbtap_device::profi
 ///
 /// # Errors
 /// The capture cannot be read; no unit answered in it; a unit asked for is not in it.
-pub fn from_capture(spec: &str, replay_values: bool, notes: &mut String) -> anyhow::Result<Vec<Device>> {
+pub fn from_capture(
+    spec: &str,
+    replay_values: bool,
+    turnaround_ms: Option<f64>,
+    notes: &mut String,
+) -> anyhow::Result<Vec<Device>> {
     let (path, wanted) = split_units(spec)?;
     if let Some(image) = super::image_file::load(path)? {
-        return from_image(path, &image, wanted.as_ref(), notes);
+        return from_image(path, &image, wanted.as_ref(), turnaround_ms, notes);
     }
     let input = crate::output::progress::open_capture(path, false)?;
     let mut recorder = Recorder::default();
@@ -82,7 +87,7 @@ pub fn from_capture(spec: &str, replay_values: bool, notes: &mut String) -> anyh
             );
             d.replay_values(course);
         }
-        describe(path, d, notes);
+        describe(path, d, turnaround_ms, notes);
     }
     Ok(devices.into_iter().map(Device::Recorded).collect())
 }
@@ -93,6 +98,7 @@ fn from_image(
     path: &Path,
     image: &mbtap_analysis::learn::diff::Image,
     wanted: Option<&BTreeSet<u8>>,
+    turnaround_ms: Option<f64>,
     notes: &mut String,
 ) -> anyhow::Result<Vec<Device>> {
     let units: BTreeSet<u8> = image.keys().map(|&(u, _, _)| u).filter(|u| (1..=247).contains(u)).collect();
@@ -111,7 +117,7 @@ fn from_image(
             .map(|(&(_, t, a), &raw)| ((t, a), raw))
             .collect();
         let d = mbtap_sim::RecordedDevice::from_image(unit, values);
-        describe(path, &d, notes);
+        describe(path, &d, turnaround_ms, notes);
         out.push(Device::Recorded(d));
     }
     Ok(out)
@@ -156,7 +162,7 @@ fn join<'a>(units: impl Iterator<Item = &'a u8>) -> String {
 /// `unit 17 (from site.pcapng): holding registers 100–139, input registers 430–441 as last
 /// heard; 2 requests refused as recorded; answers after 4.1 ms (median of 80); anything
 /// else: exception 02`.
-fn describe(path: &Path, d: &mbtap_sim::RecordedDevice, notes: &mut String) {
+fn describe(path: &Path, d: &mbtap_sim::RecordedDevice, turnaround_ms: Option<f64>, notes: &mut String) {
     let mut held = Vec::new();
     for (table, n) in d.counts() {
         if n > 0 {
@@ -164,18 +170,22 @@ fn describe(path: &Path, d: &mbtap_sim::RecordedDevice, notes: &mut String) {
         }
     }
     let refused = d.refusals().count();
-    let latency = d.latency.map_or_else(
-        || "no latency measured in it: answers after 3 ms (--turnaround-ms to change)".to_owned(),
-        |l| {
-            format!(
-                "answers after {:.1} ms (median of {}; 10–90 % {:.1}–{:.1} ms)",
-                ms(l.median_ns),
-                l.samples,
-                ms(l.p10_ns),
-                ms(l.p90_ns)
-            )
-        },
-    );
+    // What it does, not what the recording says, when --turnaround-ms says otherwise.
+    let recorded = || {
+        d.latency.map_or_else(
+            || "no latency measured in it: answers after 3 ms (--turnaround-ms to change)".to_owned(),
+            |l| {
+                format!(
+                    "answers after {:.1} ms (median of {}; 10–90 % {:.1}–{:.1} ms)",
+                    ms(l.median_ns),
+                    l.samples,
+                    ms(l.p10_ns),
+                    ms(l.p90_ns)
+                )
+            },
+        )
+    };
+    let latency = turnaround_ms.map_or_else(recorded, |t| format!("answers after {t} ms (--turnaround-ms)"));
     let _ = writeln!(
         notes,
         "mbtap: emulating unit {} as {} showed it: {} as last heard; {refused} requests refused as recorded; {latency}; what it never showed: exception 02 (01 for a function)",
