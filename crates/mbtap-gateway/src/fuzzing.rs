@@ -120,3 +120,45 @@ pub fn transports(data: &[u8]) {
         assert!(reply.len() <= 64 + 3 * 256, "{} bytes of answers", reply.len());
     }
 }
+
+/// Any bytes as one asker's requests and answers in time: the first byte picks ids or none;
+/// then each byte is an event — its top bit a request (the next number) or an answer (to a
+/// request still numbered, picked by the low bits), the rest milliseconds since the last event.
+/// The rule must never deliver an answer to a request its asker gave up on, nor an answer to a
+/// client without ids after a later request, and keeps bounded state.
+///
+/// # Panics
+/// When an answer reaches a request given up: the point of this harness.
+pub fn lifetime(data: &[u8]) {
+    use crate::lifetime::{Fate, Ids, Lifetime};
+    let (&kind, script) = data.split_first().unwrap_or((&0, &[]));
+    let ids = if kind & 1 == 0 { Ids::Has } else { Ids::None };
+    let mut l = Lifetime::new(ids);
+    let (mut next, mut now) = (0u64, Duration::ZERO);
+    let mut open: Vec<u64> = Vec::new();
+    for &b in script {
+        now += Duration::from_millis(u64::from(b & 0x3F) * 7);
+        if b & 0x80 != 0 || open.is_empty() {
+            let seq = next;
+            next += 1;
+            if let Some(below) = l.asked(seq, now) {
+                assert!(below <= seq, "gave up on requests not yet asked");
+                open.retain(|&s| s >= below);
+            }
+            open.push(seq);
+            if open.len() > 64 {
+                open.remove(0);
+            }
+        } else {
+            let i = usize::from(b & 0x3F) % open.len();
+            let seq = open.remove(i);
+            let fate = l.answer(seq, now);
+            if l.given_up(seq) {
+                assert_eq!(fate, Fate::Withhold, "request {seq} was given up");
+            }
+            if ids == Ids::None && seq + 1 < next {
+                assert_eq!(fate, Fate::Withhold, "a later request came: {seq} answered to a client without ids");
+            }
+        }
+    }
+}
