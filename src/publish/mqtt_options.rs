@@ -28,7 +28,8 @@ pub struct MqttArgs {
     /// QoS of value, health and findings messages (the status is always QoS 1).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=2))]
     pub mqtt_qos: u8,
-    /// Retain value messages (the status and discovery messages always are).
+    /// Retain value messages (the status and discovery messages always are, and with
+    /// --mqtt-discovery the values too: Home Assistant starting later gets the current ones).
     #[arg(long)]
     pub mqtt_retain: bool,
     /// A value that changes is published at most this often (bus time): `1s`, `250ms`, `0`.

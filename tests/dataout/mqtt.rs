@@ -818,3 +818,28 @@ fn discovery_topics_pass_home_assistants_pattern_whatever_the_prefix() {
     let verdict = home_assistant_check(&sub.got());
     assert!(verdict["checked"].as_u64().unwrap() > 10, "{verdict}");
 }
+
+/// Home Assistant on the first try: each entity's config goes out before its first state (HA
+/// subscribes to the state topic when the config arrives; a state before it is never seen and the
+/// sensor sits at `unknown` until the value changes), and with discovery the states are retained,
+/// so a Home Assistant that starts after mbtap gets every current value at once.
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn discovered_entities_get_their_state_after_their_config_and_kept_for_a_late_home_assistant() {
+    let d = dir("ha-first-try");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    let sub = Sub::start(port, "#");
+    demo_publishing(port);
+    // The MK4's L1 voltage, input 430 of unit 1.
+    let state = "mbtap/site1/line1/unit/1/input_registers/430";
+    sub.wait_for("the voltage's state", |g| g.iter().any(|(t, _)| t == state));
+    let got = sub.got();
+    let config =
+        got.iter().position(|(t, _)| t.starts_with("homeassistant/") && t.ends_with("/u1_input_registers_430/config"));
+    let first_state = got.iter().position(|(t, _)| t == state);
+    assert!(config.is_some() && config < first_state, "config at {config:?}, first state at {first_state:?}");
+    // A Home Assistant starting now, after the demo ended: the retained state is there.
+    let late = Sub::start(port, "mbtap/site1/line1/unit/1/input_registers/#");
+    late.wait_for("the retained voltage", |g| g.iter().any(|(t, _)| t == state));
+}

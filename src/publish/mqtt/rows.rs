@@ -29,12 +29,17 @@ impl Mqtt {
             o.insert("t_ns".into(), t_ns.into());
         }
         let topic = self.value_topic(r);
-        self.send(&topic, self.qos, self.retain, payload.to_string());
-        st.last.insert((r.unit, r.table, r.address), Sent { raw: r.raw, shown: r.shown.clone(), t_ns });
-        if self.discovery != Announce::Nothing && r.name.is_some() && st.discovered.insert((r.unit, r.table, r.address))
-        {
+        // The entity first, then its state: Home Assistant subscribes to the state topic when the
+        // config arrives, so a state sent before it is never seen and the sensor sits at
+        // `unknown` until the value changes (an energy total still overnight: all night).
+        let discovering = self.discovery != Announce::Nothing;
+        if discovering && r.name.is_some() && st.discovered.insert((r.unit, r.table, r.address)) {
             self.announce(r, &topic);
         }
+        // With discovery, states are retained: a Home Assistant that starts (or restarts) after
+        // mbtap gets every current value at once, as it gets the retained configs.
+        self.send(&topic, self.qos, self.retain || discovering, payload.to_string());
+        st.last.insert((r.unit, r.table, r.address), Sent { raw: r.raw, shown: r.shown.clone(), t_ns });
     }
 
     /// Home Assistant MQTT discovery: one entity per named value, grouped by device — a
