@@ -115,6 +115,13 @@ impl Link {
         connect_timeout: Duration,
     ) -> anyhow::Result<Self> {
         let (mode, settings, _) = line.overrides().resolve();
+        // RFC 2217 negotiates the remote port's settings around the bytes; the master speaks
+        // through tokio-modbus's transports, which carry none of that. Refused, never taken for
+        // a serial path named `rfc2217:`.
+        anyhow::ensure!(
+            !target.starts_with("rfc2217://"),
+            "{target}: RFC 2217 is read by `sniff` and served by `bridge --serial`; for read, write, watch and probe give the serial server's raw TCP port as rtu+tcp://HOST:PORT, or put `mbtap bridge --serial {target} --listen 127.0.0.1:1502` in front and read 127.0.0.1:1502"
+        );
         let endpoint = Endpoint::parse(target);
         anyhow::ensure!(
             mode == SerialMode::Rtu || !matches!(endpoint, Endpoint::Tcp(_)),

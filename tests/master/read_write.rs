@@ -321,3 +321,16 @@ fn a_late_answer_is_never_shown_under_another_request_s_registers() {
     let (right, wrong) = watch_late_device(50);
     assert_eq!((right, wrong), (16, 0));
 }
+
+/// `rfc2217://` is no serial port path: `read` refuses it saying what to give instead (it was taken
+/// for a file named `rfc2217:` and failed as a port that does not open).
+#[test]
+fn an_rfc2217_target_is_refused_by_read_saying_what_to_give() {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["read", "rfc2217://127.0.0.1:9", "holding", "0"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("rtu+tcp://HOST:PORT") && !err.contains("opening serial port"), "{err}");
+}
