@@ -176,6 +176,9 @@ pub struct OutputArgs {
     /// there for every unit heard.
     #[arg(long, value_name = "DRAFT.toml|DIR/")]
     pub learn: Option<std::path::PathBuf>,
+    /// Replace `--learn` drafts that are there already (without it they are kept, and said).
+    #[arg(long, requires = "learn")]
+    pub learn_force: bool,
     #[command(flatten)]
     pub publish: crate::publish::PublishArgs,
 }
@@ -282,7 +285,9 @@ pub fn add_reports<W: std::io::Write>(writer: &mut EventWriter<W>, o: &OutputArg
         use crate::output::learn_draft::DraftTo;
         let dir = path.as_os_str().to_string_lossy().ends_with('/') || path.is_dir();
         let to = if dir { DraftTo::Dir(path.clone()) } else { DraftTo::File(path.clone()) };
-        writer.learn = Some(crate::output::learn_draft::LiveDraft::new(Some(to), "the line mbtap listened to".into()));
+        let mut draft = crate::output::learn_draft::LiveDraft::new(Some(to), "the line mbtap listened to".into());
+        draft.replace = crate::output::learn_draft::Replace::new(o.learn_force);
+        writer.learn = Some(draft);
     }
     Ok(())
 }

@@ -38,6 +38,9 @@ pub struct Args {
     /// Write a draft profile per unit heard into this directory (`learned-unit-N.toml`).
     #[arg(long, value_name = "DIR")]
     pub dir: Option<PathBuf>,
+    /// Replace draft files that are there already (without it they are kept, and said).
+    #[arg(long)]
+    pub force: bool,
     /// Only this unit.
     #[arg(long)]
     pub unit: Option<u8>,
@@ -86,6 +89,7 @@ fn listen(args: &Args) -> anyhow::Result<mbtap_analysis::learn::Learner> {
     };
     let mut writer = crate::output::EventWriter::new(std::io::sink(), crate::output::EventFormat::Summary);
     let mut draft = crate::output::learn_draft::LiveDraft::new(target(args), port);
+    draft.replace = crate::output::learn_draft::Replace::new(args.force);
     draft.learner.only = args.unit;
     writer.learn = Some(draft);
     crate::cmd::runtime()?
@@ -145,7 +149,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     }
     if let Some(to) = target(args) {
         let source = args.capture.display().to_string();
-        for (unit, file) in crate::output::learn_draft::write_drafts(&learner, &to, &source, &args.hint)? {
+        let mut replace = crate::output::learn_draft::Replace::new(args.force);
+        for (unit, file) in crate::output::learn_draft::write_drafts(&learner, &to, &source, &args.hint, &mut replace)?
+        {
             eprintln!(
                 "mbtap: draft profile of unit {unit} written to {} (check it: mbtap profiles check)",
                 file.display()

@@ -45,10 +45,34 @@ fn one_file_for_many(path: &Path, units: &[u8]) -> String {
     )
 }
 
+/// Which existing files a draft may replace: with `--force` any; otherwise only those this run
+/// wrote itself (a live draft rewrites its own file every 10 s), never one that was there before
+/// — as `profiles import` keeps an existing profile.
+#[derive(Debug, Clone, Default)]
+pub struct Replace {
+    pub force: bool,
+    mine: std::collections::BTreeSet<PathBuf>,
+}
+
+impl Replace {
+    #[must_use]
+    pub fn new(force: bool) -> Self {
+        Self { force, mine: std::collections::BTreeSet::new() }
+    }
+}
+
 /// Writes one file atomically, through the one writer of whole files (no planted link is
-/// followed).
-fn write_atomic(file: &Path, text: &str) -> anyhow::Result<()> {
-    super::whole_file::write_whole(file, text.as_bytes())
+/// followed); a file that was there before is replaced only under `--force`.
+fn write_atomic(file: &Path, text: &str, replace: &mut Replace) -> anyhow::Result<()> {
+    if !replace.force && !replace.mine.contains(file) && file.symlink_metadata().is_ok() {
+        anyhow::bail!(
+            "{} already exists: kept as it is; give --force to replace it, or another -o/--dir",
+            file.display()
+        );
+    }
+    super::whole_file::write_whole(file, text.as_bytes())?;
+    replace.mine.insert(file.to_path_buf());
+    Ok(())
 }
 
 /// Writes the drafts of `learner` to `to`; the files written.
@@ -61,6 +85,7 @@ pub fn write_drafts(
     to: &DraftTo,
     source: &str,
     hints: &[mbtap_analysis::learn::hint::Hint],
+    replace: &mut Replace,
 ) -> anyhow::Result<Vec<(u8, PathBuf)>> {
     match to {
         DraftTo::File(path) if learner.units.len() > 1 => {
@@ -73,7 +98,7 @@ pub fn write_drafts(
     let mut written = Vec::new();
     for (unit, u) in &learner.units {
         let file = to.file_for(*unit);
-        write_atomic(&file, &mbtap_analysis::learn::draft::profile_toml(*unit, u, source, hints))?;
+        write_atomic(&file, &mbtap_analysis::learn::draft::profile_toml(*unit, u, source, hints), replace)?;
         written.push((*unit, file));
     }
     Ok(written)
@@ -90,12 +115,21 @@ pub struct LiveDraft {
     /// One file asked for and a second unit heard: that file keeps the first unit's draft,
     /// and the others are said once at the end (a listening session is not ended for it).
     pub left_out: Vec<u8>,
+    /// Which existing files may be replaced (`--force`; its own, rewritten, always).
+    pub replace: Replace,
 }
 
 impl LiveDraft {
     #[must_use]
     pub fn new(to: Option<DraftTo>, source: String) -> Self {
-        Self { learner: Learner::default(), to, source, last_write_ns: None, left_out: Vec::new() }
+        Self {
+            learner: Learner::default(),
+            to,
+            source,
+            last_write_ns: None,
+            left_out: Vec::new(),
+            replace: Replace::default(),
+        }
     }
 
     fn write(&mut self) -> anyhow::Result<Vec<(u8, PathBuf)>> {
@@ -104,10 +138,14 @@ impl LiveDraft {
             && let Some((&first, u)) = self.learner.units.iter().next()
         {
             self.left_out = self.learner.units.keys().copied().filter(|&k| k != first).collect();
-            write_atomic(path, &mbtap_analysis::learn::draft::profile_toml(first, u, &self.source, &[]))?;
+            write_atomic(
+                path,
+                &mbtap_analysis::learn::draft::profile_toml(first, u, &self.source, &[]),
+                &mut self.replace,
+            )?;
             return Ok(vec![(first, path.clone())]);
         }
-        write_drafts(&self.learner, to, &self.source, &[])
+        write_drafts(&self.learner, to, &self.source, &[], &mut self.replace)
     }
 
     /// What to say of the units heard but not written (one file asked for), if any.
@@ -169,10 +207,12 @@ mod tests {
         l.observe(1, &READ, &ANSWER, 0);
         l.observe(5, &READ, &ANSWER, 1);
         let file = dir.join("meter.toml");
-        let e = write_drafts(&l, &DraftTo::File(file.clone()), "test", &[]).unwrap_err().to_string();
+        let e = write_drafts(&l, &DraftTo::File(file.clone()), "test", &[], &mut Replace::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("2 units were heard (1, 5)") && e.contains("--unit N") && e.contains("--dir DIR"), "{e}");
         assert!(!file.exists());
-        let written = write_drafts(&l, &DraftTo::Dir(dir.join("d")), "test", &[]).unwrap();
+        let written = write_drafts(&l, &DraftTo::Dir(dir.join("d")), "test", &[], &mut Replace::default()).unwrap();
         assert_eq!(written.iter().map(|(u, _)| *u).collect::<Vec<_>>(), [1, 5]);
         assert!(dir.join("d/learned-unit-5.toml").exists());
         let mut live = LiveDraft::new(Some(DraftTo::File(file.clone())), "test".into());
@@ -180,6 +220,16 @@ mod tests {
         assert_eq!(live.finish().unwrap(), [(1, file.clone())]);
         let note = live.left_out_note().unwrap();
         assert!(note.contains("unit 1 only") && note.contains("units 5 were heard too"), "{note}");
+        // Its own file is rewritten at every turn; a file that was there before this run is kept
+        // unless --force.
+        assert_eq!(live.finish().unwrap(), [(1, file.clone())], "its own draft, rewritten");
+        let e = write_drafts(&live.learner, &DraftTo::Dir(dir.join("d")), "test", &[], &mut Replace::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("already exists") && e.contains("--force"), "{e}");
+        assert!(
+            write_drafts(&live.learner, &DraftTo::Dir(dir.join("d")), "test", &[], &mut Replace::new(true)).is_ok()
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

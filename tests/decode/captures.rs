@@ -352,10 +352,19 @@ fn learn_never_writes_through_a_planted_link() {
     std::os::unix::fs::symlink(&victim, drafts.join("learned-unit-1.toml.tmp")).unwrap();
     std::os::unix::fs::symlink(&victim, drafts.join("learned-unit-1.toml")).unwrap();
     let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-rtu.pcapng");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
-        .args(["learn", capture, "--dir", drafts.to_str().unwrap(), "--format", "json"])
-        .output()
-        .unwrap();
+    let learn = |force: bool| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+            .args(["learn", capture, "--dir", drafts.to_str().unwrap(), "--format", "json"])
+            .args(force.then_some("--force"))
+            .output()
+            .unwrap()
+    };
+    // Something is at the draft's name: kept, and said, unless --force.
+    let o = learn(false);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("already exists") && err.contains("--force"), "{err}");
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep me");
+    let o = learn(true);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep me");
     let draft = drafts.join("learned-unit-1.toml");
