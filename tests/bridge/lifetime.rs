@@ -13,11 +13,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use super::one_path::{READ_TWO, connect, honest};
+use super::one_path::{READ_TWO, connect, device_after, honest};
 use crate::common::{self, call, counter};
 
 /// Write single register 10 = 25 (MAP v1.1b3 §6.6): function 06, address 000A, value 0019.
@@ -30,50 +30,28 @@ fn read_two_at(addr: u16) -> [u8; 5] {
     [0x03, a[0], a[1], 0x00, 0x02]
 }
 
-/// What the slow device answers: reads honestly, writes by echo (§6.6), unit 9 never.
-fn answer_of(unit: u8, pdu: &[u8]) -> Option<Vec<u8>> {
+/// Requests the test devices were sent, by unit: the tests run at once, so each counts on units
+/// of its own.
+static ASKED: [AtomicUsize; 256] = [const { AtomicUsize::new(0) }; 256];
+
+fn asked(unit: u8) -> usize {
+    ASKED[usize::from(unit)].load(Ordering::SeqCst)
+}
+
+/// What the slow device answers: reads honestly, writes by echo (§6.6), units 9 and 19 never.
+fn answer_of(unit: u8, pdu: &[u8]) -> Option<(u8, Vec<u8>)> {
+    ASKED[usize::from(unit)].fetch_add(1, Ordering::SeqCst);
     match (unit, pdu.first()) {
-        (9, _) => None,
-        (_, Some(0x06)) => Some(pdu.to_vec()),
-        _ => Some(honest(pdu)),
+        (9 | 19, _) => None,
+        (_, Some(0x06)) => Some((unit, pdu.to_vec())),
+        _ => Some((unit, honest(pdu))),
     }
 }
 
 /// A Modbus TCP device on a free loopback port that answers each request `delay` after it read
-/// it, one at a time; the count of requests it was sent.
-fn slow_device(delay: Duration) -> (String, &'static AtomicUsize) {
-    let asked: &'static AtomicUsize = Box::leak(Box::new(AtomicUsize::new(0)));
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = listener.local_addr().unwrap().to_string();
-    std::thread::spawn(move || {
-        for conn in listener.incoming() {
-            let Ok(mut s) = conn else { continue };
-            std::thread::spawn(move || {
-                loop {
-                    let mut head = [0u8; 7];
-                    if s.read_exact(&mut head).is_err() {
-                        return;
-                    }
-                    let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([head[4], head[5]])).saturating_sub(1)];
-                    if s.read_exact(&mut pdu).is_err() {
-                        return;
-                    }
-                    asked.fetch_add(1, Ordering::SeqCst);
-                    std::thread::sleep(delay);
-                    if let Some(body) = answer_of(head[6], &pdu) {
-                        let mut out = head[..4].to_vec();
-                        out.extend_from_slice(&u16::try_from(body.len() + 1).unwrap().to_be_bytes());
-                        out.push(head[6]);
-                        out.extend_from_slice(&body);
-                        if s.write_all(&out).is_err() {
-                            return;
-                        }
-                    }
-                }
-            });
-        }
-    });
-    (addr, asked)
+/// it, one at a time.
+fn slow_device(delay: Duration) -> String {
+    device_after(delay, answer_of)
 }
 
 /// The bridge in front of `device`, with Modbus TCP, RTU over TCP and metrics on free ports.
@@ -126,7 +104,7 @@ fn silent_for(s: &mut TcpStream, wait: Duration) -> bool {
 /// Pipelining: 8 reads `gap_ms` apart on a line answering in `line_ms`; the (id, PDU) pairs
 /// that came back, in order.
 fn pipelined(gap_ms: u64, line_ms: u64) -> Vec<(u16, Vec<u8>)> {
-    let (dev, _) = slow_device(Duration::from_millis(line_ms));
+    let dev = slow_device(Duration::from_millis(line_ms));
     let b = bridge(&dev, &[]);
     let mut c = connect(b.tcp.as_deref().unwrap());
     let mut expected = Vec::new();
@@ -157,15 +135,15 @@ fn a_client_with_ids_gets_every_pipelined_answer_at_any_spacing() {
 
 #[test]
 fn a_writes_answer_is_sent_though_a_read_follows_it() {
-    let (dev, asked) = slow_device(Duration::from_millis(300));
+    let dev = slow_device(Duration::from_millis(300));
     let b = bridge(&dev, &[]);
     let mut c = connect(b.tcp.as_deref().unwrap());
-    send(&mut c, 1, 1, &WRITE_10);
+    send(&mut c, 1, 3, &WRITE_10);
     std::thread::sleep(Duration::from_millis(150));
-    send(&mut c, 2, 1, &READ_TWO);
+    send(&mut c, 2, 3, &READ_TWO);
     assert_eq!(receive(&mut c), (1, WRITE_10.to_vec()), "the write's echo, under its id");
     assert_eq!(receive(&mut c), (2, honest(&READ_TWO)));
-    assert_eq!(asked.load(Ordering::SeqCst), 2);
+    assert_eq!(asked(3), 2);
     assert_eq!(counter(b.metrics.as_deref().unwrap(), "mbtap_bridge_abandoned_total"), 0);
 }
 
@@ -173,7 +151,7 @@ fn a_writes_answer_is_sent_though_a_read_follows_it() {
 /// A's turn comes every 200 ms. A's answers are late (the line is shared), never gone.
 #[test]
 fn another_clients_load_makes_no_answer_vanish() {
-    let (dev, _) = slow_device(Duration::from_millis(100));
+    let dev = slow_device(Duration::from_millis(100));
     let b = bridge(&dev, &["--queue-per-client", "32"]);
     let addr = b.tcp.clone().unwrap();
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -218,17 +196,17 @@ fn another_clients_load_makes_no_answer_vanish() {
 /// the given-up request took line time once.
 #[test]
 fn a_client_shown_sequential_never_gets_the_late_answer_under_its_next_request() {
-    let (dev, asked) = slow_device(Duration::from_millis(5));
+    let dev = slow_device(Duration::from_millis(5));
     let b = bridge(&dev, &["--timeout-ms", "800"]);
     let mut c = connect(b.tcp.as_deref().unwrap());
     for tid in 1..=4u16 {
-        assert_eq!(call(&mut c, tid, 1, &READ_TWO), honest(&READ_TWO));
+        assert_eq!(call(&mut c, tid, 5, &READ_TWO), honest(&READ_TWO));
     }
-    send(&mut c, 5, 9, &READ_TWO);
+    send(&mut c, 5, 19, &READ_TWO);
     std::thread::sleep(Duration::from_millis(555));
-    assert_eq!(call(&mut c, 6, 1, &READ_TWO), honest(&READ_TWO), "its own answer, under its id");
+    assert_eq!(call(&mut c, 6, 5, &READ_TWO), honest(&READ_TWO), "its own answer, under its id");
     assert!(silent_for(&mut c, Duration::from_millis(600)), "the given-up request's 0x0B is never written");
-    assert_eq!(asked.load(Ordering::SeqCst), 6);
+    assert_eq!((asked(5), asked(19)), (5, 1), "the given-up request took line time once");
     let metrics = b.metrics.as_deref().unwrap();
     assert_eq!(counter(metrics, "mbtap_bridge_withheld_sequential_total"), 1);
     assert_eq!(counter(metrics, "mbtap_bridge_abandoned_total"), 0, "counts clients without ids only");
@@ -238,7 +216,7 @@ fn a_client_shown_sequential_never_gets_the_late_answer_under_its_next_request()
 /// that request's id, then its next answer: nothing is taken from it because it asked again.
 #[test]
 fn a_client_not_shown_sequential_gets_the_dead_units_exception_under_its_id() {
-    let (dev, _) = slow_device(Duration::from_millis(5));
+    let dev = slow_device(Duration::from_millis(5));
     let b = bridge(&dev, &["--timeout-ms", "400"]);
     let mut c = connect(b.tcp.as_deref().unwrap());
     send(&mut c, 1, 9, &READ_TWO);
@@ -261,7 +239,7 @@ fn rtu(unit: u8, pdu: &[u8]) -> Vec<u8> {
 #[test]
 fn an_rtu_over_tcp_client_asking_again_never_gets_the_earlier_answer() {
     for gap in [20, 150] {
-        let (dev, _) = slow_device(Duration::from_millis(300));
+        let dev = slow_device(Duration::from_millis(300));
         let b = bridge(&dev, &[]);
         let mut c = connect(b.rtu.as_deref().unwrap());
         c.write_all(&rtu(1, &read_two_at(100))).unwrap();
@@ -321,7 +299,7 @@ fn a_serial_master_with_a_short_timeout_never_gets_another_reads_values() {
         let d = std::env::temp_dir().join(format!("mbtap-lifetime-{}-{line_ms}-{load}", std::process::id()));
         std::fs::create_dir_all(&d).unwrap();
         let (_socat, front, master) = common::socat_pair(&d);
-        let (dev, _) = slow_device(Duration::from_millis(line_ms));
+        let dev = slow_device(Duration::from_millis(line_ms));
         let b = bridge(&dev, &["--listen-serial", front.to_str().unwrap()]);
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let loader = load.then(|| {

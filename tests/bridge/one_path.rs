@@ -22,6 +22,12 @@ pub(crate) type Answer = fn(u8, &[u8]) -> Option<(u8, Vec<u8>)>;
 /// answered with what `answer` makes of it (None: no answer). Serves connections one after
 /// another until the test ends.
 pub(crate) fn device(answer: Answer) -> String {
+    device_after(Duration::ZERO, answer)
+}
+
+/// As [`device`], each answer `delay` after its request was read (a slow device behind a
+/// gateway): one request at a time per connection.
+pub(crate) fn device_after(delay: Duration, answer: Answer) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     std::thread::spawn(move || {
@@ -37,6 +43,7 @@ pub(crate) fn device(answer: Answer) -> String {
                     if s.read_exact(&mut pdu).is_err() {
                         return;
                     }
+                    std::thread::sleep(delay);
                     if let Some((unit, body)) = answer(head[6], &pdu) {
                         let mut out = head[..4].to_vec();
                         out.extend_from_slice(&u16::try_from(body.len() + 1).unwrap().to_be_bytes());
