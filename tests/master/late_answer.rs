@@ -32,7 +32,12 @@ fn answer(req: &[u8]) -> Option<(u8, Vec<u8>)> {
 }
 
 /// Requests framed on the wire in `framing`, each answered `late` after it by its own thread.
-fn serve<S: Read + Write + Send + 'static>(mut rd: S, wr: Arc<Mutex<S>>, framing: Framing, late: Duration) {
+fn serve<R: Read + Send + 'static, W: Write + Send + 'static>(
+    mut rd: R,
+    wr: Arc<Mutex<W>>,
+    framing: Framing,
+    late: Duration,
+) {
     std::thread::spawn(move || {
         let mut buf = Vec::new();
         let mut chunk = [0u8; 256];
@@ -140,7 +145,7 @@ fn a_late_answer_over_rtu_over_tcp_is_never_shown_under_another_register() {
                 let Ok(conn) = conn else { continue };
                 *newest.lock().unwrap() = Some(conn.try_clone().unwrap());
                 let sink = Arc::new(Mutex::new(Newest(Arc::clone(&newest))));
-                serve_tcp(conn, sink);
+                serve(conn, sink, Framing::Rtu, Duration::from_millis(700));
             }
         });
     }
@@ -162,29 +167,4 @@ impl Write for Newest {
     fn flush(&mut self) -> std::io::Result<()> {
         Ok(())
     }
-}
-
-/// The RTU slave of [`serve`] on a TCP connection whose answers go to `sink`, 700 ms late.
-fn serve_tcp(mut conn: std::net::TcpStream, sink: Arc<Mutex<Newest>>) {
-    std::thread::spawn(move || {
-        let mut buf = Vec::new();
-        let mut chunk = [0u8; 256];
-        while let Ok(n) = conn.read(&mut chunk) {
-            if n == 0 {
-                return;
-            }
-            buf.extend_from_slice(&chunk[..n]);
-            while buf.len() >= 8 {
-                let req: Vec<u8> = buf.drain(..8).collect();
-                let Some((unit, pdu)) = answer(&req) else { continue };
-                let sink = Arc::clone(&sink);
-                std::thread::spawn(move || {
-                    std::thread::sleep(Duration::from_millis(700));
-                    let mut out = Vec::new();
-                    mbtap_proto::encode_rtu(unit, &pdu, &mut out);
-                    let _ = sink.lock().unwrap().write_all(&out);
-                });
-            }
-        }
-    });
 }
