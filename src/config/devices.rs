@@ -39,10 +39,56 @@ pub fn resolve_profile(spec: &str) -> anyhow::Result<mbtap_device::profile::Prof
         }
     }
     let dir = user_profile_dir().map_or_else(|| "(no config directory)".to_owned(), |d| d.display().to_string());
+    let guess = closest(spec, known_names()).map(|n| format!(" (did you mean {n:?}?)")).unwrap_or_default();
     anyhow::bail!(
-        "no profile named {spec:?}: built-in profiles are {}; user profiles are NAME.toml files in {dir}; or give the path of a profile file (see docs/profiles.md)",
+        "no profile named {spec:?}{guess}: built-in profiles are {}; user profiles are NAME.toml files in {dir}; or give the path of a profile file (see docs/profiles.md)",
         mbtap_device::profile::builtin::names().join(", ")
     )
+}
+
+/// The profile names a user may mean: the built-in ones and the user profiles' (at most the
+/// first 4 096 files of the directory: a name is a guess, not a scan).
+fn known_names() -> Vec<String> {
+    let mut names: Vec<String> = mbtap_device::profile::builtin::names().iter().map(|&n| n.to_owned()).collect();
+    if let Some(entries) = user_profile_dir().and_then(|d| std::fs::read_dir(d).ok()) {
+        names.extend(entries.take(4096).filter_map(|e| {
+            let path = e.ok()?.path();
+            (path.extension()? == "toml").then(|| path.file_stem()?.to_str().map(str::to_owned)).flatten()
+        }));
+    }
+    names
+}
+
+/// The name nearest to `typed` by edit distance, when it is near enough to be a typo: at most 2
+/// edits, and fewer than half the name (`sdm360` → `sdm630`; `xyz` suggests nothing).
+fn closest(typed: &str, names: Vec<String>) -> Option<String> {
+    let typed: Vec<char> = typed.to_lowercase().chars().collect();
+    names
+        .into_iter()
+        .map(|n| (edit_distance(&typed, &n.to_lowercase().chars().collect::<Vec<_>>()), n))
+        .filter(|(d, n)| *d <= 2 && *d * 2 < n.chars().count())
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, n)| n)
+}
+
+/// Levenshtein distance, with a transposition of two neighbours counted as one edit (a typo's
+/// usual shape: `sdm360` for `sdm630` is two substitutions, `mk4` for `km4` one swap).
+fn edit_distance(a: &[char], b: &[char]) -> usize {
+    let mut prev2: Vec<usize> = vec![0; b.len() + 1];
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for i in 1..=a.len() {
+        let mut row = vec![i; b.len() + 1];
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            let mut best = (prev[j] + 1).min(row[j - 1] + 1).min(prev[j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                best = best.min(prev2[j - 2] + 1);
+            }
+            row[j] = best;
+        }
+        prev2 = std::mem::replace(&mut prev, row);
+    }
+    prev[b.len()]
 }
 
 /// The `UNIT=PROFILE` lines of the `NAME.devices` file beside a capture `NAME.pcapng`, if there
@@ -91,4 +137,20 @@ pub fn load_devices(devices: &[String]) -> anyhow::Result<Profiles> {
         out.insert(unit, resolve_profile(profile.trim()).with_context(|| format!("--device {d:?}"))?);
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_profile_name_typed_wrong_gets_the_nearest_as_a_suggestion() {
+        let names = || ["mk4", "mkzp", "display", "sdm630"].map(String::from).to_vec();
+        assert_eq!(closest("sdm360", names()).as_deref(), Some("sdm630"));
+        assert_eq!(closest("MKZP", names()).as_deref(), Some("mkzp"));
+        assert_eq!(closest("dispaly", names()).as_deref(), Some("display"));
+        assert_eq!(closest("xyz", names()), None, "nothing near: no suggestion");
+        assert_eq!(closest("mk5", names()).as_deref(), Some("mk4"));
+        assert_eq!(closest("zz", names()), None, "two edits of a short name are no typo");
+    }
 }
