@@ -59,36 +59,17 @@ fn known_names() -> Vec<String> {
     names
 }
 
-/// The name nearest to `typed` by edit distance, when it is near enough to be a typo: at most 2
-/// edits, and fewer than half the name (`sdm360` → `sdm630`; `xyz` suggests nothing).
+/// The name nearest to `typed` by edit distance (the query's own "did you mean" measure), when
+/// it is near enough to be a typo: at most 2 edits, and fewer than half the name (`sdm360` →
+/// `sdm630`; `xyz` suggests nothing).
 fn closest(typed: &str, names: Vec<String>) -> Option<String> {
-    let typed: Vec<char> = typed.to_lowercase().chars().collect();
+    let typed = typed.to_lowercase();
     names
         .into_iter()
-        .map(|n| (edit_distance(&typed, &n.to_lowercase().chars().collect::<Vec<_>>()), n))
+        .map(|n| (mbtap_device::query::resolve::distance(&typed, &n.to_lowercase()), n))
         .filter(|(d, n)| *d <= 2 && *d * 2 < n.chars().count())
         .min_by_key(|(d, _)| *d)
         .map(|(_, n)| n)
-}
-
-/// Levenshtein distance, with a transposition of two neighbours counted as one edit (a typo's
-/// usual shape: `sdm360` for `sdm630` is two substitutions, `mk4` for `km4` one swap).
-fn edit_distance(a: &[char], b: &[char]) -> usize {
-    let mut prev2: Vec<usize> = vec![0; b.len() + 1];
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for i in 1..=a.len() {
-        let mut row = vec![i; b.len() + 1];
-        for j in 1..=b.len() {
-            let cost = usize::from(a[i - 1] != b[j - 1]);
-            let mut best = (prev[j] + 1).min(row[j - 1] + 1).min(prev[j - 1] + cost);
-            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
-                best = best.min(prev2[j - 2] + 1);
-            }
-            row[j] = best;
-        }
-        prev2 = std::mem::replace(&mut prev, row);
-    }
-    prev[b.len()]
 }
 
 /// The `UNIT=PROFILE` lines of the `NAME.devices` file beside a capture `NAME.pcapng`, if there

@@ -39,8 +39,10 @@ fn short(name: &str) -> String {
     n.to_lowercase()
 }
 
-/// Levenshtein distance over chars, for "did you mean". Bounded work: names are short.
-fn distance(a: &str, b: &str) -> usize {
+/// Levenshtein distance over chars, for "did you mean" (register names here, profile names in
+/// the binary). Bounded work: names are short.
+#[must_use]
+pub fn distance(a: &str, b: &str) -> usize {
     let b: Vec<char> = b.chars().collect();
     let mut row: Vec<usize> = (0..=b.len()).collect();
     for (i, ca) in a.chars().enumerate() {
