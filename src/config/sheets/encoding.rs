@@ -69,105 +69,63 @@ pub fn detect(mut input: impl Read) -> std::io::Result<Encoding> {
     }
 }
 
-/// Windows-1252's characters for bytes 0x80–0x9F (the rest of the code page is Latin-1: the byte
-/// is the character); the five bytes the code page leaves undefined keep their C1 control.
-const CP1252_80_9F: [char; 32] = [
-    '\u{20AC}', '\u{0081}', '\u{201A}', '\u{0192}', '\u{201E}', '\u{2026}', '\u{2020}', '\u{2021}', '\u{02C6}',
-    '\u{2030}', '\u{0160}', '\u{2039}', '\u{0152}', '\u{008D}', '\u{017D}', '\u{008F}', '\u{0090}', '\u{2018}',
-    '\u{2019}', '\u{201C}', '\u{201D}', '\u{2022}', '\u{2013}', '\u{2014}', '\u{02DC}', '\u{2122}', '\u{0161}',
-    '\u{203A}', '\u{0153}', '\u{009D}', '\u{017E}', '\u{0178}',
-];
-
-/// Bytes of Windows-1252 as text.
+/// Bytes of Windows-1252 as text (`encoding_rs`, the WHATWG mapping: the five bytes the code
+/// page leaves undefined keep their C1 control).
 #[must_use]
 pub fn windows_1252(bytes: &[u8]) -> String {
-    bytes
-        .iter()
-        .map(|&b| match b {
-            0x80..=0x9F => CP1252_80_9F.get(usize::from(b - 0x80)).copied().unwrap_or('\u{FFFD}'),
-            _ => char::from(b),
-        })
-        .collect()
+    encoding_rs::WINDOWS_1252.decode_without_bom_handling(bytes).0.into_owned()
 }
 
-/// UTF-16 read as UTF-8, streamed: what a CSV reader expects. An unpaired surrogate becomes
-/// U+FFFD (counted in `damaged`).
-#[derive(Debug)]
+/// UTF-16 read as UTF-8, streamed through `encoding_rs`'s decoder: what a CSV reader expects. An
+/// unpaired surrogate or an odd last byte becomes U+FFFD, counted in `damaged`.
 pub struct Utf16ToUtf8<R> {
     inner: R,
-    big_endian: bool,
+    decoder: encoding_rs::Decoder,
     /// UTF-8 bytes decoded and not yet read, and how far they have been read.
     out: Vec<u8>,
     at: usize,
-    /// A byte of a code unit cut between two reads.
-    odd: Option<u8>,
-    /// A high surrogate waiting for its low half.
-    high: Option<u16>,
+    done: bool,
     pub damaged: u64,
 }
 
+impl<R> std::fmt::Debug for Utf16ToUtf8<R> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Utf16ToUtf8").field("done", &self.done).field("damaged", &self.damaged).finish_non_exhaustive()
+    }
+}
+
 impl<R: Read> Utf16ToUtf8<R> {
-    pub const fn new(inner: R, big_endian: bool) -> Self {
-        Self { inner, big_endian, out: Vec::new(), at: 0, odd: None, high: None, damaged: 0 }
-    }
-
-    fn push(&mut self, c: char) {
-        let mut b = [0u8; 4];
-        self.out.extend_from_slice(c.encode_utf8(&mut b).as_bytes());
-    }
-
-    fn unit(&mut self, u: u16) {
-        match (self.high.take(), u) {
-            (Some(h), 0xDC00..=0xDFFF) => {
-                let c = 0x10000 + ((u32::from(h) - 0xD800) << 10) + (u32::from(u) - 0xDC00);
-                self.push(char::from_u32(c).unwrap_or('\u{FFFD}'));
-            }
-            (h, 0xD800..=0xDBFF) => {
-                if h.is_some() {
-                    self.damaged += 1;
-                    self.push('\u{FFFD}');
-                }
-                self.high = Some(u);
-            }
-            (h, _) => {
-                if h.is_some() {
-                    self.damaged += 1;
-                    self.push('\u{FFFD}');
-                }
-                let c = char::from_u32(u32::from(u)).unwrap_or_else(|| {
-                    self.damaged += 1;
-                    '\u{FFFD}'
-                });
-                self.push(c);
-            }
+    pub fn new(inner: R, big_endian: bool) -> Self {
+        let encoding = if big_endian { encoding_rs::UTF_16BE } else { encoding_rs::UTF_16LE };
+        Self {
+            inner,
+            decoder: encoding.new_decoder_without_bom_handling(),
+            out: Vec::new(),
+            at: 0,
+            done: false,
+            damaged: 0,
         }
     }
 }
 
 impl<R: Read> Read for Utf16ToUtf8<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        while self.at >= self.out.len() {
-            self.out.clear();
-            self.at = 0;
+        while self.at >= self.out.len() && !self.done {
             let mut raw = [0u8; 8192];
             let n = self.inner.read(&mut raw)?;
-            if n == 0 {
-                if self.high.take().is_some() || self.odd.take().is_some() {
-                    self.damaged += 1;
-                    self.push('\u{FFFD}');
-                    break;
-                }
-                return Ok(0);
+            let last = n == 0;
+            let src = raw.get(..n).unwrap_or_default();
+            // Room for every code unit as three UTF-8 bytes, and the replacements at the end.
+            self.out.clear();
+            self.out.resize(self.decoder.max_utf8_buffer_length(n).unwrap_or(n * 3 + 16), 0);
+            let (_, _, written, replaced) = self.decoder.decode_to_utf8(src, &mut self.out, last);
+            self.out.truncate(written);
+            self.at = 0;
+            if replaced {
+                let fffd = "\u{FFFD}".as_bytes();
+                self.damaged += self.out.windows(fffd.len()).filter(|w| *w == fffd).count() as u64;
             }
-            let mut bytes = raw.get(..n).unwrap_or_default().iter().copied();
-            while let Some(a) = self.odd.take().or_else(|| bytes.next()) {
-                let Some(b) = bytes.next() else {
-                    self.odd = Some(a);
-                    break;
-                };
-                let u = if self.big_endian { u16::from_be_bytes([a, b]) } else { u16::from_le_bytes([a, b]) };
-                self.unit(u);
-            }
+            self.done = last;
         }
         let rest = self.out.get(self.at..).unwrap_or_default();
         let n = rest.len().min(buf.len());
