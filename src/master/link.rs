@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use mbtap_analysis::analyzer::SerialMode;
-use mbtap_gateway::transaction::{EchoMode, LateListener, MasterConfig};
+use mbtap_gateway::transaction::LateListener;
 use tokio_modbus::client::Context;
 use tokio_modbus::{Slave, prelude::rtu, prelude::tcp};
 
@@ -213,18 +213,8 @@ impl Link {
     /// was.
     async fn hear_out_late_answer<S: tokio::io::AsyncRead + Unpin>(&mut self, stream: &mut S) {
         let Some(origin) = self.timed_out_at.take() else { return };
-        let config = MasterConfig {
-            line: self.line,
-            mode: self.mode,
-            echo: EchoMode::Off,
-            retries: 0,
-            turnaround: Duration::ZERO,
-            broadcast_reply: false,
-            latency: ADAPTER_LATENCY,
-            monitored: false,
-        };
         let window = self.connect_timeout.max(self.late_by + self.late_by / 4);
-        let listener = LateListener::new(&config, window, Duration::ZERO);
+        let listener = LateListener::on_line(self.line, self.mode, ADAPTER_LATENCY, window, Duration::ZERO);
         if let Some(first) = drain_late_answer(stream, listener, origin).await {
             self.late_by = first;
         }

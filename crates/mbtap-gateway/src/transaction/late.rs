@@ -3,6 +3,8 @@
 //! transceiver's turnaround glitch before an answer.
 
 use super::MasterConfig;
+use mbtap_analysis::analyzer::SerialMode;
+use mbtap_analysis::framer::LineSettings;
 use std::time::Duration;
 
 /// After a timeout: listens up to the window for what the unit says late, ending
@@ -28,7 +30,14 @@ impl LateListener {
     /// 1 s, so a slow unit costs the other clients little; mbtap's own master to its timeout).
     #[must_use]
     pub fn new(config: &MasterConfig, window: Duration, now: Duration) -> Self {
-        let silence = Duration::from_nanos(config.line.t35_ns()) + Duration::from_millis(1) + config.latency;
+        Self::on_line(config.line, config.mode, config.latency, window, now)
+    }
+
+    /// As [`Self::new`], for a master that knows only its line, its mode and how late its
+    /// adapter may deliver a byte (mbtap's own `read`/`watch`).
+    #[must_use]
+    pub fn on_line(line: LineSettings, mode: SerialMode, latency: Duration, window: Duration, now: Duration) -> Self {
+        let silence = Duration::from_nanos(line.t35_ns()) + Duration::from_millis(1) + latency;
         Self {
             start: now,
             until: now + window,
@@ -37,7 +46,7 @@ impl LateListener {
             last: None,
             first_at: now,
             heard: 0,
-            max_adu: config.max_adu(),
+            max_adu: super::steps::max_adu(mode),
         }
     }
 

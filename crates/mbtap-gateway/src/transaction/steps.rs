@@ -53,6 +53,16 @@ pub struct MasterConfig {
     pub monitored: bool,
 }
 
+/// The longest ADU a mode carries: RTU 256 bytes (Serial Line v1.02 §2.5.1.1), ASCII 513
+/// characters (§2.5.2.1).
+#[must_use]
+pub const fn max_adu(mode: SerialMode) -> usize {
+    match mode {
+        SerialMode::Rtu => 256,
+        SerialMode::Ascii => 513,
+    }
+}
+
 impl MasterConfig {
     /// Quiet time after the last byte before the next request: t3.5 plus the turnaround
     /// (Serial Line v1.02 §2.5.1.1).
@@ -61,14 +71,10 @@ impl MasterConfig {
         Duration::from_nanos(self.line.t35_ns()) + self.turnaround
     }
 
-    /// The longest ADU the mode carries: RTU 256 bytes (Serial Line v1.02 §2.5.1.1), ASCII 513
-    /// characters (§2.5.2.1).
+    /// The longest ADU its mode carries ([`max_adu`]).
     #[must_use]
     pub fn max_adu(&self) -> usize {
-        match self.mode {
-            SerialMode::Rtu => 256,
-            SerialMode::Ascii => 513,
-        }
+        max_adu(self.mode)
     }
 
     /// The silence that ends an answer: RTU t3.5, plus one timer tick (reads come in 1 ms
