@@ -148,8 +148,7 @@ impl Lifetime {
     /// a serial front's turnaround and the frame's time on the wire). Whether it goes out;
     /// either way the request is no longer waiting.
     pub fn answer(&mut self, seq: u64, arrives: Duration) -> Fate {
-        let asked =
-            self.waiting.iter().position(|&(s, _)| s == seq).and_then(|i| self.waiting.remove(i)).map(|(_, at)| at);
+        let asked = self.take(seq);
         if seq < self.given_up_below {
             return Fate::Withhold;
         }
@@ -166,9 +165,13 @@ impl Lifetime {
 
     /// Request `seq` gets no answer (a broadcast): it no longer waits, and nothing was written.
     pub fn unanswered(&mut self, seq: u64) {
-        if let Some(i) = self.waiting.iter().position(|&(s, _)| s == seq) {
-            self.waiting.remove(i);
-        }
+        self.take(seq);
+    }
+
+    /// Request `seq` no longer waits: when it was asked, if it was still tracked.
+    fn take(&mut self, seq: u64) -> Option<Duration> {
+        let i = self.waiting.iter().position(|&(s, _)| s == seq)?;
+        self.waiting.remove(i).map(|(_, at)| at)
     }
 
     /// Whether the asker gave up on request `seq`.
