@@ -28,6 +28,33 @@ use mbtap_gateway::lifetime::{Fate, Ids, Lifetime};
 use mbtap_gateway::queue::ClientId;
 use mbtap_sim::RequestFrame;
 
+/// Broadcasts heard and not yet carried out, at most (a master does not wait for them, but
+/// leaves the turnaround delay between them: more at once is a flood; the oldest are dropped).
+const MAX_BACKLOG: usize = 16;
+
+/// Requests just heard: the newest supersedes every request before it — those in `backlog` and
+/// those heard with it (a one-at-a-time master that sent again gave up on them, Serial Line
+/// v1.02 §2.4.1), counted as given up; broadcasts, which nobody waits for, are kept to be carried
+/// out, at most [`MAX_BACKLOG`] of them.
+fn take_newest(backlog: &mut VecDeque<RequestFrame>, heard: Vec<RequestFrame>, routes: &Routes) {
+    if heard.is_empty() {
+        return;
+    }
+    backlog.extend(heard);
+    let before = backlog.len();
+    let last = backlog.len() - 1;
+    let mut i = 0;
+    backlog.retain(|r| {
+        let keep = i == last || r.unit == 0;
+        i += 1;
+        keep
+    });
+    while backlog.len() > MAX_BACKLOG {
+        backlog.pop_front();
+    }
+    routes.server.abandoned((before - backlog.len()) as u64);
+}
+
 /// The serial front's place in the fair queue: apart from TCP (counting up from 1) and UDP
 /// (from 2^48) clients.
 const SERIAL_CLIENT: ClientId = 1 << 56;
@@ -135,7 +162,7 @@ async fn serve_port(
         let Some(r) = backlog.pop_front() else {
             let (requests, bytes) = heard.next(port, front.mode, front.line).await?;
             observe_heard(monitor, &bytes);
-            backlog.extend(requests);
+            take_newest(&mut backlog, requests, routes);
             continue;
         };
         let seq = next_seq;
@@ -158,7 +185,7 @@ async fn serve_port(
                     let (requests, bytes) = more?;
                     observe_heard(monitor, &bytes);
                     if !requests.is_empty() {
-                        backlog.extend(requests);
+                        take_newest(&mut backlog, requests, routes);
                         break None;
                     }
                 }

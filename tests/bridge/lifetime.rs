@@ -335,3 +335,36 @@ fn a_serial_master_with_a_short_timeout_never_gets_another_reads_values() {
         std::fs::remove_dir_all(&d).ok();
     }
 }
+
+/// A master on the serial front that sends without waiting (500 requests at once to a 300 ms
+/// line): it gave up on all but its last; the front keeps a bounded few, never queues the burst
+/// on the line, and answers the next request a waiting master sends.
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn a_serial_master_flooding_requests_is_held_to_a_bounded_few() {
+    let d = std::env::temp_dir().join(format!("mbtap-lifetime-flood-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    let (_socat, front, master) = common::socat_pair(&d);
+    let b = bridge(&slow_device(Duration::from_millis(300)), &["--listen-serial", front.to_str().unwrap()]);
+    std::thread::sleep(Duration::from_millis(300));
+    {
+        let mut p = std::fs::OpenOptions::new().write(true).open(&master).unwrap();
+        let burst: Vec<u8> = (0..500u16).flat_map(|a| rtu(1, &read_two_at(a))).collect();
+        p.write_all(&burst).unwrap();
+    }
+    std::thread::sleep(Duration::from_secs(3));
+    let abandoned = counter(b.metrics.as_deref().unwrap(), "mbtap_bridge_abandoned_total");
+    assert!(abandoned >= 480, "the burst's older requests given up, not queued: {abandoned}");
+    // The answer to the burst's last request is on the line for whoever reads it; a master that
+    // waits (clearing its input first, as masters do) is answered.
+    std::thread::sleep(Duration::from_secs(1));
+    {
+        use std::os::unix::fs::OpenOptionsExt as _;
+        let mut p = std::fs::OpenOptions::new().read(true).custom_flags(libc_nonblock()).open(&master).unwrap();
+        let mut sink = [0u8; 4096];
+        while matches!(p.read(&mut sink), Ok(n) if n > 0) {}
+    }
+    let (right, wrong, _) = serial_master(&master, 1_000, 2);
+    assert_eq!((right, wrong), (2, 0));
+    std::fs::remove_dir_all(&d).ok();
+}

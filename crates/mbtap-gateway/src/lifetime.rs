@@ -20,7 +20,8 @@
 //! For a one-at-a-time asker (without ids, or shown sequential) the wait after which it asked
 //! again is learnt: its own response timeout is no longer than that. Once two give-ups were
 //! seen, an answer that would reach it later after its request than the longer of the last two
-//! such waits is withheld too — it would sit in the asker's input and meet the next request. One
+//! such waits (less a guard, [`GUARD`]) is withheld too — it would sit in the asker's input and
+//! meet the next request. One
 //! odd give-up (a master that moved on early once) withholds nothing.
 //!
 //! Sans-IO: the caller numbers requests (from 0, one more each time), gives the time on one
@@ -37,6 +38,15 @@ pub const PROOF: u32 = 3;
 /// that asks again this soon waited for the answer (a program's loop, not a poll timer). Far
 /// above a loop's turn on loopback (tens of µs), far below poll periods (100 ms and up).
 pub const REACTION: Duration = Duration::from_millis(10);
+
+/// The shortest wait taken for a master's response timeout: less than a request and its answer
+/// take on the wire at 9600 baud (8 + 7 characters, 17 ms), which no master sets.
+pub const SHORTEST_TIMEOUT: Duration = Duration::from_millis(20);
+
+/// How close to a one-at-a-time asker's learnt timeout an answer may arrive, at least (an eighth
+/// of the timeout when that is more): the master may already have moved on, and an answer it
+/// reads then is taken for its next request's. Silence is the safe side.
+pub const GUARD: Duration = Duration::from_millis(5);
 
 /// Requests kept for the give-up decision, at most: the queue per client bounds what is
 /// outstanding (`--queue-per-client`, at most 1024); the oldest are forgotten beyond this.
@@ -127,8 +137,11 @@ impl Lifetime {
         };
         let result = if gives_up {
             // The newest unanswered request waited this long before the asker moved on: its
-            // timeout is no longer than that.
-            if let Some(&(_, at)) = self.waiting.back() {
+            // timeout is no longer than that. A request superseded sooner than any master waits
+            // is a burst, not a timeout, and teaches nothing.
+            if let Some(&(_, at)) = self.waiting.back()
+                && now.saturating_sub(at) >= SHORTEST_TIMEOUT
+            {
                 self.gave_up_after = [Some(now.saturating_sub(at)), self.gave_up_after[0]];
             }
             self.waiting.clear();
@@ -155,7 +168,7 @@ impl Lifetime {
         let one_at_a_time = self.ids == Ids::None || self.conduct == Conduct::Sequential;
         if one_at_a_time
             && let (Some(at), Some(patience)) = (asked, self.patience())
-            && arrives.saturating_sub(at) > patience
+            && arrives.saturating_sub(at) > patience.saturating_sub((patience / 8).max(GUARD))
         {
             return Fate::Withhold;
         }
@@ -315,6 +328,18 @@ mod tests {
         assert_eq!(l.answer(3, ms(1_720)), Fate::Withhold, "300 ms > 210 ms: the master stopped waiting");
         assert_eq!(l.asked(4, ms(3_000)), None);
         assert_eq!(l.answer(4, ms(3_060)), Fate::Deliver, "a 60 ms answer is in time");
+    }
+
+    /// A master that sends a burst without waiting teaches no timeout: the request it then sends
+    /// and waits for is answered.
+    #[test]
+    fn a_burst_of_requests_teaches_no_timeout() {
+        let mut l = Lifetime::new(Ids::None);
+        for seq in 0..100 {
+            l.asked(seq, ms(seq / 10));
+        }
+        assert_eq!(l.patience(), None);
+        assert_eq!(l.answer(99, ms(400)), Fate::Deliver);
     }
 
     #[test]
