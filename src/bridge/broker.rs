@@ -10,22 +10,15 @@
 
 use std::sync::{Arc, Mutex, PoisonError};
 
-use tokio::sync::oneshot;
-use tokio::time::Instant;
-
-use super::request::{Routes, ServerOptions};
-use super::shared::Job;
+use super::request::{Admission, Client, Routes, ServerOptions, admit};
 use crate::publish::mqtt::Mqtt;
 use mbtap_device::profile::Profiles;
 use mbtap_device::query::encode::encode_write;
 use mbtap_device::query::resolve;
-use mbtap_gateway::admit::{Asked, Role, RoleRules};
-use mbtap_gateway::queue::ClientId;
+use mbtap_gateway::admit::{Role, RoleRules};
+use mbtap_gateway::clients::BROKER;
 use mbtap_gateway::transaction::Reply;
 use mbtap_publish::remote::{Ask, Outcome};
-
-/// The queue's client id of the broker's writes: a client of its own, taking its turn.
-const BROKER_CLIENT: ClientId = ClientId::MAX - 1;
 
 /// What the bridge needs to carry out the broker's writes.
 pub struct BrokerWrites {
@@ -51,45 +44,38 @@ pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Routes>, opts: Arc<ServerOp
     let handle = tokio::runtime::Handle::current();
     let _ = std::thread::Builder::new().name("broker-writes".into()).spawn(move || {
         // The broker is one client: `--rate-limit` holds for it as for a connection.
-        let now = || routes.first().map_or(std::time::Duration::ZERO, |r| r.line.now());
-        let mut bucket = opts.rate_limit.map(|rate| mbtap_gateway::admit::RateLimit::new(rate, now()));
+        let mut client = Client::local(BROKER, Role::Broker(writes.role.as_ref()), &routes, &opts);
         for ask in asks {
             if crate::signals::stop_requested() {
                 // Stopping: what still waits is not carried out (the bound keeps it short).
                 break;
             }
-            let outcome = handle.block_on(apply(&ask, &writes, &routes, &opts, bucket.as_mut()));
+            let outcome = handle.block_on(apply(&ask, &writes, &routes, &opts, &mut client));
             writes.publisher.write_result(&ask, &outcome, crate::source::serial::now().0);
         }
     });
 }
 
-/// One write: the profile's checks, the bridge's admission, the line.
+/// One write: the profile's checks, then the one path every request takes ([`admit`]).
 async fn apply(
     ask: &Ask,
     writes: &BrokerWrites,
     routes: &Routes,
     opts: &ServerOptions,
-    bucket: Option<&mut mbtap_gateway::admit::RateLimit>,
+    client: &mut Client<'_>,
 ) -> Outcome {
     let text = &ask.item.text;
     let profile = writes.profiles.get(&ask.unit);
     let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;
     let w = encode_write(&target, profile, false).map_err(|e| e.to_string())?;
-    let pdu = w.pdu();
-    let role = Role::Broker(writes.role.as_ref());
-    let first = routes.first().ok_or_else(|| format!("{text}: the bridge has no serial line"))?;
-    let asked = Asked { unit: ask.unit, pdu: &pdu, role, peer_high: false };
-    let admitted = opts.policy.admit(asked, bucket, first.line.now()).map_err(|why| {
-        routes.server.refused(why.reason());
-        format!("{text}: refused by the bridge ({}, exception {})", why.reason(), why.exception())
-    })?;
-    let route = routes.get(admitted.route).ok_or_else(|| format!("{text}: no line serves unit {}", ask.unit))?;
-    let (tx, rx) = oneshot::channel();
-    let write = route.line.write_pending(admitted.target, &pdu);
-    let job = Job { unit: admitted.target, pdu, reply: tx, queued: Instant::now(), high: false, write };
-    route.line.submit(BROKER_CLIENT, job).map_err(|_| format!("{text}: the line's queue is full"))?;
-    match rx.await {
+    let reply = match admit(client, ask.unit, w.pdu(), routes, opts) {
+        Admission::Refused(why) => {
+            return Err(format!("{text}: refused by the bridge ({}, exception {})", why.reason(), why.exception()));
+        }
+        Admission::Now(reply) => Ok(reply),
+        Admission::Later(rx) => rx.await,
+    };
+    match reply {
         Ok(Reply::Pdu(answer)) if answer.first().is_some_and(|f| f & mbtap_proto::EXCEPTION_FLAG == 0) => Ok(None),
         Ok(Reply::Pdu(answer)) => Err(format!(
             "{text}: the device answered exception {}",

@@ -16,7 +16,7 @@ use tokio::time::Instant;
 use super::metrics::Metrics;
 use super::port::Port;
 pub use super::port::{LineOptions, MonitorChunk};
-use super::shared::{Job, LineShared, POLL_CLIENT};
+use super::shared::{Job, LineShared};
 use crate::source::pace::wait_until;
 use crate::source::stream::Transport;
 use mbtap_analysis::chunk::{PortId, Timestamp};
@@ -101,7 +101,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
                 shared.cache().fill(job.unit, &job.pdu, pdu, shared.now());
             }
         }
-        let class = match (client == POLL_CLIENT, job.high) {
+        let class = match (client == mbtap_gateway::clients::POLL, job.high) {
             (true, _) => "poll",
             (false, true) => "high",
             (false, false) => "normal",

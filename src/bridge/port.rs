@@ -104,6 +104,15 @@ impl Port<'_> {
     /// The port failed under us: reopened later, with backoff.
     pub(super) fn lost(&mut self, e: &std::io::Error) {
         self.shared.metrics.note(&format!("serial port lost: {e}; reopening"));
+        // `EINPROGRESS` (Linux: 115) is what a write on a socket closed underneath gives: its
+        // text ("Operation now in progress") says nothing true of what happened.
+        if e.raw_os_error() == Some(115) {
+            self.shared
+                .metrics
+                .port_failure(std::io::ErrorKind::ConnectionAborted, "the socket was closed under the request");
+        } else {
+            self.shared.metrics.port_failure(e.kind(), &e.to_string());
+        }
         self.stream = None;
         self.next_open = Instant::now() + self.backoff;
     }
@@ -159,6 +168,7 @@ impl Port<'_> {
                 self.stream = Some(port);
             }
             Err(why) => {
+                self.shared.metrics.port_failure(std::io::ErrorKind::NotConnected, &why);
                 // Said at once and then once a minute while it lasts (issue 31: the bridge said
                 // only "listening" and every client got 0x0A with no word why).
                 if self.missing.is_none_or(|said| said.elapsed() >= MISSING_PORT_REMINDER) {

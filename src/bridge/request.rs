@@ -1,6 +1,7 @@
 //! What a listener does with each request it reads, whatever the transport (TCP, TLS, UDP,
-//! RTU over TCP): the gateway core's admission policy, then the line's cache, then the line's
-//! queue; the answer comes back as a [`Pending`] in the order the client asked.
+//! RTU over TCP, the serial front, the broker, mbtap's own master): the gateway core's admission
+//! policy, then the line's cache, then the line's queue ([`admit`]); a listener's answer comes
+//! back as a [`Pending`] in the order the client asked.
 
 use std::net::SocketAddr;
 use std::ops::RangeInclusive;
@@ -88,7 +89,7 @@ pub(super) enum Answer {
 /// One client as the listeners know it: its queue id, its role, whether all its requests are
 /// in the priority class, and its rate limiter.
 #[derive(Debug)]
-pub(super) struct Client<'a> {
+pub struct Client<'a> {
     pub(super) id: ClientId,
     pub(super) role: Role<'a>,
     pub(super) peer_high: bool,
@@ -97,31 +98,33 @@ pub(super) struct Client<'a> {
 
 impl<'a> Client<'a> {
     pub(super) fn new(id: ClientId, role: Role<'a>, peer: SocketAddr, routes: &[Route], opts: &ServerOptions) -> Self {
+        Self { peer_high: opts.policy.peer_high(peer.ip()), ..Self::local(id, role, routes, opts) }
+    }
+
+    /// An asker inside this process (the broker's writes, mbtap's own master): no address, the
+    /// same rate limit as a connection.
+    pub fn local(id: ClientId, role: Role<'a>, routes: &[Route], opts: &ServerOptions) -> Self {
         let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
-        Self {
-            id,
-            role,
-            peer_high: opts.policy.peer_high(peer.ip()),
-            bucket: opts.rate_limit.map(|rate| RateLimit::new(rate, now)),
-        }
+        Self { id, role, peer_high: false, bucket: opts.rate_limit.map(|rate| RateLimit::new(rate, now)) }
     }
 }
 
+/// What admission made of a request: refused (nothing of it reached a line), answered from
+/// the cache, or queued on its line with the answer to come.
+#[derive(Debug)]
+pub enum Admission {
+    Refused(Refusal),
+    Now(Reply),
+    Later(oneshot::Receiver<Reply>),
+}
+
 /// Puts one request through the gateway core's admission policy, then the cache, then queues it
-/// on its line; what to answer.
-pub(super) fn request(
-    client: &mut Client<'_>,
-    transaction_id: u16,
-    unit: u8,
-    pdu: Vec<u8>,
-    routes: &Routes,
-    opts: &ServerOptions,
-) -> Pending {
-    let function = pdu.first().copied().unwrap_or(0);
-    let reply = |answer| Pending { transaction_id, unit, function, answer };
+/// on its line: the one path every asker's request takes (connections, UDP peers, the serial
+/// front, the broker's writes, mbtap's own master). A refusal is counted here.
+pub fn admit(client: &mut Client<'_>, unit: u8, pdu: Vec<u8>, routes: &Routes, opts: &ServerOptions) -> Admission {
     let refuse = |why: Refusal| {
         routes.server.refused(why.reason());
-        reply(Answer::Now(Reply::Gateway(why.exception())))
+        Admission::Refused(why)
     };
     let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
     let asked = Asked { unit, pdu: &pdu, role: client.role, peer_high: client.peer_high };
@@ -132,14 +135,32 @@ pub(super) fn request(
     let Some(route) = routes.get(admitted.route) else { return refuse(Refusal::NoRoute) };
     let target = admitted.target;
     if let Some(answer) = route.line.cached(target, &pdu) {
-        return reply(Answer::Now(Reply::Pdu(answer)));
+        return Admission::Now(Reply::Pdu(answer));
     }
     let (tx, rx) = oneshot::channel();
     let write = route.line.write_pending(target, &pdu);
     let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high: admitted.high, write };
     match route.line.submit(client.id, job) {
-        Ok(()) => reply(Answer::Later(rx)),
+        Ok(()) => Admission::Later(rx),
         Err(Full::Client) => refuse(Refusal::QueueFull),
         Err(Full::Line) => refuse(Refusal::LineFull),
     }
+}
+
+/// One request read by a listener, through [`admit`]; what to answer, in the client's order.
+pub(super) fn request(
+    client: &mut Client<'_>,
+    transaction_id: u16,
+    unit: u8,
+    pdu: Vec<u8>,
+    routes: &Routes,
+    opts: &ServerOptions,
+) -> Pending {
+    let function = pdu.first().copied().unwrap_or(0);
+    let answer = match admit(client, unit, pdu, routes, opts) {
+        Admission::Refused(why) => Answer::Now(Reply::Gateway(why.exception())),
+        Admission::Now(reply) => Answer::Now(reply),
+        Admission::Later(rx) => Answer::Later(rx),
+    };
+    Pending { transaction_id, unit, function, answer }
 }

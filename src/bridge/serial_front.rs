@@ -25,7 +25,6 @@ use mbtap_analysis::analyzer::SerialMode;
 use mbtap_analysis::framer::LineSettings;
 use mbtap_gateway::admit::Role;
 use mbtap_gateway::lifetime::{Fate, Ids, Lifetime};
-use mbtap_gateway::queue::ClientId;
 use mbtap_sim::RequestFrame;
 
 /// Broadcasts heard and not yet carried out, at most (a master does not wait for them, but
@@ -54,10 +53,6 @@ fn take_newest(backlog: &mut VecDeque<RequestFrame>, heard: Vec<RequestFrame>, r
     }
     routes.server.abandoned((before - backlog.len()) as u64);
 }
-
-/// The serial front's place in the fair queue: apart from TCP (counting up from 1) and UDP
-/// (from 2^48) clients.
-const SERIAL_CLIENT: ClientId = 1 << 56;
 
 /// The serial port the bridge answers on, and how.
 #[derive(Debug, Clone)]
@@ -149,7 +144,7 @@ async fn serve_port(
 ) -> std::io::Result<()> {
     // A serial master has no address: the priority class by address never holds for it.
     let peer = SocketAddr::from(([0, 0, 0, 0], 0));
-    let mut client = Client::new(SERIAL_CLIENT, Role::Plain, peer, routes, opts);
+    let mut client = Client::new(mbtap_gateway::clients::SERIAL_FRONT, Role::Plain, peer, routes, opts);
     let mut heard = super::slave_port::Requests::default();
     // A serial master asks one thing at a time and has no ids (`mbtap_gateway::lifetime`): its
     // next request — to any unit — means it gave up on the last; an answer that would reach it

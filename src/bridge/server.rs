@@ -5,7 +5,6 @@
 //! unit id unchanged.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use tokio::net::TcpListener;
@@ -87,7 +86,6 @@ pub async fn serve(
     tls: Option<super::tls::Tls>,
     table: Arc<Table>,
 ) {
-    static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1);
     loop {
         let Ok((stream, peer)) = listener.accept().await else {
             // Out of file descriptors or similar: back off a little, keep serving.
@@ -117,7 +115,7 @@ pub async fn serve(
             }
         }
         metrics.connection_opened();
-        let client = NEXT_CLIENT.fetch_add(1, Ordering::Relaxed);
+        let client = mbtap_gateway::clients::connection();
         let (routes, opts, table_for_task, tls) =
             (Arc::clone(&routes), Arc::clone(&opts), Arc::clone(&table), tls.clone());
         let last_byte = super::watched::LastByte::default();

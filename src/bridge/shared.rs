@@ -165,10 +165,6 @@ impl LineShared {
     }
 }
 
-/// The queue's client id of the bridge's own polls (`--poll`): it takes its turn like any
-/// client, so polling never starves the clients' requests.
-pub const POLL_CLIENT: ClientId = ClientId::MAX;
-
 /// Agent mode: reads every `--poll` range once per its interval, the requests spread evenly over
 /// the interval so they leave line time between them; the answers fill the cache (the line
 /// does that for every answer). Runs as long as the bridge.
@@ -198,7 +194,7 @@ pub async fn poll(polls: Vec<Poll>, shared: Arc<LineShared>) {
                 tick.tick().await;
                 let (tx, rx) = oneshot::channel();
                 let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now(), high: false, write: None };
-                if shared.submit(POLL_CLIENT, job).is_ok() {
+                if shared.submit(mbtap_gateway::clients::POLL, job).is_ok() {
                     // Waiting keeps one poll of this range in the queue at a time.
                     let _ = rx.await;
                 }

@@ -8,7 +8,6 @@
 use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use tokio::time::Instant;
 
 use mbtap_proto::tcp::{Streaming, encode_tcp, parse_tcp_frame};
@@ -29,8 +28,6 @@ struct Peer {
 
 /// Serves Modbus UDP on `socket` until the process ends.
 pub async fn serve_udp(socket: UdpSocket, routes: Arc<Routes>, opts: Arc<ServerOptions>) {
-    // Client ids apart from the TCP listener's (which count up from 1).
-    static NEXT_CLIENT: AtomicU64 = AtomicU64::new(1 << 48);
     let socket = Arc::new(socket);
     let mut peers: HashMap<IpAddr, Peer> = HashMap::new();
     let mut buf = vec![0u8; DATAGRAM];
@@ -64,7 +61,7 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Routes>, opts: Arc<ServerO
             metrics.refused("udp_peer_evicted");
         }
         let p = peers.entry(source).or_insert_with(|| Peer {
-            client: Client::new(NEXT_CLIENT.fetch_add(1, Ordering::Relaxed), Role::Plain, peer, &routes, &opts),
+            client: Client::new(mbtap_gateway::clients::udp_peer(), Role::Plain, peer, &routes, &opts),
             last: Instant::now(),
         });
         p.last = Instant::now();

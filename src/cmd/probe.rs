@@ -12,7 +12,6 @@ use anyhow::Context as _;
 use mbtap_analysis::learn::probe::{Probe, Reply, Step};
 use mbtap_device::profile::Table;
 use mbtap_device::query::plan::Read;
-use tokio_modbus::prelude::{Client as _, Request, Response};
 
 use crate::master::exec::{Answer, Op, send};
 use crate::master::link::Link;
@@ -82,39 +81,42 @@ fn parse_range(s: &str) -> anyhow::Result<(u16, u16)> {
     Ok((a, b))
 }
 
-/// Identification, asked once each; `None` where the device does not answer it.
-async fn identify(link: &mut Link, unit: u8, timeout: Duration) -> (Option<Vec<(u8, String)>>, Option<String>) {
+/// Read Device Identification, basic objects from the first (MAP v1.1b3 §6.21: MEI type 0x0E,
+/// read code 01, object id 00).
+const READ_DEVICE_ID_BASIC: [u8; 4] = [0x2B, 0x0E, 0x01, 0x00];
+/// Report Server ID (MAP v1.1b3 §6.17): the function code alone.
+const REPORT_SERVER_ID: [u8; 1] = [0x11];
+
+/// Identification, asked once each through the link (the one path, answer check included);
+/// `None` where the device does not answer it.
+async fn identify(link: &mut Link, unit: u8) -> (Option<Vec<(u8, String)>>, Option<String>) {
+    use mbtap_proto::response::{Response, parse_response};
     let mut ident = None;
-    if let Ok(ctx) = link.context(unit).await {
-        let r = tokio::time::timeout(
-            timeout,
-            ctx.call(Request::ReadDeviceIdentification(tokio_modbus::prelude::ReadCode::Basic, 0)),
-        )
-        .await;
-        if let Ok(Ok(Ok(Response::ReadDeviceIdentification(d)))) = r {
-            ident = Some(
-                d.device_id_objects
-                    .iter()
-                    .map(|o| (o.id, o.value_as_str().map_or_else(|| format!("{:02X?}", &o.value[..]), str::to_owned)))
-                    .collect(),
-            );
-        } else if matches!(r, Err(_) | Ok(Err(_))) {
-            // No answer or a broken link: start the reads on a fresh one.
-            link.reset();
-        }
+    if let Ok(pdu) = link.ask(unit, READ_DEVICE_ID_BASIC.to_vec()).await
+        && let Ok((_, Response::ReadDeviceIdentification { objects, .. })) = parse_response(&pdu)
+    {
+        ident = Some(
+            objects
+                .iter()
+                .map(|o| {
+                    (o.id, std::str::from_utf8(o.value).map_or_else(|_| format!("{:02X?}", o.value), str::to_owned))
+                })
+                .collect(),
+        );
     }
     let mut server = None;
-    if let Ok(ctx) = link.context(unit).await {
-        let r = tokio::time::timeout(timeout, ctx.call(Request::ReportServerId)).await;
-        if let Ok(Ok(Ok(Response::ReportServerId(id, running, data)))) = r {
+    if let Ok(pdu) = link.ask(unit, REPORT_SERVER_ID.to_vec()).await
+        && let Ok((_, Response::ReportServerId { data })) = parse_response(&pdu)
+    {
+        // The server id's length is the device's own (§6.17): the first byte is read as the id,
+        // the run indicator (0x00 off, 0xFF on) as the second, the rest as text.
+        if let [id, running, rest @ ..] = data {
             server = Some(format!(
                 "server id 0x{id:02X}, {}, {} byte(s) more: {}",
-                if running { "running" } else { "stopped" },
-                data.len(),
-                String::from_utf8_lossy(&data).trim_end_matches('\0')
+                if *running == 0xFF { "running" } else { "stopped" },
+                rest.len(),
+                String::from_utf8_lossy(rest).trim_end_matches('\0')
             ));
-        } else if matches!(r, Err(_) | Ok(Err(_))) {
-            link.reset();
         }
     }
     (ident, server)
@@ -129,21 +131,21 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         args.rate
     );
     let timeout = Duration::from_millis(args.timeout_ms);
-    let mut link = Link::new(&args.target, &args.line, timeout)?;
+    // No retries: a device that does not answer is not asked again.
+    let mut link = Link::new(&args.target, &args.line, timeout, 0)?;
     let mut probe = Probe::new(&tables, first, last, args.rate);
     if args.thorough {
         probe.max_skip = 0;
     }
     let started = Instant::now();
     let (ident, server) = crate::cmd::runtime()?.block_on(async {
-        let id = identify(&mut link, args.unit, timeout).await;
+        let id = identify(&mut link, args.unit).await;
         loop {
             let now = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
             match probe.next(now) {
                 Step::Read { table, address, quantity } => {
                     let read = Read { target: 0, table, address, quantity };
-                    // No retries: a device that does not answer is not asked again.
-                    let reply = match send(&mut link, args.unit, Op::Read(read), timeout, 0).await.0 {
+                    let reply = match send(&mut link, args.unit, Op::Read(read)).await.0 {
                         Answer::Values(v) => Reply::Values(v),
                         Answer::Exception(c) => Reply::Exception(c),
                         Answer::Failed(why) if why.closed() => Reply::Closed(why.to_string()),

@@ -50,16 +50,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let unit = m.unit(profile.as_ref());
     let (targets, plan) = prepare(&args.items, profile.as_ref())?;
     let timeout = Duration::from_millis(m.timeout_ms);
-    let mut link = Link::new(&m.target, &m.line, timeout)?;
-    let (rows, failures) = crate::cmd::runtime()?.block_on(exec::read_all(
-        &mut link,
-        unit,
-        &targets,
-        &plan,
-        profile.as_ref(),
-        timeout,
-        m.retries,
-    ));
+    let mut link = Link::new(&m.target, &m.line, timeout, m.retries)?;
+    let (rows, failures) =
+        crate::cmd::runtime()?.block_on(exec::read_all(&mut link, unit, &targets, &plan, profile.as_ref()));
     let mut failures = failures;
     if let Some(hint) = m.unit_hint(profile.as_ref()) {
         // Every read failed at an address the user did not choose: the device may be elsewhere,
@@ -79,14 +72,9 @@ fn run_sunspec(args: &Args) -> anyhow::Result<ExitCode> {
     let m = &args.master;
     let unit = m.unit.unwrap_or(1);
     let timeout = Duration::from_millis(m.timeout_ms);
-    let mut link = Link::new(&m.target, &m.line, timeout)?;
-    let (rows, failures) = crate::cmd::runtime()?.block_on(crate::master::sunspec::read_items(
-        &mut link,
-        unit,
-        &args.items,
-        timeout,
-        m.retries,
-    ))?;
+    let mut link = Link::new(&m.target, &m.line, timeout, m.retries)?;
+    let (rows, failures) =
+        crate::cmd::runtime()?.block_on(crate::master::sunspec::read_items(&mut link, unit, &args.items))?;
     show::print(m.format(), &rows, &failures, &[], &mut std::io::stdout().lock()).context("writing the values")?;
     Ok(if failures.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }

@@ -45,7 +45,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let unit = m.unit(profile.as_ref());
     let (targets, plan) = super::read::prepare(&args.items, profile.as_ref())?;
     let timeout = Duration::from_millis(m.timeout_ms);
-    let mut link = Link::new(&m.target, &m.line, timeout)?;
+    let mut link = Link::new(&m.target, &m.line, timeout, m.retries)?;
     let format = m.format();
     let live = format == MasterFormat::Text && std::io::stdout().is_terminal();
     let profiles: mbtap_device::profile::Profiles = profile.iter().map(|p| (unit, p.clone())).collect();
@@ -76,8 +76,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
                     if stopped {
                         break;
                     }
-                    let outcome =
-                        crate::master::remote::apply(&mut link, unit, &ask, profile.as_ref(), timeout, m.retries).await;
+                    let outcome = crate::master::remote::apply(&mut link, unit, &ask, profile.as_ref()).await;
                     mq.write_result(&ask, &outcome, crate::source::serial::now().0);
                 }
                 if stopped {
@@ -86,8 +85,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             }
             let started = Instant::now();
             let t_ns = crate::source::serial::now().0;
-            let (rows, failures) =
-                exec::read_all(&mut link, unit, &targets, &plan, profile.as_ref(), timeout, m.retries).await;
+            let (rows, failures) = exec::read_all(&mut link, unit, &targets, &plan, profile.as_ref()).await;
             any_failed |= !failures.is_empty();
             if let Some(mq) = &mqtt {
                 mq.rows(rows.clone(), t_ns);

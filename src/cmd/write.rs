@@ -12,8 +12,9 @@ use mbtap_device::query::plan::{Plan, Read};
 use mbtap_device::query::rows::{rows, short_table};
 use mbtap_device::query::{QueryError, items, resolve};
 
-use crate::master::link::{Endpoint, Link};
+use crate::master::link::Link;
 use crate::master::{MasterArgs, MasterFormat, exec, show};
+use crate::source::stream::Transport;
 
 /// Write values to a device by the profile's names or by address.
 ///
@@ -41,9 +42,9 @@ pub struct Args {
     pub force: bool,
 }
 
-fn frame(endpoint: &Endpoint, unit: u8, pdu: &[u8]) -> (Vec<u8>, mbtap_proto::Mode) {
+fn frame(target: &str, unit: u8, pdu: &[u8]) -> (Vec<u8>, mbtap_proto::Mode) {
     let mut out = Vec::new();
-    if let Endpoint::Tcp(_) = endpoint {
+    if let Transport::ModbusTcp(_) = Transport::of_device(target) {
         mbtap_proto::encode_tcp(1, unit, pdu, &mut out);
         (out, mbtap_proto::Mode::Tcp)
     } else {
@@ -94,11 +95,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         );
     }
     let mut out = std::io::stdout().lock();
-    let endpoint = Endpoint::parse(&m.target);
     if args.dry_run {
         let profiles: mbtap_device::profile::Profiles = p.map(|p| (unit, p.clone())).into_iter().collect();
         for (target, w) in &writes {
-            let (bytes, mode) = frame(&endpoint, unit, &w.pdu());
+            let (bytes, mode) = frame(&m.target, unit, &w.pdu());
             writeln!(out, "would send to unit {unit}: {}", printable(&describe(w, target, p, unit)))?;
             writeln!(out, "  {}", hex(&bytes))?;
             mbtap_analysis::decode::run_with_profiles(
@@ -115,19 +115,19 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let timeout = Duration::from_millis(m.timeout_ms);
-    let mut link = Link::new(&m.target, &m.line, timeout)?;
+    let mut link = Link::new(&m.target, &m.line, timeout, m.retries)?;
     let format = m.format();
     let rt = crate::cmd::runtime()?;
     let mut failed = false;
     for (target, w) in &writes {
         if unit == 0 {
             // No answer comes to a broadcast: sent once, said as such, nothing read back.
-            let _ = rt.block_on(exec::send(&mut link, 0, exec::Op::Write(w), timeout, 0));
+            let _ = rt.block_on(exec::send(&mut link, 0, exec::Op::Write(w)));
             let what = describe(w, target, p, 0);
             writeln!(out, "broadcast {} (no device answers a broadcast; nothing read back)", printable(&what))?;
             continue;
         }
-        let (answer, _) = rt.block_on(exec::send(&mut link, unit, exec::Op::Write(w), timeout, m.retries));
+        let (answer, _) = rt.block_on(exec::send(&mut link, unit, exec::Op::Write(w)));
         let what = describe(w, target, p, unit);
         if let Some(problem) = answer.problem() {
             failed = true;
@@ -147,8 +147,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let quantity = u16::try_from(w.words.len()).unwrap_or(1);
         let plan =
             Plan { reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }], skipped: vec![] };
-        let (back, failures) =
-            rt.block_on(exec::read_all(&mut link, unit, std::slice::from_ref(target), &plan, p, timeout, m.retries));
+        let (back, failures) = rt.block_on(exec::read_all(&mut link, unit, std::slice::from_ref(target), &plan, p));
         let kept = back.first().map(|r| r.raw);
         let written = rows(unit, w.table, w.address, &w.words, p).first().map(|r| r.raw);
         let differs = kept.is_some() && kept != written;

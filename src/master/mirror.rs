@@ -97,7 +97,7 @@ const SAY_EVERY: Duration = Duration::from_mins(1);
 /// Reads the source every `fresh` period until the process ends.
 pub async fn run(opts: MirrorOptions, emulated: Arc<Emulated>) {
     let timeout = opts.fresh.clamp(Duration::from_millis(200), Duration::from_secs(3));
-    let mut link = match super::link::Link::new(&opts.target, &opts.line, timeout) {
+    let mut link = match super::link::Link::new(&opts.target, &opts.line, timeout, 0) {
         Ok(l) => l,
         Err(e) => {
             eprintln!("mbtap: --mirror {}: {e:#}", opts.target);
@@ -111,7 +111,7 @@ pub async fn run(opts: MirrorOptions, emulated: Arc<Emulated>) {
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         tick.tick().await;
-        match read_all(&mut link, opts.unit, &reads, timeout).await {
+        match read_all(&mut link, opts.unit, &reads).await {
             Ok(values) => {
                 let (sets, missing) = opts.map.apply(&values, &opts.served, &opts.source);
                 update(&emulated, opts.index, &sets, true);
@@ -147,20 +147,19 @@ fn update(emulated: &Emulated, index: usize, sets: &[((Table, u16), u16)], fresh
     }
 }
 
-/// Every span read from the source through the master's one request path (`exec::send`: the
-/// timeout, the link reset after a failure, an answer of the wrong length refused); the first
-/// failure ends the round.
+/// Every span read from the source through the master's one request path (`exec::send` over
+/// the link's line: the core's answer check, timeout and late-answer rule); the first failure
+/// ends the round.
 async fn read_all(
     link: &mut super::link::Link,
     unit: u8,
     reads: &[(Table, u16, u16)],
-    timeout: Duration,
 ) -> anyhow::Result<BTreeMap<(Table, u16), u16>> {
     use super::exec::{Answer, Op, send};
     let mut values = BTreeMap::new();
     for &(table, address, last) in reads {
         let read = mbtap_device::query::plan::Read { target: 0, table, address, quantity: last - address + 1 };
-        match send(link, unit, Op::Read(read), timeout, 0).await.0 {
+        match send(link, unit, Op::Read(read)).await.0 {
             Answer::Values(words) => values.extend((address..).zip(words).map(|(a, v)| ((table, a), v))),
             other => anyhow::bail!(
                 "unit {unit}, {} {address}..{last}: {}",

@@ -1,8 +1,8 @@
 //! `read`, `write` and `watch`: mbtap as a Modbus master that speaks in the profiles' names.
 //! The requests are planned and checked by `mbtap_device::query` (pure); this module opens the
-//! link ([`link`]), sends them with tokio-modbus ([`exec`]) and prints what came back ([`show`]).
+//! link ([`link`]: a line of the bridge's, through the gateway core), sends them ([`exec`]) and
+//! prints what came back ([`show`]).
 
-pub mod ascii;
 pub mod exec;
 pub mod link;
 pub mod mirror;
@@ -72,8 +72,8 @@ impl MasterArgs {
         if self.sunspec() {
             let unit = self.unit.unwrap_or(1);
             let timeout = std::time::Duration::from_millis(self.timeout_ms);
-            let mut link = link::Link::new(&self.target, &self.line, timeout)?;
-            let imported = crate::runtime()?.block_on(sunspec::import(&mut link, unit, timeout, self.retries))?;
+            let mut link = link::Link::new(&self.target, &self.line, timeout, self.retries)?;
+            let imported = crate::runtime()?.block_on(sunspec::import(&mut link, unit))?;
             let toml = imported.to_toml("sunspec", &format!("SunSpec device at {}", self.target), &self.target);
             return Ok(Some(mbtap_device::profile::load("sunspec", &toml)?));
         }

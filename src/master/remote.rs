@@ -2,8 +2,6 @@
 //! exactly as `mbtap write` would: the item resolved by the profile, the value scaled and
 //! range-checked, refused when the register is read-only — then sent, and read back.
 
-use std::time::Duration;
-
 use mbtap_device::profile::Profile;
 use mbtap_device::query::encode::encode_write;
 use mbtap_device::query::plan::{Plan, Read};
@@ -14,14 +12,7 @@ use super::exec;
 use super::link::Link;
 
 /// Carries out `ask` on `unit` (the watched unit; another is refused).
-pub async fn apply(
-    link: &mut Link,
-    unit: u8,
-    ask: &Ask,
-    profile: Option<&Profile>,
-    timeout: Duration,
-    retries: u32,
-) -> Outcome {
+pub async fn apply(link: &mut Link, unit: u8, ask: &Ask, profile: Option<&Profile>) -> Outcome {
     if ask.unit != unit {
         return Err(format!("{}: this watch reads and writes unit {unit} only, not unit {}", ask.item.text, ask.unit));
     }
@@ -30,12 +21,12 @@ pub async fn apply(
     }
     let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;
     let w = encode_write(&target, profile, false).map_err(|e| e.to_string())?;
-    let (answer, _) = exec::send(link, unit, exec::Op::Write(&w), timeout, retries).await;
+    let (answer, _) = exec::send(link, unit, exec::Op::Write(&w)).await;
     if let Some(problem) = answer.problem() {
         return Err(format!("{}: the device refused or did not answer: {problem}", ask.item.text));
     }
     let quantity = u16::try_from(w.words.len()).unwrap_or(1);
     let plan = Plan { reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }], skipped: vec![] };
-    let (back, _) = exec::read_all(link, unit, std::slice::from_ref(&target), &plan, profile, timeout, retries).await;
+    let (back, _) = exec::read_all(link, unit, std::slice::from_ref(&target), &plan, profile).await;
     Ok(back.into_iter().next())
 }

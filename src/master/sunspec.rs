@@ -3,8 +3,6 @@
 //! whole (in requests of at most 125 registers, MAP v1.1b3 §6.3) and their points named
 //! `MODEL.POINT`, scaled by their scale factors (`mbtap_device::sunspec`).
 
-use std::time::Duration;
-
 use mbtap_device::profile::Table;
 use mbtap_device::query::plan::Read;
 use mbtap_device::query::rows::Row;
@@ -18,14 +16,7 @@ use super::show::Failure;
 const MAX_READ: u16 = 125;
 
 /// Reads `quantity` holding registers at `address` in requests of at most [`MAX_READ`].
-async fn read_regs(
-    link: &mut Link,
-    unit: u8,
-    address: u16,
-    quantity: u32,
-    timeout: Duration,
-    retries: u32,
-) -> Result<Vec<u16>, String> {
+async fn read_regs(link: &mut Link, unit: u8, address: u16, quantity: u32) -> Result<Vec<u16>, String> {
     let mut out = Vec::new();
     let mut at = u32::from(address);
     let end = at + quantity;
@@ -33,7 +24,7 @@ async fn read_regs(
         let n = u16::try_from((end - at).min(u32::from(MAX_READ))).unwrap_or(MAX_READ);
         let a = u16::try_from(at).map_err(|_| format!("the chain runs past register 65535 (at {at})"))?;
         let read = Read { target: 0, table: Table::HoldingRegisters, address: a, quantity: n };
-        match send(link, unit, Op::Read(read), timeout, retries).await.0 {
+        match send(link, unit, Op::Read(read)).await.0 {
             Answer::Values(v) => out.extend(v),
             other => {
                 return Err(format!(
@@ -52,16 +43,16 @@ async fn read_regs(
 ///
 /// # Errors
 /// No `SunS` marker at any base, or a header that could not be read.
-pub async fn discover(link: &mut Link, unit: u8, timeout: Duration, retries: u32) -> anyhow::Result<Vec<Found>> {
+pub async fn discover(link: &mut Link, unit: u8) -> anyhow::Result<Vec<Found>> {
     let mut tried = Vec::new();
     for base in sunspec::BASES {
-        match read_regs(link, unit, base, 2, timeout, retries).await {
+        match read_regs(link, unit, base, 2).await {
             Ok(m) if m == sunspec::MARKER => {
                 let mut found = Vec::new();
                 let mut at = base.checked_add(2);
                 let mut ended = false;
                 while let Some(a) = at {
-                    let h = read_regs(link, unit, a, 2, timeout, retries)
+                    let h = read_regs(link, unit, a, 2)
                         .await
                         .map_err(|e| anyhow::anyhow!("reading the model header at {a}: {e}"))?;
                     let (id, len) = (h[0], h[1]);
@@ -91,18 +82,12 @@ pub async fn discover(link: &mut Link, unit: u8, timeout: Duration, retries: u32
 
 /// The rows for `items` (`MODEL.POINT`, `MODEL`) from `unit`'s chain; failures for items not
 /// found or not read.
-pub async fn read_items(
-    link: &mut Link,
-    unit: u8,
-    items: &[String],
-    timeout: Duration,
-    retries: u32,
-) -> anyhow::Result<(Vec<Row>, Vec<Failure>)> {
+pub async fn read_items(link: &mut Link, unit: u8, items: &[String]) -> anyhow::Result<(Vec<Row>, Vec<Failure>)> {
     let refs: Vec<(String, PointRef)> = items
         .iter()
         .map(|i| sunspec::parse_point_ref(i).map(|r| (i.clone(), r)).map_err(anyhow::Error::msg))
         .collect::<anyhow::Result<_>>()?;
-    let chain = discover(link, unit, timeout, retries).await?;
+    let chain = discover(link, unit).await?;
     let names: Vec<String> = chain.iter().map(Found::name).collect();
     let (mut rows, mut failures) = (Vec::new(), Vec::new());
     let mut blocks: Vec<(Found, Vec<u16>)> = Vec::new();
@@ -114,7 +99,7 @@ pub async fn read_items(
         };
         let block = match blocks.iter().find(|(f, _)| *f == found) {
             Some((_, b)) => b.clone(),
-            None => match read_regs(link, unit, found.address, found.registers(), timeout, retries).await {
+            None => match read_regs(link, unit, found.address, found.registers()).await {
                 Ok(b) => {
                     blocks.push((found, b.clone()));
                     b
@@ -184,15 +169,10 @@ pub async fn read_items(
 /// addresses, typed, each scaled by its scale factor as read now (a device's scale factors are
 /// fixed in practice; they are not re-read by the profile). Scale-factor points, pads and
 /// 64-bit values (not in the profile format) are left out; models nobody defines are listed.
-pub async fn import(
-    link: &mut Link,
-    unit: u8,
-    timeout: Duration,
-    retries: u32,
-) -> anyhow::Result<mbtap_device::profile::import::Imported> {
+pub async fn import(link: &mut Link, unit: u8) -> anyhow::Result<mbtap_device::profile::import::Imported> {
     use mbtap_device::profile::format::{Access, ValueType, WordOrder};
     use mbtap_device::profile::import::{Imported, Point, Problem};
-    let chain = discover(link, unit, timeout, retries).await?;
+    let chain = discover(link, unit).await?;
     let mut out = Imported::default();
     let mut seen: Vec<u16> = Vec::new();
     for found in &chain {
@@ -208,7 +188,7 @@ pub async fn import(
             });
             continue;
         };
-        let block = read_regs(link, unit, found.address, found.registers(), timeout, retries)
+        let block = read_regs(link, unit, found.address, found.registers())
             .await
             .map_err(|e| anyhow::anyhow!("reading model {model} at {}: {e}", found.address))?;
         let values = sunspec::decode_model(Some(def), *found, &block);

@@ -48,6 +48,20 @@ impl<'a> Transport<'a> {
         }
     }
 
+    /// A device's address as `read`, `write`, `watch` and `probe` take it: as [`Self::of`], and a
+    /// bare `HOST:PORT` (a port number after the last colon, no path) is a Modbus TCP device —
+    /// `usb:VID:PID` and `COM3` stay serial ports.
+    #[must_use]
+    pub fn of_device(target: &'a str) -> Self {
+        match Self::of(target) {
+            Self::Serial(s) if !s.contains('/') && !s.starts_with("usb:") => match s.rsplit_once(':') {
+                Some((host, port)) if !host.is_empty() && port.parse::<u16>().is_ok() => Self::ModbusTcp(s),
+                _ => Self::Serial(s),
+            },
+            other => other,
+        }
+    }
+
     /// Reached over the network: no RS-485 direction control, no serial ioctls.
     #[must_use]
     pub const fn networked(self) -> bool {

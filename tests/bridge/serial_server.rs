@@ -121,6 +121,47 @@ fn the_bridge_reaches_a_line_behind_ser2net_raw_and_rfc2217() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
+/// `read` and `watch` reach a line behind ser2net's RFC 2217 port as `sniff` and `bridge` do:
+/// the master is a line of the bridge's, so `rfc2217://` sets the remote port's line and reads
+/// through it — mains voltages from the simulated meter, and exception 0x0B named as a timeout
+/// for a unit nobody is.
+#[test]
+#[ignore = "needs ser2net; .ci/run installs it and runs this with --ignored"]
+fn read_and_watch_reach_a_line_behind_ser2net_rfc2217() {
+    let d = super::serial::dir("ser2net-read");
+    let line = d.join("rfc");
+    let _sim = super::serial::simulator(&line, &[]);
+    let rfc = free_port();
+    let _ser2net = ser2net_in_front(&d, &[(&format!("telnet(rfc2217),tcp,127.0.0.1,{rfc}"), &line)]);
+    wait_port(rfc);
+    let target = format!("rfc2217://127.0.0.1:{rfc}");
+    let read = |args: &[&str]| {
+        let out = Command::new(BIN).arg("read").arg(&target).args(args).args(["--format", "jsonl"]).output().unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, out, err) = read(&["--unit", "1", "--device", "mk4", "430..432"]);
+    assert_eq!(code, Some(0), "{out}{err}");
+    let raws: Vec<u64> =
+        out.lines().map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["raw"].as_u64().unwrap()).collect();
+    assert_eq!(raws.len(), 3, "{out}");
+    assert!(raws.iter().all(|v| (2200..=2400).contains(v)), "mains around 230 V: {raws:?}");
+    let (code, out, err) = read(&["--unit", "77", "input", "430", "--timeout-ms", "300"]);
+    assert_ne!(code, Some(0), "{out}{err}");
+    assert!((out.clone() + &err).contains("no answer from unit 77 within 300 ms"), "{out}{err}");
+    let out = Command::new(BIN)
+        .args(["watch", &target, "--device", "mk4", "--interval", "200ms", "--count", "2", "--format", "jsonl", "430"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.lines().filter(|l| l.contains("\"raw\"")).count() >= 2, "{text}");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
 /// Issue 29: a Modbus TCP device that takes one connection at a time (a pymodbus server that
 /// closes every second connection) behind `--serial tcp://`: 8 clients at once through the
 /// bridge, 50 requests each on both units, every answer right and its own — and the device saw

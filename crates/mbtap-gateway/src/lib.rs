@@ -10,6 +10,7 @@
 //! - [`answer`]: the one answer check every back puts each answer through.
 //! - [`admit`]: may this client do this — allow-lists, read-only, roles, broadcast rules, rate
 //!   limit, routes — a route or a typed [`admit::Refusal`].
+//! - [`clients`]: the queue id of every asker, handed out here.
 //! - [`queue`]: the fair per-client queue with a priority class and coalescing of twins.
 //! - [`cache`]: answers from memory and the polling plan (agent mode).
 //! - [`breaker`]: a dead unit answered at once between probes; [`timeouts`]: how long to wait
@@ -28,6 +29,7 @@ pub mod admit;
 pub mod answer;
 pub mod breaker;
 pub mod cache;
+pub mod clients;
 pub mod fuzzing;
 pub mod lifetime;
 pub mod parse;

@@ -9,7 +9,7 @@
 //! [`request`] / [`response`] (PDU) → [`decode`] (direction hint) and [`findings`].
 //! [`length`] says how long a frame of a function code must be; [`answer_end`] uses it to find
 //! where an answer arriving byte by byte ends (the bridge's question); [`hexinput`] reads frames
-//! that people paste as text; [`ascii_link`] carries an RTU master's frames over an ASCII line; [`serial_line`] holds the
+//! that people paste as text; [`serial_line`] holds the
 //! line settings and the RTU timing they imply.
 //!
 //! This crate depends on `nom` and `thiserror` only: every parser here is fuzzed from
@@ -18,7 +18,6 @@
 pub mod adu;
 pub mod answer_end;
 pub mod ascii;
-pub mod ascii_link;
 pub mod checksum;
 pub mod data;
 pub mod decode;

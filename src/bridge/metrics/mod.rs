@@ -55,6 +55,13 @@ struct Inner {
     /// Bytes dropped unread: more than the longest answer.
     garbage_bytes: u64,
     last_note: Option<String>,
+    /// The last answer the answer check dropped, until an in-process master takes it.
+    last_misfit: Option<mbtap_gateway::answer::Misfit>,
+    /// Why the port was last found missing or lost (its I/O error's kind and words), until an
+    /// in-process master takes it.
+    port_failure: Option<(std::io::ErrorKind, String)>,
+    /// The last unit whose open breaker answered for it, until an in-process master takes it.
+    last_circuit_open: Option<u8>,
     cache_hits: u64,
     cache_misses: u64,
     coalesced: u64,
@@ -98,7 +105,10 @@ impl Metrics {
 
     /// A request answered at once because the unit's circuit breaker is open.
     pub fn circuit_open(&self, unit: u8) {
-        self.with(|m| m.units.entry(unit).or_default().circuit_open += 1);
+        self.with(|m| {
+            m.units.entry(unit).or_default().circuit_open += 1;
+            m.last_circuit_open = Some(unit);
+        });
     }
 
     /// A covered read answered from the cache (`hit`) or sent to the line.
@@ -143,6 +153,7 @@ impl Metrics {
         self.with(|m| {
             m.units.entry(unit).or_default().late_answers += 1;
             *m.misfits.entry(why.reason()).or_default() += 1;
+            m.last_misfit = Some(why);
         });
     }
 
@@ -241,6 +252,27 @@ impl Metrics {
     #[must_use]
     pub fn open_connections(&self) -> i64 {
         self.with(|m| m.connections_open)
+    }
+
+    /// The port could not be opened, or failed under a request: kept, typed, for an in-process
+    /// master to say why its request got exception 0x0A.
+    pub fn port_failure(&self, kind: std::io::ErrorKind, why: &str) {
+        self.with(|m| m.port_failure = Some((kind, why.to_owned())));
+    }
+
+    /// Why the port was last missing or lost, taken.
+    pub fn take_port_failure(&self) -> Option<(std::io::ErrorKind, String)> {
+        self.with(|m| m.port_failure.take())
+    }
+
+    /// The last unit whose open breaker answered a request without the line, taken.
+    pub fn take_circuit_open(&self) -> Option<u8> {
+        self.with(|m| m.last_circuit_open.take())
+    }
+
+    /// The last answer the answer check dropped, taken.
+    pub fn take_misfit(&self) -> Option<mbtap_gateway::answer::Misfit> {
+        self.with(|m| m.last_misfit.take())
     }
 
     /// The latest note, taken.

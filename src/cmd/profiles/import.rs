@@ -82,8 +82,8 @@ pub(super) fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
         );
         let unit = args.unit.unwrap_or(1);
         let timeout = std::time::Duration::from_secs(1);
-        let mut link = crate::master::link::Link::new(target, &args.line, timeout)?;
-        let imported = crate::cmd::runtime()?.block_on(crate::master::sunspec::import(&mut link, unit, timeout, 2))?;
+        let mut link = crate::master::link::Link::new(target, &args.line, timeout, 2)?;
+        let imported = crate::cmd::runtime()?.block_on(crate::master::sunspec::import(&mut link, unit))?;
         sink.reading(target, false);
         for n in imported.notes {
             sink.note(n);
