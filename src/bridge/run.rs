@@ -265,11 +265,7 @@ pub async fn bridge<W: Write>(
             let allow_ips = if opts.tls.tls_allow_ip.is_empty() {
                 opts.server.allow_ips.clone()
             } else {
-                opts.tls
-                    .tls_allow_ip
-                    .iter()
-                    .map(|s| s.parse().map_err(|e: mbtap_gateway::BadValue| anyhow::anyhow!("--tls-allow-ip: {e}")))
-                    .collect::<anyhow::Result<Vec<_>>>()?
+                opts.tls.tls_allow_ip.clone()
             };
             let server_opts = Arc::new(ServerOptions { rtu_over_tcp: false, allow_ips, ..opts.server.clone() });
             tokio::spawn(server::serve(

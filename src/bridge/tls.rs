@@ -47,8 +47,8 @@ pub struct TlsArgs {
     pub role: Vec<String>,
     /// Only these client addresses may connect to the TLS listener (repeatable; default: the
     /// plain listeners' --allow-ip).
-    #[arg(long, value_name = "NET")]
-    pub tls_allow_ip: Vec<String>,
+    #[arg(long, value_name = "NET", value_parser = crate::cli::numbers::ip_net)]
+    pub tls_allow_ip: Vec<mbtap_gateway::admit::IpNet>,
 }
 
 /// What one role may do: the gateway core's rules (`mbtap_gateway::admit::RoleRules`).

@@ -61,6 +61,14 @@ pub fn probability(s: &str) -> Result<f64, String> {
     within(s, &(0.0..=1.0), "a probability")
 }
 
+/// An address or a network (`--allow-ip`, `--tls-allow-ip`): `10.0.0.5`, `10.0.0.0/24`, `::1`.
+///
+/// # Errors
+/// The value, and what is expected.
+pub fn ip_net(s: &str) -> Result<mbtap_gateway::admit::IpNet, String> {
+    s.parse().map_err(|e: mbtap_gateway::BadValue| e.to_string())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -111,8 +111,8 @@ pub struct Args {
     #[arg(long = "allow-function", value_name = "CODE")]
     pub allow_functions: Vec<String>,
     /// Only these clients may connect (repeatable; 10.0.0.5 or 10.0.0.0/24).
-    #[arg(long = "allow-ip", value_name = "NET")]
-    pub allow_ips: Vec<String>,
+    #[arg(long = "allow-ip", value_name = "NET", value_parser = crate::cli::numbers::ip_net)]
+    pub allow_ips: Vec<mbtap_gateway::admit::IpNet>,
     /// Connections open at once; more are refused.
     #[arg(long, default_value_t = 64)]
     pub max_connections: usize,
@@ -221,57 +221,21 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         mqtt,
         mqtt_role,
     } = args;
-    let serial = match serial_match {
-        Some(m) => {
-            let spec = format!("usb:{m}");
-            anyhow::ensure!(
-                crate::source::serial::UsbMatch::parse(&spec).is_some(),
-                "--serial-match {m:?}: expected VID:PID or VID:PID:SERIAL in hex, e.g. 0403:6001"
-            );
-            Some(spec)
-        }
-        None => serial,
-    };
+    let serial = usb_serial(serial, serial_match)?;
     // The port name the MQTT prefix ends with.
     let source = serial.clone().unwrap_or_else(|| "bridge".to_owned());
     let (mode, settings, latency_ns) = line.overrides().resolve();
-    let allow_functions = if allow_functions.is_empty() {
-        None
-    } else {
-        Some(
-            allow_functions
-                .iter()
-                .map(|f| {
-                    mbtap_gateway::parse::parse_function_code(f)
-                        .with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
-                })
-                .collect::<anyhow::Result<Vec<u8>>>()?,
-        )
-    };
     // What a request may do, built once for every front and reverse mode alike (the routes are
     // filled from the lines when they start).
     let policy = mbtap_gateway::admit::Policy {
         read_only,
-        allow_functions,
+        allow_functions: allow_function_codes(&allow_functions)?,
         unit_map: mbtap_gateway::parse::parse_unit_map(&unit_map)?,
         priority: priority.iter().map(|p| mbtap_gateway::admit::parse_priority(p)).collect::<Result<_, _>>()?,
         routes: Vec::new(),
         broadcast: allow_broadcast || broadcast_reply,
     };
-    // Reverse mode is the serial front on --serial with the TCP target as its line.
-    let (serial, listen_serial) = if reverse {
-        let port = serial.clone().context("--reverse needs --serial PORT: the line to answer on")?;
-        let back = match (target, target_rtu) {
-            (Some(t), _) => format!("tcp://{t}"),
-            (None, Some(t)) => format!("rtu-over-tcp://{t}"),
-            (None, None) => anyhow::bail!(
-                "--reverse needs --target HOST:PORT (a Modbus TCP server) or --target-rtu HOST:PORT (RTU over TCP)"
-            ),
-        };
-        (Some(back), Some(port))
-    } else {
-        (serial, listen_serial)
-    };
+    let (serial, listen_serial) = reverse_front(reverse, serial, listen_serial, target, target_rtu)?;
     let answer_as = mbtap_gateway::parse::parse_units(answer_as.as_deref().unwrap_or(""))?;
     anyhow::ensure!(
         listen.is_some()
@@ -285,12 +249,10 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         turnaround_ms.is_finite() && turnaround_ms >= 0.0,
         "--turnaround-ms {turnaround_ms}: expected 0 or more"
     );
+    let turnaround = std::time::Duration::from_secs_f64(turnaround_ms / 1000.0);
     anyhow::ensure!(!idle_timeout.is_zero(), "--idle-timeout {idle_timeout:?}: expected a duration above 0, e.g. 300s");
     let unit_timeouts = mbtap_gateway::timeouts::parse_unit_timeouts(&unit_timeout)?;
-    let polls = poll.iter().map(|r| mbtap_gateway::cache::parse_poll(r)).collect::<Result<Vec<_>, _>>()?;
-    let mut cache = cache.iter().map(|r| mbtap_gateway::cache::parse_rule(r)).collect::<Result<Vec<_>, _>>()?;
-    // What the bridge polls is what it answers from memory.
-    cache.extend(polls.iter().map(|p| p.rule.clone()));
+    let (cache, polls) = caches(&cache, &poll)?;
     let line_for = |port: String| crate::bridge::line::LineOptions {
         line: settings,
         mode,
@@ -302,7 +264,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         cache: cache.clone(),
         polls: polls.clone(),
         retries,
-        turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
+        turnaround,
         broadcast_reply,
         // A serial server's TCP stream keeps no timing: silences shorter than its latency are
         // not taken as the end of an answer whose length the structure does not give.
@@ -322,22 +284,8 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         lines.push((1..=247, line_for(port)));
     }
     anyhow::ensure!(!lines.is_empty(), "no serial line: give --serial PORT or --route UNITS=PORT");
-    // Direction control the port cannot do is refused now, never a silent fallback.
-    for port in lines.iter().map(|(_, l)| l.port.as_str()).chain(listen_serial.as_deref()) {
-        if rs485.rs485 != crate::source::rs485::Rs485Mode::Off {
-            anyhow::ensure!(
-                !crate::source::stream::Transport::of(port).networked(),
-                "--rs485 {:?}: {port} is reached over the network, where the serial server drives the line; leave --rs485 out for it",
-                rs485.rs485
-            );
-            rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
-        }
-    }
-    let allow_ips = allow_ips
-        .iter()
-        .map(|s| s.parse().map_err(|e: mbtap_gateway::BadValue| anyhow::anyhow!("--allow-ip: {e}")))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let opts = crate::bridge::run::BridgeOptions {
+    check_rs485(&rs485, lines.iter().map(|(_, l)| l.port.as_str()).chain(listen_serial.as_deref()))?;
+    let mut opts = crate::bridge::run::BridgeOptions {
         lines,
         listen,
         listen_rtu,
@@ -361,13 +309,12 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
             port,
             line: settings,
             mode,
-            turnaround: std::time::Duration::from_secs_f64(turnaround_ms / 1000.0),
+            turnaround,
             rs485,
             answer_as,
             option: if reverse { "--reverse" } else { "--listen-serial" },
         }),
     };
-    let mut opts = opts;
     let profiles = crate::config::devices::load_devices(&devices)?;
     anyhow::ensure!(
         mqtt.mqtt.is_none() || monitor.is_some(),
@@ -384,6 +331,83 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         Runner::new("bridge".into(), format, profiles, mbtap_device::profile::annotate::Lang::En, settings);
     runner.publishing = crate::publish::Publishing { spy: None, mqtt: publisher };
     runner.run(Monitor(opts))
+}
+
+/// `--serial-match VID:PID[:SERIAL]` as the port name `usb:VID:PID[:SERIAL]`, else `--serial`.
+fn usb_serial(serial: Option<String>, serial_match: Option<String>) -> anyhow::Result<Option<String>> {
+    let Some(m) = serial_match else { return Ok(serial) };
+    let spec = format!("usb:{m}");
+    anyhow::ensure!(
+        crate::source::serial::UsbMatch::parse(&spec).is_some(),
+        "--serial-match {m:?}: expected VID:PID or VID:PID:SERIAL in hex, e.g. 0403:6001"
+    );
+    Ok(Some(spec))
+}
+
+/// `--allow-function` codes (None: not given, every function passes admission's other rules).
+fn allow_function_codes(values: &[String]) -> anyhow::Result<Option<Vec<u8>>> {
+    if values.is_empty() {
+        return Ok(None);
+    }
+    let codes = values.iter().map(|f| {
+        mbtap_gateway::parse::parse_function_code(f)
+            .with_context(|| format!("--allow-function {f:?}: expected a function code, 3 or 0x03"))
+    });
+    codes.collect::<anyhow::Result<Vec<u8>>>().map(Some)
+}
+
+/// Reverse mode is the serial front on `--serial` with the TCP target as its line: the
+/// (line, serial front) pair it makes, or the pair given.
+fn reverse_front(
+    reverse: bool,
+    serial: Option<String>,
+    listen_serial: Option<String>,
+    target: Option<String>,
+    target_rtu: Option<String>,
+) -> anyhow::Result<(Option<String>, Option<String>)> {
+    if !reverse {
+        return Ok((serial, listen_serial));
+    }
+    let port = serial.context("--reverse needs --serial PORT: the line to answer on")?;
+    let back = match (target, target_rtu) {
+        (Some(t), _) => format!("tcp://{t}"),
+        (None, Some(t)) => format!("rtu-over-tcp://{t}"),
+        (None, None) => anyhow::bail!(
+            "--reverse needs --target HOST:PORT (a Modbus TCP server) or --target-rtu HOST:PORT (RTU over TCP)"
+        ),
+    };
+    Ok((Some(back), Some(port)))
+}
+
+/// `--cache` rules and `--poll` ranges; what the bridge polls it answers from memory too.
+fn caches(
+    cache: &[String],
+    poll: &[String],
+) -> anyhow::Result<(Vec<mbtap_gateway::cache::Rule>, Vec<mbtap_gateway::cache::Poll>)> {
+    let polls = poll.iter().map(|r| mbtap_gateway::cache::parse_poll(r)).collect::<Result<Vec<_>, _>>()?;
+    let mut rules = cache.iter().map(|r| mbtap_gateway::cache::parse_rule(r)).collect::<Result<Vec<_>, _>>()?;
+    rules.extend(polls.iter().map(|p| p.rule.clone()));
+    Ok((rules, polls))
+}
+
+/// Direction control the ports cannot do is refused now, never a silent fallback: `--rs485` on
+/// a port reached over the network, or one that refuses the mode.
+fn check_rs485<'a>(
+    rs485: &crate::source::rs485::Rs485Args,
+    ports: impl Iterator<Item = &'a str>,
+) -> anyhow::Result<()> {
+    if rs485.rs485 == crate::source::rs485::Rs485Mode::Off {
+        return Ok(());
+    }
+    for port in ports {
+        anyhow::ensure!(
+            !crate::source::stream::Transport::of(port).networked(),
+            "--rs485 {:?}: {port} is reached over the network, where the serial server drives the line; leave --rs485 out for it",
+            rs485.rs485
+        );
+        rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
+    }
+    Ok(())
 }
 
 /// The bridge as the runner's source: what its lines carry, shown by `--monitor`.
@@ -478,7 +502,7 @@ mod tests {
         let path = file.to_str().unwrap();
         let (cli, m) = parse(&["mbtap", "bridge", "--config", path, "--allow-ip", "127.0.0.1"]);
         let b = merge(&file, cli, Some(&m)).unwrap();
-        assert_eq!(b.allow_ips, ["127.0.0.1"]);
+        assert_eq!(b.allow_ips, ["127.0.0.1".parse().unwrap()]);
         assert_eq!(b.routes, ["11-20=/dev/ttyS1"]);
     }
 
@@ -566,7 +590,7 @@ mod tests {
         ]);
         let b = merge(&f, cli, Some(&m)).unwrap();
         assert!(b.read_only);
-        assert_eq!(b.allow_ips, ["127.0.0.1"]);
+        assert_eq!(b.allow_ips, ["127.0.0.1".parse().unwrap()]);
         assert_eq!(b.timeout_ms, 300);
         assert_eq!(b.mqtt.mqtt_prefix.as_deref(), Some("cli/prefix"));
         assert_eq!(b.rs485.rs485_delay_before_us, 5);
