@@ -2,12 +2,15 @@
 //! fronts (Modbus TCP, RTU over TCP, UDP, TLS) and their one admission, queue, cache and
 //! metrics, with the devices of [`mbtap_sim::device`] behind them instead of a port.
 //! Every answer still passes the gateway core's one answer check: an emulated device that
-//! answered what was not asked is a defect to count, never a reply to forward.
+//! answered what was not asked is a defect to count, never a reply to forward. The breaker,
+//! the cache fill and the line-time class are the core's line's ([`mbtap_gateway::line`]), as
+//! for a serial line or a Modbus TCP device.
 
 use std::sync::Arc;
 use std::time::Instant;
 
 pub use crate::source::emulated::Emulated;
+use mbtap_gateway::line::{Back, Line, Start, class};
 use mbtap_gateway::rules::GATEWAY_TARGET_FAILED;
 use mbtap_gateway::transaction::Reply;
 
@@ -15,6 +18,7 @@ use super::shared::LineShared;
 
 /// Runs the emulated line forever, answering the clients' requests in the queue's order.
 pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
+    let mut decide = Line::new(Back::Emulated);
     loop {
         let Some((client, job)) = shared.next() else {
             shared.wake.notified().await;
@@ -22,6 +26,11 @@ pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
         };
         if job.reply.is_closed() {
             shared.metrics.dropped();
+            continue;
+        }
+        if let Start::Answer(reply) = decide.start(job.unit, shared.now()) {
+            shared.metrics.circuit_open(job.unit);
+            super::line::answer(&shared, job, reply);
             continue;
         }
         let twins = shared.twins(client, &job);
@@ -45,13 +54,15 @@ pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
             // No emulated device at that address: as a line where nobody answers (MAP v1.1b3 §7, 0B).
             None => Reply::Gateway(GATEWAY_TARGET_FAILED),
         };
+        // An emulated answer is this request's by construction: the answer check above vouches.
+        let finished = decide.finished(job.unit, &reply, true, shared.now());
         if let Reply::Pdu(pdu) = &reply {
             shared.metrics.response(job.unit, pdu);
-            if pdu.first().is_some_and(|f| f & 0x80 == 0) {
+            if finished.fill_cache {
                 shared.cache().fill(job.unit, &job.pdu, pdu, shared.now());
             }
         }
-        shared.metrics.line_time("normal", started.elapsed());
+        shared.metrics.line_time(class(client, job.high), started.elapsed());
         for twin in twins {
             let _ = twin.reply.send(reply.clone());
         }

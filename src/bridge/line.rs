@@ -2,11 +2,12 @@
 //! clients' queues ([`super::shared::LineShared`]), each driven through the gateway core's
 //! transaction machine (`mbtap_gateway::transaction`) — the shell writes what it says, reads
 //! until the time it names, and feeds back bytes and time — and the reply handed back to its
-//! client alone. The port is reopened with backoff when it goes away (a USB adapter pulled);
+//! client alone. What the line decides around each request (breaker, cache fill, quiet time)
+//! is the core's line's ([`mbtap_gateway::line`]), the same for a Modbus TCP device (`tcp://`,
+//! [`super::device`]) and for emulated devices ([`super::emulated`]). The port is reopened with backoff when it goes away (a USB adapter pulled);
 //! meanwhile requests get exception 0x0A (Gateway Path Unavailable, MAP v1.1b3 §7). The line
 //! task never exits on its own.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -20,8 +21,8 @@ use super::shared::{Job, LineShared};
 use crate::source::pace::wait_until;
 use crate::source::stream::Transport;
 use mbtap_analysis::chunk::{PortId, Timestamp};
-use mbtap_gateway::breaker::Breaker;
-use mbtap_gateway::rules::{GATEWAY_PATH_UNAVAILABLE, GATEWAY_TARGET_FAILED};
+use mbtap_gateway::line::{Back, Start, class};
+use mbtap_gateway::rules::GATEWAY_PATH_UNAVAILABLE;
 use mbtap_gateway::transaction::{LateListener, MasterConfig, Note, Outcome, Reply, SerialMaster, Step, Transaction};
 
 /// Runs the line forever.
@@ -46,7 +47,11 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
     // The line is free for the next request from this time on (t3.5 + turnaround after the
     // last byte, Serial Line v1.02 §2.5.1.1).
     let mut free_at = Instant::now();
-    let mut breakers: HashMap<u8, Breaker> = HashMap::new();
+    let mut decide = mbtap_gateway::line::Line::new(if device {
+        Back::TcpDevice
+    } else {
+        Back::Serial { guard: master.config.line_guard() }
+    });
     loop {
         let Some((client, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
@@ -70,10 +75,9 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             answer(&shared, job, Reply::Gateway(GATEWAY_PATH_UNAVAILABLE));
             continue;
         }
-        let breaker = breakers.entry(job.unit).or_default();
-        if job.unit != 0 && breaker.refuses(shared.now()) {
+        if let Start::Answer(reply) = decide.start(job.unit, shared.now()) {
             shared.metrics.circuit_open(job.unit);
-            answer(&shared, job, Reply::Gateway(GATEWAY_TARGET_FAILED));
+            answer(&shared, job, reply);
             continue;
         }
         wait_until(free_at).await;
@@ -93,30 +97,21 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         };
         let Outcome { reply, last, cacheable, flush } = outcome;
         let last = shared.instant(last);
+        let finished = decide.finished(job.unit, &reply, cacheable, shared.now());
         if let Reply::Pdu(pdu) = &reply
             && job.unit != 0
         {
             shared.metrics.response(job.unit, pdu);
-            if cacheable {
+            if finished.fill_cache {
                 shared.cache().fill(job.unit, &job.pdu, pdu, shared.now());
             }
         }
-        let class = match (client == mbtap_gateway::clients::POLL, job.high) {
-            (true, _) => "poll",
-            (false, true) => "high",
-            (false, false) => "normal",
-        };
-        shared.metrics.line_time(class, last.saturating_duration_since(on_line_from));
+        shared.metrics.line_time(class(client, job.high), last.saturating_duration_since(on_line_from));
         for twin in twins {
             shared.metrics.latency(twin.unit, twin.queued.elapsed());
             let _ = twin.reply.send(reply.clone());
         }
-        if job.unit != 0 {
-            let answered = reply != Reply::Gateway(GATEWAY_TARGET_FAILED);
-            breakers.entry(job.unit).or_default().record(answered, shared.now());
-        }
-        // A Modbus TCP device needs no quiet time between requests; a line does.
-        let guard = if device { Duration::ZERO } else { master.config.line_guard() };
+        let guard = finished.quiet;
         free_at = last + guard;
         shared.metrics.latency(job.unit, job.queued.elapsed());
         let unit = job.unit;

@@ -13,6 +13,8 @@
 //! - [`clients`]: the queue id of every asker, handed out here.
 //! - [`queue`]: the fair per-client queue with a priority class and coalescing of twins.
 //! - [`cache`]: answers from memory and the polling plan (agent mode).
+//! - [`line`]: what one line decides around each request, whatever its back (a serial line, a
+//!   Modbus TCP device, emulated devices): breaker, cache fill, quiet time, line-time class.
 //! - [`breaker`]: a dead unit answered at once between probes; [`timeouts`]: how long to wait
 //!   for each unit.
 //! - [`transaction`]: one serial request with its echo, answer, retries and late answers, as a
@@ -32,6 +34,7 @@ pub mod cache;
 pub mod clients;
 pub mod fuzzing;
 pub mod lifetime;
+pub mod line;
 pub mod parse;
 pub mod queue;
 pub mod rfc2217;
