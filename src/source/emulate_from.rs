@@ -59,8 +59,18 @@ pub fn from_capture(
     for w in &recorder.warnings {
         let _ = writeln!(notes, "mbtap: --from {}: {w}", path.display());
     }
-    let mut devices = recorder.devices();
+    let mut devices = recorder.take_devices();
+    for said in recorder.bounds_said() {
+        let _ = writeln!(notes, "mbtap: --from {}: {said}", path.display());
+    }
     let silent = recorder.silent_units();
+    // A capture the reader stopped in (a damaged block) is said as the reader says it, as
+    // `replay` does, not as a line where nobody answered.
+    if devices.is_empty()
+        && let Some(damage) = recorder.warnings.first()
+    {
+        anyhow::bail!("--from {}: {damage}", path.display());
+    }
     anyhow::ensure!(
         !devices.is_empty(),
         "--from {}: no unit answered in this capture ({}): nothing to emulate; record the line while the devices answer",
@@ -75,6 +85,9 @@ pub fn from_capture(
         let heard: BTreeSet<u8> = devices.iter().map(mbtap_sim::RecordedDevice::address).collect();
         require_units(path, wanted, &heard, "did not answer in this capture; units that did")?;
         devices.retain(|d| wanted.contains(&d.address()));
+    }
+    if let Some(said) = recorder.course_said().filter(|_| replay_values) {
+        let _ = writeln!(notes, "mbtap: --from {}: {said}", path.display());
     }
     for d in &mut devices {
         if replay_values {

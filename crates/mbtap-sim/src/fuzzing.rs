@@ -29,10 +29,10 @@ pub fn sim(data: &[u8]) {
         }
     }
     // A device emulated from a recording (`simulate --from`): holding 0–9 and coils 0–15 heard.
-    let mut values = std::collections::BTreeMap::new();
+    let mut values = crate::store::Values::default();
     for a in 0..16u16 {
-        values.insert((mbtap_device::profile::Table::Coils, a), a % 2);
-        values.insert((mbtap_device::profile::Table::HoldingRegisters, a % 10), a);
+        values.insert(mbtap_device::profile::Table::Coils, a, a % 2);
+        values.insert(mbtap_device::profile::Table::HoldingRegisters, a % 10, a);
     }
     let mut recorded = crate::RecordedDevice::from_image(1, values);
     if let Some(answer) = recorded.handle(unit, pdu) {

@@ -27,6 +27,7 @@ pub mod recording;
 pub mod rtu_requests;
 pub mod scan_line;
 pub mod slave;
+pub mod store;
 pub mod traffic;
 pub mod uart;
 pub mod world;

@@ -50,7 +50,7 @@ pub struct Latency {
 #[derive(Debug, Clone)]
 pub struct RecordedDevice {
     pub(super) address: u8,
-    pub(super) values: BTreeMap<(Table, u16), u16>,
+    pub(super) values: crate::store::Values,
     pub(super) refusals: BTreeMap<(u8, u16, u16), u8>,
     pub(super) verbatim: BTreeMap<Vec<u8>, Vec<u8>>,
     /// The values in their recorded time course (ns from the recording's first transaction),
@@ -68,7 +68,7 @@ impl RecordedDevice {
     /// A device from a register image alone (`replay --image`, a probe dump): every value as
     /// the image holds it, no refusals, no latency.
     #[must_use]
-    pub fn from_image(address: u8, values: BTreeMap<(Table, u16), u16>) -> Self {
+    pub fn from_image(address: u8, values: crate::store::Values) -> Self {
         Self {
             address,
             values,
@@ -86,8 +86,12 @@ impl RecordedDevice {
     /// Serves the recorded time course from now on: values start as first heard and change
     /// when the recording changed them, from the start again after the last change.
     pub fn replay_values(&mut self, course: Vec<(u64, Table, u16, u16)>) {
+        // Only where the recording's values are kept: the course never grows the store past the
+        // bound its values were kept under.
         for &(_, table, address, value) in course.iter().rev() {
-            self.values.insert((table, address), value);
+            if self.values.contains(table, address) {
+                self.values.insert(table, address, value);
+            }
         }
         self.course = course;
         self.course_at = 0;
@@ -109,7 +113,9 @@ impl RecordedDevice {
             if at > now {
                 break;
             }
-            self.values.insert((table, address), value);
+            if self.values.contains(table, address) {
+                self.values.insert(table, address, value);
+            }
             self.course_at += 1;
         }
         self.course_last_ns = now;
@@ -125,25 +131,23 @@ impl RecordedDevice {
     #[must_use]
     pub fn counts(&self) -> [(Table, usize); 4] {
         [Table::Coils, Table::DiscreteInputs, Table::InputRegisters, Table::HoldingRegisters]
-            .map(|t| (t, self.values.keys().filter(|(table, _)| *table == t).count()))
+            .map(|t| (t, self.values.count(t)))
     }
 
     /// A value as the recording left it (or as written since).
     #[must_use]
     pub fn get(&self, table: Table, address: u16) -> Option<u16> {
-        self.values.get(&(table, address)).copied()
+        self.values.get(table, address)
     }
 
     /// Sets a value the recording showed (from outside: `simulate --values-from`); `false` at an
     /// address it never showed, which stays refused.
     pub fn set(&mut self, table: Table, address: u16, value: u16) -> bool {
-        match self.values.get_mut(&(table, address)) {
-            Some(v) => {
-                *v = value;
-                true
-            }
-            None => false,
+        let known = self.values.contains(table, address);
+        if known {
+            self.values.insert(table, address, value);
         }
+        known
     }
 
     /// Requests the recording showed refused, and with which code.
@@ -232,7 +236,7 @@ impl RecordedDevice {
     /// evidence: a device's 03 for a block says nothing of a smaller read inside it.)
     fn covered(&self, table: Table, function: u8, address: u16, quantity: u16) -> Result<(), u8> {
         let last = answers::last_address(address, quantity).map_err(ExceptionCode::value)?;
-        if (address..=last).all(|a| self.values.contains_key(&(table, a))) {
+        if (address..=last).all(|a| self.values.contains(table, a)) {
             return Ok(());
         }
         Err(self.refused_function(function).unwrap_or(ExceptionCode::IllegalDataAddress.value()))
@@ -263,7 +267,7 @@ impl RecordedDevice {
         let quantity = u16::try_from(values.len()).map_err(|_| ExceptionCode::IllegalDataValue.value())?;
         self.covered(table, function, address, quantity)?;
         for (a, &v) in (address..).zip(values) {
-            self.values.insert((table, a), v);
+            self.values.insert(table, a, v);
         }
         Ok(())
     }
@@ -278,7 +282,7 @@ mod tests {
 
     #[test]
     fn replayed_values_follow_their_recorded_course_and_loop() {
-        let mut d = RecordedDevice::from_image(9, BTreeMap::from([((Table::HoldingRegisters, 100), 3)]));
+        let mut d = RecordedDevice::from_image(9, [((Table::HoldingRegisters, 100), 3)].into_iter().collect());
         // Holding 100 was 1, then 2 a second later, then 3 at two seconds.
         d.replay_values(vec![
             (0, Table::HoldingRegisters, 100, 1),

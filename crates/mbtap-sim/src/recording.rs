@@ -1,8 +1,11 @@
 //! Building devices from a recording (`mbtap simulate --from CAPTURE`): an analyzer sink fed by
 //! the one replay every command uses, keeping per unit what [`super::recorded::RecordedDevice`]
 //! answers from — the register image, the refusals, verbatim answers, latencies, and the values'
-//! time course for `--replay-values`. Every store is bounded: a recording of ever-new requests
-//! cannot grow memory without end.
+//! time course for `--replay-values`. Every store is bounded — per unit, and in all by what it
+//! takes in memory — so a recording of ever-new requests cannot grow memory without end, and
+//! every unit a recording shows keeps its values: 247 units read over their whole holding and
+//! input tables take 2 × 256 pages each (69 MB) under [`MAX_VALUE_BYTES`]. What a bound drops is
+//! counted per unit and said ([`Recorder::bounds_said`]).
 
 use std::collections::BTreeMap;
 
@@ -12,14 +15,21 @@ use mbtap_analysis::pairing::{Outcome, ShownLatency};
 use mbtap_device::profile::format::Table;
 use mbtap_device::profile::image::RegisterImage;
 
+use crate::store::{PAGE_BYTES, Values};
+
 /// Answers kept verbatim per device (requests of functions without registers, by their PDU).
 const MAX_VERBATIM: usize = 1024;
 /// Refusals kept per device, by (function, start address, quantity).
 const MAX_REFUSALS: usize = 65_536;
 /// Latencies kept per device for its median and spread (the most recent).
 const MAX_LATENCIES: usize = 4096;
+/// Refusals kept in all units together (about 40 bytes each: 10 MiB).
+const MAX_REFUSALS_ALL: usize = 1 << 18;
 /// Values of the time course kept in all (16 bytes each: 16 MiB).
-const MAX_COURSE: usize = 1 << 20;
+pub const MAX_COURSE: usize = 1 << 20;
+/// Memory the units' values may take in all, in pages of [`PAGE_BYTES`]: every unit of a line
+/// (247) over whole holding and input tables fits, with room to spare.
+pub const MAX_VALUE_BYTES: usize = 96 << 20;
 
 /// What one unit showed in the recording.
 #[derive(Debug, Clone, Default)]
@@ -33,13 +43,24 @@ struct UnitLog {
     latency_at: usize,
     answered: u64,
     unanswered: u64,
+    /// The values it showed, as last heard.
+    values: Values,
+    /// Values and refusals it showed that the bounds in all dropped.
+    values_dropped: u64,
+    refusals_dropped: u64,
 }
 
 /// Builds devices from a recording's transactions (an [`Sink`] for [`mbtap_analysis::replay::replay_into`]).
 #[derive(Debug, Default)]
 pub struct Recorder {
+    /// Decodes each transaction's values; emptied after each into the units' stores.
     image: RegisterImage,
     units: BTreeMap<u8, UnitLog>,
+    /// Value pages held by all units, and refusals kept by all units.
+    pages: usize,
+    refusals: usize,
+    /// Time course values past [`MAX_COURSE`], not kept.
+    course_dropped: u64,
     /// Every value set, when: (ns from the first transaction, unit, table, address, value).
     course: Vec<(u64, u8, Table, u16, u16)>,
     first_ns: Option<u64>,
@@ -69,35 +90,33 @@ impl Recorder {
             return;
         }
         let log = self.units.entry(t.unit).or_default();
-        match (t.outcome, t.response_pdu) {
+        let answer = match (t.outcome, t.response_pdu) {
             (Outcome::Ok, Some(response)) => {
                 log.answered += 1;
                 let function = request.first().copied().unwrap_or(0);
                 if !carries_registers(function) && log.verbatim.len() < MAX_VERBATIM {
                     log.verbatim.insert(request.to_vec(), response.to_vec());
                 }
-                self.image.update(t.unit, t.t_start.0, request, Some(response));
-                let since = t.t_start.0.saturating_sub(*self.first_ns.get_or_insert(t.t_start.0));
-                for &(unit, table, address) in self.image.touched() {
-                    if self.course.len() < MAX_COURSE
-                        && let Some(k) = self.image.values.get(&(unit, table, address))
-                    {
-                        self.course.push((since, unit, table, address, k.raw));
-                    }
-                }
+                Some(response)
             }
             (Outcome::Exception(code), _) => {
                 log.answered += 1;
                 let key = refusal_key(request);
-                if log.refusals.len() < MAX_REFUSALS || log.refusals.contains_key(&key) {
+                if log.refusals.contains_key(&key) {
                     log.refusals.insert(key, code);
+                } else if log.refusals.len() < MAX_REFUSALS && self.refusals < MAX_REFUSALS_ALL {
+                    log.refusals.insert(key, code);
+                    self.refusals += 1;
+                } else {
+                    log.refusals_dropped += 1;
                 }
+                None
             }
             _ => {
                 log.unanswered += 1;
                 return;
             }
-        }
+        };
         if let ShownLatency::Measured(ns) = t.shown_latency() {
             if log.latencies.len() < MAX_LATENCIES {
                 log.latencies.push(ns);
@@ -106,6 +125,36 @@ impl Recorder {
                 log.latency_at = (log.latency_at + 1) % MAX_LATENCIES;
             }
         }
+        if let Some(response) = answer {
+            self.keep_values(t.unit, t.t_start.0, request, response);
+        }
+    }
+
+    /// The values an answered request set (a read's answer, a write's request), into each
+    /// unit's store and the time course, as far as the bounds allow.
+    fn keep_values(&mut self, unit: u8, t_ns: u64, request: &[u8], response: &[u8]) {
+        self.image.update(unit, t_ns, request, Some(response));
+        let since = t_ns.saturating_sub(*self.first_ns.get_or_insert(t_ns));
+        let touched: Vec<(u8, Table, u16)> = self.image.touched().to_vec();
+        for (unit, table, address) in touched {
+            let Some(raw) = self.image.values.remove(&(unit, table, address)).map(|k| k.raw) else { continue };
+            if self.course.len() < MAX_COURSE {
+                self.course.push((since, unit, table, address, raw));
+            } else {
+                self.course_dropped += 1;
+            }
+            let log = self.units.entry(unit).or_default();
+            if log.values.needs_page(table, address) {
+                if (self.pages + 1) * PAGE_BYTES > MAX_VALUE_BYTES {
+                    log.values_dropped += 1;
+                    continue;
+                }
+                self.pages += 1;
+            }
+            log.values.insert(table, address, raw);
+        }
+        // The image only decodes: the units' stores hold the values.
+        self.image.values.clear();
     }
 
     /// Unit `unit`'s values in their recorded time course (ns from the recording's first
@@ -121,20 +170,56 @@ impl Recorder {
         self.units.iter().filter(|(_, l)| l.answered == 0).map(|(&u, _)| u).collect()
     }
 
-    /// One device per unit that answered at least once, in address order.
+    /// What the bounds dropped, one line each, with what to do: values and refusals per unit.
+    /// Empty when everything was kept.
     #[must_use]
-    pub fn devices(&self) -> Vec<RecordedDevice> {
+    pub fn bounds_said(&self) -> Vec<String> {
+        let mut said = Vec::new();
+        let per_unit = |what: fn(&UnitLog) -> u64| {
+            self.units
+                .iter()
+                .filter(|(_, l)| what(l) > 0)
+                .map(|(u, l)| format!("unit {u}: {}", what(l)))
+                .collect::<Vec<_>>()
+        };
+        let values = per_unit(|l| l.values_dropped);
+        if !values.is_empty() {
+            said.push(format!(
+                "values past the {} MiB the emulated units may hold in all were not kept ({}); those addresses answer exception 02; give fewer units with CAPTURE@UNITS",
+                MAX_VALUE_BYTES >> 20,
+                values.join(", ")
+            ));
+        }
+        let refusals = per_unit(|l| l.refusals_dropped);
+        if !refusals.is_empty() {
+            said.push(format!(
+                "refusals past {MAX_REFUSALS} per unit or {MAX_REFUSALS_ALL} in all were not kept ({}); those requests get the unit's usual answer for addresses it never showed",
+                refusals.join(", ")
+            ));
+        }
+        said
+    }
+
+    /// With `--replay-values`: what the time course's bound dropped, if anything.
+    #[must_use]
+    pub fn course_said(&self) -> Option<String> {
+        (self.course_dropped > 0).then(|| {
+            format!(
+                "--replay-values: the recording's time course holds {} values more than the {MAX_COURSE} kept; the values replay up to the last kept change, then loop",
+                self.course_dropped
+            )
+        })
+    }
+
+    /// One device per unit that answered at least once, in address order; each takes its values
+    /// from the recorder (they are not held twice).
+    #[must_use]
+    pub fn take_devices(&mut self) -> Vec<RecordedDevice> {
         self.units
-            .iter()
+            .iter_mut()
             .filter(|(_, l)| l.answered > 0)
             .map(|(&unit, log)| {
-                // Coils sort first and input registers last (the order of `Table`'s variants).
-                let values = self
-                    .image
-                    .values
-                    .range((unit, Table::Coils, 0)..=(unit, Table::InputRegisters, u16::MAX))
-                    .map(|(&(_, table, a), k)| ((table, a), k.raw))
-                    .collect();
+                let values = std::mem::take(&mut log.values);
                 let mut sorted = log.latencies.clone();
                 sorted.sort_unstable();
                 let at = |q: usize| sorted.get(sorted.len().saturating_sub(1) * q / 100).copied();
@@ -216,9 +301,64 @@ mod tests {
         r.transaction(&transaction(10, &READ_INPUT_8, Some(&[0x04, 2, 0xFF, 0xFF]), Outcome::Ok, 1));
         r.transaction(&transaction(3, &READ_100_2, None, Outcome::NoResponse, 0));
         assert_eq!(r.silent_units(), [3], "unit 3 was asked, never answered");
-        let mut devices = r.devices();
+        let mut devices = r.take_devices();
         assert_eq!(devices.iter().map(RecordedDevice::address).collect::<Vec<_>>(), [9, 10]);
         devices.remove(0)
+    }
+
+    /// 247 units, each read over 4 500 holding and 4 500 input registers in blocks of 125 (the
+    /// most FC 03/04 carries, MAP v1.1b3 §6.3) — 2.2 M values, twice what one store shared by
+    /// all units held: every unit keeps every value, none loses its values to the units before
+    /// it. (247 units over their whole tables: `BENCHMARKS.md`, the release binary's peak RSS;
+    /// their pages fit the bound, `a_full_line_over_whole_tables_fits_the_bound`.)
+    #[test]
+    fn every_unit_of_a_full_line_keeps_its_values() {
+        const SPAN: u16 = 4_500;
+        let mut r = Recorder::default();
+        let mut answer = Vec::with_capacity(2 + 250);
+        for unit in 1..=247u8 {
+            for function in [0x03u8, 0x04] {
+                for start in (0..SPAN).step_by(125) {
+                    let quantity: u16 = 125;
+                    let [ah, al] = start.to_be_bytes();
+                    let [qh, ql] = quantity.to_be_bytes();
+                    let request = [function, ah, al, qh, ql];
+                    answer.clear();
+                    answer.extend([function, u8::try_from(quantity * 2).unwrap()]);
+                    for a in (0..quantity).map(|i| start + i) {
+                        answer.extend((a ^ u16::from(unit)).to_be_bytes());
+                    }
+                    r.transaction(&transaction(unit, &request, Some(&answer), Outcome::Ok, 1_000_000));
+                }
+            }
+        }
+        assert!(r.bounds_said().is_empty(), "{:?}", r.bounds_said());
+        let devices = r.take_devices();
+        assert_eq!(devices.len(), 247);
+        for d in &devices {
+            let u = u16::from(d.address());
+            assert_eq!(d.counts()[3], (Table::HoldingRegisters, usize::from(SPAN)), "unit {u}");
+            for a in [0, 1, 2_222, SPAN - 1] {
+                assert_eq!(d.get(Table::HoldingRegisters, a), Some(a ^ u), "unit {u} holding {a}");
+                assert_eq!(d.get(Table::InputRegisters, a), Some(a ^ u), "unit {u} input {a}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_full_line_over_whole_tables_fits_the_bound() {
+        // 247 units × 2 tables × 256 pages of 256 addresses.
+        let pages = 247 * 2 * (65_536 / 256);
+        assert!(pages * PAGE_BYTES <= MAX_VALUE_BYTES, "{} MB", pages * PAGE_BYTES >> 20);
+    }
+
+    /// Past the bound in bytes, what is dropped is counted for the unit it belonged to and said.
+    #[test]
+    fn values_past_the_bound_are_said_per_unit() {
+        let mut r = Recorder { pages: MAX_VALUE_BYTES / PAGE_BYTES, ..Recorder::default() };
+        r.transaction(&transaction(12, &READ_100_2, Some(&ANSWER_100_2), Outcome::Ok, 1));
+        let said = r.bounds_said();
+        assert!(said.len() == 1 && said[0].contains("unit 12: 2") && said[0].contains("CAPTURE@UNITS"), "{said:?}");
     }
 
     #[test]
