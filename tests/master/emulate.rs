@@ -182,6 +182,22 @@ fn bad_sources_are_refused_with_what_to_do() {
     std::fs::write(&silent, w.into_inner()).unwrap();
     let err = run(&["--from", silent.to_str().unwrap()]);
     assert!(err.contains("no unit answered") && err.contains("units 9 were asked"), "{err}");
+    // A pcap whose one record claims 4 GB: said as the reader says it (where, and what), as
+    // `replay` and `learn` say it — not as a line where nobody answered.
+    let liar = dir.join("liar.pcap");
+    let mut bytes = Vec::new();
+    // Global header: magic, version 2.4, zone 0, accuracy 0, snaplen 65535, linktype 147 (USER0).
+    for word in [0xA1B2_C3D4u32, 0x0004_0002, 0, 0, 65_535, 147] {
+        bytes.extend(word.to_le_bytes());
+    }
+    // One record header: seconds, microseconds, included and original length 0xFFFF_FFF0.
+    for word in [0u32, 0, 0xFFFF_FFF0, 0xFFFF_FFF0] {
+        bytes.extend(word.to_le_bytes());
+    }
+    bytes.extend(&POLL_9);
+    std::fs::write(&liar, bytes).unwrap();
+    let err = run(&["--from", liar.to_str().unwrap()]);
+    assert!(err.contains("offset 24") && !err.contains("no unit answered"), "{err}");
 }
 
 /// Reads an f32 (high word first) at input register `address` of `unit`; `None` on an exception.

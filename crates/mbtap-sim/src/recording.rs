@@ -349,7 +349,7 @@ mod tests {
     fn a_full_line_over_whole_tables_fits_the_bound() {
         // 247 units × 2 tables × 256 pages of 256 addresses.
         let pages = 247 * 2 * (65_536 / 256);
-        assert!(pages * PAGE_BYTES <= MAX_VALUE_BYTES, "{} MB", pages * PAGE_BYTES >> 20);
+        assert!(pages * PAGE_BYTES <= MAX_VALUE_BYTES, "{} MB", (pages * PAGE_BYTES) >> 20);
     }
 
     /// Past the bound in bytes, what is dropped is counted for the unit it belonged to and said.
