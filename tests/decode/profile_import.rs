@@ -1277,3 +1277,48 @@ fn a_zip_part_that_lies_about_its_size_is_refused_by_what_it_inflates_to() {
     assert!(!o.status.success() && err.contains("xl/sharedStrings.xml") && err.contains("says 1000 bytes"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// An XLSX whose workbook names more sheets than any register map has (5 000, each pointing at
+/// the one sheet): refused before the workbook reader lays them out, naming the count — 2.5
+/// million of them in 12.7 MB took 574 MB to open (BENCHMARKS.md).
+#[test]
+fn a_workbook_naming_thousands_of_sheets_is_refused_before_it_is_opened() {
+    use std::fmt::Write as _;
+    use std::io::Write as _;
+    let dir = std::env::temp_dir().join(format!("mbtap-many-sheets-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("one.xlsx");
+    let strings = vec!["Address".to_owned(), "Name".to_owned()];
+    xlsx_with_shared_strings(&path, &strings, &[vec![(true, "0".into()), (true, "1".into())]]);
+    let mut zin = zip::ZipArchive::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let many = dir.join("many.xlsx");
+    let mut z = zip::ZipWriter::new(std::fs::File::create(&many).unwrap());
+    let o: zip::write::SimpleFileOptions = zip::write::SimpleFileOptions::default();
+    for i in 0..zin.len() {
+        let mut part = zin.by_index(i).unwrap();
+        let name = part.name().to_owned();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut part, &mut bytes).unwrap();
+        z.start_file(name.as_str(), o).unwrap();
+        if name == "xl/workbook.xml" {
+            let mut sheets = String::new();
+            for k in 0..5_000 {
+                let _ = write!(sheets, r#"<sheet name="S{k}" sheetId="{}" r:id="rId1"/>"#, k + 1);
+            }
+            let text =
+                String::from_utf8(bytes).unwrap().replace(r#"<sheet name="Map" sheetId="1" r:id="rId1"/>"#, &sheets);
+            bytes = text.into_bytes();
+        }
+        z.write_all(&bytes).unwrap();
+    }
+    z.finish().unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["profiles", "import", many.to_str().unwrap(), "--table", "holding", "--name", "many"])
+        .args(["-o", dir.join("many.toml").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("names 5000 sheets, over the 4096"), "{err}");
+    assert!(!dir.join("many.toml").exists(), "nothing written");
+    std::fs::remove_dir_all(&dir).ok();
+}
