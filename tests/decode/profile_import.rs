@@ -1322,3 +1322,24 @@ fn a_workbook_naming_thousands_of_sheets_is_refused_before_it_is_opened() {
     assert!(!dir.join("many.toml").exists(), "nothing written");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// An XLSX of more than a million tiny shared strings (`<si><t>a</t></si>`, honest sizes, a
+/// file of ~40 kB): refused before the workbook reader holds them all, naming the count —
+/// 7.4 million of them from 307 kB took 413 MB to open (BENCHMARKS.md).
+#[test]
+fn a_million_tiny_shared_strings_are_refused_before_they_are_held() {
+    let dir = std::env::temp_dir().join(format!("mbtap-tiny-strings-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("tiny.xlsx");
+    let mut strings = vec!["Address".to_owned(), "Name".to_owned()];
+    strings.resize(1_000_001, "a".to_owned());
+    xlsx_with_shared_strings(&path, &strings, &[vec![(true, "0".into()), (true, "1".into())]]);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["profiles", "import", path.to_str().unwrap(), "--table", "holding", "--name", "tiny"])
+        .args(["-o", dir.join("tiny.toml").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("1000001 shared strings, over the 1000000"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

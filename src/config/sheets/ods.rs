@@ -75,17 +75,20 @@ fn check_unpacked<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::
         let Ok(part) = zip.by_index(i) else { continue };
         let (name, says) = (part.name().to_owned(), part.size());
         let left = MAX_UNPACKED_BYTES.saturating_sub(total);
-        let workbook = name.eq_ignore_ascii_case("xl/workbook.xml");
+        // What the workbook reader lays out in memory for each element: sheets, shared strings.
+        let (tag, max, what): (Option<&[u8]>, u64, &str) = match name.to_ascii_lowercase().as_str() {
+            "xl/workbook.xml" => (Some(b"sheet"), MAX_SHEETS, "its workbook names {n} sheets, over the {max} read"),
+            "xl/sharedstrings.xml" => {
+                (Some(b"si"), MAX_SHARED_STRINGS, "it holds {n} shared strings, over the {max} read")
+            }
+            _ => (None, u64::MAX, ""),
+        };
         // A part that cannot be inflated is the workbook reader's to report.
-        let (got, sheets) = inflate_counting(part.take(left.saturating_add(1)), workbook);
+        let (got, n) = inflate_counting(part.take(left.saturating_add(1)), tag);
         total = total.saturating_add(got);
-        if sheets > MAX_SHEETS {
-            return Err(too_big(
-                path,
-                &format!(
-                    "its workbook names {sheets} sheets, over the {MAX_SHEETS} read (each is laid out in memory when the workbook opens)"
-                ),
-            ));
+        if n > max {
+            let said = what.replace("{n}", &n.to_string()).replace("{max}", &max.to_string());
+            return Err(too_big(path, &format!("{said} (each is held in memory when the workbook opens)")));
         }
         if total > MAX_UNPACKED_BYTES {
             return Err(too_big(
@@ -104,33 +107,61 @@ fn check_unpacked<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::
 /// has a handful.
 pub const MAX_SHEETS: u64 = 4096;
 
-/// Inflates `part` to nothing, counting its bytes and, for a workbook part, its `<sheet` elements
-/// (any namespace prefix: `<x:sheet `); `<sheets>` and `<sheetView` are not sheets.
-fn inflate_counting(mut part: impl std::io::Read, workbook: bool) -> (u64, u64) {
-    let (mut bytes, mut sheets) = (0u64, 0u64);
+/// The most shared strings an XLSX may hold: the workbook reader keeps every one in memory when
+/// it opens (measured: 7.4 million one-letter strings from a 307 kB file took 413 MB, ~55 bytes
+/// a string), so this keeps them under ~55 MB; a 200 000-row register sheet with three texts a
+/// row has 600 000.
+pub const MAX_SHARED_STRINGS: u64 = 1_000_000;
+
+/// Inflates `part` to nothing, counting its bytes and the start tags named `tag` in it (any
+/// namespace prefix: `<x:sheet `; `<sheets>` and `<sheetView` are not `sheet`s).
+fn inflate_counting(mut part: impl std::io::Read, tag: Option<&[u8]>) -> (u64, u64) {
+    let (mut bytes, mut found) = (0u64, 0u64);
     let mut buf = vec![0u8; 64 * 1024];
-    // The tail of the previous chunk, so a `<sheet ` split across reads is still seen.
+    // The tail of the previous chunk, so an element cut by the read is still seen.
     let mut carry: Vec<u8> = Vec::new();
     loop {
         let n = match part.read(&mut buf) {
-            Ok(0) | Err(_) => return (bytes, sheets),
+            Ok(0) | Err(_) => return (bytes, found),
             Ok(n) => n,
         };
         bytes = bytes.saturating_add(n as u64);
-        if !workbook {
-            continue;
-        }
+        let Some(tag) = tag else { continue };
         carry.extend_from_slice(buf.get(..n).unwrap_or_default());
-        sheets += carry
-            .windows(6)
-            .enumerate()
-            .filter(|&(i, w)| w == b"sheet " && i > 0 && carry.get(i - 1).is_some_and(|&b| b == b'<' || b == b':'))
-            .count() as u64;
-        // Keep the last 6 bytes: a `<sheet ` cut by the read has its `<` and its start in them,
-        // and one wholly in them, counted now, sits at 0 and is not counted again.
-        let keep = carry.len().saturating_sub(6);
-        carry.drain(..keep);
+        let (count, rest) = count_elements(&carry, tag);
+        found += count;
+        carry.drain(..rest);
     }
+}
+
+/// The longest element name looked at (prefix included); longer ones are no `tag`.
+const MAX_NAME: usize = 64;
+
+/// Start tags named `tag` in `text` (any prefix: `<x:si>`; `<si/>` too; `</si>` is an end tag),
+/// and where the unread rest begins: a `<` whose name the text cuts is kept for the next read.
+fn count_elements(text: &[u8], tag: &[u8]) -> (u64, usize) {
+    let mut found = 0;
+    let mut at = 0;
+    while let Some(lt) = text.get(at..).and_then(|t| t.iter().position(|&b| b == b'<')).map(|p| p + at) {
+        let name_from = lt + 1;
+        let rest = text.get(name_from..).unwrap_or_default();
+        let Some(len) =
+            rest.iter().take(MAX_NAME).position(|&b| matches!(b, b' ' | b'>' | b'/' | b'\t' | b'\r' | b'\n'))
+        else {
+            if rest.len() < MAX_NAME {
+                // The name goes on in the next read.
+                return (found, lt);
+            }
+            at = name_from;
+            continue;
+        };
+        let name = rest.get(..len).unwrap_or_default();
+        if name.rsplit(|&b| b == b':').next() == Some(tag) {
+            found += 1;
+        }
+        at = name_from + len;
+    }
+    (found, text.len())
 }
 
 /// Whether the zip is an OpenDocument spreadsheet (its `mimetype` part says so, ODF v1.2 part 3
@@ -191,8 +222,12 @@ mod sheet_count_tests {
     fn sheets_are_counted_however_the_part_is_cut() {
         let wb = br#"<workbook><sheets><sheet name="A"/><x:sheet name="B"/><sheetView/></sheets></workbook>"#;
         for step in 1..wb.len() {
-            assert_eq!(inflate_counting(Pieces(wb, step), true), (wb.len() as u64, 2), "pieces of {step}");
+            assert_eq!(inflate_counting(Pieces(wb, step), Some(b"sheet")), (wb.len() as u64, 2), "pieces of {step}");
         }
-        assert_eq!(inflate_counting(Pieces(wb, 4), false).1, 0, "only the workbook part is counted");
+        assert_eq!(inflate_counting(Pieces(wb, 4), None).1, 0, "nothing counted without a tag");
+        let sst = b"<sst><si><t>a</t></si><x:si><t>b</t></x:si><si/><sig/></sst>";
+        for step in 1..sst.len() {
+            assert_eq!(inflate_counting(Pieces(sst, step), Some(b"si")).1, 3, "pieces of {step}");
+        }
     }
 }
