@@ -132,8 +132,10 @@ fn spy(_d: &Path) {
 
 fn mqtt(d: &Path) {
     let capture = d.join("big.pcapng");
-    let g =
-        Command::new(BIN).args(["generate", capture.to_str().unwrap(), "--transactions", "200000"]).output().unwrap();
+    let g = Command::new(BIN)
+        .args(["generate", capture.to_str().unwrap(), "--transactions", "200000", "--force"])
+        .output()
+        .unwrap();
     assert!(g.status.success());
     let (_broker, port) = broker(d, "mqtt");
     let replay = |mqtt: bool| {

@@ -21,14 +21,18 @@ pub struct Args {
     /// The Wireshark file to write.
     #[arg(short, long)]
     pub out: PathBuf,
+    /// Replace the file if it is already there (without, it is kept and nothing is written).
+    #[arg(long)]
+    pub force: bool,
     #[command(flatten)]
     pub line: CaptureLineArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { file, out, line } = args;
+    let Args { file, out, force, line } = args;
     let input = crate::output::progress::open_capture(&file, true)?;
-    let output = crate::output::whole_file::WholeFile::create(&out)?;
+    let output =
+        crate::output::whole_file::WholeFile::create(&out, crate::output::whole_file::Existing::forced(force))?;
     let export = mbtap_analysis::capture::export::WiresharkExport::new(io::BufWriter::new(output))?;
     let mut sink = ExportSink { export, error: None };
     mbtap_analysis::replay::replay_into(input, line.overrides(), &mut sink)

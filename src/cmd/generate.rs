@@ -16,6 +16,9 @@ use crate::cli::args::LineArgs;
 pub struct Args {
     /// Output pcapng file.
     pub out: PathBuf,
+    /// Replace the file if it is already there (without, it is kept and nothing is written).
+    #[arg(long)]
+    pub force: bool,
     /// Transactions to generate.
     #[arg(long, default_value_t = 1000)]
     pub transactions: usize,
@@ -71,7 +74,10 @@ fn frames(args: &Args, list: &Path) -> anyhow::Result<ExitCode> {
             .map_err(|e| anyhow::anyhow!("{}:{}: {e}", list.display(), i + 1))?;
         frames.push(wire);
     }
-    let mut file = io::BufWriter::new(crate::output::whole_file::WholeFile::create(out)?);
+    let mut file = io::BufWriter::new(crate::output::whole_file::WholeFile::create(
+        out,
+        crate::output::whole_file::Existing::forced(args.force),
+    )?);
     let n = mbtap_sim::traffic::capture::write_frames(
         &mut file,
         &frames,
@@ -111,7 +117,10 @@ fn random(args: &Args) -> anyhow::Result<ExitCode> {
         ..TrafficConfig::default()
     };
     let model = model(*observe);
-    let mut file = io::BufWriter::new(crate::output::whole_file::WholeFile::create(out)?);
+    let mut file = io::BufWriter::new(crate::output::whole_file::WholeFile::create(
+        out,
+        crate::output::whole_file::Existing::forced(args.force),
+    )?);
     let (chunks, bytes) = mbtap_sim::traffic::capture::write_capture(&mut file, &cfg, model)
         .with_context(|| format!("writing {}", out.display()))?;
     file.into_inner()

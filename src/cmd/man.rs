@@ -133,7 +133,8 @@ fn write_all(dir: &Path) -> anyhow::Result<usize> {
     let pages = pages()?;
     for (name, page) in &pages {
         let path = dir.join(name);
-        crate::output::whole_file::write_whole(&path, page)?;
+        // The pages are this command's own, in the directory given: made again, they replace.
+        crate::output::whole_file::write_whole(&path, page, crate::output::whole_file::Existing::Replace)?;
     }
     Ok(pages.len())
 }

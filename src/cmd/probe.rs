@@ -49,6 +49,9 @@ pub struct Args {
     /// Write a skeleton profile of what answered here.
     #[arg(short, long, value_name = "SKELETON.toml")]
     pub output: Option<PathBuf>,
+    /// Replace the file if it is already there (without, it is kept and nothing is written).
+    #[arg(long)]
+    pub force: bool,
     /// What to print.
     #[arg(long, value_enum, default_value_t = Format::Text)]
     pub format: Format,
@@ -165,7 +168,11 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let skeleton = probe.skeleton(args.unit, &args.target);
         mbtap_device::profile::load("skeleton", &skeleton)
             .context("the skeleton does not load (a bug: please report it)")?;
-        crate::output::whole_file::write_whole(out, skeleton.as_bytes())?;
+        crate::output::whole_file::write_whole(
+            out,
+            skeleton.as_bytes(),
+            crate::output::whole_file::Existing::forced(args.force),
+        )?;
         eprintln!("mbtap: wrote {}", out.display());
     }
     let mut stdout = std::io::stdout().lock();

@@ -102,6 +102,9 @@ pub struct ExportArgs {
     /// Where to write it (default: standard output).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Replace the file if it is already there (without, it is kept and nothing is written).
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -236,7 +239,11 @@ fn export(args: &ExportArgs) -> anyhow::Result<ExitCode> {
     };
     let e = mbtap_device::profile::export::export(&p, args.unit, target);
     match &args.output {
-        Some(o) => crate::output::whole_file::write_whole(o, e.text.as_bytes())?,
+        Some(o) => crate::output::whole_file::write_whole(
+            o,
+            e.text.as_bytes(),
+            crate::output::whole_file::Existing::forced(args.force),
+        )?,
         None => std::io::stdout().lock().write_all(e.text.as_bytes())?,
     }
     let mut err = std::io::stderr().lock();

@@ -23,6 +23,9 @@ pub struct Args {
     /// from which transaction) to this file: `.json` for JSON, anything else CSV.
     #[arg(long)]
     pub image: Option<PathBuf>,
+    /// With --image: replace the file if it is already there.
+    #[arg(long)]
+    pub force: bool,
     #[command(flatten)]
     pub line: CaptureLineArgs,
     #[command(flatten)]
@@ -30,7 +33,11 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { file, image, line, mut output } = args;
+    let Args { file, image, force, line, mut output } = args;
+    // Said before the replay, not after it: a file there is kept unless --force.
+    if let Some(path) = image.as_ref().filter(|p| !force && p.symlink_metadata().is_ok()) {
+        anyhow::bail!("--image {}: already exists: kept as it is; give --force to replace it", path.display());
+    }
     // The profiles a capture ships with (NAME.devices beside it) under the command line's.
     output.devices = [crate::config::devices::devices_beside(&file)?, output.devices].concat();
     let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
@@ -39,7 +46,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     runner.pacing = true;
     runner.block_buffered = true;
     runner.serve_after_end = true;
-    runner.run(Replay { input, line, file, image })
+    runner.run(Replay { input, line, file, image, force })
 }
 
 /// A capture as the runner's source, and the register image it leaves (`--image`).
@@ -48,11 +55,12 @@ struct Replay<R> {
     line: CaptureLineArgs,
     file: PathBuf,
     image: Option<PathBuf>,
+    force: bool,
 }
 
 impl<R: Read + Send + 'static> Job for Replay<R> {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
-        let Self { input, line, file, image } = self;
+        let Self { input, line, file, image, force } = self;
         // Recorded input shown in the UI is held to its own time.
         writer.paced = writer.tui.is_some();
         if image.is_some() {
@@ -63,7 +71,7 @@ impl<R: Read + Send + 'static> Job for Replay<R> {
             .with_context(|| format!("replaying {}", file.display()))
             .map_err(SourceError::NotStarted)?;
         if let (Some(path), Some(img)) = (&image, writer.image.take()) {
-            write_image(path, &img, &writer.profiles)?;
+            write_image(path, &img, &writer.profiles, force)?;
         }
         Ok(())
     }
@@ -74,6 +82,7 @@ fn write_image(
     path: &std::path::Path,
     img: &mbtap_device::profile::image::RegisterImage,
     profiles: &mbtap_device::profile::Profiles,
+    force: bool,
 ) -> anyhow::Result<()> {
     if img.overflowed > 0 {
         eprintln!(
@@ -87,5 +96,6 @@ fn write_image(
     } else {
         img.to_csv(profiles)
     };
-    crate::output::whole_file::write_whole(path, text.as_bytes()).context("the register image")
+    crate::output::whole_file::write_whole(path, text.as_bytes(), crate::output::whole_file::Existing::forced(force))
+        .context("the register image")
 }

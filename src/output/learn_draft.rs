@@ -64,13 +64,9 @@ impl Replace {
 /// Writes one file atomically, through the one writer of whole files (no planted link is
 /// followed); a file that was there before is replaced only under `--force`.
 fn write_atomic(file: &Path, text: &str, replace: &mut Replace) -> anyhow::Result<()> {
-    if !replace.force && !replace.mine.contains(file) && file.symlink_metadata().is_ok() {
-        anyhow::bail!(
-            "{} already exists: kept as it is; give --force to replace it, or another -o/--dir",
-            file.display()
-        );
-    }
-    super::whole_file::write_whole(file, text.as_bytes())?;
+    // A draft this run wrote before is its own to replace as the learner learns more.
+    let existing = super::whole_file::Existing::forced(replace.force || replace.mine.contains(file));
+    super::whole_file::write_whole(file, text.as_bytes(), existing)?;
     replace.mine.insert(file.to_path_buf());
     Ok(())
 }

@@ -3,6 +3,9 @@
 //! never through a link someone planted there, never over a file already there — synced, then
 //! renamed over the target. A reader sees the old file or the new one, never half of one; a
 //! write that fails or is abandoned leaves the old file as it was and removes its temporary.
+//! A file already at the target (or a link) is replaced only when the user said so (`--force`,
+//! [`Existing::Replace`]); otherwise it is kept and the write refused, saying so — one rule for
+//! every command.
 
 use std::fs::File;
 use std::io::Write;
@@ -15,12 +18,38 @@ use anyhow::Context as _;
 /// Temporaries made by this process so far: each name is new, whatever runs at once.
 static MADE: AtomicU64 = AtomicU64::new(0);
 
+/// What becomes of a file already at the target.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Existing {
+    /// Kept: the write is refused, naming the file and `--force`.
+    Keep,
+    /// Replaced (`--force`, or a file this run wrote itself).
+    Replace,
+}
+
+impl Existing {
+    /// `--force` given: replace; else keep.
+    #[must_use]
+    pub const fn forced(force: bool) -> Self {
+        if force { Self::Replace } else { Self::Keep }
+    }
+}
+
+/// The refusal for a file already there.
+fn kept(target: &Path) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{} already exists: kept as it is; give --force to replace it, or write elsewhere",
+        target.display()
+    )
+}
+
 /// A whole file being written; [`WholeFile::commit`] puts it in place.
 #[derive(Debug)]
 pub struct WholeFile {
     file: File,
     tmp: PathBuf,
     target: PathBuf,
+    existing: Existing,
     committed: bool,
 }
 
@@ -28,8 +57,12 @@ impl WholeFile {
     /// Starts writing `target`.
     ///
     /// # Errors
-    /// The target's directory cannot take a new file (missing, not writable), named.
-    pub fn create(target: &Path) -> anyhow::Result<Self> {
+    /// A file (or link) already at `target` under [`Existing::Keep`]; the target's directory
+    /// cannot take a new file (missing, not writable), named.
+    pub fn create(target: &Path, existing: Existing) -> anyhow::Result<Self> {
+        if existing == Existing::Keep && target.symlink_metadata().is_ok() {
+            return Err(kept(target));
+        }
         let dir = match target.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),
@@ -52,7 +85,7 @@ impl WholeFile {
                     dir.display()
                 )
             })?;
-        Ok(Self { file, tmp, target: target.to_path_buf(), committed: false })
+        Ok(Self { file, tmp, target: target.to_path_buf(), existing, committed: false })
     }
 
     /// Syncs the bytes and renames the temporary over the target (a link at the target is
@@ -63,7 +96,20 @@ impl WholeFile {
     pub fn commit(mut self) -> anyhow::Result<()> {
         self.file.flush().with_context(|| format!("writing {}", self.target.display()))?;
         self.file.sync_all().with_context(|| format!("writing {}", self.target.display()))?;
-        std::fs::rename(&self.tmp, &self.target).with_context(|| format!("writing {}", self.target.display()))?;
+        match self.existing {
+            Existing::Replace => {
+                std::fs::rename(&self.tmp, &self.target)
+                    .with_context(|| format!("writing {}", self.target.display()))?;
+            }
+            // A hard link is made only where nothing is: a file that appeared meanwhile is kept.
+            Existing::Keep => match std::fs::hard_link(&self.tmp, &self.target) {
+                Ok(()) => {
+                    let _ = std::fs::remove_file(&self.tmp);
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Err(kept(&self.target)),
+                Err(e) => return Err(e).with_context(|| format!("writing {}", self.target.display())),
+            },
+        }
         self.committed = true;
         Ok(())
     }
@@ -91,8 +137,8 @@ impl Drop for WholeFile {
 ///
 /// # Errors
 /// As [`WholeFile::create`] and [`WholeFile::commit`], and a failed write, naming the target.
-pub fn write_whole(target: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let mut f = WholeFile::create(target)?;
+pub fn write_whole(target: &Path, bytes: &[u8], existing: Existing) -> anyhow::Result<()> {
+    let mut f = WholeFile::create(target, existing)?;
     f.write_all(bytes).with_context(|| format!("writing {}", target.display()))?;
     f.commit()
 }
@@ -117,7 +163,9 @@ mod tests {
         // A link at every name an older writer used for its temporary, and at the target.
         std::os::unix::fs::symlink(&victim, d.join("learned-unit-1.toml.tmp")).unwrap();
         std::os::unix::fs::symlink(&victim, d.join("learned-unit-1.toml")).unwrap();
-        write_whole(&d.join("learned-unit-1.toml"), b"new").unwrap();
+        let e = write_whole(&d.join("learned-unit-1.toml"), b"new", Existing::Keep).unwrap_err();
+        assert!(format!("{e:#}").contains("--force"), "a link at the target is kept without --force: {e:#}");
+        write_whole(&d.join("learned-unit-1.toml"), b"new", Existing::Replace).unwrap();
         assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep");
         assert_eq!(std::fs::read_to_string(d.join("learned-unit-1.toml")).unwrap(), "new");
         assert!(!d.join("learned-unit-1.toml").is_symlink(), "the link is replaced by the file");
@@ -129,7 +177,7 @@ mod tests {
         let target = d.join("profile.toml");
         std::fs::write(&target, "old").unwrap();
         {
-            let mut f = WholeFile::create(&target).unwrap();
+            let mut f = WholeFile::create(&target, Existing::Replace).unwrap();
             f.write_all(b"half").unwrap();
         }
         assert_eq!(std::fs::read_to_string(&target).unwrap(), "old");
@@ -138,7 +186,26 @@ mod tests {
 
     #[test]
     fn a_directory_that_is_not_there_is_named() {
-        let e = write_whole(Path::new("/nonexistent-dir/x.toml"), b"x").unwrap_err();
+        let e = write_whole(Path::new("/nonexistent-dir/x.toml"), b"x", Existing::Keep).unwrap_err();
         assert!(format!("{e:#}").contains("/nonexistent-dir"), "{e:#}");
+    }
+
+    #[test]
+    fn a_file_already_there_is_kept_unless_replacing_was_asked_for() {
+        let d = scratch("kept");
+        let target = d.join("export.pcap");
+        std::fs::write(&target, "old").unwrap();
+        let e = write_whole(&target, b"new", Existing::Keep).unwrap_err();
+        assert!(format!("{e:#}").contains("already exists") && format!("{e:#}").contains("--force"), "{e:#}");
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "old");
+        // A file that appears while the new one is written is kept too.
+        let late = d.join("late.pcap");
+        let f = WholeFile::create(&late, Existing::Keep).unwrap();
+        std::fs::write(&late, "theirs").unwrap();
+        assert!(f.commit().is_err());
+        assert_eq!(std::fs::read_to_string(&late).unwrap(), "theirs");
+        write_whole(&target, b"new", Existing::Replace).unwrap();
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "new");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 2, "no temporary left");
     }
 }
