@@ -13,6 +13,7 @@ use mbtap_device::profile::export::Target;
 
 use crate::config::devices::{load_profile_file, resolve_profile, user_profile_dir};
 
+pub mod fuzzing;
 mod import;
 mod profile_file;
 use import::{import, parse_type_arg};

@@ -43,6 +43,7 @@ fn run_dir(dir: &Path) -> usize {
             "gateway" => mbtap_gateway::fuzzing::transaction,
             "gateway_transports" => mbtap_gateway::fuzzing::transports,
             "lifetime" => mbtap_gateway::fuzzing::lifetime,
+            "import_file" => mbtap::cmd::profiles::fuzzing::import_file,
             other => panic!("{} names no fuzz target ({other})", target.display()),
         };
         for file in fs::read_dir(&target).unwrap() {

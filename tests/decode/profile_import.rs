@@ -1343,3 +1343,30 @@ fn a_million_tiny_shared_strings_are_refused_before_they_are_held() {
     assert!(!o.status.success() && err.contains("1000001 shared strings, over the 1000000"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A CSV of one 17 MiB quoted field, and the same with the quote never closed (as a truncated
+/// export leaves it): refused by the text budget, naming the row — not held whole and built into
+/// a profile (a 60 MB field took 580 MB; now 132 MB and refused, BENCHMARKS.md).
+#[test]
+fn a_csv_field_longer_than_the_text_budget_is_refused_naming_the_row() {
+    let dir = std::env::temp_dir().join(format!("mbtap-long-field-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let long = "A".repeat(17 << 20);
+    for (name, text) in [
+        ("closed.csv", format!("name,address\n\"{long}\",1\n")),
+        ("unclosed.csv", format!("name,address\n\"{long},1\n")),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let out = dir.join(format!("{name}.toml"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
+            .args(["profiles", "import", path.to_str().unwrap(), "--table", "holding", "--name", "long"])
+            .args(["-o", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("row 2") && err.contains("16777216"), "{name}: {err}");
+        assert!(!out.exists(), "{name}: no profile written");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

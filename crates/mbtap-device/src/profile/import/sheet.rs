@@ -256,7 +256,7 @@ pub fn read_sheet<S: SheetRows>(rows: &mut S, opts: &SheetOptions, out: &mut imp
                 at: format!("row {}", i + 1),
                 column: None,
                 why: format!(
-                    "the rows up to here hold {produced} bytes of text in the columns read, over the {MAX_TEXT_PRODUCED} a profile may be built from (the same long text cited by many cells?); nothing imported"
+                    "the rows up to here hold {produced} bytes of text in the columns read, over the {MAX_TEXT_PRODUCED} a profile may be built from (one very long cell, or the same long text cited by many cells?); nothing imported"
                 ),
             });
             return ControlFlow::Break(());
