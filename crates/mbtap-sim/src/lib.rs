@@ -20,6 +20,7 @@ pub mod ascii_requests;
 pub mod bus;
 pub mod device;
 pub mod fuzzing;
+pub mod meters;
 pub mod mirror;
 pub mod poll_list;
 pub mod recorded;

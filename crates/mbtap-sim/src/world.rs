@@ -38,6 +38,8 @@ pub fn step(slave: &mut Slave, t: f64) {
         "mk4" => mk4(slave, t),
         "display" => display(slave, t),
         "mkzp" => mkzp(slave, t),
+        "sdm120" | "sdm230" => super::meters::single_phase(slave, t),
+        "sdm630" => super::meters::three_phase(slave, t),
         _ => {}
     }
 }

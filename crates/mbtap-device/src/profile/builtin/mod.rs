@@ -9,6 +9,9 @@ const BUILTIN: &[(&str, &str, &str)] = &[
     ("mk4", "builtin/mk4.toml", include_str!("mk4.toml")),
     ("mkzp", "builtin/mkzp.toml", include_str!("mkzp.toml")),
     ("display", "builtin/display.toml", include_str!("display.toml")),
+    ("sdm120", "builtin/sdm120.toml", include_str!("sdm120.toml")),
+    ("sdm230", "builtin/sdm230.toml", include_str!("sdm230.toml")),
+    ("sdm630", "builtin/sdm630.toml", include_str!("sdm630.toml")),
 ];
 
 /// Names of the built-in profiles.
