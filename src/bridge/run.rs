@@ -59,7 +59,7 @@ impl BridgeOptions {
     /// The bridge's fronts before emulated devices (`simulate --listen`): one line answering
     /// every unit from `emulated`, under the bridge's default limits (64 connections, 32
     /// requests waiting per client, idle connections closed after 5 minutes) and its one
-    /// admission; broadcast writes reach the devices, as on a line.
+    /// admission under `policy` (`simulate --read-only`, `--allow-broadcast`: the bridge's rules).
     #[must_use]
     pub fn emulating(
         emulated: Arc<crate::source::emulated::Emulated>,
@@ -67,6 +67,7 @@ impl BridgeOptions {
         mode: mbtap_analysis::analyzer::SerialMode,
         duration: Option<Duration>,
         fronts: EmulatedFronts,
+        policy: mbtap_gateway::admit::Policy,
     ) -> Self {
         let EmulatedFronts { listen, listen_rtu, listen_udp, listen_serial } = fronts;
         let line = LineOptions {
@@ -93,7 +94,7 @@ impl BridgeOptions {
             listen_udp,
             server: ServerOptions {
                 rtu_over_tcp: false,
-                policy: mbtap_gateway::admit::Policy { broadcast: true, ..Default::default() },
+                policy,
                 allow_ips: Vec::new(),
                 max_connections: 64,
                 idle_timeout: Duration::from_mins(5),

@@ -75,6 +75,16 @@ pub struct Args {
     /// the bridge's admission, queue and limits.
     #[arg(long, value_name = "ADDR:PORT")]
     pub listen: Option<String>,
+    /// Refuse every request that could change a device (writes, diagnostics that restart or
+    /// silence it, anything not known to be harmless) with exception 01, on every front: a device
+    /// anyone may read and nobody may write.
+    #[arg(long)]
+    pub read_only: bool,
+    /// Let broadcast writes (unit 0) from TCP, UDP and serial-front clients reach the devices, as
+    /// `bridge --allow-broadcast` does; without it they are refused with exception 01 (one rule
+    /// for both).
+    #[arg(long)]
+    pub allow_broadcast: bool,
     /// Serve them as RTU frames over TCP here.
     #[arg(long, value_name = "ADDR:PORT")]
     pub listen_rtu: Option<String>,
@@ -133,6 +143,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         listen,
         listen_rtu,
         listen_udp,
+        read_only,
+        allow_broadcast,
         line,
         duration,
         turnaround_ms,
@@ -190,6 +202,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         started: Instant::now(),
         turnaround: turnaround_ms.map(|ms| Duration::from_secs_f64(ms / 1000.0)),
         usual_turnaround: crate::source::simulate::DEFAULT_TURNAROUND,
+        read_only,
     });
     let listening = listen.is_some() || listen_rtu.is_some() || listen_udp.is_some() || serial.is_some();
     if let Some(port) = &serial {
@@ -232,7 +245,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                     option: "simulate --serial",
                 }),
             };
-            let bridge = crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts);
+            let policy = mbtap_gateway::admit::Policy { read_only, broadcast: allow_broadcast, ..Default::default() };
+            let bridge = crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts, policy);
             crate::bridge::run::bridge::<io::Sink>(bridge, None, &mut io::stderr()).await
         };
         let on_pty = async {

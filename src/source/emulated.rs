@@ -17,6 +17,10 @@ pub struct Emulated {
     /// median), else `usual_turnaround`.
     pub turnaround: Option<Duration>,
     pub usual_turnaround: Duration,
+    /// `simulate --read-only`: a request that could change a device is answered exception 01
+    /// (the core's one read-only rule, `mbtap_gateway::rules::read_only_safe`), whatever front
+    /// it came by; the bridge's fronts refuse it at admission before it gets here.
+    pub read_only: bool,
 }
 
 impl Emulated {
@@ -25,6 +29,13 @@ impl Emulated {
     pub fn answer(&self, unit: u8, pdu: &[u8]) -> Option<(Vec<u8>, Duration)> {
         let t = self.started.elapsed().as_secs_f64();
         let mut devices = self.devices.lock().unwrap_or_else(PoisonError::into_inner);
+        if self.read_only && !mbtap_gateway::rules::read_only_safe(pdu) {
+            // Only a device that is there refuses (another unit's request stays another's), and
+            // a broadcast is never answered (Serial Line v1.02 §2.2).
+            let function = pdu.first().copied().unwrap_or(0);
+            let here = devices.iter().any(|d| d.address() == unit);
+            return here.then(|| (vec![function | mbtap_proto::EXCEPTION_FLAG, 0x01], self.usual_turnaround));
+        }
         let (answer, own) = mbtap_sim::device::answer(&mut devices, unit, pdu, t)?;
         let wait = self.turnaround.or_else(|| own.map(Duration::from_nanos)).unwrap_or(self.usual_turnaround);
         Some((answer, wait))

@@ -78,6 +78,64 @@ fn what_the_recording_never_showed_is_refused_not_invented() {
     assert_eq!(common::call(&mut s, 3, 2, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x83, 0x0B]);
 }
 
+/// A recording that only ever read holding register 0 of unit 1: a read of input registers —
+/// a function the device never showed — is answered 01, as the docs and the start line say; a
+/// holding register it never showed is answered 02.
+#[test]
+fn a_function_the_recording_never_showed_is_01_and_an_address_02() {
+    let dir = std::env::temp_dir().join(format!("mbtap-never-shown-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut text = String::new();
+    // FC 03 holding 0, one register, answered 42 (MAP v1.1b3 §6.3), three times.
+    for pdu in [[0x03u8, 0x00, 0x00, 0x00, 0x01].as_slice(), [0x03, 0x02, 0x00, 0x2A].as_slice()].repeat(3) {
+        let mut frame = Vec::new();
+        mbtap_proto::rtu::encode_rtu(1, pdu, &mut frame);
+        let hex: Vec<String> = frame.iter().map(|b| format!("{b:02X}")).collect();
+        text.push_str(&hex.join(" "));
+        text.push('\n');
+    }
+    let (frames, capture) = (dir.join("holding.txt"), dir.join("holding.pcapng"));
+    std::fs::write(&frames, text).unwrap();
+    let g = Command::new(BIN)
+        .args(["generate", capture.to_str().unwrap(), "--frames", frames.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
+    let (_sim, addr, _) = emulate(&["--from", capture.to_str().unwrap()]);
+    let mut s = connect(&addr);
+    assert_eq!(common::call(&mut s, 1, 1, &[0x03, 0x00, 0x00, 0x00, 0x01]), [0x03, 0x02, 0x00, 0x2A]);
+    assert_eq!(common::call(&mut s, 2, 1, &[0x04, 0x00, 0x00, 0x00, 0x01]), [0x84, 0x01], "a function never shown");
+    assert_eq!(common::call(&mut s, 3, 1, &[0x03, 0x00, 0x05, 0x00, 0x01]), [0x83, 0x02], "an address never shown");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `simulate --read-only` refuses what could change a device with 01 and still answers reads;
+/// a broadcast write (unit 0) over TCP is refused with 01 as the bridge refuses it, and with
+/// `--allow-broadcast` reaches the device (unanswered, as a broadcast is) — one rule for both.
+#[test]
+fn read_only_and_broadcasts_follow_the_bridges_rules() {
+    // FC 06 holding 101 (MK4 operating mode) := 1, and := 2 (MAP v1.1b3 §6.6).
+    const SET_MODE_1: [u8; 5] = [0x06, 0x00, 0x65, 0x00, 0x01];
+    const SET_MODE_2: [u8; 5] = [0x06, 0x00, 0x65, 0x00, 0x02];
+    const READ_MODE: [u8; 5] = [0x03, 0x00, 0x65, 0x00, 0x01];
+    let (_sim, addr, _) = emulate(&["--device", "mk4@1", "--read-only"]);
+    let mut s = connect(&addr);
+    assert_eq!(common::call(&mut s, 1, 1, &SET_MODE_1), [0x86, 0x01], "a write under --read-only");
+    assert_eq!(common::call(&mut s, 2, 1, &READ_MODE), [0x03, 0x02, 0x00, 0x00], "reads still answered");
+    let (_sim, addr, _) = emulate(&["--device", "mk4@1"]);
+    let mut s = connect(&addr);
+    assert_eq!(common::call(&mut s, 3, 0, &SET_MODE_1), [0x86, 0x01], "a broadcast without --allow-broadcast");
+    assert_eq!(common::call(&mut s, 4, 1, &READ_MODE), [0x03, 0x02, 0x00, 0x00], "and nothing changed");
+    let (_sim, addr, _) = emulate(&["--device", "mk4@1", "--allow-broadcast"]);
+    let mut s = connect(&addr);
+    // The broadcast goes unanswered; the next answer is the read's, under its own id.
+    let mut frame = vec![0x00, 0x05, 0x00, 0x00, 0x00, 0x06, 0x00];
+    frame.extend_from_slice(&SET_MODE_2);
+    std::io::Write::write_all(&mut s, &frame).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    assert_eq!(common::call(&mut s, 6, 1, &READ_MODE), [0x03, 0x02, 0x00, 0x02], "the broadcast was applied");
+}
+
 #[test]
 fn a_recorded_mk4_gives_its_exceptions_keeps_its_writes_and_reads_by_name() {
     let (_sim, addr, said) = emulate(&["--from", capture("mk4-doc-examples-rtu.pcapng").to_str().unwrap()]);

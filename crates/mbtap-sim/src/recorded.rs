@@ -232,9 +232,16 @@ impl RecordedDevice {
     }
 
     /// Every address of the range heard, else refused: 01 where the recording showed the whole
-    /// function refused, else 02. (A refusal of another request overlapping this one is no
+    /// function refused or never showed its table read, else 02. (A refusal of another request overlapping this one is no
     /// evidence: a device's 03 for a block says nothing of a smaller read inside it.)
     fn covered(&self, table: Table, function: u8, address: u16, quantity: u16) -> Result<(), u8> {
+        // A read of a table the recording never showed read, nor refused, is a function the
+        // device never showed: 01, as the docs and the start line say (02 is for an address).
+        let never_shown = self.values.count(table) == 0
+            && self.refusals.range((function, 0, 0)..=(function, u16::MAX, u16::MAX)).next().is_none();
+        if never_shown && matches!(function, 0x01..=0x04) {
+            return Err(ExceptionCode::IllegalFunction.value());
+        }
         let last = answers::last_address(address, quantity).map_err(ExceptionCode::value)?;
         if (address..=last).all(|a| self.values.contains(table, a)) {
             return Ok(());
