@@ -29,6 +29,9 @@ pub const MAX_PACKET: usize = 4 << 20;
 
 /// How long a Sparkplug node waits at start for its first session before it analyses on
 /// (holding what it measures meanwhile).
+/// Home Assistant's birth and last-will topic under its default discovery prefix (Home
+/// Assistant MQTT integration, "Birth and last will messages": `online` when it starts).
+const HA_BIRTH_TOPIC: &str = "homeassistant/status";
 const FIRST_SESSION_WAIT: Duration = Duration::from_secs(5);
 
 /// Unit health, findings and the publisher's counts go out at most this often (bus time).
@@ -49,7 +52,9 @@ struct State {
     last: BTreeMap<(u8, Table, u16), Sent>,
     /// Changed values held back by the interval, newest row each.
     pending: BTreeMap<(u8, Table, u16), (Row, u64)>,
-    discovered: BTreeSet<(u8, Table, u16)>,
+    /// Every value announced to Home Assistant, with its last row and when: announced again,
+    /// with its state, when Home Assistant comes back (its birth message).
+    discovered: BTreeMap<(u8, Table, u16), (Row, u64)>,
     units: BTreeMap<u8, String>,
     findings: Option<BTreeSet<(String, Option<u8>)>>,
     next_tick_ns: Option<u64>,
@@ -209,6 +214,7 @@ impl Mqtt {
         ob.profiles = profiles.clone();
         ob.memory_cap = args.mqtt_queue.max(1);
         ob.host = args.sparkplug_host.as_deref().map(|h| (mbtap_publish::sparkplug::state_topic(h), false));
+        ob.ha_status = (args.mqtt_discovery.is_some() && !sparkplug).then(|| HA_BIRTH_TOPIC.to_owned());
         let outbox = Arc::new(Mutex::new(ob));
         let connected = Arc::new(AtomicBool::new(false));
         let (done_tx, done_rx) = std::sync::mpsc::channel();

@@ -102,6 +102,11 @@ pub struct Outbox {
     /// (until it does, nothing is born or published live: Sparkplug 3.0 edge nodes wait for their
     /// primary host).
     pub host: Option<(String, bool)>,
+    /// With Home Assistant discovery: its birth topic (`homeassistant/status`), subscribed at
+    /// each connection; an `online` there asks for discovery and the current states again.
+    pub ha_status: Option<String>,
+    /// Home Assistant said `online` since the last [`Outbox::take_ha_birth`].
+    pub(super) ha_birth: bool,
     /// A retained command was ignored and said so (said once a session).
     /// The broker's commands: subscriptions and what became of floods.
     pub commands: Commands,
@@ -145,6 +150,8 @@ impl Outbox {
             profiles: Profiles::new(),
             refused_writes: 0,
             host: None,
+            ha_status: None,
+            ha_birth: false,
             commands: Commands::default(),
             memory: std::collections::VecDeque::new(),
             memory_cap: 10_000,
@@ -212,6 +219,9 @@ impl Outbox {
         if let Some((topic, _)) = &self.host {
             let _ = self.client.try_subscribe(topic.clone(), QoS::AtLeastOnce);
         }
+        if let Some(topic) = &self.ha_status {
+            let _ = self.client.try_subscribe(topic.clone(), QoS::AtLeastOnce);
+        }
         self.commands.subscribed = false;
         self.subscribe_commands();
         if let Some(status) = self.status.clone() {
@@ -221,6 +231,11 @@ impl Outbox {
         if self.host_hears() {
             self.born();
         }
+    }
+
+    /// Whether Home Assistant announced itself (`online` on its birth topic) since last asked.
+    pub fn take_ha_birth(&mut self) -> bool {
+        std::mem::take(&mut self.ha_birth)
     }
 
     /// Subscribes to the command topics, unless a pause after an oversized message still runs.

@@ -843,3 +843,65 @@ fn discovered_entities_get_their_state_after_their_config_and_kept_for_a_late_ho
     let late = Sub::start(port, "mbtap/site1/line1/unit/1/input_registers/#");
     late.wait_for("the retained voltage", |g| g.iter().any(|(t, _)| t == state));
 }
+
+/// Home Assistant's birth message (`homeassistant/status` `online`, sent when it starts): mbtap
+/// announces every entity again and sends its current state, so a Home Assistant that restarted
+/// (and lost what it was told) has its sensors at once. Seen by a subscriber that prints only live
+/// messages (`mosquitto_sub -R`): the MK4 voltage's config, announced seconds before, comes again
+/// after the birth, and its state after it.
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn home_assistants_birth_message_gets_discovery_and_states_again() {
+    let d = dir("ha-birth");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    let early = Sub::start(port, "homeassistant/#");
+    let demo = Kill(
+        Command::new(BIN)
+            .args(["demo", "--format", "summary", "--duration", "30"])
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/site1/line1"])
+            .args(["--mqtt-discovery", "homeassistant"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let config = "/u1_input_registers_430/config";
+    early.wait_for("the voltage's first announcement", |g| g.iter().any(|(t, _)| t.ends_with(config)));
+    std::thread::sleep(Duration::from_millis(1500));
+    // Live messages only from here on: a retained copy of the first announcement is not printed.
+    let mut live = Kill(
+        Command::new("mosquitto_sub")
+            .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-R", "-v", "-t", "homeassistant/#", "-t", "mbtap/#"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("mosquitto_sub must be installed for this test"),
+    );
+    let out = live.0.stdout.take().unwrap();
+    let got = Arc::new(Mutex::new(Vec::<String>::new()));
+    let sink = Arc::clone(&got);
+    std::thread::spawn(move || {
+        for l in BufReader::new(out).lines().map_while(Result::ok) {
+            sink.lock().unwrap().push(l);
+        }
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    let before = got.lock().unwrap().iter().filter(|l| l.contains(config)).count();
+    assert_eq!(before, 0, "no second announcement before the birth message");
+    publish(port, "homeassistant/status", "online");
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let again = loop {
+        let lines = got.lock().unwrap().clone();
+        let at = lines.iter().position(|l| l.contains(config));
+        if at.is_some() || std::time::Instant::now() > deadline {
+            break at.map(|i| lines[i..].to_vec());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    drop((live, demo));
+    let after = again.expect("the voltage announced again after Home Assistant's birth message");
+    assert!(
+        after.iter().any(|l| l.starts_with("mbtap/site1/line1/unit/1/input_registers/430 ")),
+        "its state after it: {after:?}"
+    );
+}

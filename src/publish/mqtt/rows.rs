@@ -33,13 +33,30 @@ impl Mqtt {
         // config arrives, so a state sent before it is never seen and the sensor sits at
         // `unknown` until the value changes (an energy total still overnight: all night).
         let discovering = self.discovery != Announce::Nothing;
-        if discovering && r.name.is_some() && st.discovered.insert((r.unit, r.table, r.address)) {
-            self.announce(r, &topic);
+        if discovering && r.name.is_some() {
+            let key = (r.unit, r.table, r.address);
+            if st.discovered.insert(key, (r.clone(), t_ns)).is_none() {
+                self.announce(r, &topic);
+            }
         }
         // With discovery, states are retained: a Home Assistant that starts (or restarts) after
         // mbtap gets every current value at once, as it gets the retained configs.
         self.send(&topic, self.qos, self.retain || discovering, payload.to_string());
         st.last.insert((r.unit, r.table, r.address), Sent { raw: r.raw, shown: r.shown.clone(), t_ns });
+    }
+
+    /// Home Assistant came back (its birth message): every entity announced so far is announced
+    /// again, then its current state, retained — so none sits `unknown` until its value changes.
+    pub(super) fn announce_again(&self, st: &State) {
+        for (r, t_ns) in st.discovered.values() {
+            let topic = self.value_topic(r);
+            self.announce(r, &topic);
+            let mut payload = r.to_json();
+            if let Some(o) = payload.as_object_mut() {
+                o.insert("t_ns".into(), (*t_ns).into());
+            }
+            self.send(&topic, self.qos, true, payload.to_string());
+        }
     }
 
     /// Home Assistant MQTT discovery: one entity per named value, grouped by device — a
@@ -66,6 +83,10 @@ impl Mqtt {
     /// Takes rows read at bus time `t_ns`: each one published if it changed and its last
     /// publication is an interval old, else held for the next tick.
     pub(super) fn take_rows(&self, st: &mut State, rows: Vec<Row>, t_ns: u64) {
+        // Home Assistant (re)started since the last rows: it is told everything again first.
+        if !self.sparkplug && lock(&self.outbox).take_ha_birth() {
+            self.announce_again(st);
+        }
         if self.sparkplug {
             self.sparkplug_rows(rows, t_ns);
             return;

@@ -116,6 +116,14 @@ impl Outbox {
             }
             return;
         }
+        // Home Assistant's birth message (MQTT discovery: `homeassistant/status` `online`, sent
+        // when it starts): it has forgotten what it was told, so everything is said again.
+        if self.ha_status.as_deref() == Some(topic) {
+            if payload.trim_ascii() == b"online" {
+                self.ha_birth = true;
+            }
+            return;
+        }
         if let Some((state, online)) = self.host.as_mut()
             && topic == state.as_str()
         {
