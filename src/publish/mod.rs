@@ -19,7 +19,7 @@ use std::time::Duration;
 use clap::Args;
 
 /// `--serve` and `--mqtt` options of `sniff`, `tap` and `replay`.
-#[derive(Debug, Clone, Args, Default)]
+#[derive(Debug, Clone, Args)]
 pub struct PublishArgs {
     /// Spy mode: serve the register image the sniffer builds as a read-only Modbus TCP server
     /// at this address (e.g. 127.0.0.1:5020). Reads are answered with the latest value heard;

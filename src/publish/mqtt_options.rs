@@ -9,7 +9,7 @@ use anyhow::Context as _;
 use clap::Args;
 
 /// `--mqtt` options (on `sniff`, `tap`, `replay`, `watch` and `bridge --monitor`).
-#[derive(Debug, Clone, Args, Default)]
+#[derive(Debug, Clone, Args)]
 pub struct MqttArgs {
     /// Publish to an MQTT broker: `mqtt://HOST[:PORT]` (1883) or `mqtts://HOST[:PORT]` (8883,
     /// with --mqtt-ca). User and password come from --mqtt-credentials or the environment
@@ -94,6 +94,22 @@ pub enum Discovery {
 /// From 0 (every change) to a day.
 fn parse_interval(s: &str) -> Result<Duration, String> {
     mbtap_analysis::duration::parse_duration(s, Duration::ZERO, Duration::from_hours(24))
+}
+
+impl MqttArgs {
+    /// The options as the command line's defaults make them, with `extra` given (`--mqtt URL`,
+    /// …): for a publisher a command starts itself (`simulate --values-from`). The defaults are
+    /// clap's, written once on the fields above — a derived `Default` gave a queue of 0 messages
+    /// and an interval of 0 where the command line says 10 000 and 1 s.
+    ///
+    /// # Errors
+    /// A value in `extra` the options refuse, as the command line would say it.
+    pub fn with(extra: &[&str]) -> anyhow::Result<Self> {
+        use clap::{Args as _, FromArgMatches as _};
+        let command = Self::augment_args(clap::Command::new("mbtap").no_binary_name(true));
+        let matches = command.try_get_matches_from(extra)?;
+        Ok(Self::from_arg_matches(&matches)?)
+    }
 }
 
 /// A topic level from free text: MQTT reserves `/`, `+` and `#` (MQTT v3.1.1 §4.7).

@@ -20,12 +20,11 @@ const PASS: Duration = Duration::from_millis(20);
 /// # Errors
 /// A bad URL or prefix (said before serving).
 pub fn start(url: &str, prefix: Option<String>, emulated: Arc<Emulated>) -> anyhow::Result<()> {
-    let args = super::mqtt_options::MqttArgs {
-        mqtt: Some(url.to_owned()),
-        mqtt_prefix: prefix,
-        mqtt_writes: true,
-        ..Default::default()
-    };
+    let mut options = vec!["--mqtt", url, "--mqtt-writes"];
+    if let Some(p) = &prefix {
+        options.extend(["--mqtt-prefix", p.as_str()]);
+    }
+    let args = super::mqtt_options::MqttArgs::with(&options)?;
     let profiles = {
         let devices = emulated.devices.lock().unwrap_or_else(PoisonError::into_inner);
         devices
