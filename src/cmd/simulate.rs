@@ -225,7 +225,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             tokio::spawn(crate::master::mirror::run(m, Arc::clone(&shared)));
         }
         if let Some(url) = &values_from {
-            crate::publish::values_from::start(url, values_prefix, Arc::clone(&shared))?;
+            crate::publish::values_from::start(url, values_prefix.as_deref(), Arc::clone(&shared))?;
         }
         let served = async {
             if !listening {

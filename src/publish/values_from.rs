@@ -19,10 +19,10 @@ const PASS: Duration = Duration::from_millis(20);
 ///
 /// # Errors
 /// A bad URL or prefix (said before serving).
-pub fn start(url: &str, prefix: Option<String>, emulated: Arc<Emulated>) -> anyhow::Result<()> {
+pub fn start(url: &str, prefix: Option<&str>, emulated: Arc<Emulated>) -> anyhow::Result<()> {
     let mut options = vec!["--mqtt", url, "--mqtt-writes"];
-    if let Some(p) = &prefix {
-        options.extend(["--mqtt-prefix", p.as_str()]);
+    if let Some(p) = prefix {
+        options.extend(["--mqtt-prefix", p]);
     }
     let args = super::mqtt_options::MqttArgs::with(&options)?;
     let profiles = {
