@@ -112,7 +112,7 @@ pub async fn serve(front: SerialFront, routes: Arc<Routes>, opts: Arc<ServerOpti
                 if !said {
                     note(
                         &routes,
-                        &format!("--listen-serial {}: cannot open it ({e:#}); retrying every second", front.port),
+                        &format!("{} {}: cannot open it ({e:#}); retrying every second", front.option, front.port),
                     );
                     said = true;
                 }
@@ -122,7 +122,7 @@ pub async fn serve(front: SerialFront, routes: Arc<Routes>, opts: Arc<ServerOpti
         };
         said = false;
         if let Err(e) = serve_port(&front, &mut port, &routes, &opts, &monitor).await {
-            note(&routes, &format!("--listen-serial {}: lost ({e}); reopening", front.port));
+            note(&routes, &format!("{} {}: lost ({e}); reopening", front.option, front.port));
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
     }

@@ -432,3 +432,18 @@ fn an_emulated_device_on_a_serial_bus_is_silent_for_other_units() {
     // Unit 1, FC 04, 2 bytes: the MK4's L1 voltage.
     assert_eq!(own.get(..3), Some(&[0x01, 0x04, 0x02][..]), "unit 1 is emulated: {own:02x?}");
 }
+
+/// The start lines name the options the user gave: `simulate --serial` with a port that is not
+/// there says `simulate --serial PORT: cannot open it`, never `--listen-serial` (the bridge's
+/// option, which the user did not give).
+#[test]
+fn a_serial_front_that_cannot_open_names_the_option_given() {
+    let out = Command::new(BIN)
+        .args(["simulate", "--device", "sdm630@1", "--serial", "/nonexistent/tty-for-mbtap", "--duration", "1"])
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("simulate --serial /nonexistent/tty-for-mbtap: cannot open it"), "{err}");
+    assert!(!err.contains("--listen-serial"), "{err}");
+}
