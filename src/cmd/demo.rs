@@ -40,7 +40,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { format, lang, duration, faults, speed, heard_at, publish } = args;
+    let Args { format, lang, duration, faults, speed, heard_at, mut publish } = args;
+    // A demo's devices are nobody's: what it announced to Home Assistant is taken back at its
+    // end, so no `unavailable` entity is left behind (`--mqtt-forget` on by default here).
+    publish.mqtt.mqtt_forget = true;
     let faults = fault_list(&faults);
     anyhow::ensure!(speed.is_finite() && speed >= 0.0, "--speed {speed}: expected 0 (no waiting) or more");
     let format =

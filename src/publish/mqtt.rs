@@ -52,6 +52,8 @@ struct State {
     last: BTreeMap<(u8, Table, u16), Sent>,
     /// Changed values held back by the interval, newest row each.
     pending: BTreeMap<(u8, Table, u16), (Row, u64)>,
+    /// The discovery configs announced, for `--mqtt-forget` to take back at the end.
+    announced: BTreeSet<String>,
     /// Every value announced to Home Assistant, with its last row and when: announced again,
     /// with its state, when Home Assistant comes back (its birth message).
     discovered: BTreeMap<(u8, Table, u16), (Row, u64)>,
@@ -83,6 +85,8 @@ pub struct Mqtt {
     prefix: String,
     qos: QoS,
     retain: bool,
+    /// `--mqtt-forget`: the end takes back every retained config and value this run announced.
+    forget: bool,
     interval_ns: u64,
     discovery: Announce,
     profiles: Profiles,
@@ -248,6 +252,7 @@ impl Mqtt {
             prefix,
             qos: qos(args.mqtt_qos),
             retain: args.mqtt_retain,
+            forget: args.mqtt_forget,
             interval_ns: u64::try_from(args.mqtt_interval.as_nanos()).unwrap_or(u64::MAX),
             discovery: match (args.mqtt_discovery.is_some(), writes_on) {
                 (false, _) => Announce::Nothing,

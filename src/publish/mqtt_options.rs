@@ -38,6 +38,11 @@ pub struct MqttArgs {
     /// Announce a sensor per register heard that the profile names.
     #[arg(long, value_enum, value_name = "KIND")]
     pub mqtt_discovery: Option<Discovery>,
+    /// At the end, take back what was announced: an empty retained message on every discovery
+    /// config this run published, so Home Assistant removes the entities (`demo` does this by
+    /// default; without it the entities stay, `unavailable`, until removed).
+    #[arg(long)]
+    pub mqtt_forget: bool,
     /// Messages waiting for the broker at most; more are dropped and counted.
     #[arg(long, default_value_t = 10_000, value_name = "MESSAGES")]
     pub mqtt_queue: usize,

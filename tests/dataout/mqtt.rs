@@ -964,3 +964,29 @@ fn every_set_over_mqtt_is_answered_in_order_under_a_burst() {
     assert_eq!(items[..30], by_name[..], "answered in the order sent");
     assert!(answers.iter().all(|a| a["ok"] == true), "{answers:#?}");
 }
+
+/// `demo --mqtt-discovery` takes back what it announced at its end (`--mqtt-forget` on by
+/// default for the demo): after it, a subscriber finds no retained discovery config left — Home
+/// Assistant keeps no `unavailable` entity of a demo.
+#[test]
+#[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
+fn a_demo_takes_back_its_home_assistant_entities_at_its_end() {
+    let d = dir("ha-forget");
+    let port = free_port();
+    let _broker = broker(&d, port);
+    let during = Sub::start(port, "homeassistant/#");
+    let out = Command::new(BIN)
+        .args(["demo", "--format", "summary", "--speed", "0", "--duration", "3"])
+        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--mqtt-prefix", "mbtap/demo"])
+        .args(["--mqtt-discovery", "homeassistant"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let configs = during.got().iter().filter(|(t, p)| t.ends_with("/config") && !p.is_empty()).count();
+    assert!(configs > 10, "the demo announced its entities: {configs}");
+    // A subscriber from now on is sent what the broker retains: nothing under homeassistant/.
+    let after = Sub::start(port, "homeassistant/#");
+    std::thread::sleep(Duration::from_millis(700));
+    let left: Vec<_> = after.got().into_iter().filter(|(_, p)| !p.is_empty()).collect();
+    assert!(left.is_empty(), "retained configs left behind: {left:?}");
+}

@@ -25,7 +25,9 @@ checked, refused, by_component = 0, [], {}
 for line in sys.stdin:
     topic, _, payload = line.rstrip("\n").partition(" ")
     parts = topic.split("/")
-    if len(parts) < 4 or parts[-1] != "config" or not payload:
+    # An empty config (mosquitto_sub -v prints it as "(null)") removes the entity: Home
+    # Assistant's documented way to take one back (`--mqtt-forget`, a demo's end), not a config.
+    if len(parts) < 4 or parts[-1] != "config" or payload in ("", "(null)"):
         continue
     component = parts[1]
     if not TOPIC_MATCHER.match("/".join(parts[1:])):

@@ -36,7 +36,10 @@ impl Mqtt {
         if discovering && r.name.is_some() {
             let key = (r.unit, r.table, r.address);
             if st.discovered.insert(key, (r.clone(), t_ns)).is_none() {
-                self.announce(r, &topic);
+                let config = self.announce(r, &topic);
+                if self.forget {
+                    st.announced.insert(config);
+                }
             }
         }
         // With discovery, states are retained: a Home Assistant that starts (or restarts) after
@@ -50,7 +53,7 @@ impl Mqtt {
     pub(super) fn announce_again(&self, st: &State) {
         for (r, t_ns) in st.discovered.values() {
             let topic = self.value_topic(r);
-            self.announce(r, &topic);
+            let _ = self.announce(r, &topic);
             let mut payload = r.to_json();
             if let Some(o) = payload.as_object_mut() {
                 o.insert("t_ns".into(), (*t_ns).into());
@@ -61,7 +64,8 @@ impl Mqtt {
 
     /// Home Assistant MQTT discovery: one entity per named value, grouped by device — a
     /// `binary_sensor` for coils and discrete inputs (on/off), a `sensor` for registers.
-    pub(super) fn announce(&self, r: &Row, state_topic: &str) {
+    /// The config's topic.
+    pub(super) fn announce(&self, r: &Row, state_topic: &str) -> String {
         let profile = self.profiles.get(&r.unit);
         let (node, object, component, config) = discovery(&self.prefix, r, profile, state_topic);
         let _ = object;
@@ -72,12 +76,9 @@ impl Mqtt {
             Some(control) => control,
             None => (component, config),
         };
-        self.send(
-            &format!("homeassistant/{component}/{node}/{}/config", discovery_object(r)),
-            QoS::AtLeastOnce,
-            true,
-            config.to_string(),
-        );
+        let topic = format!("homeassistant/{component}/{node}/{}/config", discovery_object(r));
+        self.send(&topic, QoS::AtLeastOnce, true, config.to_string());
+        topic
     }
 
     /// Takes rows read at bus time `t_ns`: each one published if it changed and its last
@@ -183,11 +184,26 @@ impl Mqtt {
 }
 
 impl Mqtt {
+    /// `--mqtt-forget`: every discovery config this run announced taken back with an empty
+    /// retained message (MQTT v3.1.1 §3.3.1.3: a zero-byte retained message removes the retained
+    /// one; Home Assistant removes an entity whose config is emptied). The values' retained states
+    /// stay: without a config they make no entity, and a reader of the topics still finds them.
+    fn forget_announced(&self, st: &mut State) {
+        let n = st.announced.len();
+        for topic in std::mem::take(&mut st.announced) {
+            lock(&self.outbox).publish_now(&topic, QoS::AtLeastOnce, true, Vec::new());
+        }
+        eprintln!("mbtap: mqtt: {n} Home Assistant entities taken back (--mqtt-forget)");
+    }
+
     /// The end: what is held goes out, `offline` (retained), then the connection closes
     /// (waiting at most 2 s for the broker to take what is queued).
     pub fn finish(&self) {
         if let Ok(mut st) = self.state.lock() {
             self.flush(&mut st, true);
+            if self.forget {
+                self.forget_announced(&mut st);
+            }
         }
         {
             let mut ob = lock(&self.outbox);
