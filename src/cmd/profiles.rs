@@ -18,10 +18,12 @@ mod import;
 mod profile_file;
 use import::{import, parse_type_arg};
 
-/// Device profiles: check a profile file, or show what it defines.
+/// Device profiles: list them, show or check one, import one from a vendor's sheet, export one
+/// for Home Assistant, ESPHome or Telegraf.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// List the built-in profiles.
+    /// List the profiles there are — built in (the seeds' devices, the Eastron meters) and in the
+    /// user profile directory — with where each came from.
     List,
     /// Load a profile file and report the first problem with file:line:column, or a summary.
     /// A built-in name, a user profile's name (as `profiles import` leaves it), or a file.
