@@ -52,6 +52,31 @@ pub struct LineOptions {
 }
 
 impl LineOptions {
+    /// A line to `port` with every option at its plain value: the timeout fixed at `timeout`, no
+    /// per-unit timeouts, echo found by itself, no direction control, cache, polls, retries,
+    /// turnaround or latency — what a command that starts a line of its own (`simulate --listen`,
+    /// mbtap's master) changes from.
+    #[must_use]
+    pub fn plain(port: String, line: LineSettings, mode: SerialMode, timeout: Duration) -> Self {
+        Self {
+            port,
+            line,
+            mode,
+            timeout,
+            timeout_mode: TimeoutMode::Fixed,
+            unit_timeouts: std::collections::BTreeMap::new(),
+            echo: EchoMode::default(),
+            rs485: crate::source::rs485::Rs485Args::default(),
+            cache: Vec::new(),
+            polls: Vec::new(),
+            retries: 0,
+            turnaround: Duration::ZERO,
+            broadcast_reply: false,
+            latency: Duration::ZERO,
+            emulated: None,
+        }
+    }
+
     pub(super) fn master(&self) -> SerialMaster {
         let config = MasterConfig {
             line: self.line,

@@ -71,21 +71,8 @@ impl BridgeOptions {
     ) -> Self {
         let EmulatedFronts { listen, listen_rtu, listen_udp, listen_serial } = fronts;
         let line = LineOptions {
-            port: "emulated".to_owned(),
-            line,
-            mode,
-            timeout: Duration::from_millis(DEFAULT_TIMEOUT_MS),
-            timeout_mode: mbtap_gateway::timeouts::TimeoutMode::Fixed,
-            unit_timeouts: std::collections::BTreeMap::new(),
-            echo: mbtap_gateway::transaction::EchoMode::default(),
-            rs485: crate::source::rs485::Rs485Args::default(),
-            cache: Vec::new(),
-            polls: Vec::new(),
-            retries: 0,
-            turnaround: Duration::ZERO,
-            broadcast_reply: false,
-            latency: Duration::ZERO,
             emulated: Some(emulated),
+            ..LineOptions::plain("emulated".to_owned(), line, mode, Duration::from_millis(DEFAULT_TIMEOUT_MS))
         };
         Self {
             lines: vec![(1..=247, line)],

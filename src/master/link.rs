@@ -134,23 +134,8 @@ impl Link {
             "--mode ascii: {target} is Modbus TCP, framed by MBAP, not ASCII; leave --mode out, or give rtu+tcp://{} for a converter that passes ASCII frames",
             target.trim_start_matches("tcp://")
         );
-        let options = LineOptions {
-            line: settings,
-            mode,
-            timeout,
-            timeout_mode: mbtap_gateway::timeouts::TimeoutMode::Fixed,
-            unit_timeouts: std::collections::BTreeMap::new(),
-            echo: mbtap_gateway::transaction::EchoMode::default(),
-            rs485: crate::source::rs485::Rs485Args::default(),
-            cache: Vec::new(),
-            polls: Vec::new(),
-            retries,
-            turnaround: Duration::ZERO,
-            broadcast_reply: false,
-            latency: Duration::from_nanos(transport.latency_ns(None).unwrap_or(0)),
-            emulated: None,
-            port,
-        };
+        let latency = Duration::from_nanos(transport.latency_ns(None).unwrap_or(0));
+        let options = LineOptions { retries, latency, ..LineOptions::plain(port, settings, mode, timeout) };
         Ok(Self { target: target.to_owned(), options, running: None })
     }
 
