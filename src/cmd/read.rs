@@ -38,6 +38,13 @@ pub fn prepare(
             mbtap_device::query::rows::short_table(table)
         );
     }
+    for &(i, table, a, b) in &plan.unmapped {
+        let item = targets.get(i).map(|t| t.item.text.as_str()).unwrap_or_default();
+        eprintln!(
+            "mbtap: {item}: {} {a}..{b} not in the profile's map, not read",
+            mbtap_device::query::rows::short_table(table)
+        );
+    }
     Ok((targets, plan))
 }
 

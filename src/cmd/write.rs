@@ -145,8 +145,11 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         }
         // The echo: read the same registers back and show what the device kept.
         let quantity = u16::try_from(w.words.len()).unwrap_or(1);
-        let plan =
-            Plan { reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }], skipped: vec![] };
+        let plan = Plan {
+            reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }],
+            skipped: vec![],
+            unmapped: vec![],
+        };
         let (back, failures) = rt.block_on(exec::read_all(&mut link, unit, std::slice::from_ref(target), &plan, p));
         let kept = back.first().map(|r| r.raw);
         let written = rows(unit, w.table, w.address, &w.words, p).first().map(|r| r.raw);

@@ -26,7 +26,11 @@ pub async fn apply(link: &mut Link, unit: u8, ask: &Ask, profile: Option<&Profil
         return Err(format!("{}: the device refused or did not answer: {problem}", ask.item.text));
     }
     let quantity = u16::try_from(w.words.len()).unwrap_or(1);
-    let plan = Plan { reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }], skipped: vec![] };
+    let plan = Plan {
+        reads: vec![Read { target: 0, table: w.table, address: w.address, quantity }],
+        skipped: vec![],
+        unmapped: vec![],
+    };
     let (back, _) = exec::read_all(link, unit, std::slice::from_ref(&target), &plan, profile).await;
     Ok(back.into_iter().next())
 }

@@ -447,3 +447,22 @@ fn a_serial_front_that_cannot_open_names_the_option_given() {
     assert!(err.contains("simulate --serial /nonexistent/tty-for-mbtap: cannot open it"), "{err}");
     assert!(!err.contains("--listen-serial"), "{err}");
 }
+
+/// A read across a meter's gaps with its profile: `read … --device sdm630 input 0..343` gives
+/// every value the map names (0 to 342) and says what it left out, where it
+/// failed as three 02s when the gaps were read too.
+#[test]
+fn a_read_across_a_profiles_gaps_gives_the_mapped_values_and_says_what_it_left_out() {
+    let (_sim, addr, _) = emulate(&["--device", "sdm630@1"]);
+    let out = Command::new(BIN)
+        .args(["read", &addr, "--unit", "1", "--device", "sdm630", "--format", "jsonl", "input", "0..343"])
+        .output()
+        .unwrap();
+    let (text, err) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{text}{err}");
+    let values: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert!(values.iter().all(|v| v.get("error").is_none()), "{text}");
+    let names: Vec<&str> = values.iter().filter_map(|v| v["name"].as_str()).collect();
+    assert!(names.contains(&"Phase 1 line to neutral volts") && names.contains(&"Total kWh"), "{names:?}");
+    assert!(err.contains("input 44..45 not in the profile's map"), "{err}");
+}

@@ -1,8 +1,10 @@
 //! Targets split into read requests the spec and the device allow: at most 125 registers
 //! (MAP v1.1b3 §6.3 and §6.4: quantity 1 to 125, 0x7D) or 2000 bits (§6.1 and §6.2: 1 to
 //! 2000, 0x7D0) per request, never across an address the device's document reserves (devices
-//! answer exception 02 for the whole request), and never through the middle of a multi-register
-//! value (each half would be read at a different time).
+//! answer exception 02 for the whole request), never across an address the profile does not map
+//! when it maps others in the range (`input 0..342` of a meter: the values it names, not three
+//! 02s for its gaps), and never through the middle of a multi-register value (each half would
+//! be read at a different time).
 
 use super::resolve::Target;
 use super::{QueryError, is_bits};
@@ -31,11 +33,20 @@ impl Read {
     }
 }
 
-/// A plan: the reads, and the reserved addresses left out (to tell the user).
+/// A plan: the reads, and the addresses left out (to tell the user): reserved by the document,
+/// or not in the profile's map.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Plan {
     pub reads: Vec<Read>,
     pub skipped: Vec<(usize, Table, u16, u16)>,
+    pub unmapped: Vec<(usize, Table, u16, u16)>,
+}
+
+/// Why an address is not read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Gap {
+    Reserved,
+    Unmapped,
 }
 
 /// Splits `targets` into reads. See the module documentation.
@@ -43,25 +54,38 @@ pub fn plan(targets: &[Target], p: Option<&Profile>) -> Result<Plan, QueryError>
     let mut out = Plan::default();
     for (i, t) in targets.iter().enumerate() {
         let limit = if is_bits(t.table) { MAX_READ_BITS } else { MAX_READ_REGISTERS };
-        let reserved = |a: u16| p.is_some_and(|p| p.is_reserved(t.table, a));
+        // The profile's map counts only where it maps something in the range: a range it knows
+        // nothing of is read as asked (raw values, for exploring).
+        let maps_some = p.is_some_and(|p| (t.first..=t.last).any(|a| p.slot(t.table, a).is_some()));
+        let gap = |a: u16| match p {
+            Some(p) if p.is_reserved(t.table, a) => Some(Gap::Reserved),
+            Some(p) if maps_some && p.slot(t.table, a).is_none() => Some(Gap::Unmapped),
+            _ => None,
+        };
         let before = out.reads.len();
         let mut a = u32::from(t.first);
         let last = u32::from(t.last);
         while a <= last {
             // Bounded by the u16 range: a and last are u16 values widened.
             let at = u16::try_from(a).unwrap_or(u16::MAX);
-            if reserved(at) {
+            if let Some(why) = gap(at) {
                 let mut end = a;
-                while end < last && reserved(u16::try_from(end + 1).unwrap_or(u16::MAX)) {
+                while end < last && gap(u16::try_from(end + 1).unwrap_or(u16::MAX)) == Some(why) {
                     end += 1;
                 }
-                out.skipped.push((i, t.table, at, u16::try_from(end).unwrap_or(u16::MAX)));
+                let run = (i, t.table, at, u16::try_from(end).unwrap_or(u16::MAX));
+                match why {
+                    Gap::Reserved => out.skipped.push(run),
+                    Gap::Unmapped => out.unmapped.push(run),
+                }
                 a = end + 1;
                 continue;
             }
-            // As far as the limit, the target's end or the next reserved address.
+            // As far as the limit, the target's end or the next address not read.
             let mut end = a;
-            while end < last && end + 1 - a < u32::from(limit) && !reserved(u16::try_from(end + 1).unwrap_or(u16::MAX))
+            while end < last
+                && end + 1 - a < u32::from(limit)
+                && gap(u16::try_from(end + 1).unwrap_or(u16::MAX)).is_none()
             {
                 end += 1;
             }
@@ -126,5 +150,19 @@ mod tests {
         let p = plan_of(&[&item], Some(&mk4));
         assert!(p.reads.iter().all(|r| !(a..=b).contains(&r.address)), "{p:?}");
         assert_eq!(p.skipped.first().map(|s| (s.2, s.3)), Some((a, b)), "{p:?}");
+    }
+
+    /// The SDM630 maps input 0–47 with gaps (44–45 is no value of its map): a read of 40..49
+    /// asks for what the map names and leaves the gap out, told.
+    #[test]
+    fn unmapped_addresses_between_mapped_ones_are_left_out_and_told() {
+        let sdm = crate::profile::builtin::get("sdm630").unwrap().unwrap();
+        let p = plan_of(&["input 40..49"], Some(&sdm));
+        let q: Vec<(u16, u16)> = p.reads.iter().map(|r| (r.address, r.quantity)).collect();
+        assert_eq!(q, [(40, 4), (46, 4)], "{p:?}");
+        assert_eq!(p.unmapped.iter().map(|s| (s.2, s.3)).collect::<Vec<_>>(), [(44, 45)]);
+        // A range the profile maps nothing of is read as asked.
+        let raw = plan_of(&["input 1000..1009"], Some(&sdm));
+        assert_eq!(raw.reads.iter().map(|r| (r.address, r.quantity)).collect::<Vec<_>>(), [(1000, 10)]);
     }
 }
