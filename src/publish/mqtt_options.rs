@@ -104,8 +104,8 @@ fn parse_interval(s: &str) -> Result<Duration, String> {
 impl MqttArgs {
     /// The options as the command line's defaults make them, with `extra` given (`--mqtt URL`,
     /// …): for a publisher a command starts itself (`simulate --values-from`). The defaults are
-    /// clap's, written once on the fields above — a derived `Default` gave a queue of 0 messages
-    /// and an interval of 0 where the command line says 10 000 and 1 s.
+    /// clap's, written once on the fields above (a derived `Default` would hold a queue of 0
+    /// messages and an interval of 0 where the command line says 10 000 and 1 s).
     ///
     /// # Errors
     /// A value in `extra` the options refuse, as the command line would say it.

@@ -907,9 +907,9 @@ fn home_assistants_birth_message_gets_discovery_and_states_again() {
 }
 
 /// `simulate --values-from` under a burst: 60 sets sent back to back by one `mosquitto_pub -l`
-/// (30 by name on `v/unit/3/set`, 30 by address on `v/unit/3/holding_registers/2/set`), each
-/// answered on `v/unit/3/write` in the order sent — none dropped (a publisher started with
-/// derived defaults had a queue of one message: 10 sets, 2 replies).
+/// (30 by name on `v/unit/3/set`, 30 by address on `v/unit/3/input_registers/2/set`), each
+/// answered on `v/unit/3/write` in the order sent — none dropped: the publisher holds the
+/// command line's queue of 10 000 messages, not one.
 #[test]
 #[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
 fn every_set_over_mqtt_is_answered_in_order_under_a_burst() {

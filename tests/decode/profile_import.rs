@@ -1222,6 +1222,33 @@ fn shared_strings_cited_many_times_are_counted_at_each_citation() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A copy of the zip at `from` to `to`, every part as it is but `part`, whose bytes `write`
+/// writes as it likes.
+fn rewrite_part(
+    from: &std::path::Path,
+    to: &std::path::Path,
+    part: &str,
+    write: impl FnOnce(Vec<u8>, &mut zip::ZipWriter<std::fs::File>),
+) {
+    use std::io::Write as _;
+    let mut zin = zip::ZipArchive::new(std::fs::File::open(from).unwrap()).unwrap();
+    let mut z = zip::ZipWriter::new(std::fs::File::create(to).unwrap());
+    let o: zip::write::SimpleFileOptions = zip::write::SimpleFileOptions::default();
+    let mut write = Some(write);
+    for i in 0..zin.len() {
+        let mut entry = zin.by_index(i).unwrap();
+        let name = entry.name().to_owned();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
+        z.start_file(name.as_str(), o).unwrap();
+        match write.take_if(|_| name == part) {
+            Some(w) => w(bytes, &mut z),
+            None => z.write_all(&bytes).unwrap(),
+        }
+    }
+    z.finish().unwrap();
+}
+
 /// An XLSX whose local and central headers both say 1 000 bytes for a `sharedStrings.xml` that
 /// inflates past the 128 MiB read: the sizes are claims; what inflates is counted, and the
 /// inflater stops at the budget. Refused naming the part.
@@ -1234,25 +1261,14 @@ fn a_zip_part_that_lies_about_its_size_is_refused_by_what_it_inflates_to() {
     let strings = vec!["Address".to_owned(), "Name".to_owned()];
     xlsx_with_shared_strings(&path, &strings, &[vec![(true, "0".into()), (true, "1".into())]]);
     // Rewritten with a 129 MiB sharedStrings.xml (compressible: the file stays small).
-    let mut zin = zip::ZipArchive::new(std::fs::File::open(&path).unwrap()).unwrap();
     let lying = dir.join("lying.xlsx");
-    let mut z = zip::ZipWriter::new(std::fs::File::create(&lying).unwrap());
-    let o: zip::write::SimpleFileOptions = zip::write::SimpleFileOptions::default();
-    for i in 0..zin.len() {
-        let mut part = zin.by_index(i).unwrap();
-        let name = part.name().to_owned();
-        let mut bytes = Vec::new();
-        std::io::Read::read_to_end(&mut part, &mut bytes).unwrap();
-        z.start_file(name.as_str(), o).unwrap();
-        if name == "xl/sharedStrings.xml" {
-            let chunk = vec![b' '; 1 << 20];
-            for _ in 0..129 {
-                z.write_all(&chunk).unwrap();
-            }
+    rewrite_part(&path, &lying, "xl/sharedStrings.xml", |bytes, z| {
+        let chunk = vec![b' '; 1 << 20];
+        for _ in 0..129 {
+            z.write_all(&chunk).unwrap();
         }
         z.write_all(&bytes).unwrap();
-    }
-    z.finish().unwrap();
+    });
     // Both headers of that part now say 1 000 bytes unpacked (APPNOTE 4.3.7 and 4.3.12: the
     // local header's uncompressed size at +22, the central directory's at +24).
     let mut data = std::fs::read(&lying).unwrap();
@@ -1279,8 +1295,8 @@ fn a_zip_part_that_lies_about_its_size_is_refused_by_what_it_inflates_to() {
 }
 
 /// An XLSX whose workbook names more sheets than any register map has (5 000, each pointing at
-/// the one sheet): refused before the workbook reader lays them out, naming the count — 2.5
-/// million of them in 12.7 MB took 574 MB to open (BENCHMARKS.md).
+/// the one sheet): refused before the workbook reader lays them out, naming the count (2.5
+/// million of them in 12.7 MB take 574 MB to open: BENCHMARKS.md).
 #[test]
 fn a_workbook_naming_thousands_of_sheets_is_refused_before_it_is_opened() {
     use std::fmt::Write as _;
@@ -1290,28 +1306,15 @@ fn a_workbook_naming_thousands_of_sheets_is_refused_before_it_is_opened() {
     let path = dir.join("one.xlsx");
     let strings = vec!["Address".to_owned(), "Name".to_owned()];
     xlsx_with_shared_strings(&path, &strings, &[vec![(true, "0".into()), (true, "1".into())]]);
-    let mut zin = zip::ZipArchive::new(std::fs::File::open(&path).unwrap()).unwrap();
     let many = dir.join("many.xlsx");
-    let mut z = zip::ZipWriter::new(std::fs::File::create(&many).unwrap());
-    let o: zip::write::SimpleFileOptions = zip::write::SimpleFileOptions::default();
-    for i in 0..zin.len() {
-        let mut part = zin.by_index(i).unwrap();
-        let name = part.name().to_owned();
-        let mut bytes = Vec::new();
-        std::io::Read::read_to_end(&mut part, &mut bytes).unwrap();
-        z.start_file(name.as_str(), o).unwrap();
-        if name == "xl/workbook.xml" {
-            let mut sheets = String::new();
-            for k in 0..5_000 {
-                let _ = write!(sheets, r#"<sheet name="S{k}" sheetId="{}" r:id="rId1"/>"#, k + 1);
-            }
-            let text =
-                String::from_utf8(bytes).unwrap().replace(r#"<sheet name="Map" sheetId="1" r:id="rId1"/>"#, &sheets);
-            bytes = text.into_bytes();
+    rewrite_part(&path, &many, "xl/workbook.xml", |bytes, z| {
+        let mut sheets = String::new();
+        for k in 0..5_000 {
+            let _ = write!(sheets, r#"<sheet name="S{k}" sheetId="{}" r:id="rId1"/>"#, k + 1);
         }
-        z.write_all(&bytes).unwrap();
-    }
-    z.finish().unwrap();
+        let text = String::from_utf8(bytes).unwrap().replace(r#"<sheet name="Map" sheetId="1" r:id="rId1"/>"#, &sheets);
+        z.write_all(text.as_bytes()).unwrap();
+    });
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_mbtap"))
         .args(["profiles", "import", many.to_str().unwrap(), "--table", "holding", "--name", "many"])
         .args(["-o", dir.join("many.toml").to_str().unwrap()])
@@ -1324,8 +1327,8 @@ fn a_workbook_naming_thousands_of_sheets_is_refused_before_it_is_opened() {
 }
 
 /// An XLSX of more than a million tiny shared strings (`<si><t>a</t></si>`, honest sizes, a
-/// file of ~40 kB): refused before the workbook reader holds them all, naming the count —
-/// 7.4 million of them from 307 kB took 413 MB to open (BENCHMARKS.md).
+/// file of ~40 kB): refused before the workbook reader holds them all, naming the count
+/// (7.4 million of them from 307 kB take 413 MB to open: BENCHMARKS.md).
 #[test]
 fn a_million_tiny_shared_strings_are_refused_before_they_are_held() {
     let dir = std::env::temp_dir().join(format!("mbtap-tiny-strings-{}", std::process::id()));
@@ -1345,8 +1348,8 @@ fn a_million_tiny_shared_strings_are_refused_before_they_are_held() {
 }
 
 /// A CSV of one 17 MiB quoted field, and the same with the quote never closed (as a truncated
-/// export leaves it): refused by the text budget, naming the row — not held whole and built into
-/// a profile (a 60 MB field took 580 MB; now 132 MB and refused, BENCHMARKS.md).
+/// export leaves it): refused by the text budget, naming the row — never built into a profile (a
+/// 60 MB field is refused at 132 MB peak: BENCHMARKS.md).
 #[test]
 fn a_csv_field_longer_than_the_text_budget_is_refused_naming_the_row() {
     let dir = std::env::temp_dir().join(format!("mbtap-long-field-{}", std::process::id()));

@@ -1,8 +1,8 @@
 //! A device's register values as a recording or an image gave them: dense pages of 256
 //! addresses per table, each with a bitmap of the addresses present. A unit read over its whole
 //! holding and input tables takes 2 × 256 pages of [`PAGE_BYTES`] (272 KiB), so every unit a
-//! recording shows keeps its values within a bound a caller can count in bytes — a map of one
-//! entry per value took about 12 bytes a value and a shared cap dropped whole units.
+//! recording shows keeps its values within a bound a caller can count in bytes (a map of one
+//! entry per value costs about 12 bytes a value).
 
 use std::collections::BTreeMap;
 
