@@ -115,6 +115,22 @@ pub struct SerialLineArgs {
 }
 
 impl SerialLineArgs {
+    /// A line given whole (`--mirror-line "9600 8N1"`) as these options, with its framing.
+    #[must_use]
+    pub fn whole(settings: mbtap_proto::serial_line::LineSettings, mode: Option<SerialModeArg>) -> Self {
+        Self {
+            mode,
+            baud: Some(settings.baud),
+            parity: Some(match settings.parity {
+                Parity::None => ParityArg::None,
+                Parity::Even => ParityArg::Even,
+                Parity::Odd => ParityArg::Odd,
+            }),
+            stop_bits: Some(settings.stop_bits),
+            data_bits: Some(settings.data_bits),
+        }
+    }
+
     /// These settings over whatever a capture or a default supplies.
     #[must_use]
     pub fn overrides(&self) -> LineOverrides {

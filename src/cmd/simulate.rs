@@ -40,7 +40,7 @@ pub struct Args {
     pub replay_values: bool,
     /// A device whose values are read from another one: a serial port, `HOST:PORT` (Modbus TCP)
     /// or `rtu+tcp://HOST:PORT`; with --mirror-device, and --as/--map to serve it under
-    /// another profile (the line options apply to a serial target).
+    /// another profile (a serial target's line: --mirror-line, else the line options).
     #[arg(long, value_name = "TARGET", requires = "mirror_device")]
     pub mirror: Option<String>,
     /// The mirrored device's profile and unit on the target: `PROFILE@UNIT`.
@@ -54,6 +54,13 @@ pub struct Args {
     /// addresses of the served profile = of the source's, times or divided by a factor).
     #[arg(long, value_name = "SERVED=SOURCE,…", requires = "as_device")]
     pub map: Option<String>,
+    /// The mirrored device's own serial line, apart from the one the devices are served on:
+    /// `"9600 8N1"` (baud, data bits, parity, stop bits) [default: the line options].
+    #[arg(long, value_name = "SETTINGS", requires = "mirror")]
+    pub mirror_line: Option<LineSettings>,
+    /// The mirrored device's framing, RTU or ASCII [default: --mode's].
+    #[arg(long, value_enum, value_name = "MODE", requires = "mirror")]
+    pub mirror_mode: Option<crate::cli::args::SerialModeArg>,
     /// How often the mirrored device is read; no value served is older [default: 1s].
     #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg, requires = "mirror")]
     pub fresh: Option<std::time::Duration>,
@@ -135,6 +142,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         mirror_device,
         as_device,
         map,
+        mirror_line,
+        mirror_mode,
         fresh,
         values_from,
         values_prefix,
@@ -178,7 +187,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 as_device.as_deref(),
                 map.as_deref(),
                 fresh.unwrap_or(std::time::Duration::from_secs(1)),
-                line.serial.clone(),
+                // The source's own line when given, apart from the served one's.
+                match mirror_line {
+                    Some(whole) => crate::cli::args::SerialLineArgs::whole(whole, mirror_mode.or(line.serial.mode)),
+                    None => crate::cli::args::SerialLineArgs {
+                        mode: mirror_mode.or(line.serial.mode),
+                        ..line.serial.clone()
+                    },
+                },
                 emulated.len(),
                 &mut notes,
             )?;

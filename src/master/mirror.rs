@@ -66,9 +66,18 @@ pub fn prepare(
         MirrorMap::identity(&source_profile)
     };
     let reads = map.reads();
+    // A serial source's line is its own (--mirror-line), said so a mismatch is seen at start;
+    // a networked one has no line settings of mbtap's.
+    let source_line = match crate::source::stream::Transport::of_device(target) {
+        crate::source::stream::Transport::Serial(_) | crate::source::stream::Transport::Rfc2217(_) => {
+            let (mode, settings, _) = line.overrides().resolve();
+            format!(" on a {settings} {} line", mode.name())
+        }
+        _ => String::new(),
+    };
     let _ = writeln!(
         notes,
-        "mbtap: mirroring unit {unit} of {target} ({}) as {} at address {address}: {} reads every {fresh:?}; exception 0B until it answers",
+        "mbtap: mirroring unit {unit} of {target}{source_line} ({}) as {} at address {address}: {} reads every {fresh:?}; exception 0B until it answers",
         source_profile.meta.name,
         served_profile.meta.name,
         reads.len()

@@ -466,3 +466,62 @@ fn a_read_across_a_profiles_gaps_gives_the_mapped_values_and_says_what_it_left_o
     assert!(names.contains(&"Phase 1 line to neutral volts") && names.contains(&"Total kWh"), "{names:?}");
     assert!(err.contains("input 44..45 not in the profile's map"), "{err}");
 }
+
+/// The README's fake-meter story, as written with built-in profiles: an EM24 on its own 9600
+/// 8N1 line (played by `simulate` on a pty) served as an SDM630 on an inverter's 19200 8E1
+/// RS-485 port (one end of a pty pair; the inverter, here `mbtap read`, on the other), its map
+/// naming each SDM630 value by the EM24's. The inverter reads the EM24's volts and energy in the
+/// SDM630's floats; the mirror says which line it reads the source on, apart from the served one.
+#[test]
+#[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
+fn a_fake_meter_on_an_inverters_port_serves_another_meters_values_on_its_own_line() {
+    let dir = std::env::temp_dir().join(format!("mbtap-fake-meter-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let em24 = dir.join("em24");
+    let _meter =
+        common::simulate(&em24, &["--device", "em24@1", "--baud", "9600", "--parity", "none", "--duration", "60"]);
+    let (_socat, meter_side, inverter_side) = common::socat_pair(&dir);
+    let map = "Phase 1 line to neutral volts=V L1-N,Phase 2 line to neutral volts=V L2-N,\
+               Phase 3 line to neutral volts=V L3-N,Total system power=W sys,Total kWh=kWh (+) TOT";
+    let mut fake = Command::new(BIN)
+        .args(["simulate", "--mirror", em24.to_str().unwrap(), "--mirror-device", "em24@1"])
+        .args(["--mirror-line", "9600 8N1", "--as", "sdm630@2", "--map", map, "--fresh", "300ms"])
+        .args(["--serial", meter_side.to_str().unwrap(), "--baud", "19200", "--parity", "even"])
+        .args(["--duration", "60"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let said = {
+        use std::io::BufRead;
+        let mut lines = std::io::BufReader::new(fake.stderr.take().unwrap()).lines();
+        let said = lines.by_ref().map_while(Result::ok).find(|l| l.contains("mirroring")).unwrap_or_default();
+        std::thread::spawn(move || lines.for_each(drop));
+        said
+    };
+    let _fake = Kill(fake);
+    assert!(said.contains("on a 9600 8N1 rtu line"), "the source's own line is said: {said}");
+    let read = || {
+        Command::new(BIN)
+            .args(["read", inverter_side.to_str().unwrap(), "--unit", "2", "--device", "sdm630"])
+            .args(["--baud", "19200", "--parity", "even", "--format", "jsonl"])
+            .args(["Phase 1 line to neutral volts", "Total kWh"])
+            .output()
+            .unwrap()
+    };
+    let start = std::time::Instant::now();
+    let values = loop {
+        let out = read();
+        let values: Vec<f64> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok()?["value"].as_f64())
+            .collect();
+        if values.len() == 2 || start.elapsed() > std::time::Duration::from_secs(15) {
+            break values;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(300));
+    };
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(values.len(), 2, "the inverter reads both values: {values:?}");
+    assert!((225.0..235.0).contains(&values[0]), "the EM24's L1 volts as the SDM630's float: {}", values[0]);
+    assert!(values[1] > 1234.0, "the EM24's import energy as the SDM630's Total kWh: {}", values[1]);
+}

@@ -148,12 +148,47 @@ fn pymodbus_reads_the_built_in_meters_at_their_maps_addresses_and_types() {
         assert!(first > 1234.0 && second >= first, "{name}: total kWh {first} then {second}");
         assert_eq!(pymodbus_read(&addr, unit, "input", 1000, 2)["exception"], 2, "{name}: outside the map");
     }
+    // Carlo Gavazzi EM24 and EM340 (holding 0: V L1-N, INT32 low word first, ×0.1 V; 51: Hz,
+    // u16 ×0.1; 52: kWh (+) TOT, INT32 low word first, ×0.1 kWh), Chint DTSU666 (holding 2006h:
+    // Ua, a float in 0.1 V; 401Eh: ImpEp, a float in kWh) and DDSU666 (input 2000h: U, a float in
+    // V; 4000h: Ep, kWh).
+    let low_first = |answer: &serde_json::Value| {
+        let r = answer["registers"].as_array().unwrap_or_else(|| panic!("{answer}"));
+        let w: Vec<u32> = r.iter().map(|w| u32::try_from(w.as_u64().unwrap()).unwrap()).collect();
+        f64::from((w[1] << 16 | w[0]).cast_signed())
+    };
+    for (name, unit) in [("em24", 4u8), ("em340", 5)] {
+        let (_sim, addr, said) = emulate(&["--device", &format!("{name}@{unit}")]);
+        assert!(said.contains(name), "{said}");
+        let volts = low_first(&pymodbus_read(&addr, unit, "holding", 0, 2)) * 0.1;
+        assert!((225.0..235.0).contains(&volts), "{name}: holding 0 = {volts} V");
+        let hertz = &pymodbus_read(&addr, unit, "holding", 51, 1)["registers"][0];
+        assert!((499..=501).contains(&hertz.as_u64().unwrap()), "{name}: holding 51 = {hertz} (0.1 Hz)");
+        let first = low_first(&pymodbus_read(&addr, unit, "holding", 52, 2)) * 0.1;
+        std::thread::sleep(std::time::Duration::from_millis(1200));
+        let second = low_first(&pymodbus_read(&addr, unit, "holding", 52, 2)) * 0.1;
+        assert!(first > 1234.0 && second >= first, "{name}: kWh {first} then {second}");
+        assert_eq!(pymodbus_read(&addr, unit, "holding", 200, 2)["exception"], 2, "{name}: outside the map");
+    }
+    let (_sim, addr, _) = emulate(&["--device", "dtsu666@6"]);
+    let tenths = f64::from(float_of(&pymodbus_read(&addr, 6, "holding", 0x2006, 2)));
+    assert!((2250.0..2350.0).contains(&tenths), "dtsu666: holding 2006h = {tenths} (0.1 V)");
+    let kwh = float_of(&pymodbus_read(&addr, 6, "holding", 0x401E, 2));
+    assert!(kwh > 1234.0, "dtsu666: ImpEp {kwh}");
+    let (_sim, addr, _) = emulate(&["--device", "ddsu666@7"]);
+    let volts = float_of(&pymodbus_read(&addr, 7, "input", 0x2000, 2));
+    assert!((225.0..235.0).contains(&volts), "ddsu666: input 2000h = {volts} V");
+    assert!(float_of(&pymodbus_read(&addr, 7, "input", 0x4000, 2)) > 1234.0, "ddsu666: Ep");
+
     let out = Command::new(BIN).args(["profiles", "list"]).output().unwrap();
     let listed = String::from_utf8_lossy(&out.stdout);
-    for name in ["sdm120", "sdm230", "sdm630"] {
+    for name in ["sdm120", "sdm230", "sdm630", "em24", "em340", "dtsu666", "ddsu666"] {
         assert!(listed.contains(name), "profiles list: {listed}");
     }
     let out = Command::new(BIN).args(["profiles", "show", "sdm630"]).output().unwrap();
     let shown = String::from_utf8_lossy(&out.stdout);
     assert!(shown.contains("Phase 1 line to neutral volts") && shown.contains("Total kWh"), "{shown}");
+    let out = Command::new(BIN).args(["profiles", "show", "em24"]).output().unwrap();
+    let shown = String::from_utf8_lossy(&out.stdout);
+    assert!(shown.contains("V L1-N") && shown.contains("kWh (+) TOT"), "{shown}");
 }

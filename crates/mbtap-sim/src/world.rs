@@ -40,6 +40,9 @@ pub fn step(slave: &mut Slave, t: f64) {
         "mkzp" => mkzp(slave, t),
         "sdm120" | "sdm230" => super::meters::single_phase(slave, t),
         "sdm630" => super::meters::three_phase(slave, t),
+        "em24" | "em340" => super::meters::carlo_gavazzi(slave, t),
+        "dtsu666" => super::meters::dtsu666(slave, t),
+        "ddsu666" => super::meters::ddsu666(slave, t),
         _ => {}
     }
 }

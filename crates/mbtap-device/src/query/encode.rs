@@ -189,7 +189,10 @@ fn raw_of(c: &mut Check<'_>, text: &str, def: &Def) -> Result<i64, QueryError> {
 fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<Vec<u16>, QueryError> {
     match def.value_type {
         ValueType::F32 => {
-            let v: f32 = text.trim().parse().map_err(|_| c.hard(format!("{text:?} is not a number")))?;
+            let v: f64 = text.trim().parse().map_err(|_| c.hard(format!("{text:?} is not a number")))?;
+            // The register's scale applies as when it is read (see `encode_number`).
+            #[allow(clippy::cast_possible_truncation)]
+            let v = (v / def.scale.unwrap_or(1.0)) as f32;
             if !v.is_finite() {
                 return Err(c.hard(format!(
                     "{text:?} does not fit the register's 32-bit float (a finite number within ±{:e})",
@@ -291,10 +294,12 @@ pub fn encode_number(value: f64, def: &Def) -> Result<Vec<u16>, String> {
     }
     match def.value_type {
         ValueType::F32 => {
+            // A float register's scale applies as it does when the value is read (the annotator
+            // multiplies the float by it): Chint's DTSU666 holds 230.0 V as 2300.0 at scale 0.1.
             // Rounded to the nearest f32 (IEEE 754 binary32), as any device holding one would;
             // beyond its range it would be infinity, which is no measurement.
             #[allow(clippy::cast_possible_truncation)]
-            let v = value as f32;
+            let v = (value / def.scale.unwrap_or(1.0)) as f32;
             if v.is_finite() {
                 Ok(words32(v.to_bits(), def.word_order))
             } else {
@@ -465,6 +470,8 @@ mod tests {
         assert!(e.contains("32-bit float"), "{e}");
         assert!(encode_number(f64::INFINITY, &number_def(ValueType::F32, None)).is_err());
         assert!(encode_number(f64::NAN, &number_def(ValueType::U16, None)).is_err());
+        // A float register's scale applies as it does when read: 230 V at scale 0.1 is 2300.0.
+        assert_eq!(encode_number(230.0, &number_def(ValueType::F32, Some(0.1))), Ok(vec![0x450F, 0xC000]));
         // In range: held exactly as before.
         assert_eq!(encode_number(229.5, &number_def(ValueType::U16, Some(0.1))), Ok(vec![2295]));
         assert_eq!(encode_number(-81.0, &number_def(ValueType::I16, None)), Ok(vec![0xFFAF]));

@@ -12,6 +12,10 @@ const BUILTIN: &[(&str, &str, &str)] = &[
     ("sdm120", "builtin/sdm120.toml", include_str!("sdm120.toml")),
     ("sdm230", "builtin/sdm230.toml", include_str!("sdm230.toml")),
     ("sdm630", "builtin/sdm630.toml", include_str!("sdm630.toml")),
+    ("dtsu666", "builtin/dtsu666.toml", include_str!("dtsu666.toml")),
+    ("ddsu666", "builtin/ddsu666.toml", include_str!("ddsu666.toml")),
+    ("em24", "builtin/em24.toml", include_str!("em24.toml")),
+    ("em340", "builtin/em340.toml", include_str!("em340.toml")),
 ];
 
 /// Names of the built-in profiles.
