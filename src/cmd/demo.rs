@@ -35,12 +35,22 @@ pub struct Args {
     /// what a sniffer set up wrong gets.
     #[arg(long, value_name = "SETTINGS")]
     pub heard_at: Option<LineSettings>,
+    /// Record what the listener hears to this pcapng file, with its timing (as `sniff --record`):
+    /// a recording to replay, export, report on or learn from.
+    #[arg(long, value_name = "FILE.pcapng")]
+    pub record: Option<std::path::PathBuf>,
+    /// End (Ctrl-C or --duration) with the bus health report, as `mbtap report` gives it.
+    #[arg(long)]
+    pub report: bool,
+    /// Also give the report so far every SECONDS of line time (implies --report).
+    #[arg(long, value_name = "SECONDS", value_parser = crate::cli::numbers::seconds)]
+    pub report_every: Option<f64>,
     #[command(flatten)]
     pub publish: crate::publish::PublishArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
-    let Args { format, lang, duration, faults, speed, heard_at, mut publish } = args;
+    let Args { format, lang, duration, faults, speed, heard_at, record, report, report_every, mut publish } = args;
     // A demo's devices are nobody's: what it announced to Home Assistant is taken back at its
     // end, so no `unavailable` entity is left behind (`--mqtt-forget` on by default here).
     publish.mqtt.mqtt_forget = true;
@@ -55,7 +65,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut runner = Runner::new("demo (simulated bus)".into(), format, profiles, lang.into(), line);
     runner.publishing = publishing;
     runner.pacing = true;
-    runner.run(Demo(DemoOptions { duration, faults, speed, heard_at }))
+    runner.recording.clone_from(&record);
+    // The report as sniff's output options ask it (the demo's devices are its own).
+    runner.output = Some(crate::cli::args::OutputArgs {
+        format,
+        devices: Vec::new(),
+        lang,
+        report,
+        report_every,
+        learn: None,
+        learn_force: false,
+        publish,
+    });
+    runner.run(Demo(DemoOptions { duration, faults, speed, heard_at, record }))
 }
 
 /// The simulated line as the runner's source.

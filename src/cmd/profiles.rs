@@ -22,7 +22,7 @@ use import::{import, parse_type_arg};
 /// for Home Assistant, ESPHome or Telegraf.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// List the profiles there are — built in (the seeds' devices, the Eastron meters) and in the
+    /// List the profiles there are — built in (the seeds' devices and the energy meters) and in the
     /// user profile directory — with where each came from.
     List,
     /// Load a profile file and report the first problem with file:line:column, or a summary.

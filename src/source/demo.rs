@@ -26,6 +26,8 @@ pub struct DemoOptions {
     pub speed: f64,
     /// The listener's UART settings, when not the line's.
     pub heard_at: Option<LineSettings>,
+    /// Where to record what the listener hears (pcapng).
+    pub record: Option<std::path::PathBuf>,
 }
 
 /// Runs the demo until Ctrl-C or the duration; the writer's profiles are set to the devices.
@@ -44,8 +46,24 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
     bus.faults = opts.faults;
     let heard_at = opts.heard_at.unwrap_or(line);
     let mut listener = Listener::new(line, heard_at);
+    let recorder = match &opts.record {
+        Some(path) => Some(crate::source::record::Recorder::create(
+            path,
+            // What the listener hears, described as the reader reads it back (its settings).
+            &[(
+                "demo",
+                &mbtap_analysis::line_args::LineOverrides::describe(
+                    mbtap_analysis::analyzer::SerialMode::Rtu,
+                    heard_at,
+                    0,
+                ),
+            )],
+        )?),
+        None => None,
+    };
     let mut session =
-        Session::new(AnalyzerConfig { framer: FramerConfig::new(heard_at, 0), ..AnalyzerConfig::default() });
+        Session::new(AnalyzerConfig { framer: FramerConfig::new(heard_at, 0), ..AnalyzerConfig::default() })
+            .recording(recorder);
     let start = tokio::time::Instant::now();
     let start_t = now();
     let mut stop = Box::pin(crate::signals::shutdown_signal());

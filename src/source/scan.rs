@@ -83,7 +83,20 @@ async fn listen(port: &mut tokio_serial::SerialStream, dwell: Duration) -> Vec<(
 #[must_use]
 pub fn describe(scores: &[Score]) -> String {
     let mut s = String::new();
-    let ranked = scores.iter().map(|r| (format!("{} {}", r.candidate.line, r.candidate.mode.name()), r));
+    let tie = mbtap_analysis::scan::tied_stop_bits(scores);
+    let ranked = scores.iter().enumerate().map(|(i, r)| {
+        let label = format!("{} {}", r.candidate.line, r.candidate.mode.name());
+        match tie {
+            // A second stop bit is idle line to a one-stop-bit receiver: both read the same.
+            Some(other) if i == 0 => (
+                format!(
+                    "{label} (or {other} stop bits: they read alike when listening; set what the devices' manuals say)"
+                ),
+                r,
+            ),
+            _ => (label, r),
+        }
+    });
     if !write_ranked(&mut s, ranked, 3) {
         s.push_str("no setting gave a valid Modbus frame: is the bus silent, or the wiring (A/B) swapped?\n");
     }

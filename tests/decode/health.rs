@@ -262,10 +262,21 @@ fn scan(truth: &str, ascii: bool) -> Vec<mbtap_analysis::scan::Score> {
 #[test]
 fn scan_finds_the_settings_of_simulated_lines() {
     use mbtap_analysis::analyzer::SerialMode;
-    for (truth, ascii) in [("9600 8E1", false), ("19200 8N2", false), ("115200 8N1", false), ("9600 7E1", true)] {
+    // A two-stop-bit line reads alike at one stop bit: one ranks first, the tie is said.
+    for (truth, found, ascii) in [
+        ("9600 8E1", "9600 8E1", false),
+        ("19200 8N2", "19200 8N1", false),
+        ("115200 8N1", "115200 8N1", false),
+        ("9600 7E1", "9600 7E1", true),
+    ] {
         let ranked = scan(truth, ascii);
         let best = &ranked[0];
-        let expected: LineSettings = truth.parse().unwrap();
+        let expected: LineSettings = found.parse().unwrap();
+        assert_eq!(
+            mbtap_analysis::scan::tied_stop_bits(&ranked),
+            (truth != found).then_some(2),
+            "{truth}: the tie between stop bits is found only where there is one"
+        );
         assert_eq!(
             best.candidate.line, expected,
             "{truth}: best {:?} (runner-up {:?})",

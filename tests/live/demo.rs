@@ -107,3 +107,37 @@ fn durations_take_one_syntax_everywhere() {
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// `demo --record FILE --report`: what the listener heard goes to a pcapng that replays to the
+/// same transactions (its line settings stored with it, so no default is guessed), and the health
+/// report ends the output — a demo that leaves something to try the other commands on.
+#[test]
+fn a_demo_records_what_it_heard_and_reports_on_it() {
+    let dir = std::env::temp_dir().join(format!("mbtap-demo-record-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let recording = dir.join("demo.pcapng");
+    let out = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["demo", "--format", "jsonl", "--speed", "0", "--duration", "10", "--fault", "corrupt"])
+        .args(["--report", "--record", recording.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let lines: Vec<serde_json::Value> =
+        String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let summary = lines.iter().find(|l| l["event"] == "summary").expect("a summary");
+    assert!(lines.iter().any(|l| l["event"] == "report"), "the health report ends a demo given --report");
+    let replayed = Command::new(env!("CARGO_BIN_EXE_mbtap"))
+        .args(["replay", recording.to_str().unwrap(), "--format", "jsonl"])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&replayed.stderr);
+    assert!(replayed.status.success() && !said.contains("stores no line settings"), "{said}");
+    let again: Vec<serde_json::Value> =
+        String::from_utf8(replayed.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let replayed_summary = again.iter().find(|l| l["event"] == "summary").expect("a summary");
+    std::fs::remove_dir_all(&dir).ok();
+    for field in ["transactions", "ok", "bad_frames"] {
+        assert_eq!(replayed_summary[field], summary[field], "{field}: the recording holds what the demo heard");
+    }
+    assert!(summary["bad_frames"].as_u64().unwrap() > 0, "the injected corruption is in it: {summary}");
+}

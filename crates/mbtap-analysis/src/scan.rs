@@ -6,8 +6,9 @@
 //!
 //! Ties: a sender with two stop bits is heard perfectly by a one-stop-bit receiver (the second
 //! stop bit is idle line), so the stop bits cannot always be told apart by frames alone; when
-//! they tie, two stop bits win without parity — what Serial Line v1.02 §2.5.1 prescribes for
-//! "no parity" — and one stop bit with parity.
+//! they tie, one stop bit ranks first — what the meters and devices on these buses are set to
+//! without parity at the factory (Eastron, Carlo Gavazzi, Chint: 8N1), where Serial Line v1.02
+//! §2.5.1 prescribes two — and the description names both ([`tied_stop_bits`]).
 
 use std::collections::BTreeSet;
 
@@ -95,14 +96,24 @@ fn count(s: &mut Score, mode: SerialMode, framer: FramerConfig, heard: &[(u64, V
 pub fn rank(scores: &mut [Score]) {
     let preference = |s: &Score| {
         let c = s.candidate;
-        let stop_rule = match (c.line.parity, c.line.stop_bits) {
-            (Parity::None, 2) | (Parity::Even | Parity::Odd, 1) => 1,
-            _ => 0,
-        };
+        let stop_rule = i32::from(c.line.stop_bits == 1);
         // Even parity is the serial line's default (Serial Line v1.02 §2.5.1).
         (s.value(), stop_rule, i32::from(c.line.parity == Parity::Even), i32::from(c.line.data_bits == 8))
     };
     scores.sort_by_key(|s| std::cmp::Reverse(preference(s)));
+}
+
+/// Whether the runner-up scored the same as the best and differs from it only in its stop bits:
+/// a listener cannot tell those apart, and the result must say both.
+#[must_use]
+pub fn tied_stop_bits(ranked: &[Score]) -> Option<u8> {
+    let (best, next) = (ranked.first()?, ranked.get(1)?);
+    let (a, b) = (best.candidate, next.candidate);
+    (best.value() == next.value()
+        && a.mode == b.mode
+        && a.line.stop_bits != b.line.stop_bits
+        && LineSettings { stop_bits: b.line.stop_bits, ..a.line } == b.line)
+        .then_some(b.line.stop_bits)
 }
 
 /// What the eighth bit of stored characters says about a 7-bit (ASCII) line recorded as

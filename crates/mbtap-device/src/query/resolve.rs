@@ -57,6 +57,23 @@ pub fn distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
+/// The shortest of `names` holding every word of `want` (two words at least; a word of three
+/// letters or more may be the start of the name's word: `volt` in `volts`), if one does.
+fn by_words<'p>(want: &str, names: impl Iterator<Item = &'p str>) -> Option<String> {
+    let words: Vec<&str> = want.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
+    if words.len() < 2 {
+        return None;
+    }
+    names
+        .filter(|en| {
+            let lower = en.to_lowercase();
+            let has: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
+            words.iter().all(|w| has.iter().any(|h| h == w || (w.chars().count() >= 3 && h.starts_with(w))))
+        })
+        .min_by_key(|en| en.chars().count())
+        .map(str::to_owned)
+}
+
 /// Every value's first address with its names: (table, first, names to match).
 fn named_values(p: &Profile) -> impl Iterator<Item = (Table, u16, &str, Option<&str>)> {
     p.tables.iter().flat_map(move |(&table, slots)| {
@@ -92,16 +109,22 @@ fn find_name(item: &Item, name: &str, p: &Profile) -> Result<(Table, u16), Query
             // from costing its length times every name in the profile.
             let limit = want.chars().count() / 3 + 2;
             let near = |n: &str| n.chars().count().abs_diff(want.chars().count()) <= limit;
-            let suggestion = named_values(p)
-                .filter(|&(t, ..)| in_table(t))
-                .filter_map(|(_, _, en, _)| {
-                    let (full, cut) = (en.to_lowercase(), short(en));
-                    let d = [full, cut].iter().filter(|n| near(n)).map(|n| distance(&want, n)).min()?;
-                    Some((d, en))
-                })
-                .min_by_key(|&(d, _)| d)
-                .filter(|&(d, _)| d <= limit)
-                .map(|(_, en)| en.to_owned());
+            // A name holding every word typed comes first ("Phase 1 volts" → "Phase 1 line to
+            // neutral volts", not the closer-spelled "Phase 1 power"): users shorten names by
+            // leaving words out far more often than they misspell them.
+            let suggestion = by_words(&want, named_values(p).filter(|&(t, ..)| in_table(t)).map(|(_, _, en, _)| en))
+                .or_else(|| {
+                    named_values(p)
+                        .filter(|&(t, ..)| in_table(t))
+                        .filter_map(|(_, _, en, _)| {
+                            let (full, cut) = (en.to_lowercase(), short(en));
+                            let d = [full, cut].iter().filter(|n| near(n)).map(|n| distance(&want, n)).min()?;
+                            Some((d, en))
+                        })
+                        .min_by_key(|&(d, _)| d)
+                        .filter(|&(d, _)| d <= limit)
+                        .map(|(_, en)| en.to_owned())
+                });
             Err(QueryError::UnknownName { item: item.text.clone(), profile: p.meta.name.clone(), suggestion })
         }
         many => {
@@ -197,6 +220,16 @@ mod tests {
     fn a_typo_gets_the_closest_name() {
         let e = target("Operating mdoe").unwrap_err();
         assert!(e.to_string().contains("did you mean \"Operating mode\""), "{e}");
+    }
+
+    #[test]
+    fn a_name_shortened_by_leaving_words_out_is_suggested_whole() {
+        let sdm = crate::profile::builtin::get("sdm630").unwrap().unwrap();
+        let e = resolve(&parse_item("Phase 1 volts", None).unwrap(), Some(&sdm)).unwrap_err();
+        assert!(e.to_string().contains("did you mean \"Phase 1 line to neutral volts\""), "{e}");
+        // A misspelling still finds the name by its spelling.
+        let e = resolve(&parse_item("Total kwhh", None).unwrap(), Some(&sdm)).unwrap_err();
+        assert!(e.to_string().contains("did you mean \"Total kWh\""), "{e}");
     }
 
     #[test]
