@@ -202,6 +202,8 @@ pub async fn import(link: &mut Link, unit: u8) -> anyhow::Result<mbtap_device::p
                 "int16" => ValueType::I16,
                 "uint32" | "enum32" | "bitfield32" | "acc32" => ValueType::U32,
                 "int32" => ValueType::I32,
+                "uint64" | "acc64" => ValueType::U64,
+                "int64" => ValueType::I64,
                 "float32" => ValueType::F32,
                 "string" => ValueType::String,
                 _ => continue,

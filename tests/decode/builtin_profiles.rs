@@ -237,3 +237,28 @@ fn mk4_alarm_log_time_is_one_date() {
     );
     assert_eq!(a[0].notes[0].kind(), "out_of_range", "minute 75");
 }
+
+/// Named constant: an ABB B23's answer to `03 5000 0008` (MAP v1.1b3 §6.3) after the byte count,
+/// as registers — active import 0x0000_0000_0001_E240 (123 456 × 0.01 kWh), active export 0,
+/// both 64-bit high word first (ABB 2CMC485003M0201, "Energy accumulators").
+const B23_ENERGIES: [u16; 8] = [
+    0x0000, 0x0000, 0x0001, 0xE240, // 5000h active import, u64
+    0x0000, 0x0000, 0x0000, 0x0000, // 5004h active export, u64
+];
+
+/// 64-bit registers read whole: four registers, one value, the scale applied; the meter's "not
+/// available" (all ones) said out of range, never shown as a reading.
+#[test]
+fn an_abb_meters_64_bit_energy_reads_as_one_value() {
+    let p = builtin::get("b23").unwrap().unwrap();
+    let a =
+        mbtap_device::profile::annotate::annotate_registers(&p, Table::HoldingRegisters, 0x5000, &B23_ENERGIES, false);
+    let shown: Vec<String> = a.iter().map(ToString::to_string).collect();
+    assert_eq!(
+        shown,
+        ["20480 Active import energy = 1234.56 kWh (raw 123456)", "20484 Active export energy = 0.00 kWh (raw 0)"]
+    );
+    let a =
+        mbtap_device::profile::annotate::annotate_registers(&p, Table::HoldingRegisters, 0x5000, &[0xFFFF; 4], false);
+    assert!(a[0].to_string().contains("outside the documented range"), "{}", a[0]);
+}

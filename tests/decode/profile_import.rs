@@ -200,7 +200,7 @@ fn a_tab_separated_sheet_with_plc_type_names() {
 fn rows_that_cannot_be_read_are_named_with_row_column_and_why() {
     let (p, err) = import("bad-rows.csv", &[]);
     for expected in [
-        "row 3, column C (type): \"float64\": 64-bit values are not in the profile format yet",
+        "row 3, column C (type): \"float64\": 64-bit floats are not in the profile format",
         "row 4, column D (scale): \"ten\" is not a scale",
         "row 5, column A (address): \"banana\" is not an address",
         "row 6: input_registers 1 overlaps \"Voltage\" (row 2, address 0)",

@@ -180,9 +180,24 @@ fn pymodbus_reads_the_built_in_meters_at_their_maps_addresses_and_types() {
     assert!((225.0..235.0).contains(&volts), "ddsu666: input 2000h = {volts} V");
     assert!(float_of(&pymodbus_read(&addr, 7, "input", 0x4000, 2)) > 1234.0, "ddsu666: Ep");
 
+    // ABB B21, B23, B24 (holding 5B00h: Voltage L1-N, u32 high word first, 0.1 V; 5000h: Active
+    // import energy, u64 high word first, 0.01 kWh).
+    for (name, unit) in [("b21", 8u8), ("b23", 9), ("b24", 10)] {
+        let (_sim, addr, _) = emulate(&["--device", &format!("{name}@{unit}")]);
+        let words = |a: &serde_json::Value| -> Vec<u64> {
+            a["registers"].as_array().unwrap_or_else(|| panic!("{a}")).iter().map(|w| w.as_u64().unwrap()).collect()
+        };
+        let v = words(&pymodbus_read(&addr, unit, "holding", 0x5B00, 2));
+        let decivolts = v[0] << 16 | v[1];
+        assert!((2250..2350).contains(&decivolts), "{name}: 5B00h = {decivolts} (0.1 V)");
+        let e = words(&pymodbus_read(&addr, unit, "holding", 0x5000, 4));
+        let centi_kwh = e.iter().fold(0, |acc, w| acc << 16 | w);
+        assert!(centi_kwh > 123_400, "{name}: 5000h = {centi_kwh} (0.01 kWh)");
+    }
+
     let out = Command::new(BIN).args(["profiles", "list"]).output().unwrap();
     let listed = String::from_utf8_lossy(&out.stdout);
-    for name in ["sdm120", "sdm230", "sdm630", "em24", "em340", "dtsu666", "ddsu666"] {
+    for name in ["sdm120", "sdm230", "sdm630", "em24", "em340", "dtsu666", "ddsu666", "b21", "b23", "b24"] {
         assert!(listed.contains(name), "profiles list: {listed}");
     }
     let out = Command::new(BIN).args(["profiles", "show", "sdm630"]).output().unwrap();

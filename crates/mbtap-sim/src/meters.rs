@@ -290,6 +290,39 @@ pub fn ddsu666(slave: &mut Slave, t: f64) {
     }
 }
 
+/// ABB B21 (one phase), B23 and B24 (three): holding registers 5000h–5010h (64-bit energies)
+/// and 5B00h–5B3Dh.
+pub fn abb(slave: &mut Slave, t: f64, phases: u8) {
+    use Quantity as Q;
+    let mut map: Vec<(u16, Quantity)> = vec![
+        (0x5000, Q::ImportKwh),
+        (0x5004, Q::ExportKwh),
+        (0x5008, Q::ImportKwh),
+        (0x5B14, Q::TotalWatts),
+        (0x5B1C, Q::TotalVars),
+        (0x5B24, Q::TotalVoltAmps),
+        (0x5B2C, Q::Hertz),
+        (0x5B3A, Q::PowerFactor),
+    ];
+    for i in 0..phases {
+        let k = u16::from(i) * 2;
+        map.extend([
+            (0x5B00 + k, Q::Volts(i)),
+            (0x5B0C + k, Q::Amps(i)),
+            (0x5B16 + k, Q::Watts(i)),
+            (0x5B1E + k, Q::Vars(i)),
+            (0x5B26 + k, Q::VoltAmps(i)),
+            (0x5B3B + u16::from(i), Q::PowerFactor),
+        ]);
+        if phases == 3 {
+            map.push((0x5B06 + k, Q::LineVolts(i)));
+        }
+    }
+    for (address, q) in map {
+        put(slave, Table::HoldingRegisters, address, measure(q, t, phases));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::sync::Arc;
@@ -374,6 +407,18 @@ mod tests {
         assert!((2250.0..2350.0).contains(&f32::from_bits(bits)), "raw {}", f32::from_bits(bits));
         assert!((225.0..235.0).contains(&value_at(&d, h, 0x2006)));
         assert!((49.9..50.1).contains(&value_at(&d, h, 0x2044)));
+        for (name, phases) in [("b21", 1), ("b23", 3), ("b24", 3)] {
+            let mut m = meter(name);
+            abb(&mut m, 100.0, phases);
+            // 5B00h: u32 high word first, 0.1 V; 5000h: u64 high word first, 0.01 kWh.
+            let volts = u32::from(m.get(h, 0x5B00).unwrap()) << 16 | u32::from(m.get(h, 0x5B01).unwrap());
+            assert!((2250..2350).contains(&volts), "{name}: raw volts {volts}");
+            let words: Vec<u64> = (0x5000..0x5004).map(|a| u64::from(m.get(h, a).unwrap())).collect();
+            let centi_kwh = words.iter().fold(0, |acc, w| acc << 16 | w);
+            assert!(centi_kwh > 123_400, "{name}: raw energy {centi_kwh}");
+            let hz = m.get(h, 0x5B2C).unwrap();
+            assert!((4990..=5010).contains(&hz), "{name}: raw hertz {hz}");
+        }
         let mut s = meter("ddsu666");
         ddsu666(&mut s, 100.0);
         let i = Table::InputRegisters;

@@ -43,6 +43,8 @@ pub fn step(slave: &mut Slave, t: f64) {
         "em24" | "em340" => super::meters::carlo_gavazzi(slave, t),
         "dtsu666" => super::meters::dtsu666(slave, t),
         "ddsu666" => super::meters::ddsu666(slave, t),
+        "b21" => super::meters::abb(slave, t, 1),
+        "b23" | "b24" => super::meters::abb(slave, t, 3),
         _ => {}
     }
 }

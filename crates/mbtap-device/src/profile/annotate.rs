@@ -224,6 +224,20 @@ pub fn annotate_registers(p: &Profile, table: Table, start: u16, values: &[u16],
             (raw, None, 1, Vec::new())
         } else if !whole {
             (i64::from(v), None, 1, vec![Note::HalfOfPair])
+        } else if matches!(def.value_type, ValueType::U64 | ValueType::I64) {
+            let mut regs: Vec<u16> = values[i..i + width].to_vec();
+            if def.word_order == WordOrder::LowFirst {
+                regs.reverse();
+            }
+            let bits = regs.iter().fold(0u64, |acc, &w| (acc << 16) | u64::from(w));
+            // A raw value is an i64: a u64 past its range (ABB's "not available", all ones) is
+            // held at i64::MAX and said out of range.
+            let (raw, notes) = match (def.value_type, i64::try_from(bits)) {
+                (ValueType::I64, _) => (bits.cast_signed(), Vec::new()),
+                (_, Ok(raw)) => (raw, Vec::new()),
+                (_, Err(_)) => (i64::MAX, vec![Note::OutOfRange { min: 0, max: i64::MAX }]),
+            };
+            (raw, None, width, notes)
         } else if matches!(def.value_type, ValueType::Datetime | ValueType::String) {
             // A value spread over several registers: shown whole, no single raw value.
             let regs = &values[i..i + width];

@@ -185,6 +185,8 @@ fn home_assistant(p: &Profile, unit: u8) -> Exported {
             ValueType::I16 => "int16",
             ValueType::U32 => "uint32",
             ValueType::I32 => "int32",
+            ValueType::U64 => "uint64",
+            ValueType::I64 => "int64",
             ValueType::F32 => "float32",
             ValueType::String => "string",
             ValueType::Datetime => {
@@ -201,7 +203,8 @@ fn home_assistant(p: &Profile, unit: u8) -> Exported {
         if d.value_type == ValueType::String {
             e.insert("count".into(), json!(d.width));
         } else {
-            if d.width == 2 && d.word_order == WordOrder::LowFirst {
+            // Home Assistant's `word` swap reverses the registers of a 32- or 64-bit value.
+            if d.width >= 2 && d.word_order == WordOrder::LowFirst {
                 e.insert("swap".into(), json!("word"));
             }
             if let Some(k) = d.scale {
@@ -278,6 +281,10 @@ fn esphome(p: &Profile, unit: u8) -> Exported {
             (ValueType::U32, true) => "U_DWORD_R",
             (ValueType::I32, false) => "S_DWORD",
             (ValueType::I32, true) => "S_DWORD_R",
+            (ValueType::U64, false) => "U_QWORD",
+            (ValueType::U64, true) => "U_QWORD_R",
+            (ValueType::I64, false) => "S_QWORD",
+            (ValueType::I64, true) => "S_QWORD_R",
             (ValueType::F32, false) => "FP32",
             (ValueType::F32, true) => "FP32_R",
             (ValueType::Datetime, _) => {
@@ -354,6 +361,8 @@ fn telegraf(p: &Profile, unit: u8) -> Exported {
                 (ValueType::I16, _) => ("INT16", "AB"),
                 (ValueType::U32, l) => ("UINT32", if l { "CDAB" } else { "ABCD" }),
                 (ValueType::I32, l) => ("INT32", if l { "CDAB" } else { "ABCD" }),
+                (ValueType::U64, l) => ("UINT64", if l { "GHEFCDAB" } else { "ABCDEFGH" }),
+                (ValueType::I64, l) => ("INT64", if l { "GHEFCDAB" } else { "ABCDEFGH" }),
                 (ValueType::F32, l) => ("FLOAT32-IEEE", if l { "CDAB" } else { "ABCD" }),
                 (ValueType::String, _) => {
                     out.skipped.push(format!(

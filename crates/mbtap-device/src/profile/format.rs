@@ -128,6 +128,9 @@ pub enum ValueType {
     /// Two registers.
     U32,
     I32,
+    /// Four registers (energy totals: ABB's B-series meters, SunSpec's acc64).
+    U64,
+    I64,
     F32,
     Bool,
     /// Named bits (see `bits`).
@@ -141,7 +144,7 @@ pub enum ValueType {
     Datetime,
 }
 
-/// Word order of 32-bit values.
+/// Word order of 32- and 64-bit values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum WordOrder {

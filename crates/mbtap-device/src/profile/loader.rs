@@ -298,6 +298,7 @@ fn compile(cx: &Ctx<'_>, span: &Range<usize>, r: &RegisterDef) -> Result<Def, Pr
     }
     let width = match r.value_type {
         ValueType::U32 | ValueType::I32 | ValueType::F32 => 2,
+        ValueType::U64 | ValueType::I64 => 4,
         ValueType::String => r.length.unwrap_or(1).max(1),
         ValueType::Datetime => u16::try_from(r.parts.len()).unwrap_or(1).max(1),
         _ => 1,

@@ -132,6 +132,10 @@ fn bounds(t: ValueType) -> (i64, i64) {
         ValueType::I16 => (i64::from(i16::MIN), i64::from(i16::MAX)),
         ValueType::U32 => (0, i64::from(u32::MAX)),
         ValueType::I32 => (i64::from(i32::MIN), i64::from(i32::MAX)),
+        // A raw value is an i64: a u64 register takes what an i64 holds (9.2 × 10¹⁸ is beyond
+        // any meter's counter).
+        ValueType::U64 => (0, i64::MAX),
+        ValueType::I64 => (i64::MIN, i64::MAX),
         _ => (0, i64::from(u16::MAX)),
     }
 }
@@ -144,6 +148,16 @@ fn word(raw: i64) -> u16 {
 /// The low 32 bits of a raw value in two's complement.
 fn bits32(raw: i64) -> u32 {
     u32::try_from(raw.rem_euclid(1 << 32)).unwrap_or(0)
+}
+
+/// Four registers, most significant first unless the profile says the low word comes first.
+fn words64(raw: i64, order: WordOrder) -> Vec<u16> {
+    let bits = raw.cast_unsigned();
+    let mut words: Vec<u16> = (0..4).rev().map(|i| u16::try_from((bits >> (16 * i)) & 0xFFFF).unwrap_or(0)).collect();
+    if order == WordOrder::LowFirst {
+        words.reverse();
+    }
+    words
 }
 
 fn words32(bits: u32, order: WordOrder) -> Vec<u16> {
@@ -275,6 +289,7 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
                 // Two's complement in one or two registers (MAP v1.1b3 §4.2 leaves signedness
                 // to the device; the profile's type says it).
                 ValueType::U32 | ValueType::I32 => words32(bits32(raw), def.word_order),
+                ValueType::U64 | ValueType::I64 => words64(raw, def.word_order),
                 _ => vec![word(raw)],
             })
         }
@@ -323,6 +338,7 @@ pub fn encode_number(value: f64, def: &Def) -> Result<Vec<u16>, String> {
             let raw = raw as i64;
             Ok(match t {
                 ValueType::U32 | ValueType::I32 => words32(bits32(raw), def.word_order),
+                ValueType::U64 | ValueType::I64 => words64(raw, def.word_order),
                 _ => vec![word(raw)],
             })
         }
@@ -447,6 +463,7 @@ mod tests {
                 ValueType::F32 => "f32",
                 ValueType::I16 => "i16",
                 ValueType::U32 => "u32",
+                ValueType::U64 => "u64",
                 _ => "u16",
             },
             scale.map(|s| format!("scale = {s}\n")).unwrap_or_default()
@@ -470,6 +487,8 @@ mod tests {
         assert!(e.contains("32-bit float"), "{e}");
         assert!(encode_number(f64::INFINITY, &number_def(ValueType::F32, None)).is_err());
         assert!(encode_number(f64::NAN, &number_def(ValueType::U16, None)).is_err());
+        // A 64-bit counter in four registers, high word first; the low word first reversed.
+        assert_eq!(encode_number(123_456.78, &number_def(ValueType::U64, Some(0.01))), Ok(vec![0, 0, 0x00BC, 0x614E]));
         // A float register's scale applies as it does when read: 230 V at scale 0.1 is 2300.0.
         assert_eq!(encode_number(230.0, &number_def(ValueType::F32, Some(0.1))), Ok(vec![0x450F, 0xC000]));
         // In range: held exactly as before.

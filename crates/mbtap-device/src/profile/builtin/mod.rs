@@ -16,6 +16,9 @@ const BUILTIN: &[(&str, &str, &str)] = &[
     ("ddsu666", "builtin/ddsu666.toml", include_str!("ddsu666.toml")),
     ("em24", "builtin/em24.toml", include_str!("em24.toml")),
     ("em340", "builtin/em340.toml", include_str!("em340.toml")),
+    ("b21", "builtin/b21.toml", include_str!("b21.toml")),
+    ("b23", "builtin/b23.toml", include_str!("b23.toml")),
+    ("b24", "builtin/b24.toml", include_str!("b24.toml")),
 ];
 
 /// Names of the built-in profiles.

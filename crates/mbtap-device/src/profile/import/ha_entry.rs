@@ -284,6 +284,8 @@ fn to_point(kind: &str, e: &Entry, name: &str) -> Result<Point, (&'static str, S
         "uint16" | "uint" => ValueType::U16,
         "int32" => ValueType::I32,
         "uint32" => ValueType::U32,
+        "int64" => ValueType::I64,
+        "uint64" => ValueType::U64,
         "float32" | "float" => ValueType::F32,
         "string" => {
             p.length = Some(count.ok_or(("count", "a string needs its count of registers".to_owned()))?);
@@ -292,13 +294,20 @@ fn to_point(kind: &str, e: &Entry, name: &str) -> Result<Point, (&'static str, S
         other => {
             return Err((
                 "data_type",
-                format!("{other:?}: not in the profile format (int16, uint16, int32, uint32, float32, string)"),
+                format!(
+                    "{other:?}: not in the profile format (int16, uint16, int32, uint32, int64, uint64, float32, string)"
+                ),
             ));
         }
     };
     match text(e.swap.as_ref()).as_deref() {
         None | Some("none") => {}
-        Some("word") if matches!(p.value_type, ValueType::I32 | ValueType::U32 | ValueType::F32) => {
+        Some("word")
+            if matches!(
+                p.value_type,
+                ValueType::I32 | ValueType::U32 | ValueType::F32 | ValueType::I64 | ValueType::U64
+            ) =>
+        {
             p.word_order = WordOrder::LowFirst;
         }
         Some(other) => return Err(("swap", format!("{other:?}: byte swaps are not in the profile format"))),

@@ -250,7 +250,12 @@ modbus:
       - name: Odd
         slave: 3
         address: 10
-        data_type: int64
+        data_type: float64
+      - name: Counter
+        slave: 3
+        address: 20
+        data_type: uint64
+        swap: word
     binary_sensors:
       - name: Relay
         slave: 3
@@ -267,17 +272,19 @@ modbus:
     fn sensors_binary_sensors_and_switches_become_points() {
         let (r, unit) = parse_home_assistant(CONFIG, None).unwrap();
         assert_eq!(unit, 3);
-        assert_eq!(r.points.len(), 4, "{:?}", r.problems);
+        assert_eq!(r.points.len(), 5, "{:?}", r.problems);
         let energy = &r.points[1];
         assert_eq!(
             (energy.value_type, energy.word_order, energy.scale),
             (ValueType::U32, WordOrder::LowFirst, Some(0.01))
         );
-        assert_eq!(r.points[3].access, Access::ReadWrite);
+        let counter = &r.points[2];
+        assert_eq!((counter.value_type, counter.word_order, counter.width()), (ValueType::U64, WordOrder::LowFirst, 4));
+        assert_eq!(r.points[4].access, Access::ReadWrite);
         assert_eq!(r.problems.len(), 1);
         assert_eq!(
             r.problems[0].to_string(),
-            "sensors[2] \"Odd\", data_type: \"int64\": not in the profile format (int16, uint16, int32, uint32, float32, string)"
+            "sensors[2] \"Odd\", data_type: \"float64\": not in the profile format (int16, uint16, int32, uint32, int64, uint64, float32, string)"
         );
     }
 

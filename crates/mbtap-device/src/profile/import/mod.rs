@@ -57,6 +57,7 @@ impl Point {
     pub fn width(&self) -> u16 {
         match self.value_type {
             ValueType::U32 | ValueType::I32 | ValueType::F32 => 2,
+            ValueType::U64 | ValueType::I64 => 4,
             ValueType::String => self.length.unwrap_or(1).max(1),
             _ => 1,
         }
@@ -230,6 +231,8 @@ pub const fn type_name(t: ValueType) -> &'static str {
         ValueType::I16 => "i16",
         ValueType::U32 => "u32",
         ValueType::I32 => "i32",
+        ValueType::U64 => "u64",
+        ValueType::I64 => "i64",
         ValueType::F32 => "f32",
         ValueType::Bool => "bool",
         ValueType::Bits => "bits",

@@ -129,8 +129,10 @@ pub fn parse_type(s: &str) -> Result<(ValueType, Option<u16>), String> {
         "uint32" | "dword" | "udint" | "u32" | "ulong" | "unsigned32" | "unsignedlong" => ValueType::U32,
         "string" | "ascii" | "char" | "str" | "text" => ValueType::String,
         "bit" | "bool" | "boolean" | "coil" | "binary" => ValueType::Bool,
-        "float64" | "double" | "int64" | "uint64" | "lreal" | "lint" | "ulint" | "f64" | "i64" | "u64" => {
-            return Err(format!("{:?}: 64-bit values are not in the profile format yet", s.trim()));
+        "int64" | "lint" | "i64" | "s64" | "sint64" | "signed64" => ValueType::I64,
+        "uint64" | "ulint" | "u64" | "unsigned64" | "qword" | "uqword" => ValueType::U64,
+        "float64" | "double" | "lreal" | "f64" => {
+            return Err(format!("{:?}: 64-bit floats are not in the profile format", s.trim()));
         }
         _ => return Err(format!("{:?} is not a type (float32, int16, uint16, int32, uint32, string, bit…)", s.trim())),
     };

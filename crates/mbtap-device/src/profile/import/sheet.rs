@@ -444,7 +444,7 @@ mod tests {
         assert_eq!(r.problems[0].at, "row 7");
         assert_eq!(
             r.problems[1].to_string(),
-            "row 10, column C (type): \"float64\": 64-bit values are not in the profile format yet"
+            "row 10, column C (type): \"float64\": 64-bit floats are not in the profile format"
         );
         assert!(r.notes[0].starts_with("header on row 4"), "{:?}", r.notes);
     }
