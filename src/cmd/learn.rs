@@ -51,6 +51,21 @@ pub struct Args {
     /// (e.g. `1:input:430=230.4`): fixes that register's scale in the draft (repeatable).
     #[arg(long, value_name = "UNIT:TABLE:ADDRESS=VALUE", value_parser = mbtap_analysis::learn::hint::parse_hint)]
     pub hint: Vec<mbtap_analysis::learn::hint::Hint>,
+    /// Where the traffic leaves registers decided by one or two samples, read those blocks again
+    /// from the device here (a serial port with the line options, `HOST:PORT` for Modbus TCP,
+    /// `rtu+tcp://…`): only reads (03/04) of blocks its master read, paced at --rate, for at
+    /// most --confirm-for; nothing is ever written. A busy or refusing device ends it, said.
+    #[arg(long, value_name = "TARGET")]
+    pub confirm: Option<String>,
+    /// With --confirm: requests per second, at most.
+    #[arg(long, default_value_t = 2.0, value_parser = crate::cli::numbers::rate, requires = "confirm")]
+    pub rate: f64,
+    /// With --confirm: how long it may ask, at most (`30s`, `2min`).
+    #[arg(long, value_name = "DURATION", value_parser = crate::cli::args::duration_arg, requires = "confirm")]
+    pub confirm_for: Option<std::time::Duration>,
+    /// With --confirm: how long to wait for each answer, ms.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=60_000), requires = "confirm")]
+    pub timeout_ms: u64,
 }
 
 /// Output of `learn`.
@@ -126,6 +141,21 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         args.capture.display(),
         args.unit.map(|u| format!(" of unit {u}")).unwrap_or_default()
     );
+    if let Some(target) = &args.confirm {
+        let opts = crate::master::confirm::ConfirmOptions {
+            target: target.clone(),
+            line: args.line.line.serial.clone(),
+            rate: args.rate,
+            limit: args.confirm_for.unwrap_or(std::time::Duration::from_secs(30)),
+            timeout: std::time::Duration::from_millis(args.timeout_ms),
+        };
+        let said = crate::cmd::runtime()?
+            .block_on(crate::master::confirm::confirm(&mut learner, &opts))
+            .with_context(|| format!("--confirm {target}"))?;
+        for line in said.lines() {
+            eprintln!("mbtap: --confirm {target}: {line}");
+        }
+    }
     let mut out = std::io::stdout().lock();
     let shown = match args.format {
         Format::Text => {

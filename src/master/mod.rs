@@ -3,6 +3,7 @@
 //! link ([`link`]: a line of the bridge's, through the gateway core), sends them ([`exec`]) and
 //! prints what came back ([`show`]).
 
+pub mod confirm;
 pub mod exec;
 pub mod link;
 pub mod mirror;

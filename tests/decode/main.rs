@@ -12,6 +12,7 @@ mod crc_shift;
 mod framer_accuracy;
 mod fuzz_corpus;
 mod health;
+mod learn_inverters;
 mod messages;
 mod mk4_examples;
 mod numeric_options;

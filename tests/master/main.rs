@@ -12,6 +12,7 @@ mod interop_master;
 mod interop_mbpoll;
 mod interop_pymodbus;
 mod late_answer;
+mod learn_confirm;
 mod probe;
 mod read_write;
 mod sunspec;

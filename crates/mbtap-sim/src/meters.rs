@@ -17,11 +17,15 @@ const PF: f64 = 0.95;
 /// Where the import counters start (kWh): a meter that has been in service a while.
 const START_KWH: f64 = 1234.5;
 
-/// One phase at `t` seconds: (volts, amps), the phase `i` a little apart from the others.
+/// One phase at `t` seconds: (volts, amps), the phase `i` a little apart from the others. Over
+/// the slow swing sits a jitter of a few tenths of a percent, as a meter's readings have from
+/// one second to the next (fast sinusoids: a function of time, the same on every run), so a
+/// value read twice a second moves both ways and no reading counts up like a total.
 fn phase(i: u8, t: f64) -> (f64, f64) {
     let k = f64::from(i);
-    let volts = 230.0 + 1.5 * (t / 7.0 + 2.1 * k).sin() + (k - 1.0) * 0.4;
-    let amps = 4.0 + 2.0 * (t / 30.0 + k).sin();
+    let jitter = 0.6 * (t * 7.3 + 1.7 * k).sin() * (t * 2.9 + k).cos();
+    let volts = 230.0 + 1.5 * (t / 7.0 + 2.1 * k).sin() + (k - 1.0) * 0.4 + jitter;
+    let amps = 4.0 + 2.0 * (t / 30.0 + k).sin() + 0.02 * (t * 11.1 + 2.3 * k).sin();
     (volts, amps)
 }
 

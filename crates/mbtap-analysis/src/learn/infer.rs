@@ -138,6 +138,27 @@ fn texty(r: &RegStat) -> bool {
     r.samples > 0 && r.ascii == r.samples && r.changes * 20 <= r.samples
 }
 
+/// String lengths devices give their text fields, in registers (serial numbers of 10, 16, 20
+/// characters; SunSpec's 8 and 16 registers).
+const TEXT_LENGTHS: [usize; 12] = [2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32];
+
+/// A text run of `run` registers at `regs[i]` to its full length: the NUL or space padding after
+/// it (registers that held only `0x0000` or `0x2020`), taken up to the longest usual string
+/// length it reaches — a field is padded to its size, and what lies past the usual size is a
+/// value of its own.
+fn padded_length(regs: &[(u16, &RegStat)], i: usize, run: usize) -> usize {
+    let Some(&(a, _)) = regs.get(i) else { return run };
+    let padding = regs[i + run..]
+        .iter()
+        .enumerate()
+        .take_while(|(k, (addr, r))| {
+            usize::from(*addr) == usize::from(a) + run + k && r.min == r.max && matches!(r.min, 0x0000 | 0x2020)
+        })
+        .count();
+    let total = (run + padding).min(32);
+    TEXT_LENGTHS.iter().rev().copied().find(|&n| n <= total && n >= run).unwrap_or(run)
+}
+
 fn text_of(regs: &[&RegStat]) -> String {
     regs.iter().filter_map(|r| r.last).flat_map(u16::to_be_bytes).filter(|&b| b != 0).map(char::from).collect()
 }
@@ -146,7 +167,14 @@ fn text_of(regs: &[&RegStat]) -> String {
 #[allow(clippy::cast_possible_wrap)]
 fn single(address: u16, r: &RegStat) -> Guess {
     let c = confidence(r.samples, r.changes);
-    let (kind, evidence) = if r.changes == 0 {
+    // A value just under 0x10000 among small ones is a small negative (two's complement): a
+    // scale factor of −2, a temperature of −8.1 °C, a power factor of −0.98 — a u16 there would
+    // be a reading near its top, which few are. 0xFFFF alone is left: many maps' "no value".
+    let negative = |v: u16| (0xF000..0xFFFF).contains(&v);
+    let small_negative = r.recent.iter().all(|&v| v <= 0x0FFF || negative(v)) && r.recent.iter().any(|&v| negative(v));
+    let (kind, evidence) = if r.changes == 0 && small_negative {
+        (Kind::I16, format!("{} samples, always {} ({}): a small negative", r.samples, r.min, r.min.cast_signed()))
+    } else if r.changes == 0 {
         (Kind::Constant, format!("{} samples, always {}", r.samples, r.min))
     } else if r.downs == 0 && r.ups >= 3 && r.wraps <= (r.ups / 4).max(1) {
         (Kind::Counter, format!("{} samples, rose {} times, wrapped {} times, never fell", r.samples, r.ups, r.wraps))
@@ -155,6 +183,15 @@ fn single(address: u16, r: &RegStat) -> Guess {
         lo > -16_384 && hi < 16_384
     } {
         (Kind::I16, format!("{} samples, values on both sides of zero (wrapping 0 ↔ 65535)", r.samples))
+    } else if small_negative && r.one_bit_changes < r.changes.max(1) {
+        (
+            Kind::I16,
+            format!(
+                "{} samples, last {}: values just under 0x10000 among small ones, small negatives",
+                r.samples,
+                r.last.map_or(0, u16::cast_signed)
+            ),
+        )
     } else if r.one_bit_changes == r.changes && r.flipped_bits.count_ones() >= 2 && r.changes >= 3 {
         (
             Kind::Bits(r.flipped_bits),
@@ -181,17 +218,25 @@ pub fn guess_table<'a>(
     pair: &dyn Fn(u16) -> Option<&'a PairStat>,
     layout: Option<&Layout>,
     still: &std::collections::BTreeMap<u16, bool>,
+    ints: &std::collections::BTreeMap<u16, Guess>,
 ) -> Vec<Guess> {
     let mut out = Vec::new();
     let mut i = 0;
     while let Some(&(a, r)) = regs.get(i) {
         let start = layout.and_then(|l| l.starts_at(a));
-        // A run of text: consecutive addresses, every sample printable.
-        let run = regs[i..]
-            .iter()
-            .enumerate()
-            .take_while(|(k, (addr, reg))| usize::from(*addr) == usize::from(a) + k && texty(reg))
-            .count();
+        // A run of text: consecutive addresses, every sample printable; a NUL ends a text, so
+        // the run stops after the register holding one ("0\0" ends "DG1.0": what follows is
+        // another field).
+        let mut run = 0;
+        for (k, (addr, reg)) in regs[i..].iter().enumerate() {
+            if usize::from(*addr) != usize::from(a) + k || !texty(reg) {
+                break;
+            }
+            run += 1;
+            if reg.last.is_some_and(|v| v.to_be_bytes()[1] == 0) {
+                break;
+            }
+        }
         // Printable words that the layout reads as floats pair by pair, each a short decimal
         // (0x3F33 0x3333 is "?333" and 0.7), are floats: a rating or a factor stored as a float
         // is a round number, where text read as a float has a mantissa of many digits
@@ -208,16 +253,23 @@ pub fn guess_table<'a>(
                 })
         });
         if run >= 2 && !floats_too {
-            let part: Vec<&RegStat> = regs[i..i + run].iter().map(|(_, r)| *r).collect();
+            let padded = padded_length(regs, i, run);
+            let part: Vec<&RegStat> = regs[i..i + padded].iter().map(|(_, r)| *r).collect();
             let text = text_of(&part);
-            let registers = u16::try_from(run).unwrap_or(u16::MAX);
+            let registers = u16::try_from(padded).unwrap_or(u16::MAX);
             out.push(Guess {
                 address: a,
                 confidence: confidence(r.samples, 8),
-                evidence: format!("{run} registers of printable ASCII in every sample: {text:?}"),
+                evidence: if padded > run {
+                    format!(
+                        "{run} registers of printable ASCII in every sample: {text:?}, padded with NULs or spaces to {padded}"
+                    )
+                } else {
+                    format!("{run} registers of printable ASCII in every sample: {text:?}")
+                },
                 kind: Kind::Text { registers, text },
             });
-            i += run;
+            i += padded;
             continue;
         }
         if let (Some(l), Some(true)) = (layout, start)
@@ -227,12 +279,21 @@ pub fn guess_table<'a>(
             i += 2;
             continue;
         }
+        // A block of 32-bit integers read whole (few samples): its pairs as the block says.
+        if let (Some(g), Some(&(b, _))) = (ints.get(&a), regs.get(i + 1))
+            && u32::from(b) == u32::from(a) + 1
+        {
+            out.push(g.clone());
+            i += 2;
+            continue;
+        }
         // Where the layout has no pair start, a float decided by its bits alone (a short series)
         // would straddle two of the layout's: only a series may show one there.
+        let few = |g: &Guess| pair(g.address).is_none_or(|p| usize::try_from(p.samples).unwrap_or(usize::MAX) < ENOUGH);
+        // Inside a float layout's block, off its pair starts: a float only from a series, and no
+        // integer decided by a few samples' bits.
         let allowed = |g: &Guess, start: Option<bool>| {
-            start != Some(false)
-                || !matches!(g.kind, Kind::F32 { .. })
-                || pair(g.address).is_some_and(|p| usize::try_from(p.samples).unwrap_or(usize::MAX) >= ENOUGH)
+            start != Some(false) || !few(g) || !(matches!(g.kind, Kind::F32 { .. }) || g.kind.width() == 2)
         };
         if let Some((g, score)) = wide_at(regs, pair, i).filter(|(g, _)| allowed(g, start)) {
             // The pair starting one register later may be the real one (this register being a
@@ -293,6 +354,22 @@ fn wide_at<'a>(
     // Over a short series "never changed" says little (one snapshot changes nothing): the
     // plausibility of the bits decides there.
     if usize::try_from(p.samples).unwrap_or(usize::MAX) < ENOUGH {
+        // Bits that read as an integer high word first are never called a float (a zero high
+        // word is a denormal one way and any low-word-first float the other).
+        if let Some((kind, why)) = super::few_samples::int_by_bits(p) {
+            return Some((
+                Guess {
+                    address: a,
+                    kind,
+                    confidence: super::few_samples::FEW.min(confidence(p.samples, 1)),
+                    evidence: format!("{} joint sample(s): {why} — decided by few samples", p.samples),
+                },
+                // Weaker than a float its bits decide: a pair starting one register later that
+                // reads as one takes the register (a float's zero low word beside the next
+                // value's high word reads as such an integer).
+                0,
+            ));
+        }
         return short(a, p);
     }
     if r.changes == 0 && r2.changes == 0 {

@@ -6,8 +6,10 @@
 //! length of the capture ([`stats`]), and the registers kept are bounded too
 //! ([`MAX_REGISTERS`], [`MAX_OTHER`]): a capture naming more is learned in part, and says so.
 
+pub mod confirm;
 pub mod diff;
 pub mod draft;
+pub mod few_samples;
 pub mod hint;
 pub mod infer;
 mod kind;
@@ -16,6 +18,7 @@ pub mod probe;
 mod series;
 pub mod stats;
 mod still_words;
+pub mod sunspec_map;
 pub mod truth;
 
 use std::collections::btree_map::Entry;
@@ -83,15 +86,31 @@ impl Unit {
     /// The guesses for one table.
     #[must_use]
     pub fn guesses(&self, table: Table) -> Vec<Guess> {
-        let regs: Vec<(u16, &RegStat)> =
-            self.regs.range((table, 0)..=(table, u16::MAX)).map(|(&(_, a), r)| (a, r)).collect();
+        // A SunSpec device's points are typed by its models; the samples judge the rest.
+        let by_models = if matches!(table, Table::HoldingRegisters) {
+            sunspec_map::guesses(&|a| self.regs.get(&(table, a)).and_then(|r| r.last))
+        } else {
+            Vec::new()
+        };
+        let covered: BTreeSet<u16> =
+            by_models.iter().flat_map(|g| (0..g.kind.width()).filter_map(move |k| g.address.checked_add(k))).collect();
+        let regs: Vec<(u16, &RegStat)> = self
+            .regs
+            .range((table, 0)..=(table, u16::MAX))
+            .map(|(&(_, a), r)| (a, r))
+            .filter(|(a, _)| !covered.contains(a))
+            .collect();
         let pair = |a| self.pairs.get(&(table, a));
         let blocks: Vec<(u16, u16)> =
             self.blocks.keys().filter(|&&(t, _, _)| t == table).map(|&(_, first, q)| (first, q)).collect();
         let heard = |a| self.regs.contains_key(&(table, a));
         let layout = layout::Layout::decide(&blocks, &pair, &heard);
         let still = still_words::still_word_pairs(&blocks, &|a| self.regs.get(&(table, a)));
-        infer::guess_table(&regs, &pair, layout.as_ref(), &still)
+        let ints = few_samples::int_blocks(&blocks, &pair);
+        let mut out = infer::guess_table(&regs, &pair, layout.as_ref(), &still, &ints);
+        out.extend(by_models);
+        out.sort_by_key(|g| g.address);
+        out
     }
 
     /// The last value of what `g` covers, as its type reads it (a 32-bit pair combined in its
