@@ -32,9 +32,16 @@ const SMALL_HIGH: u16 = 0x0FFF;
 /// A low word in its upper range: beside a zero high word, more likely a 32-bit value's.
 const WIDE_LOW: u16 = 0x1000;
 
-/// The integer the samples of `p` (high word first) show by their bits, with the reason.
+/// The integer the samples of `p` (high word first) show by their bits, with the reason and the
+/// other reading (two 16-bit registers), so the draft keeps one entry and says both.
 #[must_use]
 pub fn int_by_bits(p: &PairStat) -> Option<(Kind, String)> {
+    let (kind, why) = int_by_bits_alone(p)?;
+    let &(h, l) = p.recent.back()?;
+    Some((kind, format!("{why} (read as two 16-bit registers instead: {h} and {l})")))
+}
+
+fn int_by_bits_alone(p: &PairStat) -> Option<(Kind, String)> {
     let s: Vec<(u16, u16)> = p.recent.iter().copied().collect();
     let (first, last) = (s.first()?, s.last()?);
     let negative = |&(h, l): &(u16, u16)| h == 0xFFFF && (0x8000..0xFFFF).contains(&l);
