@@ -51,7 +51,8 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         Back::TcpDevice
     } else {
         Back::Serial { guard: master.config.line_guard() }
-    });
+    })
+    .with_gaps(opts.unit_gaps.clone());
     loop {
         let Some((client, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
@@ -80,7 +81,13 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             answer(&shared, job, reply);
             continue;
         }
-        wait_until(free_at).await;
+        // The unit's own gap, on top of the line's quiet time: the core says when it may go.
+        let ready = shared.instant(decide.ready_at(job.unit, shared.since_start(free_at)));
+        let gap_waited = ready.saturating_duration_since(free_at.max(Instant::now()));
+        if !gap_waited.is_zero() {
+            shared.metrics.unit_gap_wait(job.unit, gap_waited);
+        }
+        wait_until(ready.max(free_at)).await;
         let on_line_from = Instant::now();
         let twins = shared.twins(client, &job);
         // A write may change what the cache holds, whatever its outcome.

@@ -30,6 +30,8 @@ pub struct LineOptions {
     pub timeout_mode: TimeoutMode,
     /// `--unit-timeout`: units with a timeout of their own.
     pub unit_timeouts: std::collections::BTreeMap<u8, Duration>,
+    /// `--unit-gap`: silence kept before each request to a unit, beyond the quiet time.
+    pub unit_gaps: mbtap_gateway::line::UnitGaps,
     /// `--echo`: whether the adapter hears its own transmission.
     pub echo: EchoMode,
     /// `--rs485`: transmitter direction control.
@@ -65,6 +67,7 @@ impl LineOptions {
             timeout,
             timeout_mode: TimeoutMode::Fixed,
             unit_timeouts: std::collections::BTreeMap::new(),
+            unit_gaps: mbtap_gateway::line::UnitGaps::default(),
             echo: EchoMode::default(),
             rs485: crate::source::rs485::Rs485Args::default(),
             cache: Vec::new(),

@@ -81,6 +81,11 @@ impl LineShared {
         self.origin + at
     }
 
+    /// An instant as a time on the gateway core's clock (0 for one before its origin).
+    pub fn since_start(&self, at: Instant) -> Duration {
+        at.saturating_duration_since(self.origin)
+    }
+
     /// Registers a write to `unit` before it is queued (none for a request that writes
     /// nothing the cache holds, or without a cache); the job carries the guard.
     pub fn write_pending(self: &Arc<Self>, unit: u8, pdu: &[u8]) -> Option<WriteGuard> {

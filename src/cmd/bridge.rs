@@ -92,6 +92,12 @@ pub struct Args {
     /// ones, `--unit-timeout 10-12=50`. Wins over --timeout auto.
     #[arg(long, value_name = "UNITS=MS")]
     pub unit_timeout: Vec<String>,
+    /// Silence the line keeps before each request to a unit, beyond t3.5 and --turnaround-ms
+    /// (repeatable): `--unit-gap 1=40` for a device that needs a pause between requests,
+    /// `--unit-gap 10-12=100`, `--unit-gap 20` for every unit. Other units wait for no one's
+    /// gap; the time waited is in the metrics (`mbtap_bridge_unit_gap_wait_seconds_total`).
+    #[arg(long, value_name = "[UNITS=]MS")]
+    pub unit_gap: Vec<String>,
     /// Retries after a timeout or a failed CRC.
     #[arg(long, default_value_t = 0)]
     pub retries: u32,
@@ -193,6 +199,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         timeout_ms,
         timeout,
         unit_timeout,
+        unit_gap,
         echo,
         cache,
         poll,
@@ -253,6 +260,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
     let turnaround = std::time::Duration::from_secs_f64(turnaround_ms / 1000.0);
     anyhow::ensure!(!idle_timeout.is_zero(), "--idle-timeout {idle_timeout:?}: expected a duration above 0, e.g. 300s");
     let unit_timeouts = mbtap_gateway::timeouts::parse_unit_timeouts(&unit_timeout)?;
+    let unit_gaps = mbtap_gateway::line::UnitGaps::parse(&unit_gap)?;
     let (cache, polls) = caches(&cache, &poll)?;
     let line_for = |port: String| crate::bridge::line::LineOptions {
         line: settings,
@@ -260,6 +268,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         timeout: std::time::Duration::from_millis(timeout_ms),
         timeout_mode: timeout.into(),
         unit_timeouts: unit_timeouts.clone(),
+        unit_gaps: unit_gaps.clone(),
         echo: echo.into(),
         rs485,
         cache: cache.clone(),

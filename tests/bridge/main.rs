@@ -11,6 +11,7 @@ mod hardware;
 mod lifetime;
 mod listen_serial;
 mod one_path;
+mod operate;
 mod serial;
 mod serial_server;
 mod tls;

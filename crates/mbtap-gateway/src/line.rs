@@ -5,8 +5,10 @@
 //! teaches the breaker, how long the line stays quiet after it, and under which class its line
 //! time is counted. The I/O shells take a request from the queue, ask [`Line::start`], move the
 //! bytes through their back, and hand the reply to [`Line::finished`]: one rule for every back.
+//! A unit may ask for a pause of its own before each request to it ([`UnitGaps`], `--unit-gap`):
+//! a slow device that needs silence beyond t3.5 gets it, and no other unit waits for it.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::time::Duration;
 
 use crate::breaker::Breaker;
@@ -54,17 +56,86 @@ pub fn class(client: ClientId, high: bool) -> &'static str {
     }
 }
 
+/// `--unit-gap`: silence the line keeps before each request to a unit, beyond its quiet time
+/// (t3.5 and the turnaround): for every unit, and per unit (which wins).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct UnitGaps {
+    pub every: Duration,
+    pub units: BTreeMap<u8, Duration>,
+}
+
+/// The longest gap a unit may ask for: a minute (a device that needs more is polled, not paced).
+pub const MAX_GAP_MS: u64 = 60_000;
+
+impl UnitGaps {
+    /// `--unit-gap` values: `MS` for every unit, `UNITS=MS` for some (`1=40`, `10-12=100`).
+    ///
+    /// # Errors
+    /// A value that is neither, or a gap outside 0–60 000 ms, named with what to give.
+    pub fn parse(values: &[String]) -> Result<Self, crate::BadValue> {
+        let mut gaps = Self::default();
+        for v in values {
+            let bad = |why: String| crate::BadValue(format!("--unit-gap {v:?}: {why}"));
+            let (units, ms) = match v.split_once('=') {
+                Some((units, ms)) => (Some(units), ms),
+                None => (None, v.as_str()),
+            };
+            let ms: u64 = ms
+                .trim()
+                .parse()
+                .ok()
+                .filter(|&m| m <= MAX_GAP_MS)
+                .ok_or_else(|| bad(format!("{ms:?} is not a number of ms from 0 to {MAX_GAP_MS}; e.g. 40 or 1=40")))?;
+            let gap = Duration::from_millis(ms);
+            match units {
+                None => gaps.every = gap,
+                Some(units) => {
+                    for unit in crate::parse::parse_units(units).map_err(|e| bad(e.to_string()))? {
+                        gaps.units.insert(unit, gap);
+                    }
+                }
+            }
+        }
+        Ok(gaps)
+    }
+
+    /// The gap owed before a request to `unit`; a broadcast (unit 0) reaches every unit and
+    /// waits for the longest.
+    #[must_use]
+    pub fn of(&self, unit: u8) -> Duration {
+        if unit == 0 {
+            return self.units.values().copied().fold(self.every, Duration::max);
+        }
+        self.units.get(&unit).copied().unwrap_or(self.every)
+    }
+}
+
 /// One line's decisions, per unit.
 #[derive(Debug, Clone)]
 pub struct Line {
     back: Back,
     breakers: HashMap<u8, Breaker>,
+    gaps: UnitGaps,
 }
 
 impl Line {
     #[must_use]
     pub fn new(back: Back) -> Self {
-        Self { back, breakers: HashMap::new() }
+        Self { back, breakers: HashMap::new(), gaps: UnitGaps::default() }
+    }
+
+    /// The line with `--unit-gap`s.
+    #[must_use]
+    pub fn with_gaps(mut self, gaps: UnitGaps) -> Self {
+        self.gaps = gaps;
+        self
+    }
+
+    /// When a request to `unit` may go, the line being free (its quiet time kept) from `free`:
+    /// that plus the unit's own gap — and no later for a unit without one.
+    #[must_use]
+    pub fn ready_at(&self, unit: u8, free: Duration) -> Duration {
+        free.saturating_add(self.gaps.of(unit))
     }
 
     /// A request to `unit` is next, at `now`. Broadcasts (unit 0) always go: nobody answers
@@ -131,6 +202,23 @@ mod tests {
         assert!(!serial.finished(0, &Reply::Silence, true, t).fill_cache, "a broadcast");
         let mut device = Line::new(Back::TcpDevice);
         assert_eq!(device.finished(1, &Reply::Pdu(ANSWER.to_vec()), true, t).quiet, Duration::ZERO);
+    }
+
+    #[test]
+    fn a_units_gap_delays_its_requests_and_no_other_units() {
+        let gaps = UnitGaps::parse(&["1=40".to_owned(), "10-12=100".to_owned()]).unwrap();
+        let line = Line::new(Back::Serial { guard: Duration::from_millis(2) }).with_gaps(gaps);
+        let free = Duration::from_secs(5);
+        assert_eq!(line.ready_at(1, free), free + Duration::from_millis(40));
+        assert_eq!(line.ready_at(11, free), free + Duration::from_millis(100));
+        assert_eq!(line.ready_at(2, free), free, "a unit without a gap waits for none");
+        assert_eq!(line.ready_at(0, free), free + Duration::from_millis(100), "a broadcast waits for the longest");
+        let every = UnitGaps::parse(&["25".to_owned(), "3=0".to_owned()]).unwrap();
+        assert_eq!((every.of(7), every.of(3)), (Duration::from_millis(25), Duration::ZERO));
+        for bad in ["x", "1=", "1=60001", "300=5", "-1"] {
+            let e = UnitGaps::parse(&[bad.to_owned()]).unwrap_err().to_string();
+            assert!(e.contains("--unit-gap"), "{bad}: {e}");
+        }
     }
 
     #[test]

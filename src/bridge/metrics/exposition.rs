@@ -103,6 +103,10 @@ impl Metrics {
             for (u, v) in &m.units {
                 let _ = writeln!(s, "mbtap_bridge_timeout_wait_seconds_total{{unit=\"{u}\"}} {}", v.waited_in_vain.as_secs_f64());
             }
+            counter(&mut s, "mbtap_bridge_unit_gap_wait_seconds_total", "Line time kept silent before a unit's requests for its --unit-gap.");
+            for (u, v) in m.units.iter().filter(|(_, v)| !v.gap_wait.is_zero()) {
+                let _ = writeln!(s, "mbtap_bridge_unit_gap_wait_seconds_total{{unit=\"{u}\"}} {}", v.gap_wait.as_secs_f64());
+            }
             counter(&mut s, "mbtap_bridge_collisions_total", "Requests whose echo differed from what was sent: another driver on the line.");
             for (u, v) in &m.units {
                 let _ = writeln!(s, "mbtap_bridge_collisions_total{{unit=\"{u}\"}} {}", v.collisions);

@@ -31,6 +31,8 @@ struct Unit {
     echo_missing: u64,
     /// Answers that did not fit the request on the line (late answers to earlier requests).
     late_answers: u64,
+    /// Time the line waited before this unit's requests for its `--unit-gap`.
+    gap_wait: Duration,
     buckets: [u64; BUCKETS.len()],
     latency_count: u64,
     latency_sum: f64,
@@ -143,6 +145,14 @@ impl Metrics {
     }
 
     /// A request to `unit` did not come back from an echoing adapter.
+    /// The line kept silent `waited` before a request to `unit` for its `--unit-gap`.
+    pub fn unit_gap_wait(&self, unit: u8, waited: Duration) {
+        self.with(|m| {
+            let u = m.units.entry(unit).or_default();
+            u.gap_wait = u.gap_wait.saturating_add(waited);
+        });
+    }
+
     /// An answer from `unit` that fits another request than the one on the line: dropped.
     pub fn late_answer(&self, unit: u8) {
         self.with(|m| m.units.entry(unit).or_default().late_answers += 1);
