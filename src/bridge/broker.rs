@@ -28,6 +28,8 @@ pub struct BrokerWrites {
     pub profiles: Profiles,
     /// `--mqtt-role`: the role whose rules also judge the broker's writes.
     pub role: Option<RoleRules>,
+    /// That role's name, for the audit.
+    pub role_name: Option<String>,
 }
 
 impl std::fmt::Debug for BrokerWrites {
@@ -44,7 +46,8 @@ pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Routes>, opts: Arc<ServerOp
     let handle = tokio::runtime::Handle::current();
     let _ = std::thread::Builder::new().name("broker-writes".into()).spawn(move || {
         // The broker is one client: `--rate-limit` holds for it as for a connection.
-        let mut client = Client::local(BROKER, Role::Broker(writes.role.as_ref()), &routes, &opts);
+        let mut client = Client::local(BROKER, Role::Broker(writes.role.as_ref()), &routes, &opts)
+            .known_as("mqtt", writes.role_name.clone());
         for ask in asks {
             if crate::signals::stop_requested() {
                 // Stopping: what still waits is not carried out (the bound keeps it short).
@@ -131,6 +134,7 @@ pub fn start_publisher(
             publisher: Arc::clone(p),
             profiles: profiles.clone(),
             role,
+            role_name: mqtt_role.map(str::to_owned),
         }));
     }
     Ok((publisher, writes))

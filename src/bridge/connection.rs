@@ -28,7 +28,8 @@ const REQUEST_DEADLINE: Duration = Duration::from_secs(2);
 const RTU_GARBAGE_LIMIT: u64 = 16 * 256;
 
 /// One client's connection until it closes, misbehaves or idles out; `seen` is told of every
-/// whole request (for eviction).
+/// whole request (for eviction); `role_name`: its TLS certificate's role, for the audit.
+#[allow(clippy::too_many_arguments)] // the connection's parts, each passed once by the server
 pub(super) async fn connection<S>(
     stream: S,
     peer: SocketAddr,
@@ -37,11 +38,16 @@ pub(super) async fn connection<S>(
     opts: &ServerOptions,
     seen: &(dyn Fn(ClientId) + Sync),
     role: Role<'_>,
+    role_name: Option<String>,
 ) where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Send + 'static,
 {
     // `--priority high=ip:…`: the whole connection's requests.
+    let tls = matches!(role, Role::Tls(_));
     let mut client = Client::new(client, role, peer, routes, opts);
+    if tls {
+        client = client.known_as("tls", role_name);
+    }
     let (mut rd, mut wr) = tokio::io::split(stream);
     let (tx, mut rx) = mpsc::channel::<(u64, Pending)>(64);
     // Requests numbered as they come; whether the client still waits for each, and what its

@@ -26,6 +26,8 @@ pub async fn run(emulated: Arc<Emulated>, shared: Arc<LineShared>) {
         };
         if job.reply.is_closed() {
             shared.metrics.dropped();
+            let mut job = job;
+            job.audited("not sent: the client left before the device took it");
             continue;
         }
         if let Start::Answer(reply) = decide.start(job.unit, shared.now()) {

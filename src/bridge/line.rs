@@ -67,6 +67,8 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         if job.reply.is_closed() {
             // The client left while this request waited: no line time for it.
             shared.metrics.dropped();
+            let mut job = job;
+            job.audited("not sent: the client left before the line took it");
             continue;
         }
         if port.stream.is_none() && Instant::now() >= port.next_open {
@@ -138,10 +140,11 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
 }
 
 /// Hands `reply` to the job's client, counting a gateway exception (every line task's ending).
-pub(super) fn answer(shared: &LineShared, job: Job, reply: Reply) {
+pub(super) fn answer(shared: &LineShared, mut job: Job, reply: Reply) {
     if let Reply::Gateway(code) = reply {
         shared.metrics.gateway_exception(job.unit, code);
     }
+    job.audited(&mbtap_gateway::audit::outcome(&reply));
     let _ = job.reply.send(reply);
 }
 

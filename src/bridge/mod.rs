@@ -14,8 +14,10 @@
 //! line behind it), [`slave_port`] (that port's request framing and answers), [`device`] (a
 //! Modbus TCP device as a line's back), [`run`] (starts them all), [`config`] (the
 //! configuration file), [`modes`] (the command line's enums), [`broker`] (writes from the MQTT
-//! broker through the same admission).
+//! broker through the same admission), [`audit`] (`--audit`: the log of every request that may
+//! change a device).
 
+pub mod audit;
 pub mod broker;
 pub mod config;
 pub mod connection;

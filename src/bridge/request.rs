@@ -31,6 +31,8 @@ pub struct Route {
 pub struct Routes {
     pub lines: Vec<Route>,
     pub server: super::metrics::Metrics,
+    /// `--audit`: where every request that may change a device is recorded, with its ending.
+    pub audit: Option<Arc<super::audit::Audit>>,
 }
 
 impl std::ops::Deref for Routes {
@@ -94,18 +96,39 @@ pub struct Client<'a> {
     pub(super) role: Role<'a>,
     pub(super) peer_high: bool,
     pub(super) bucket: Option<RateLimit>,
+    /// Who it is, as the audit records it.
+    pub(super) who: super::audit::Who,
 }
 
 impl<'a> Client<'a> {
     pub(super) fn new(id: ClientId, role: Role<'a>, peer: SocketAddr, routes: &[Route], opts: &ServerOptions) -> Self {
-        Self { peer_high: opts.policy.peer_high(peer.ip()), ..Self::local(id, role, routes, opts) }
+        let transport = if opts.rtu_over_tcp { "rtu-over-tcp" } else { "tcp" };
+        Self {
+            peer_high: opts.policy.peer_high(peer.ip()),
+            who: super::audit::Who { transport, address: Some(peer), role: None },
+            ..Self::local(id, role, routes, opts)
+        }
     }
 
     /// An asker inside this process (the broker's writes, mbtap's own master): no address, the
     /// same rate limit as a connection.
     pub fn local(id: ClientId, role: Role<'a>, routes: &[Route], opts: &ServerOptions) -> Self {
         let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
-        Self { id, role, peer_high: false, bucket: opts.rate_limit.map(|rate| RateLimit::new(rate, now)) }
+        Self {
+            id,
+            role,
+            peer_high: false,
+            bucket: opts.rate_limit.map(|rate| RateLimit::new(rate, now)),
+            who: super::audit::Who { transport: "local", address: None, role: None },
+        }
+    }
+
+    /// The same client, recorded by the audit as coming over `transport` under `role`.
+    #[must_use]
+    pub fn known_as(mut self, transport: &'static str, role: Option<String>) -> Self {
+        self.who.transport = transport;
+        self.who.role = role;
+        self
     }
 }
 
@@ -122,8 +145,13 @@ pub enum Admission {
 /// on its line: the one path every asker's request takes (connections, UDP peers, the serial
 /// front, the broker's writes, mbtap's own master). A refusal is counted here.
 pub fn admit(client: &mut Client<'_>, unit: u8, pdu: Vec<u8>, routes: &Routes, opts: &ServerOptions) -> Admission {
+    // What the audit records of it, if anything: a request that may change a device.
+    let audited = routes.audit.as_ref().and_then(|a| Some((Arc::clone(a), mbtap_gateway::audit::change(&pdu)?)));
     let refuse = |why: Refusal| {
         routes.server.refused(why.reason());
+        if let Some((audit, change)) = &audited {
+            audit.record(&client.who, unit, change, &format!("refused: {}", why.reason()));
+        }
         Admission::Refused(why)
     };
     let now = routes.first().map_or(Duration::ZERO, |r| r.line.now());
@@ -139,7 +167,12 @@ pub fn admit(client: &mut Client<'_>, unit: u8, pdu: Vec<u8>, routes: &Routes, o
     }
     let (tx, rx) = oneshot::channel();
     let write = route.line.write_pending(target, &pdu);
-    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high: admitted.high, write };
+    let audit = audited.as_ref().map(|(audit, change)| super::shared::Ticket {
+        audit: Arc::clone(audit),
+        who: client.who.clone(),
+        change: change.clone(),
+    });
+    let job = Job { unit: target, pdu, reply: tx, queued: Instant::now(), high: admitted.high, write, audit };
     match route.line.submit(client.id, job) {
         Ok(()) => Admission::Later(rx),
         Err(Full::Client) => refuse(Refusal::QueueFull),

@@ -53,6 +53,8 @@ pub struct BridgeOptions {
     /// `--listen-serial`: a serial port on which the bridge is the slave, for a master
     /// already on the line.
     pub listen_serial: Option<crate::bridge::serial_front::SerialFront>,
+    /// `--audit`: every request that may change a device, recorded.
+    pub audit: Option<Arc<crate::bridge::audit::Audit>>,
 }
 
 impl BridgeOptions {
@@ -95,6 +97,7 @@ impl BridgeOptions {
             roles: Arc::default(),
             broker_writes: None,
             listen_serial,
+            audit: None,
         }
     }
 }
@@ -149,6 +152,20 @@ impl Served {
         }
         // Connections and refusals are the server's: once, without a line label.
         body.push_str(&routes.server.render_server());
+        if let Some(a) = &routes.audit {
+            use std::sync::atomic::Ordering;
+            let _ = std::fmt::Write::write_fmt(
+                &mut body,
+                format_args!(
+                    "# HELP mbtap_bridge_audit_records_total Requests that may change a device, handed to the audit.\n\
+                     # TYPE mbtap_bridge_audit_records_total counter\nmbtap_bridge_audit_records_total {}\n\
+                     # HELP mbtap_bridge_audit_lost_total Audit records that could not be queued or written (a slow or full disk).\n\
+                     # TYPE mbtap_bridge_audit_lost_total counter\nmbtap_bridge_audit_lost_total {}\n",
+                    a.records.load(Ordering::Relaxed),
+                    a.lost.load(Ordering::Relaxed)
+                ),
+            );
+        }
         body
     }
 
@@ -198,7 +215,7 @@ pub async fn bridge<W: Write>(
             tokio::spawn(super::shared::poll(line_opts.polls.clone(), Arc::clone(&shared)));
             routes.push(Route { units: units.clone(), line: shared });
         }
-        let routes = Arc::new(Routes { lines: routes, server: Metrics::default() });
+        let routes = Arc::new(Routes { lines: routes, server: Metrics::default(), audit: opts.audit.clone() });
         // The admission policy routes by the lines' units, in the order they were given.
         opts.server.policy.routes = routes.iter().map(|r| r.units.clone()).collect();
         if let Some(w) = &opts.broker_writes {

@@ -144,7 +144,8 @@ async fn serve_port(
 ) -> std::io::Result<()> {
     // A serial master has no address: the priority class by address never holds for it.
     let peer = SocketAddr::from(([0, 0, 0, 0], 0));
-    let mut client = Client::new(mbtap_gateway::clients::SERIAL_FRONT, Role::Plain, peer, routes, opts);
+    let mut client =
+        Client::new(mbtap_gateway::clients::SERIAL_FRONT, Role::Plain, peer, routes, opts).known_as("serial", None);
     let mut heard = super::slave_port::Requests::default();
     // A serial master asks one thing at a time and has no ids (`mbtap_gateway::lifetime`): its
     // next request — to any unit — means it gave up on the last; an answer that would reach it

@@ -131,7 +131,7 @@ pub async fn serve(
                 }
             };
             match &tls {
-                None => connection(stream, peer, client, &routes, &opts, &seen, Role::Plain).await,
+                None => connection(stream, peer, client, &routes, &opts, &seen, Role::Plain, None).await,
                 Some(tls) => {
                     let metrics = &routes.server;
                     let Some(acceptor) = tls.current() else { return };
@@ -145,7 +145,7 @@ pub async fn serve(
                             // (issue 24: it was still answered after SIGHUP).
                             let revoked = tls.revocation(cert.as_deref().unwrap_or_default());
                             tokio::select! {
-                                () = connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy)) => {}
+                                () = connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy), role.clone()) => {}
                                 () = revoked => {
                                     metrics.refused("revoked");
                                     eprintln!("mbtap: TLS client {peer}: its certificate is revoked by the reloaded CRL; session closed");

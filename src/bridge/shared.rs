@@ -27,6 +27,25 @@ pub struct Job {
     /// read it may change (issue 24: a client pipelining "write h101, read h101" read the old
     /// value from the cache). Dropped with the job, however it ends.
     pub write: Option<WriteGuard>,
+    /// `--audit`: the record of a request that may change a device, written when it ends.
+    pub audit: Option<Ticket>,
+}
+
+/// What the audit writes of a job when it ends: who asked, what it changes.
+#[derive(Debug)]
+pub struct Ticket {
+    pub audit: Arc<super::audit::Audit>,
+    pub who: super::audit::Who,
+    pub change: mbtap_gateway::audit::Change,
+}
+
+impl Job {
+    /// Records the job's ending in the audit, if it is one the audit keeps.
+    pub fn audited(&mut self, outcome: &str) {
+        if let Some(t) = self.audit.take() {
+            t.audit.record(&t.who, self.unit, &t.change, outcome);
+        }
+    }
 }
 
 /// A write's place among the cache's writes not yet done; ended when dropped, however the
@@ -198,7 +217,15 @@ pub async fn poll(polls: Vec<Poll>, shared: Arc<LineShared>) {
             loop {
                 tick.tick().await;
                 let (tx, rx) = oneshot::channel();
-                let job = Job { unit, pdu: pdu.clone(), reply: tx, queued: Instant::now(), high: false, write: None };
+                let job = Job {
+                    unit,
+                    pdu: pdu.clone(),
+                    reply: tx,
+                    queued: Instant::now(),
+                    high: false,
+                    write: None,
+                    audit: None,
+                };
                 if shared.submit(mbtap_gateway::clients::POLL, job).is_ok() {
                     // Waiting keeps one poll of this range in the queue at a time.
                     let _ = rx.await;

@@ -61,7 +61,8 @@ pub async fn serve_udp(socket: UdpSocket, routes: Arc<Routes>, opts: Arc<ServerO
             metrics.refused("udp_peer_evicted");
         }
         let p = peers.entry(source).or_insert_with(|| Peer {
-            client: Client::new(mbtap_gateway::clients::udp_peer(), Role::Plain, peer, &routes, &opts),
+            client: Client::new(mbtap_gateway::clients::udp_peer(), Role::Plain, peer, &routes, &opts)
+                .known_as("udp", None),
             last: Instant::now(),
         });
         p.last = Instant::now();

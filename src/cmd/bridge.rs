@@ -98,6 +98,8 @@ pub struct Args {
     /// gap; the time waited is in the metrics (`mbtap_bridge_unit_gap_wait_seconds_total`).
     #[arg(long, value_name = "[UNITS=]MS")]
     pub unit_gap: Vec<String>,
+    #[command(flatten)]
+    pub audit: crate::bridge::audit::AuditArgs,
     /// Retries after a timeout or a failed CRC.
     #[arg(long, default_value_t = 0)]
     pub retries: u32,
@@ -200,6 +202,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         timeout,
         unit_timeout,
         unit_gap,
+        audit,
         echo,
         cache,
         poll,
@@ -315,6 +318,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         roles: std::sync::Arc::new(crate::bridge::tls::parse_roles(&tls.role)?),
         tls,
         broker_writes: None,
+        audit: audit.open()?,
         listen_serial: listen_serial.map(|port| crate::bridge::serial_front::SerialFront {
             port,
             line: settings,

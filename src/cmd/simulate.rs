@@ -87,6 +87,8 @@ pub struct Args {
     /// anyone may read and nobody may write.
     #[arg(long)]
     pub read_only: bool,
+    #[command(flatten)]
+    pub audit: crate::bridge::audit::AuditArgs,
     /// Let broadcast writes (unit 0) from TCP, UDP and serial-front clients reach the devices, as
     /// `bridge --allow-broadcast` does; without it they are refused with exception 01 (one rule
     /// for both).
@@ -153,6 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         listen_rtu,
         listen_udp,
         read_only,
+        audit,
         allow_broadcast,
         line,
         duration,
@@ -225,6 +228,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
     }
     let link = link.or_else(|| (!listening).then(|| PathBuf::from("/tmp/mbtap-bus")));
+    let audit = audit.open()?;
     let opts = crate::source::simulate::SimulateOptions {
         link: link.clone(),
         devices: Arc::clone(&shared),
@@ -234,6 +238,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         paced,
         echo,
         poll: poll.then(|| crate::source::simulate::PollOptions { faults: fault_list(&faults), heard_at, follow_baud }),
+        audit: audit.clone(),
     };
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
     rt.block_on(async move {
@@ -262,7 +267,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 }),
             };
             let policy = mbtap_gateway::admit::Policy { read_only, broadcast: allow_broadcast, ..Default::default() };
-            let bridge = crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts, policy);
+            let mut bridge =
+                crate::bridge::run::BridgeOptions::emulating(shared, settings, mode, duration, fronts, policy);
+            bridge.audit = audit;
             crate::bridge::run::bridge::<io::Sink>(bridge, None, &mut io::stderr()).await
         };
         let on_pty = async {

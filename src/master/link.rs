@@ -193,7 +193,8 @@ impl Link {
         };
         // What an earlier request left said is no part of this one's story.
         let _ = (line.metrics.take_misfit(), line.metrics.take_port_failure(), line.metrics.take_circuit_open());
-        let mut client = Client::local(mbtap_gateway::clients::MASTER, Role::Plain, &running.routes, &running.server);
+        let mut client = Client::local(mbtap_gateway::clients::MASTER, Role::Plain, &running.routes, &running.server)
+            .known_as("mbtap", None);
         let reply = match admit(&mut client, unit, pdu, &running.routes, &running.server) {
             Admission::Refused(why) => return Err(Failure::Refused { unit, reason: why.reason() }),
             Admission::Now(reply) => reply,

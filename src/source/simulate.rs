@@ -75,6 +75,8 @@ pub struct SimulateOptions {
     /// Play the master too (`--poll`): the whole line goes out on the pseudo-terminal, for a
     /// listener (`mbtap sniff`) to hear.
     pub poll: Option<PollOptions>,
+    /// `--audit`: requests on the pseudo-terminal that may change a device, recorded.
+    pub audit: Option<Arc<crate::bridge::audit::Audit>>,
 }
 
 /// The built-in master's settings.
@@ -194,7 +196,21 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
         // Paced: a request is over when its characters would have crossed the line.
         let heard = if requests.is_empty() { None } else { request_start.take() };
         for request in requests {
-            let Some((pdu, wait)) = opts.devices.answer(request.unit, &request.pdu) else { continue };
+            let answered = opts.devices.answer(request.unit, &request.pdu);
+            if let Some(audit) = &opts.audit
+                && let Some(change) = mbtap_gateway::audit::change(&request.pdu)
+            {
+                let outcome = match &answered {
+                    Some((pdu, _)) => {
+                        mbtap_gateway::audit::outcome(&mbtap_gateway::transaction::Reply::Pdu(pdu.clone()))
+                    }
+                    None if request.unit == 0 => "broadcast (no answer)".to_owned(),
+                    None => "not answered: no device here has this address".to_owned(),
+                };
+                let who = crate::bridge::audit::Who { transport: "pty", address: None, role: None };
+                audit.record(&who, request.unit, &change, &outcome);
+            }
+            let Some((pdu, wait)) = answered else { continue };
             if let (true, Some((first, count))) = (opts.paced, heard) {
                 let ended = first + char_time * u32::try_from(count).unwrap_or(u32::MAX);
                 super::pace::wait_until(ended + wait).await;

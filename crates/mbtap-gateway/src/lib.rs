@@ -29,6 +29,7 @@
 
 pub mod admit;
 pub mod answer;
+pub mod audit;
 pub mod breaker;
 pub mod cache;
 pub mod clients;

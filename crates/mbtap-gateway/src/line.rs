@@ -80,12 +80,10 @@ impl UnitGaps {
                 Some((units, ms)) => (Some(units), ms),
                 None => (None, v.as_str()),
             };
-            let ms: u64 = ms
-                .trim()
-                .parse()
-                .ok()
-                .filter(|&m| m <= MAX_GAP_MS)
-                .ok_or_else(|| bad(format!("{ms:?} is not a number of ms from 0 to {MAX_GAP_MS}; e.g. 40 or 1=40")))?;
+            let ms: u64 =
+                ms.trim().parse().ok().filter(|&m| m <= MAX_GAP_MS).ok_or_else(|| {
+                    bad(format!("{ms:?} is not a number of ms from 0 to {MAX_GAP_MS}; e.g. 40 or 1=40"))
+                })?;
             let gap = Duration::from_millis(ms);
             match units {
                 None => gaps.every = gap,

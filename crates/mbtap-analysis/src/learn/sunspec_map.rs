@@ -21,9 +21,8 @@ const BY_DEFINITION: f64 = 0.95;
 /// the marker. `last(a)`: the last value heard at register `a`.
 #[must_use]
 pub fn guesses(last: &dyn Fn(u16) -> Option<u16>) -> Vec<Guess> {
-    let Some(base) = BASES
-        .into_iter()
-        .find(|&b| last(b) == Some(MARKER[0]) && b.checked_add(1).and_then(last) == Some(MARKER[1]))
+    let Some(base) =
+        BASES.into_iter().find(|&b| last(b) == Some(MARKER[0]) && b.checked_add(1).and_then(last) == Some(MARKER[1]))
     else {
         return Vec::new();
     };
