@@ -107,6 +107,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let Outcome { reply, last, cacheable, flush } = outcome;
         let last = shared.instant(last);
         let finished = decide.finished(job.unit, &reply, cacheable, shared.now());
+        shared.metrics.resting(job.unit, decide.resting(job.unit, shared.now()));
         if let Reply::Pdu(pdu) = &reply
             && job.unit != 0
         {
@@ -144,7 +145,9 @@ pub(super) fn answer(shared: &LineShared, mut job: Job, reply: Reply) {
     if let Reply::Gateway(code) = reply {
         shared.metrics.gateway_exception(job.unit, code);
     }
-    job.audited(&mbtap_gateway::audit::outcome(&reply));
+    let outcome = mbtap_gateway::audit::outcome(&reply);
+    job.audited(&outcome);
+    shared.metrics.transaction(job.unit, &job.pdu, outcome, job.queued.elapsed());
     let _ = job.reply.send(reply);
 }
 

@@ -19,6 +19,7 @@
 
 pub mod audit;
 pub mod broker;
+pub mod client_book;
 pub mod config;
 pub mod connection;
 pub mod device;
@@ -36,3 +37,4 @@ pub mod slave_port;
 pub mod tls;
 pub mod udp;
 pub mod watched;
+pub mod web;

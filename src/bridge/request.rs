@@ -33,6 +33,8 @@ pub struct Routes {
     pub server: super::metrics::Metrics,
     /// `--audit`: where every request that may change a device is recorded, with its ending.
     pub audit: Option<Arc<super::audit::Audit>>,
+    /// `--web`: who asks, with their requests and refusals (kept only when the view is on).
+    pub clients: Option<Arc<super::client_book::ClientBook>>,
 }
 
 impl std::ops::Deref for Routes {
@@ -147,8 +149,14 @@ pub enum Admission {
 pub fn admit(client: &mut Client<'_>, unit: u8, pdu: Vec<u8>, routes: &Routes, opts: &ServerOptions) -> Admission {
     // What the audit records of it, if anything: a request that may change a device.
     let audited = routes.audit.as_ref().and_then(|a| Some((Arc::clone(a), mbtap_gateway::audit::change(&pdu)?)));
+    if let Some(book) = &routes.clients {
+        book.request(client.id, &client.who);
+    }
     let refuse = |why: Refusal| {
         routes.server.refused(why.reason());
+        if let Some(book) = &routes.clients {
+            book.refused(client.id, &client.who, why.reason());
+        }
         if let Some((audit, change)) = &audited {
             audit.record(&client.who, unit, change, &format!("refused: {}", why.reason()));
         }

@@ -55,6 +55,8 @@ pub struct BridgeOptions {
     pub listen_serial: Option<crate::bridge::serial_front::SerialFront>,
     /// `--audit`: every request that may change a device, recorded.
     pub audit: Option<Arc<crate::bridge::audit::Audit>>,
+    /// `--web`: the live view's address and who may look.
+    pub web: Option<crate::bridge::web::WebOptions>,
 }
 
 impl BridgeOptions {
@@ -98,6 +100,7 @@ impl BridgeOptions {
             broker_writes: None,
             listen_serial,
             audit: None,
+            web: None,
         }
     }
 }
@@ -215,7 +218,17 @@ pub async fn bridge<W: Write>(
             tokio::spawn(super::shared::poll(line_opts.polls.clone(), Arc::clone(&shared)));
             routes.push(Route { units: units.clone(), line: shared });
         }
-        let routes = Arc::new(Routes { lines: routes, server: Metrics::default(), audit: opts.audit.clone() });
+        let routes = Arc::new(Routes {
+            lines: routes,
+            server: Metrics::default(),
+            audit: opts.audit.clone(),
+            clients: opts.web.is_some().then(Arc::default),
+        });
+        if let Some(web) = &opts.web {
+            let listener = super::web::bind(web).await?;
+            let _ = writeln!(err, "mbtap: web view at http://{}/ (read-only)", listener.local_addr()?);
+            tokio::spawn(super::web::serve(listener, web.clone(), Arc::clone(&routes), std::time::Instant::now()));
+        }
         // The admission policy routes by the lines' units, in the order they were given.
         opts.server.policy.routes = routes.iter().map(|r| r.units.clone()).collect();
         if let Some(w) = &opts.broker_writes {

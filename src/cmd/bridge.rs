@@ -100,6 +100,16 @@ pub struct Args {
     pub unit_gap: Vec<String>,
     #[command(flatten)]
     pub audit: crate::bridge::audit::AuditArgs,
+    /// A live view of the bridge on this address (`127.0.0.1:8502`; port 0 picks one): lines,
+    /// units (requests, answers, exceptions, timeouts, p50/p99, breaker, gap), clients, the last
+    /// transactions and latency over time, updating every second; `/api/state` the same as
+    /// JSON. Read-only, self-contained. An address that is not loopback needs --web-allow-ip.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub web: Option<String>,
+    /// Who may open the web view (repeatable): `10.0.0.0/24`, `192.0.2.7`. Needed for a --web
+    /// address that is not loopback.
+    #[arg(long = "web-allow-ip", value_name = "NET", value_parser = crate::cli::numbers::ip_net, requires = "web")]
+    pub web_allow_ips: Vec<mbtap_gateway::admit::IpNet>,
     /// Retries after a timeout or a failed CRC.
     #[arg(long, default_value_t = 0)]
     pub retries: u32,
@@ -203,6 +213,8 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         unit_timeout,
         unit_gap,
         audit,
+        web,
+        web_allow_ips,
         echo,
         cache,
         poll,
@@ -319,6 +331,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         tls,
         broker_writes: None,
         audit: audit.open()?,
+        web: web.map(|addr| crate::bridge::web::WebOptions { addr, allow: web_allow_ips }),
         listen_serial: listen_serial.map(|port| crate::bridge::serial_front::SerialFront {
             port,
             line: settings,

@@ -145,3 +145,147 @@ fn a_full_disk_loses_audit_lines_counted_and_said_never_a_request() {
     assert!(said.contains("--audit /dev/full: cannot write") && said.contains("lost"), "{said}");
     std::fs::remove_dir_all(&d).ok();
 }
+
+/// GET a path of the web view; the body.
+fn get(addr: &str, path: &str) -> String {
+    use std::io::{Read, Write};
+    // A connection the view closes unanswered (all its slots taken) reads as nothing.
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    let _ = write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n");
+    let mut text = String::new();
+    let _ = s.read_to_string(&mut text);
+    text.split_once("\r\n\r\n").map(|(_, b)| b.to_owned()).unwrap_or_default()
+}
+
+/// The page as headless Chromium renders it after its script ran for `ms` of virtual time.
+fn rendered(url: &str, ms: u32) -> String {
+    let browser = ["chromium", "chromium-browser", "google-chrome"]
+        .into_iter()
+        .find(|b| std::process::Command::new(b).arg("--version").output().is_ok_and(|o| o.status.success()))
+        .expect("chromium must be installed for this test");
+    // `timeout`: a page that never settles fails the test instead of hanging it.
+    let out = std::process::Command::new("timeout")
+        .args(["60", browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage"])
+        .arg(format!("--virtual-time-budget={ms}"))
+        .args(["--dump-dom", url])
+        .output()
+        .unwrap();
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A field of a unit as the page shows it (`data-unit="1" data-field="requests"`).
+fn shown(dom: &str, unit: u8, field: &str) -> Option<String> {
+    let key = format!("data-unit=\"{unit}\" data-field=\"{field}\">");
+    let at = dom.find(&key)? + key.len();
+    Some(dom[at..].split('<').next()?.to_owned())
+}
+
+/// `--web`: headless Chromium opens the page; unit 1's request count on it is `/api/state`'s,
+/// and after more traffic both show the new count; the page took several updates from its
+/// event stream. The page fetches nothing from elsewhere, and refuses to write.
+#[test]
+#[ignore = "needs chromium and real pseudo-terminals; .ci/run installs it and runs this with --ignored"]
+fn the_web_view_shows_what_the_api_says_and_follows_the_traffic() {
+    let d = dir("web");
+    let bus = d.join("bus");
+    let _sim = common::simulate(&bus, &["--duration", "120"]);
+    let b = common::bridge(&["--serial", bus.to_str().unwrap(), "--listen", "127.0.0.1:0", "--web", "127.0.0.1:0"]);
+    let web = b.web.clone().unwrap();
+    let mut s = std::net::TcpStream::connect(b.tcp.as_deref().unwrap()).unwrap();
+    for round in 0..2u16 {
+        for tid in 0..(3 + round * 4) {
+            assert_eq!(common::call(&mut s, tid, 1, &READ_430)[0], 0x04);
+        }
+        let api: serde_json::Value = serde_json::from_str(&get(&web, "/api/state")).unwrap();
+        let unit = api["lines"][0]["units"].as_array().unwrap().iter().find(|u| u["unit"] == 1).unwrap().clone();
+        // Three updates from the event stream, then the page stops following (`?updates=3`).
+        let dom = rendered(&format!("http://{web}/?updates=3"), 5000);
+        assert_eq!(shown(&dom, 1, "requests"), Some(unit["requests"].to_string()), "round {round}: {unit}\n{dom}");
+        assert_eq!(shown(&dom, 1, "answers"), Some(unit["answers"].to_string()));
+        let updates: u32 = dom.split("data-updates=\"").nth(1).unwrap().split('"').next().unwrap().parse().unwrap();
+        assert!(updates >= 2, "the page updated {updates} times from its event stream");
+        assert!(dom.contains("data-client=\"127.0.0.1:"), "the client is listed");
+    }
+    let page = get(&web, "/");
+    // Nothing fetched from elsewhere: no link, source, stylesheet import or URL but the SVG
+    // namespace's name (an identifier, never fetched).
+    for outside in ["<link", "src=", "url(", "@import", "https://"] {
+        assert!(!page.contains(outside), "the page names {outside}");
+    }
+    assert_eq!(page.matches("http://").count(), page.matches("http://www.w3.org/2000/svg").count());
+    let mut post = std::net::TcpStream::connect(&web).unwrap();
+    std::io::Write::write_all(&mut post, b"POST /api/state HTTP/1.1\r\nHost: x\r\nContent-Length: 0\r\n\r\n").unwrap();
+    let mut answer = String::new();
+    std::io::Read::read_to_string(&mut post, &mut answer).unwrap();
+    assert!(answer.starts_with("HTTP/1.1 405"), "{answer}");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+/// A web view on an address that is not loopback, without `--web-allow-ip`, is refused at start
+/// with what to give; with one, it starts.
+#[test]
+fn a_web_view_open_beyond_loopback_needs_an_allow_list() {
+    let out = std::process::Command::new(common::BIN)
+        .args([
+            "bridge",
+            "--serial",
+            "/dev/null-none",
+            "--listen",
+            "127.0.0.1:0",
+            "--web",
+            "0.0.0.0:0",
+            "--duration",
+            "1",
+        ])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && said.contains("--web-allow-ip"), "{said}");
+    let out = std::process::Command::new(common::BIN)
+        .args(["bridge", "--serial", "/dev/null-none", "--listen", "127.0.0.1:0", "--web", "0.0.0.0:0"])
+        .args(["--web-allow-ip", "127.0.0.1", "--duration", "1"])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && said.contains("web view at http://0.0.0.0:"), "{said}");
+}
+
+/// The view is bounded like every other front: 32 connections that say nothing hold every
+/// slot, the next one is closed unanswered (counted), and once the silent ones time out (5 s
+/// for a request head) the view answers again.
+#[test]
+fn the_web_views_connections_are_bounded_and_silent_ones_time_out() {
+    use std::io::{Read, Write};
+    let b = common::bridge(&[
+        "--serial",
+        "/dev/null-none",
+        "--listen",
+        "127.0.0.1:0",
+        "--web",
+        "127.0.0.1:0",
+        "--metrics",
+        "127.0.0.1:0",
+        "--duration",
+        "30",
+    ]);
+    let web = b.web.clone().unwrap();
+    let silent: Vec<std::net::TcpStream> = (0..32).map(|_| std::net::TcpStream::connect(&web).unwrap()).collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let mut extra = std::net::TcpStream::connect(&web).unwrap();
+    extra.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+    let _ = extra.write_all(b"GET /api/state HTTP/1.1\r\n\r\n");
+    let mut got = Vec::new();
+    let _ = extra.read_to_end(&mut got);
+    assert!(got.is_empty(), "past 32 connections: closed unanswered, got {}", String::from_utf8_lossy(&got));
+    let m = common::metrics_text(b.metrics.as_deref().unwrap());
+    assert!(common::metric(&m, "mbtap_bridge_refused_total{reason=\"web_connections\"}").unwrap_or(0.0) >= 1.0, "{m}");
+    let start = Instant::now();
+    loop {
+        assert!(start.elapsed() < Duration::from_secs(15), "the view never answered again");
+        std::thread::sleep(Duration::from_millis(500));
+        if get(&web, "/api/state").starts_with('{') {
+            break;
+        }
+    }
+    drop(silent);
+}

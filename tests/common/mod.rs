@@ -85,6 +85,8 @@ pub struct Bridge {
     pub tls: Option<String>,
     pub udp: Option<String>,
     pub metrics: Option<String>,
+    /// `--web`: the live view's address.
+    pub web: Option<String>,
     pub log: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
 }
 
@@ -95,8 +97,9 @@ pub fn bridge(args: &[&str]) -> Bridge {
         std::process::Command::new(BIN).arg("bridge").args(args).stderr(std::process::Stdio::piped()).spawn().unwrap();
     let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
     let wants = |flag: &str| args.contains(&flag);
-    let (mut tcp, mut rtu, mut tls, mut udp, mut metrics) = (None, None, None, None, None);
+    let (mut tcp, mut rtu, mut tls, mut udp, mut metrics, mut web) = (None, None, None, None, None, None);
     while (wants("--listen") && tcp.is_none())
+        || (wants("--web") && web.is_none())
         || (wants("--listen-udp") && udp.is_none())
         || (wants("--listen-rtu") && rtu.is_none())
         || (wants("--listen-tls") && tls.is_none())
@@ -116,6 +119,8 @@ pub fn bridge(args: &[&str]) -> Bridge {
             }
         } else if let Some(rest) = l.strip_prefix("mbtap: metrics at http://") {
             metrics = Some(rest.trim_end_matches("/metrics").to_owned());
+        } else if let Some(rest) = l.strip_prefix("mbtap: web view at http://") {
+            web = Some(rest.split('/').next().unwrap().to_owned());
         }
     }
     let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
@@ -125,7 +130,7 @@ pub fn bridge(args: &[&str]) -> Bridge {
             sink.lock().unwrap().push(l);
         }
     });
-    Bridge { child: Kill(child), tcp, rtu, tls, udp, metrics, log }
+    Bridge { child: Kill(child), tcp, rtu, tls, udp, metrics, web, log }
 }
 
 /// GET /metrics.

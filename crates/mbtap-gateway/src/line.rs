@@ -136,6 +136,12 @@ impl Line {
         free.saturating_add(self.gaps.of(unit))
     }
 
+    /// Whether `unit` rests behind its open breaker at `now` (its requests answered 0x0B).
+    #[must_use]
+    pub fn resting(&self, unit: u8, now: Duration) -> bool {
+        self.breakers.get(&unit).is_some_and(|b| b.refuses(now))
+    }
+
     /// A request to `unit` is next, at `now`. Broadcasts (unit 0) always go: nobody answers
     /// them, so no breaker learns from them.
     pub fn start(&mut self, unit: u8, now: Duration) -> Start {

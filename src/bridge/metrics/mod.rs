@@ -3,6 +3,7 @@
 //! Prometheus text is written in [`exposition`].
 
 mod exposition;
+pub mod snapshot;
 
 use std::collections::BTreeMap;
 use std::sync::{Mutex, PoisonError};
@@ -33,6 +34,10 @@ struct Unit {
     late_answers: u64,
     /// Time the line waited before this unit's requests for its `--unit-gap`.
     gap_wait: Duration,
+    /// The last latencies, ms (for p50/p99 of what happens now, not since the start).
+    recent: std::collections::VecDeque<f64>,
+    /// Its breaker open: the line answers 0x0B for it until its next probe.
+    resting: bool,
     buckets: [u64; BUCKETS.len()],
     latency_count: u64,
     latency_sum: f64,
@@ -69,6 +74,8 @@ struct Inner {
     coalesced: u64,
     /// Line time used, by class: high (`--priority`), normal, poll (`--poll`).
     line_time: BTreeMap<&'static str, Duration>,
+    /// The last transactions, newest last (the web view's list).
+    last: std::collections::VecDeque<snapshot::Transaction>,
 }
 
 /// Counters shared by the line and the connections.
@@ -203,6 +210,10 @@ impl Metrics {
         self.with(|m| {
             let u = m.units.entry(unit).or_default();
             let s = d.as_secs_f64();
+            if u.recent.len() == snapshot::RECENT_LATENCIES {
+                u.recent.pop_front();
+            }
+            u.recent.push_back(s * 1000.0);
             for (b, bound) in u.buckets.iter_mut().zip(BUCKETS) {
                 if s <= bound {
                     *b += 1;
