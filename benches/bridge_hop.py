@@ -6,6 +6,7 @@ usage: bridge_hop.py MBTAP N tcp|serial
           $BRIDGE_TOOLS/tcp_device.py): `--serial tcp://DEVICE`, holding registers read
   serial  the bridge in front of `mbtap simulate` on a pseudo-terminal at 115200 baud answering at
           once (the simulator is $SIM, default MBTAP: give both sides of a pair the same one)
+WEB=1 adds `--web` and a reader of its event stream (an open page).
 Every answer is checked. Time the whole command (e.g. `/usr/bin/time -v`, alternating two
 binaries run after run); BENCHMARKS.md keeps the figures."""
 import os
@@ -60,9 +61,20 @@ else:
     wait(lambda: os.path.exists(link))
     serial = [link, '--baud', '115200']
     function, first = 4, 430    # the MK4's phase voltages
-bridge = subprocess.Popen([mbtap, 'bridge', '--serial', *serial, '--listen', f'127.0.0.1:{bridge_port}'],
+# WEB=1: the bridge serves its live view (--web) and a reader follows its event stream the whole
+# run, as an open page would — to pair against the same binary without it.
+web = []
+if os.environ.get('WEB'):
+    web_port = free_port()
+    web = ['--web', f'127.0.0.1:{web_port}']
+bridge = subprocess.Popen([mbtap, 'bridge', '--serial', *serial, '--listen', f'127.0.0.1:{bridge_port}', *web],
                           stderr=subprocess.DEVNULL)
 wait(lambda: listening(bridge_port))
+if web:
+    import threading
+    page = socket.create_connection(('127.0.0.1', web_port))
+    page.sendall(b'GET /events HTTP/1.1\r\nHost: x\r\n\r\n')
+    threading.Thread(target=lambda: [None for _ in iter(lambda: page.recv(65536), b'')], daemon=True).start()
 c = socket.create_connection(('127.0.0.1', bridge_port))
 c.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 for i in range(n):

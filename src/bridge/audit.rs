@@ -9,7 +9,7 @@ use std::io::Write as _;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context as _;
@@ -108,12 +108,29 @@ impl Audit {
             "outcome": outcome,
         })
         .to_string();
+        self.queue(line);
+    }
+
+    /// Records a value set by name from the broker (`simulate --values-from`): no Modbus
+    /// request, the `NAME=VALUE` asked and how it ended.
+    pub fn record_set(&self, who: &Who, unit: u8, item: &str, outcome: &str) {
+        let (secs, nanos) =
+            SystemTime::now().duration_since(UNIX_EPOCH).map_or((0, 0), |d| (d.as_secs(), d.subsec_nanos()));
+        let line = serde_json::json!({
+            "time": rfc3339(secs, nanos),
+            "client": {"transport": who.transport, "address": who.address.map(|a| a.to_string()), "role": who.role},
+            "unit": unit,
+            "set": item,
+            "outcome": outcome,
+        })
+        .to_string();
+        self.queue(line);
+    }
+
+    fn queue(&self, line: String) {
         self.records.fetch_add(1, Ordering::Relaxed);
-        match self.tx.try_send(line) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.lost.fetch_add(1, Ordering::Relaxed);
-            }
+        if self.tx.try_send(line).is_err() {
+            self.lost.fetch_add(1, Ordering::Relaxed);
         }
     }
 

@@ -29,6 +29,8 @@ listen = "0.0.0.0:502"
 timeout-ms = 800
 retries = 0
 turnaround-ms = 0.0
+# A pause of a unit's own before each request to it, beyond t3.5 (ms): a slow device's.
+# unit-gap = ["1=40"]     # or ["20"] for every unit
 # allow-broadcast = true  # let writes to unit 0 through to every device (refused otherwise)
 # broadcast-reply = true  # answer broadcast writes at once, for SCADA that insists
 
@@ -46,6 +48,10 @@ queue-per-client = 32
 
 # Observability.
 # metrics = "127.0.0.1:9502"
+# web = "127.0.0.1:8502"  # a live read-only page; another address needs web-allow-ip
+# web-allow-ip = ["10.0.0.0/24"]
+# audit = "/var/log/mbtap/audit.jsonl"   # every write, who and how it ended (JSON lines)
+# audit-max-bytes = 16777216
 # monitor = "jsonl"      # text | jsonl | tui
 # device = ["1=mk4", "5=display", "17=mkzp"]
 # Modbus/TCP Security: TLS with client certificates; the role in a client's certificate

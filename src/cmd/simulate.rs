@@ -246,7 +246,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             tokio::spawn(crate::master::mirror::run(m, Arc::clone(&shared)));
         }
         if let Some(url) = &values_from {
-            crate::publish::values_from::start(url, values_prefix.as_deref(), Arc::clone(&shared))?;
+            crate::publish::values_from::start(url, values_prefix.as_deref(), Arc::clone(&shared), audit.clone())?;
         }
         let served = async {
             if !listening {

@@ -19,7 +19,12 @@ const PASS: Duration = Duration::from_millis(20);
 ///
 /// # Errors
 /// A bad URL or prefix (said before serving).
-pub fn start(url: &str, prefix: Option<&str>, emulated: Arc<Emulated>) -> anyhow::Result<()> {
+pub fn start(
+    url: &str,
+    prefix: Option<&str>,
+    emulated: Arc<Emulated>,
+    audit: Option<Arc<crate::bridge::audit::Audit>>,
+) -> anyhow::Result<()> {
     let mut options = vec!["--mqtt", url, "--mqtt-writes"];
     if let Some(p) = prefix {
         options.extend(["--mqtt-prefix", p]);
@@ -52,6 +57,15 @@ pub fn start(url: &str, prefix: Option<&str>, emulated: Arc<Emulated>) -> anyhow
                         None => Err(format!("{}: no device at unit {} here", ask.item.text, ask.unit)),
                     }
                 };
+                if let Some(a) = &audit {
+                    let who = crate::bridge::audit::Who { transport: "mqtt", address: None, role: None };
+                    a.record_set(
+                        &who,
+                        ask.unit,
+                        &ask.item.text,
+                        outcome.as_ref().map_or_else(String::as_str, |_| "done"),
+                    );
+                }
                 mqtt.write_result(&ask, &outcome, crate::source::serial::now().0);
             }
         }
