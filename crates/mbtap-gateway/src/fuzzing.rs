@@ -78,12 +78,17 @@ pub fn transaction(data: &[u8]) {
 /// Any bytes as what a networked line delivers: the first byte picks the transport — even, a
 /// Modbus TCP device's stream ([`crate::tcp_device`]); odd, a Telnet/RFC 2217 server's
 /// ([`crate::rfc2217`]) — the rest arrives in reads of 1 to 16 bytes. Neither may panic, nor
-/// buffer without bound, nor make more line bytes than it received.
+/// buffer without bound, nor make more line bytes than it received. The same bytes as a request
+/// go through the audit's reading of it ([`crate::audit::change`]).
 ///
 /// # Panics
 /// When one of those is broken: the point of this harness.
 pub fn transports(data: &[u8]) {
     let (&pick, rest) = data.split_first().unwrap_or((&0, &[]));
+    // The audit reads any request a client sends: whatever the bytes, a bounded record.
+    if let Some(c) = crate::audit::change(rest) {
+        assert!(c.values.len() <= crate::audit::MAX_VALUES, "{} values", c.values.len());
+    }
     let reads = rest.chunks(usize::from(pick >> 4) + 1);
     if pick % 2 == 0 {
         const READ_ONE: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x01];
