@@ -108,7 +108,7 @@ pub fn start_publisher(
     roles: &super::tls::Roles,
 ) -> anyhow::Result<(Option<Arc<Mqtt>>, Option<Writes>)> {
     use anyhow::Context as _;
-    // Fails closed (issue 38): with roles, the broker's writes must be given one too — otherwise
+    // Fails closed: with roles, the broker's writes must be given one too — otherwise
     // anyone on the broker would pass under the plain listeners' rules.
     anyhow::ensure!(
         !mqtt.mqtt_writes || roles.is_empty() || mqtt_role.is_some(),

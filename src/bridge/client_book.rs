@@ -10,7 +10,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use mbtap_gateway::queue::ClientId;
 use serde_json::{Value, json};
 
-use super::audit::Who;
+use crate::output::audit::Who;
 
 /// Clients kept.
 pub const KEPT: usize = 256;

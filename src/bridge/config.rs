@@ -80,7 +80,7 @@ pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
     let roles = doc.get("roles").cloned();
     let table = match doc.get("bridge") {
         Some(toml::Value::Table(t)) => {
-            // Keys above `[bridge]` (or tables beside it) were ignored (issue 24: `read-only =
+            // Keys above `[bridge]` (or tables beside it) were ignored (`read-only =
             // true` at the top of the file had no effect): the file defines `[bridge]` and
             // `[roles.NAME]` only, and anything else stops the start.
             let mut outside: Vec<(usize, &String)> = doc
@@ -128,7 +128,7 @@ pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
             // refusal then names the key and the value.
             // An empty allow-list would let everyone in (the lists restrict only when given):
             // refuse it rather than fail open.
-            // One rule for every list (issue 24: `tls-allow-ip = []` and `crl = []` passed
+            // One rule for every list (`tls-allow-ip = []` and `crl = []` passed
             // silently): an empty list is refused, naming the key and its line.
             toml::Value::Array(items) if items.is_empty() => {
                 let what = if matches!(long.as_str(), "allow-ip" | "allow-function" | "tls-allow-ip") {

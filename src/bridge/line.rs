@@ -37,7 +37,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         watch: crate::source::serial::DeviceWatch::default(),
         missing: None,
         opened_once: false,
-        // Transaction ids toward the device start where nobody can guess (issue 38: counted from
+        // Transaction ids toward the device start where nobody can guess (counted from
         // 0, an unsolicited answer under the next id was taken).
         device: mbtap_gateway::tcp_device::TcpDevice::seeded(super::device::random_seed()),
     };
@@ -57,7 +57,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let Some((client, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
             let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
-            // With backoff (issue 38: a server streaming an endless negotiation was reconnected
+            // With backoff (a server streaming an endless negotiation was reconnected
             // every half second, each attempt reading at full speed: 98 % CPU).
             if port.stream.is_none() && Instant::now() >= port.next_open {
                 port.reopen().await;
@@ -128,7 +128,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         answer(&shared, job, reply);
         // The client has its answer (or 0x0B); now what a slow unit says late is heard and
         // dropped before the next request goes out — but only where that request could take
-        // it for its own: the same unit's. Another unit's request goes at once (issue 38: a
+        // it for its own: the same unit's. Another unit's request goes at once (a
         // dead unit cost every queued request two timeouts); a late answer carries its unit's
         // address and the answer check drops it.
         if let Some(window) = flush

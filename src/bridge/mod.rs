@@ -14,10 +14,8 @@
 //! line behind it), [`slave_port`] (that port's request framing and answers), [`device`] (a
 //! Modbus TCP device as a line's back), [`run`] (starts them all), [`config`] (the
 //! configuration file), [`modes`] (the command line's enums), [`broker`] (writes from the MQTT
-//! broker through the same admission), [`audit`] (`--audit`: the log of every request that may
-//! change a device).
+//! broker through the same admission); the audit of writes is `crate::output::audit`.
 
-pub mod audit;
 pub mod broker;
 pub mod client_book;
 pub mod config;

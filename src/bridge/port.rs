@@ -181,7 +181,7 @@ impl Port<'_> {
         let opts = self.opts;
         match opened {
             Ok(port) => {
-                // Counted however it came back, idle or at a request's turn (issue 38: 21
+                // Counted however it came back, idle or at a request's turn (21
                 // reconnections to a tcp:// device left port_reopened_total at 0).
                 if self.opened_once {
                     self.shared.metrics.reopened();
@@ -197,7 +197,7 @@ impl Port<'_> {
             }
             Err(why) => {
                 self.shared.metrics.port_failure(std::io::ErrorKind::NotConnected, &why);
-                // Said at once and then once a minute while it lasts (issue 31: the bridge said
+                // Said at once and then once a minute while it lasts (the bridge said
                 // only "listening" and every client got 0x0A with no word why).
                 if self.missing.is_none_or(|said| said.elapsed() >= MISSING_PORT_REMINDER) {
                     self.missing = Some(Instant::now());

@@ -26,13 +26,13 @@ pub struct Route {
 
 /// The lines a bridge serves, in the order given, and the counters of the server in front of
 /// them: connections and refusals belong to no line (they were counted on the first line's
-/// metrics, issue 26), so they are kept and exported once, without a line label.
+/// metrics), so they are kept and exported once, without a line label.
 #[derive(Debug, Default)]
 pub struct Routes {
     pub lines: Vec<Route>,
     pub server: super::metrics::Metrics,
     /// `--audit`: where every request that may change a device is recorded, with its ending.
-    pub audit: Option<Arc<super::audit::Audit>>,
+    pub audit: Option<Arc<crate::output::audit::Audit>>,
     /// `--web`: who asks, with their requests and refusals (kept only when the view is on).
     pub clients: Option<Arc<super::client_book::ClientBook>>,
 }
@@ -99,7 +99,7 @@ pub struct Client<'a> {
     pub(super) peer_high: bool,
     pub(super) bucket: Option<RateLimit>,
     /// Who it is, as the audit records it.
-    pub(super) who: super::audit::Who,
+    pub(super) who: crate::output::audit::Who,
 }
 
 impl<'a> Client<'a> {
@@ -107,7 +107,7 @@ impl<'a> Client<'a> {
         let transport = if opts.rtu_over_tcp { "rtu-over-tcp" } else { "tcp" };
         Self {
             peer_high: opts.policy.peer_high(peer.ip()),
-            who: super::audit::Who { transport, address: Some(peer), role: None },
+            who: crate::output::audit::Who { transport, address: Some(peer), role: None },
             ..Self::local(id, role, routes, opts)
         }
     }
@@ -121,7 +121,7 @@ impl<'a> Client<'a> {
             role,
             peer_high: false,
             bucket: opts.rate_limit.map(|rate| RateLimit::new(rate, now)),
-            who: super::audit::Who { transport: "local", address: None, role: None },
+            who: crate::output::audit::Who { transport: "local", address: None, role: None },
         }
     }
 

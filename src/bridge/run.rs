@@ -54,7 +54,7 @@ pub struct BridgeOptions {
     /// already on the line.
     pub listen_serial: Option<crate::bridge::serial_front::SerialFront>,
     /// `--audit`: every request that may change a device, recorded.
-    pub audit: Option<Arc<crate::bridge::audit::Audit>>,
+    pub audit: Option<Arc<crate::output::audit::Audit>>,
     /// `--web`: the live view's address and who may look.
     pub web: Option<crate::bridge::web::WebOptions>,
 }

@@ -29,7 +29,7 @@ pub struct Conn {
 /// The open connections of every listener (plain, RTU over TCP, TLS) — the connection limit is
 /// theirs together, so a full table evicts a socket that never asked (a TLS handshake in
 /// progress counts as one), or its idlest member, whichever listener holds it, instead of
-/// refusing everyone new (issue 24: 64 idle RTU sockets locked out every Modbus TCP client).
+/// refusing everyone new (64 idle RTU sockets locked out every Modbus TCP client).
 pub type Table = std::sync::Mutex<std::collections::HashMap<ClientId, Conn>>;
 
 /// Ends a connection's bookkeeping however it ends — closed, failed or evicted (an aborted
@@ -142,7 +142,7 @@ pub async fn serve(
                             let role = cert.as_deref().and_then(super::tls::role_of);
                             let policy = role.as_ref().and_then(|r| tls.roles.get(r));
                             // A session whose certificate a reloaded CRL revokes ends at once
-                            // (issue 24: it was still answered after SIGHUP).
+                            // (it was still answered after SIGHUP).
                             let revoked = tls.revocation(cert.as_deref().unwrap_or_default());
                             tokio::select! {
                                 () = connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy), role.clone()) => {}

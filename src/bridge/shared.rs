@@ -24,7 +24,7 @@ pub struct Job {
     /// `--priority high=…` matched: goes before the round-robin (see `FairQueue::pop_prefer`).
     pub high: bool,
     /// A write's place among the writes not yet done: while it is held, the cache answers no
-    /// read it may change (issue 24: a client pipelining "write h101, read h101" read the old
+    /// read it may change (a client pipelining "write h101, read h101" read the old
     /// value from the cache). Dropped with the job, however it ends.
     pub write: Option<WriteGuard>,
     /// `--audit`: the record of a request that may change a device, written when it ends.
@@ -34,8 +34,8 @@ pub struct Job {
 /// What the audit writes of a job when it ends: who asked, what it changes.
 #[derive(Debug)]
 pub struct Ticket {
-    pub audit: Arc<super::audit::Audit>,
-    pub who: super::audit::Who,
+    pub audit: Arc<crate::output::audit::Audit>,
+    pub who: crate::output::audit::Who,
     pub change: mbtap_gateway::audit::Change,
 }
 

@@ -251,7 +251,7 @@ mod tests {
         assert!(parse_roles(&["admin=all".into()]).unwrap()["admin"].allows(1, &[0x06, 0, 0, 0, 1]));
     }
 
-    /// Issue 24: `--role admin=` let a client do everything; a second `--role admin=…` silently
+    /// `--role admin=` let a client do everything; a second `--role admin=…` silently
     /// replaced the first.
     #[test]
     fn an_empty_or_repeated_role_is_refused() {

@@ -72,7 +72,7 @@ pub struct LineArgs {
 /// Line settings of a command that reads a capture: those of [`LineArgs`], each one over what
 /// the capture stores, and which link types carry serial bytes. Live commands (`simulate`,
 /// `bridge`, `sniff`, `tap`) take [`LineArgs`] alone: no option that cannot apply to them is
-/// listed in their help (issue 31).
+/// listed in their help.
 #[derive(Debug, Clone, Args)]
 pub struct CaptureLineArgs {
     /// Mode, baud rate, parity, stop and data bits not given are what the capture stores (then

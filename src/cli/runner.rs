@@ -1,5 +1,5 @@
 //! The one ending of the analyzing commands (`sniff`, `tap`, `demo`, `replay` and the bridge's
-//! `--monitor`, issue 43). A command builds its source — a [`Job`] — and its options; the runner
+//! `--monitor`). A command builds its source — a [`Job`] — and its options; the runner
 //! owns the rest: the terminal UI or text/JSON lines on stdout (with the health report and the
 //! learned draft when asked), the publishers (spy server, MQTT), and what is said at the end —
 //! the summary, where a recording went.

@@ -99,7 +99,7 @@ pub struct Args {
     #[arg(long, value_name = "[UNITS=]MS")]
     pub unit_gap: Vec<String>,
     #[command(flatten)]
-    pub audit: crate::bridge::audit::AuditArgs,
+    pub audit: crate::output::audit::AuditArgs,
     /// A live view of the bridge on this address (`127.0.0.1:8502`; port 0 picks one): lines,
     /// units (requests, answers, exceptions, timeouts, p50/p99, breaker, gap), clients, the last
     /// transactions and latency over time, updating every second; `/api/state` the same as
@@ -410,7 +410,7 @@ mod tests {
         assert_eq!(b.serial.as_deref(), Some("/dev/ttyUSB0"));
         assert_eq!(b.listen.as_deref(), Some("0.0.0.0:502"));
         assert_eq!(b.timeout_ms, 800);
-        // Issue 42: the packaged sample opened a writable gateway to the whole network.
+        // The packaged sample opened a writable gateway to the whole network.
         assert!(b.read_only, "the sample starts closed to writes");
     }
 
@@ -473,7 +473,7 @@ mod tests {
         assert!(e.contains("allow-ip = []") && e.contains(file.to_str().unwrap()), "{e}");
     }
 
-    /// Issue 24: `read-only = true` and `allow-ip` above `[bridge]` had no effect.
+    /// `read-only = true` and `allow-ip` above `[bridge]` had no effect.
     #[test]
     fn keys_outside_the_bridge_table_refuse_to_start() {
         let file =
@@ -485,7 +485,7 @@ mod tests {
         assert!(e.contains("line 3") && e.contains("bridg"), "{e}");
     }
 
-    /// Issue 24: `tls-allow-ip = []` and `crl = []` passed silently while `allow-ip = []` was
+    /// `tls-allow-ip = []` and `crl = []` passed silently while `allow-ip = []` was
     /// refused; an empty `[roles.admin]` let a client do everything.
     #[test]
     fn every_empty_list_and_empty_role_is_refused() {

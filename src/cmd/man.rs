@@ -76,7 +76,7 @@ const FILES: &[(&str, &str)] = &[
 ];
 
 /// One page: the title, NAME and a SYNOPSIS as typed (`mbtap bridge [OPTIONS] …`, with the
-/// values options take — clap_mangen's lists every flag without its value, issue 42), then
+/// values options take — clap_mangen's lists every flag without its value), then
 /// clap_mangen's DESCRIPTION, OPTIONS and command sections, EXAMPLES from the help, FILES, and
 /// the version.
 fn render(cmd: &clap::Command, typed: &str) -> anyhow::Result<Vec<u8>> {
@@ -113,7 +113,7 @@ fn render(cmd: &clap::Command, typed: &str) -> anyhow::Result<Vec<u8>> {
     Ok(page)
 }
 
-/// Every page: (file name, roff). No `help` command has a page (issue 42: `mbtap(1)` named an
+/// Every page: (file name, roff). No `help` command has a page (`mbtap(1)` named an
 /// `mbtap-help(1)` that does not exist).
 fn pages() -> anyhow::Result<Vec<(String, Vec<u8>)>> {
     let top = super::Cli::command().version(super::long_version()).disable_help_subcommand(true);
@@ -165,11 +165,11 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
 mod tests {
     use super::*;
 
-    /// Issue 42: the SYNOPSIS read `mbtap-bridge [--config] [--serial]…` (hyphenated, no
+    /// The SYNOPSIS read `mbtap-bridge [--config] [--serial]…` (hyphenated, no
     /// values), no page had EXAMPLES or FILES, and `mbtap(1)` named an `mbtap-help(1)` that does
     /// not exist.
     #[test]
-    fn regression_issue_42_pages_have_a_typed_synopsis_examples_and_files_and_no_help_page() {
+    fn pages_have_a_typed_synopsis_examples_and_files_and_no_help_page() {
         let pages = pages().unwrap();
         let page = |n: &str| String::from_utf8(pages.iter().find(|(p, _)| p == n).unwrap().1.clone()).unwrap();
         let bridge = page("mbtap-bridge.1");

@@ -185,7 +185,7 @@ fn list() -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// A profile loaded — by name or file, as every command finds it (issue 42: the name
+/// A profile loaded — by name or file, as every command finds it (the name
 /// `profiles import` said was usable failed here with "os error 2") — its first problem with
 /// file:line:column, or a summary counting entries as import counts them, and the registers
 /// they cover.
@@ -215,7 +215,7 @@ fn check(spec: &str) -> anyhow::Result<ExitCode> {
 fn show(profile: &str) -> anyhow::Result<ExitCode> {
     let p = resolve_profile(profile)?;
     let mut out = std::io::stdout().lock();
-    // Names, units and devices come from files anyone may have written: escaped (issue 24).
+    // Names, units and devices come from files anyone may have written: escaped.
     writeln!(out, "{}", printable(&format!("{} — {}", p.meta.name, p.meta.device)))?;
     for t in [Table::Coils, Table::DiscreteInputs, Table::HoldingRegisters, Table::InputRegisters] {
         writeln!(out, "[{}]", t.name())?;

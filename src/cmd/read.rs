@@ -63,7 +63,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let mut failures = failures;
     if let Some(hint) = m.unit_hint(profile.as_ref()) {
         // Every read failed at an address the user did not choose: the device may be elsewhere,
-        // not the register wrong (issue 31: the error blamed the register).
+        // not the register wrong (the error blamed the register).
         if rows.is_empty() {
             for f in &mut failures {
                 f.problem = format!("{}; {hint}", f.problem);

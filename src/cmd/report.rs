@@ -46,7 +46,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         eprintln!("mbtap: warning: {w}");
     }
     let mut report = health.report();
-    // What the report worked with: the line settings and the observer latency (issue 25/31).
+    // What the report worked with: the line settings and the observer latency.
     report.line = settings.map(|l| l.to_string());
     report.observers = observers;
     let text = match format {

@@ -88,7 +88,7 @@ pub struct Args {
     #[arg(long)]
     pub read_only: bool,
     #[command(flatten)]
-    pub audit: crate::bridge::audit::AuditArgs,
+    pub audit: crate::output::audit::AuditArgs,
     /// Let broadcast writes (unit 0) from TCP, UDP and serial-front clients reach the devices, as
     /// `bridge --allow-broadcast` does; without it they are refused with exception 01 (one rule
     /// for both).

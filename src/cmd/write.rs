@@ -88,7 +88,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         writes.push((target, w));
     }
     // Unit 0 is a broadcast (Serial Line v1.02 §2.1): every device on the line executes it,
-    // none answers, nothing can be read back. Never by accident (issue 24).
+    // none answers, nothing can be read back. Never by accident.
     if unit == 0 && !args.force && !args.dry_run {
         anyhow::bail!(
             "unit 0 is a broadcast: every device on the line would execute this write and none would answer or be read back; give the unit's own address, or add --force to broadcast on purpose"

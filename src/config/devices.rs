@@ -74,7 +74,7 @@ fn closest(typed: &str, names: Vec<String>) -> Option<String> {
 
 /// The `UNIT=PROFILE` lines of the `NAME.devices` file beside a capture `NAME.pcapng`, if there
 /// is one (blank lines and `#` comments skipped), said on stderr when used; `--device` entries
-/// given after them win unit by unit (issue 31: `replay` ignored the file the captures ship with).
+/// given after them win unit by unit (`replay` ignored the file the captures ship with).
 ///
 /// # Errors
 /// A line that is not `UNIT=PROFILE`, with the file and line.

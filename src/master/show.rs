@@ -56,7 +56,7 @@ pub fn print(
     match format {
         MasterFormat::Text => {
             // Names and units come from profiles (user files, imports): control characters in
-            // them never reach the terminal (issue 24), as `decode` escapes them.
+            // them never reach the terminal, as `decode` escapes them.
             for r in rows {
                 writeln!(out, "{}", printable(&r.line()))?;
             }

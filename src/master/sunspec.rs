@@ -64,7 +64,7 @@ pub async fn discover(link: &mut Link, unit: u8) -> anyhow::Result<Vec<Found>> {
                 }
                 if !ended {
                     // Cut by the model bound or the address space, not by the end marker: what
-                    // follows is not the whole chain, and the user is told so (issue 39).
+                    // follows is not the whole chain, and the user is told so.
                     eprintln!(
                         "mbtap: unit {unit}: the SunSpec chain has no end marker within {} models (or runs past register 65535): only its first {} are used",
                         sunspec::MAX_MODELS,

@@ -32,7 +32,7 @@ impl DraftTo {
     }
 }
 
-/// Why `-o FILE` cannot hold the drafts of several units (issue 40: it wrote
+/// Why `-o FILE` cannot hold the drafts of several units (it wrote
 /// `NAME-unit-N.toml` files nobody asked for instead).
 fn one_file_for_many(path: &Path, units: &[u8]) -> String {
     let shown: Vec<String> = units.iter().map(u8::to_string).collect();
@@ -192,11 +192,11 @@ mod tests {
     const READ: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x01];
     const ANSWER: [u8; 4] = [0x03, 0x02, 0x00, 0x07];
 
-    /// Issue 40: `-o FILE` with several units wrote `NAME-unit-N.toml` files instead of the file
+    /// `-o FILE` with several units wrote `NAME-unit-N.toml` files instead of the file
     /// named. Once: refused, saying what to do; while listening: the file holds the first unit's
     /// draft and the others are said at the end; a directory holds one per unit.
     #[test]
-    fn regression_issue_40_one_file_holds_one_unit_and_a_directory_holds_each() {
+    fn one_file_holds_one_unit_and_a_directory_holds_each() {
         let dir = std::env::temp_dir().join(format!("mbtap-drafts-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let mut l = Learner::default();

@@ -1,7 +1,10 @@
 //! The output sink every analyzing command writes through: events as text, JSON lines or only
 //! counted (the terminal UI takes them instead when it runs), the register image, the health
-//! report at the end or every so often; and a capture replayed into it.
+//! report at the end or every so often; and a capture replayed into it. Beside it, the files
+//! mbtap keeps as it runs: the audit of writes ([`audit`]), `learn`'s drafts, whole files
+//! written safely.
 
+pub mod audit;
 pub mod learn_draft;
 pub mod progress;
 pub mod whole_file;
@@ -28,7 +31,7 @@ pub enum EventFormat {
 #[derive(Debug)]
 pub enum SourceError {
     /// The source never began (a port that did not open, a file that is no capture): nothing
-    /// was heard, so only the error is said (issue 31: an empty summary went to stdout beside
+    /// was heard, so only the error is said (an empty summary went to stdout beside
     /// the real error).
     NotStarted(anyhow::Error),
     /// It began and then failed: the summary of what was heard is still written, then the error.

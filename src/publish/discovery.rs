@@ -26,11 +26,11 @@ pub(super) fn discovery_object(r: &Row) -> String {
 }
 
 /// A Home Assistant discovery message for `r`: (node id, object id, component, config).
-/// Keys without a value are left out (issue 31: `"manufacturer": null` for a profile without a
+/// Keys without a value are left out (`"manufacturer": null` for a profile without a
 /// vendor, which Home Assistant's schema refuses: a string or no key); coils and discrete inputs
 /// are binary sensors with the raw 1/0 as their state, not numeric sensors. A known unit is
-/// spelled as Home Assistant does, with its device and state class (issue 42); the device names
-/// no `via_device` (issue 42: it named a bridge device no config announced).
+/// spelled as Home Assistant does, with its device and state class; the device names
+/// no `via_device` (it named a bridge device no config announced).
 ///
 /// Writable registers are sensors here too; [`control`] makes them controls when writes from the
 /// broker are on (a control whose commands nothing executes would mislead).
@@ -155,11 +155,11 @@ mod tests {
         assert_eq!(ha_id("mbtap_site"), "mbtap_site", "a legal id is kept as it is");
     }
 
-    /// Issue 42: no config had a device or state class (no long-term statistics, nothing for
+    /// No config had a device or state class (no long-term statistics, nothing for
     /// the Energy dashboard), and `via_device` named a device no config announced. The MK4's
     /// voltage (input 430, `V`) is a voltage measurement, and no config names a `via_device`.
     #[test]
-    fn regression_issue_42_discovery_gives_classes_and_no_unannounced_via_device() {
+    fn discovery_gives_classes_and_no_unannounced_via_device() {
         use mbtap_device::profile::Table;
         let mk4 = mbtap_device::profile::builtin::get("mk4").unwrap().unwrap();
         let regs = mbtap_device::query::rows::rows(1, Table::InputRegisters, 430, &[2304], Some(&mk4));
@@ -171,7 +171,7 @@ mod tests {
         assert!(config["device"].get("via_device").is_none(), "{config}");
     }
 
-    /// Issue 31: the MKZP (a profile without a vendor) was announced with `"manufacturer":
+    /// The MKZP (a profile without a vendor) was announced with `"manufacturer":
     /// null`, which Home Assistant's schema refuses, and coils as numeric sensors.
     #[test]
     fn discovery_leaves_out_absent_keys_and_announces_bits_as_binary_sensors() {
@@ -193,7 +193,7 @@ mod tests {
         assert!(config["device"]["manufacturer"].is_string(), "the MK4 has a vendor: {config}");
     }
 
-    /// Issue 30: with writes on, writable registers become Home Assistant controls — a rw coil a
+    /// With writes on, writable registers become Home Assistant controls — a rw coil a
     /// switch, a ranged set point a number within its scaled range — and the rest stay sensors.
     #[test]
     fn writable_registers_are_announced_as_controls() {

@@ -131,7 +131,7 @@ const MAX_PREFIX_BYTES: usize = 65_535 - 1_024;
 
 /// Whether `prefix` can start every topic mbtap publishes: the broker drops a publication to a
 /// topic it cannot take without telling a QoS 0 publisher, so a prefix it would refuse is
-/// refused here (issue 24: `$SYS/x`, a tab, 70 kB: every message dropped, "0 dropped" said).
+/// refused here (`$SYS/x`, a tab, 70 kB: every message dropped, "0 dropped" said).
 ///
 /// # Errors
 /// What is wrong, with the rule: no `+`/`#` (MQTT v3.1.1 §4.7.1), no leading `$` (topics
@@ -230,7 +230,7 @@ pub(super) fn default_buffer_dir(prefix: &str) -> PathBuf {
 mod tests {
     use super::*;
 
-    /// Issue 24: `$SYS/x`, a tab or 70 kB were accepted and every message silently dropped.
+    /// `$SYS/x`, a tab or 70 kB were accepted and every message silently dropped.
     #[test]
     fn a_prefix_the_broker_would_drop_is_refused() {
         assert!(check_prefix("mbtap/site/line1").is_ok());

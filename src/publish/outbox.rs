@@ -29,7 +29,7 @@ pub const COMMANDS_WAITING: usize = 32;
 /// The largest packet taken from the broker. Larger than anything mbtap acts on
 /// ([`MAX_COMMAND`]), so an oversized message on a command topic is read and
 /// dropped without losing the connection — MQTT 3.1.1 has no other way to refuse one, and a
-/// retained one would come again at every subscription (issue 39). Past this, the connection
+/// retained one would come again at every subscription. Past this, the connection
 /// is lost with it and the command topics are paused instead (`Outbox::oversized_message`).
 pub const MAX_INCOMING: usize = 32 << 20;
 

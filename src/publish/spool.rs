@@ -349,7 +349,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
     }
 
-    /// Issue 30: a full buffer drops the oldest and says how many.
+    /// A full buffer drops the oldest and says how many.
     #[test]
     fn a_full_buffer_drops_the_oldest_segments_and_counts_them() {
         let d = tmp("full");
@@ -369,7 +369,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
     }
 
-    /// Issue 30: a power cut mid-append costs the torn record only.
+    /// A power cut mid-append costs the torn record only.
     #[test]
     fn a_torn_tail_costs_one_record() {
         let d = tmp("torn");
@@ -402,7 +402,7 @@ mod tests {
         }
     }
 
-    /// Issue 39: a FIFO, a directory, a symbolic link and a file larger than any segment in the
+    /// A FIFO, a directory, a symbolic link and a file larger than any segment in the
     /// buffer are said and left in place — never opened for reading (a FIFO blocked forwarding
     /// for good), never deleted (a 64 GiB sparse segment was deleted as "0 messages"), never
     /// written through; the other segments are forwarded and new ones numbered above them.
@@ -436,7 +436,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
     }
 
-    /// Issue 39: a segment that becomes unreadable after start (a FIFO put in its place) is
+    /// A segment that becomes unreadable after start (a FIFO put in its place) is
     /// passed over when its turn comes, not read, not deleted.
     #[test]
     fn a_segment_replaced_while_running_is_set_aside_not_deleted() {
@@ -452,7 +452,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
     }
 
-    /// Issue 39: an append that cannot be written says why (a full disk said as such, not "queue
+    /// An append that cannot be written says why (a full disk said as such, not "queue
     /// full or broker away") and counts it.
     #[test]
     fn a_failed_append_is_said_with_its_cause_and_counted() {

@@ -115,7 +115,7 @@ impl Spy {
                     };
                     // A client that breaks its connection ends only that connection. An accept
                     // error (out of file descriptors) ends tokio-modbus's loop: it is said once
-                    // per spell, counted, and serving starts again (issue 24: the server stopped
+                    // per spell, counted, and serving starts again (the server stopped
                     // for good while the process went on).
                     let mut said = false;
                     loop {

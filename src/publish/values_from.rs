@@ -23,7 +23,7 @@ pub fn start(
     url: &str,
     prefix: Option<&str>,
     emulated: Arc<Emulated>,
-    audit: Option<Arc<crate::bridge::audit::Audit>>,
+    audit: Option<Arc<crate::output::audit::Audit>>,
 ) -> anyhow::Result<()> {
     let mut options = vec!["--mqtt", url, "--mqtt-writes"];
     if let Some(p) = prefix {
@@ -58,7 +58,7 @@ pub fn start(
                     }
                 };
                 if let Some(a) = &audit {
-                    let who = crate::bridge::audit::Who { transport: "mqtt", address: None, role: None };
+                    let who = crate::output::audit::Who { transport: "mqtt", address: None, role: None };
                     a.record_set(
                         &who,
                         ask.unit,

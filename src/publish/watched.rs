@@ -1,9 +1,9 @@
-//! Connections of the spy server under the bridge's rules (issue 24): a connection silent for
+//! Connections of the spy server under the bridge's rules: a connection silent for
 //! the idle timeout is closed, and when every place is taken the gateway's one seat decision
-//! ([`mbtap_gateway::seats::for_room`], issue 38) says whose place the newcomer takes — a socket
+//! ([`mbtap_gateway::seats::for_room`]) says whose place the newcomer takes — a socket
 //! that never sent a byte, then the one stalled longest, else the idlest — instead of being
 //! refused while idle sockets hold every place. (It had a rule of its own, a 200 ms grace for
-//! silent sockets, which issue 38 found lets a flood of young silent sockets starve newcomers.)
+//! silent sockets, which lets a flood of young silent sockets starve newcomers.)
 //! tokio-modbus runs each connection's request loop itself; the stream it is given
 //! ([`Watched`]) keeps the time of the last byte read and ends (EOF) when it idles out or is
 //! evicted.
@@ -165,7 +165,7 @@ mod tests {
         let older = t.open();
         tokio::time::advance(Duration::from_millis(10)).await;
         let _young = t.open();
-        // Issue 38's rule, the bridge's: a silent socket gives its place at once, whatever its
+        // The bridge's rule: a silent socket gives its place at once, whatever its
         // age (a 200 ms grace let a flood of young silent sockets starve newcomers), the one
         // opened first before younger ones.
         assert!(t.evict_idlest(Instant::now()));

@@ -50,7 +50,7 @@ mod tests {
         d
     }
 
-    /// Issue 15: `simulate --link` and `tap --link` deleted whatever was at the path.
+    /// `simulate --link` and `tap --link` deleted whatever was at the path.
     #[test]
     fn a_regular_file_at_the_link_is_refused_and_kept() {
         let d = dir("file");

@@ -152,17 +152,17 @@ pub fn ended_note(path: &Path) -> Option<String> {
 mod tests {
     use super::*;
 
-    /// Issue 42: a `--record` session ending said nothing of its file. It says where, how many
+    /// A `--record` session ending said nothing of its file. It says where, how many
     /// valid frames (as a replay counts them: the Display's examples are 8) and how big.
     #[test]
-    fn regression_issue_42_a_recording_is_said_with_its_frames_when_it_ends() {
+    fn a_recording_is_said_with_its_frames_when_it_ends() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("captures/display-examples-rtu.pcapng");
         let note = ended_note(&path).unwrap();
         assert!(note.contains("(8 valid frames, ") && note.contains("mbtap replay "), "{note}");
         assert_eq!(ended_note(Path::new("/nonexistent/x.pcapng")), None);
     }
 
-    /// Issue 15: a full disk ended `sniff` and `tap`; the message did not name the file.
+    /// A full disk ended `sniff` and `tap`; the message did not name the file.
     #[test]
     fn a_full_disk_stops_the_recording_not_the_caller_and_names_the_file() {
         // /dev/full accepts the open and fails every write with ENOSPC, as a full disk does.

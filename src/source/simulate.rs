@@ -76,7 +76,7 @@ pub struct SimulateOptions {
     /// listener (`mbtap sniff`) to hear.
     pub poll: Option<PollOptions>,
     /// `--audit`: requests on the pseudo-terminal that may change a device, recorded.
-    pub audit: Option<Arc<crate::bridge::audit::Audit>>,
+    pub audit: Option<Arc<crate::output::audit::Audit>>,
 }
 
 /// The built-in master's settings.
@@ -207,7 +207,7 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
                     None if request.unit == 0 => "broadcast (no answer)".to_owned(),
                     None => "not answered: no device here has this address".to_owned(),
                 };
-                let who = crate::bridge::audit::Who { transport: "pty", address: None, role: None };
+                let who = crate::output::audit::Who { transport: "pty", address: None, role: None };
                 audit.record(&who, request.unit, &change, &outcome);
             }
             let Some((pdu, wait)) = answered else { continue };

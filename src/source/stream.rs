@@ -86,7 +86,7 @@ impl<'a> Transport<'a> {
 /// buffering and the network's split and join the line's bytes far beyond t3.5 at any baud rate,
 /// so silences shorter than this are not taken as frame ends (sniffing) or as the end of an
 /// answer whose length its structure does not give (the bridge). One figure for every command:
-/// the bridge had 50 ms and sniff 100 ms for the same kind of line (issue 43).
+/// the bridge had 50 ms and sniff 100 ms for the same kind of line.
 pub const SERIAL_SERVER_LATENCY: u64 = 100_000_000;
 
 /// An open line.
@@ -152,7 +152,7 @@ impl LineStream {
                 while !telnet.configured {
                     // A server that talks without end before agreeing (an endless
                     // subnegotiation) is no RFC 2217 server: given up at once, not read at full
-                    // speed until the timeout (issue 38: 97 % CPU).
+                    // speed until the timeout (97 % CPU).
                     if received > NEGOTIATION_LIMIT {
                         return Err(format!(
                             "{addr} sent {received} bytes without agreeing to the COM port option (RFC 2217); not a serial server the bridge can set"
@@ -186,7 +186,7 @@ impl LineStream {
     }
 
     /// Drops what was received and not read (a late answer, noise): it must not be taken for
-    /// the next request's answer. Bounded (issue 38: a server streaming garbage kept this loop
+    /// the next request's answer. Bounded (a server streaming garbage kept this loop
     /// reading, never yielding, and stalled every route): at most [`CLEAR_LIMIT`] bytes a call;
     /// what is left is the answer check's to drop. Returns the bytes dropped.
     pub fn clear_input(&mut self) -> usize {

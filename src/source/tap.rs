@@ -114,7 +114,7 @@ pub async fn tap<W: Write>(
                     (APP_PORT, n)
                 }
                 // The application closed its end (EIO on the master): wait for it to reopen.
-                // What was heard so far is flushed now (issue 24: a SIGKILL after the
+                // What was heard so far is flushed now (a SIGKILL after the
                 // application closed lost the last transactions), and the loop goes on to its
                 // own flushes (a `continue` here skipped them for as long as it stayed closed).
                 _ => {

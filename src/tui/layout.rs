@@ -37,7 +37,7 @@ fn u16_at(b: &[u8], i: usize) -> Option<u16> {
 
 /// The fields of a frame (`bytes` as from [`binary`]); `ascii` says the check is one LRC byte;
 /// `first` is the first register address a response's values belong to (its request's), so
-/// they are numbered as the device numbers them — as the decode beside them does (issue 31:
+/// they are numbered as the device numbers them — as the decode beside them does (
 /// they were numbered from 0).
 #[must_use]
 pub fn fields(bytes: &[u8], is_request: bool, ascii: bool, first: Option<u16>) -> Vec<Field> {
@@ -171,7 +171,7 @@ mod tests {
         let resp = [0x01, 0x03, 0x04, 0x00, 0x0A, 0x01, 0x02, 0xAA, 0xBB];
         let f = fields(&resp, false, false, Some(128));
         let labels: Vec<&str> = f.iter().map(|f| f.label.as_str()).collect();
-        // Issue 31: numbered as the device numbers them (from the request's 128), not from 0.
+        // Numbered as the device numbers them (from the request's 128), not from 0.
         assert_eq!(labels, ["unit", "function", "byte count", "register 128", "register 129", "CRC"]);
         let unknown: Vec<String> = fields(&resp, false, false, None).into_iter().map(|f| f.label).collect();
         assert_eq!(unknown[3..5], ["register +0", "register +1"]);

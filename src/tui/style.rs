@@ -1,6 +1,6 @@
 //! How the views write and colour the figures they share (times, durations, function names,
 //! a row's status): a leaf every view and the frame's renderer take from, so the views and the
-//! renderer that calls them never import each other (issue 26).
+//! renderer that calls them never import each other.
 
 use ratatui::style::{Color, Style};
 

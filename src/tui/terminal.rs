@@ -71,7 +71,7 @@ impl Shared {
 
 /// The producer's messages (what it would print on stderr), shown on the status line: the
 /// terminal belongs to the UI. A message arrives in pieces (`writeln!` writes each formatted
-/// part apart): the line is shown once it is whole (issue 42: the status line showed only the
+/// part apart): the line is shown once it is whole (the status line showed only the
 /// last piece of one, a stray `)`).
 #[derive(Debug)]
 pub struct NoticeWriter {
@@ -119,10 +119,10 @@ impl Write for NoticeWriter {
 mod notice_tests {
     use super::*;
 
-    /// Issue 42: the status line began with a stray `)` — the last piece `writeln!` wrote of
+    /// The status line began with a stray `)` — the last piece `writeln!` wrote of
     /// "sniffing PORT at … (reads trusted to …)" taken for the whole message.
     #[test]
-    fn regression_issue_42_a_message_written_in_pieces_is_shown_whole() {
+    fn a_message_written_in_pieces_is_shown_whole() {
         let line = mbtap_analysis::framer::LineSettings {
             baud: 19_200,
             data_bits: 8,
@@ -257,7 +257,7 @@ fn ui_loop(terminal: &mut ratatui::DefaultTerminal, shared: &Shared, source: &st
 }
 
 /// What an export says: every row shown, or how many of them and why the rest were not
-/// (issue 31: "(27 shown)" beside "exported 26 rows" — a row the model had already let go of,
+/// ("(27 shown)" beside "exported 26 rows" — a row the model had already let go of,
 /// the oldest when memory is full, was shown in the list but could not be written).
 fn export_said(path: &str, exported: usize, shown: usize) -> String {
     if exported >= shown {
@@ -354,7 +354,7 @@ fn write_pcapng(rows: &[&Row], model: &Model, out: &mut dyn Write) -> std::io::R
 mod tests {
     use super::*;
 
-    /// Issue 31: "(27 shown)" and "exported 26 rows" with nothing said of the difference.
+    /// "(27 shown)" and "exported 26 rows" with nothing said of the difference.
     #[test]
     fn an_export_says_what_it_left_out_and_why() {
         assert_eq!(export_said("x.jsonl", 27, 27), "exported all 27 rows shown to x.jsonl");
@@ -377,7 +377,7 @@ mod tests {
         assert_eq!(p.delay(9_000_000_000, Speed::Max, start), None);
     }
 
-    /// Issue 16 regression: exports within the same second overwrote each other (same name,
+    /// Exports within the same second overwrote each other (same name,
     /// `File::create` truncating).
     #[test]
     fn exports_in_the_same_second_get_their_own_files_and_never_truncate() {

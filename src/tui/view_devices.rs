@@ -12,7 +12,7 @@ use super::style::{clock, duration};
 
 pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &App, model: &Model) {
     // The table takes what its units need (a header, borders, a row each), the findings the
-    // rest, wrapped (issue 42: six of ten findings, cut at the right, under a mostly empty
+    // rest, wrapped (six of ten findings, cut at the right, under a mostly empty
     // devices pane).
     let units = u16::try_from(model.devices.len().saturating_sub(app.device_offset)).unwrap_or(u16::MAX);
     let [bus, table, findings] =

@@ -54,7 +54,7 @@ fn timing_findings(r: &Report) -> Vec<(&'static str, Option<u8>)> {
 }
 
 #[test]
-fn regression_issue_25_a_healthy_bus_through_a_16_ms_usb_timer_gives_no_timing_finding() {
+fn a_healthy_bus_through_a_16_ms_usb_timer_gives_no_timing_finding() {
     for glitch in [0.0, 1.0] {
         let r = report(&tight_bus(L9600, glitch, None), Observation::USB_16MS);
         assert_eq!(timing_findings(&r), [], "glitch {glitch}: {}", r.text());
@@ -62,7 +62,7 @@ fn regression_issue_25_a_healthy_bus_through_a_16_ms_usb_timer_gives_no_timing_f
 }
 
 #[test]
-fn regression_issue_25_a_healthy_bus_through_a_16550_fifo_gives_no_timing_finding() {
+fn a_healthy_bus_through_a_16550_fifo_gives_no_timing_finding() {
     for line in [L9600, L19200] {
         let r = report(&tight_bus(line, 0.3, None), Observation::FIFO_16550);
         assert_eq!(timing_findings(&r), [], "{line}: {}", r.text());
@@ -70,13 +70,13 @@ fn regression_issue_25_a_healthy_bus_through_a_16550_fifo_gives_no_timing_findin
 }
 
 #[test]
-fn regression_issue_25_a_master_waiting_just_past_t35_is_not_fast_through_a_1_ms_usb_timer() {
+fn a_master_waiting_just_past_t35_is_not_fast_through_a_1_ms_usb_timer() {
     let r = report(&tight_bus(L19200, 1.0, None), Observation::USB_1MS);
     assert_eq!(timing_findings(&r), [], "{}", r.text());
 }
 
 #[test]
-fn regression_issue_25_the_slow_unit_is_named_alone_through_a_fifo_and_a_16_ms_timer() {
+fn the_slow_unit_is_named_alone_through_a_fifo_and_a_16_ms_timer() {
     for model in [Observation::FIFO_16550, Observation::USB_16MS] {
         let r = report(&tight_bus(L9600, 0.0, Some(17)), model);
         assert_eq!(timing_findings(&r), [("gap_inside_frame", Some(17))], "{}: {}", model.name(), r.text());
@@ -88,7 +88,7 @@ fn regression_issue_25_the_slow_unit_is_named_alone_through_a_fifo_and_a_16_ms_t
 /// late, got no finding — the resolution was the latency plus a character (1.4 ms). Where every
 /// read holds one byte only the delays' spread is uncertain: the unit is named, no other.
 #[test]
-fn regression_issue_40_a_two_character_pause_read_byte_by_byte_names_the_unit() {
+fn a_two_character_pause_read_byte_by_byte_names_the_unit() {
     let cfg = TrafficConfig { slow_unit_chars: 2, ..tight_bus(L9600, 0.0, Some(17)) };
     let r = report(&cfg, Observation::PER_BYTE_JITTER);
     assert_eq!(timing_findings(&r), [("gap_inside_frame", Some(17))], "{}", r.text());
@@ -98,7 +98,7 @@ fn regression_issue_40_a_two_character_pause_read_byte_by_byte_names_the_unit() 
 }
 
 #[test]
-fn regression_issue_25_pauses_the_reads_cannot_resolve_are_said_once_not_blamed() {
+fn pauses_the_reads_cannot_resolve_are_said_once_not_blamed() {
     // 30 characters at 115200 are 2.6 ms: nothing a 16 ms timer can show.
     let line = LineSettings { baud: 115_200, data_bits: 8, parity: Parity::None, stop_bits: 1 };
     let r = report(&tight_bus(line, 0.0, Some(17)), Observation::USB_16MS);
@@ -114,7 +114,7 @@ fn regression_issue_25_pauses_the_reads_cannot_resolve_are_said_once_not_blamed(
 /// lone glitch bytes reported as noise behind a 16 ms timer. A healthy bus gets no finding but
 /// its turnaround glitches (and unit 33's absence, which is true).
 #[test]
-fn regression_issue_25_healthy_glitchy_lines_get_no_finding_but_their_glitches() {
+fn healthy_glitchy_lines_get_no_finding_but_their_glitches() {
     let l115200 = LineSettings { baud: 115_200, data_bits: 8, parity: Parity::None, stop_bits: 1 };
     let cells = [
         (Observation::PerByte, L9600, 700, 1.0),

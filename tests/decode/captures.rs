@@ -237,7 +237,7 @@ fn non_zero_pairs(txt: &str, first_of: &dyn Fn(usize) -> u64) -> std::collection
 /// voltages as u32 "carries", 0x4516 1000…4000 as a constant and a u16, 12.0 over a zero low
 /// word as u16, two 0.7 as the text "?333?333". Judged by block: all 43, and nothing else joined.
 #[test]
-fn regression_issue_40_learn_types_every_float_of_a_three_phase_meter_by_its_blocks() {
+fn learn_types_every_float_of_a_three_phase_meter_by_its_blocks() {
     let learned = learned("rtu-shape-three-phase-floats.pcapng");
     let floats = non_zero_pairs("rtu-shape-three-phase-floats.txt", &|k| if k % 2 == 0 { 0 } else { 200 });
     assert_eq!(floats.len(), 43);
@@ -256,7 +256,7 @@ fn regression_issue_40_learn_types_every_float_of_a_three_phase_meter_by_its_blo
 /// word first, zeros between them): the frequency 0x4248 0x3333 (50.05 Hz) at 8206/8207 was
 /// joined as 8205/8206 low word first (50.0), against every other pair of the same answer.
 #[test]
-fn regression_issue_40_learn_keeps_a_blocks_word_order_and_alignment_on_two_polls() {
+fn learn_keeps_a_blocks_word_order_and_alignment_on_two_polls() {
     let learned = learned("rtu-shape-single-phase-floats.pcapng");
     let floats = non_zero_pairs("rtu-shape-single-phase-floats.txt", &|k| if k % 2 == 0 { 0x2000 } else { 0x4000 });
     assert_eq!(floats.len(), 9);

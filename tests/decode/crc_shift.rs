@@ -288,7 +288,7 @@ const VENDOR_ANSWER_247: [u8; 13] = [0xF7, 0x41, 0x78, 0x8D, 0xBA, 0x23, 0x93, 0
 /// failing its check — `check_errors` against a healthy unit. The answer starts with the
 /// request's unit and function: the CRC match before it ends the request.
 #[test]
-fn regression_issue_25_a_vendor_request_and_answer_in_one_read_at_the_line_start_are_two_frames() {
+fn a_vendor_request_and_answer_in_one_read_at_the_line_start_are_two_frames() {
     assert_eq!(rtu(0xF7, &VENDOR_REQUEST_247[1..5]), VENDOR_REQUEST_247, "the request's CRC");
     assert_eq!(rtu(0xF7, &VENDOR_ANSWER_247[1..11]), VENDOR_ANSWER_247, "the answer's CRC");
     let mut line = Line::new();
@@ -309,7 +309,7 @@ fn regression_issue_25_a_vendor_request_and_answer_in_one_read_at_the_line_start
 /// frame. The request and its `00` check as one 8-byte frame too (CRC-16's shift property) and
 /// nothing is known yet of the master's glitches: both readings are shown.
 #[test]
-fn regression_issue_25_a_vendor_answer_and_its_fe_glitch_at_the_line_start_are_a_frame_and_a_glitch() {
+fn a_vendor_answer_and_its_fe_glitch_at_the_line_start_are_a_frame_and_a_glitch() {
     let mut line = Line::new();
     line.send(0, &VENDOR_REQUEST_247);
     line.send(0, &[0x00]);

@@ -89,7 +89,7 @@ fn events_cover_every_byte_once() {
 /// that are unambiguous about their length decide the twins — far fewer shown with two lengths,
 /// and far fewer with the wrong one first, than a framer that does not learn them.
 #[test]
-fn regression_issue_25_vendor_lengths_learned_per_unit_decide_crc_00_twins() {
+fn vendor_lengths_learned_per_unit_decide_crc_00_twins() {
     let cfg = TrafficConfig {
         seed: 2525,
         line: L19200,
@@ -144,7 +144,7 @@ fn vendor_line_with(
 /// — its learned length never asked; and a corrupted vendor request glued to the next frame
 /// checked as one long "frame" of a length its function never has. Zero now on this line.
 #[test]
-fn regression_issue_25_vendor_twins_glued_to_noise_take_their_learned_length() {
+fn vendor_twins_glued_to_noise_take_their_learned_length() {
     let s = vendor_line(L9600, 42, 0.0, Observation::USB_16MS);
     assert_eq!(s.false_valid, 0, "{s:?}");
     assert!(s.good_ratio() > 0.999, "{s:?}");
@@ -154,7 +154,7 @@ fn regression_issue_25_vendor_twins_glued_to_noise_take_their_learned_length() {
 /// makes three readings that check (7, 8 and 9 bytes): the frame is the second — a sender
 /// leaves one glitch byte — where the first used to be taken through a FIFO.
 #[test]
-fn regression_issue_25_a_frame_ending_in_00_and_its_00_glitch_is_the_longer_reading() {
+fn a_frame_ending_in_00_and_its_00_glitch_is_the_longer_reading() {
     let s = vendor_line(L19200, 43, 1.0, Observation::FIFO_16550);
     assert_eq!(s.false_valid, 0, "{s:?}");
 }
@@ -167,7 +167,7 @@ fn regression_issue_25_a_frame_ending_in_00_and_its_00_glitch_is_the_longer_read
 /// values were counted, and `00`s after requests nobody answers (a silence after them, not a
 /// frame). None now.
 #[test]
-fn regression_issue_25_glitches_between_frames_are_glitches_behind_a_usb_timer() {
+fn glitches_between_frames_are_glitches_behind_a_usb_timer() {
     let t35 = L19200.t35_ns();
     let cfg = TrafficConfig {
         seed: 701,
@@ -194,7 +194,7 @@ fn regression_issue_25_glitches_between_frames_are_glitches_behind_a_usb_timer()
 /// Where reads batch bytes, that silence is a lower bound and the glitch after the longer frame
 /// outweighs it.
 #[test]
-fn regression_issue_25_a_vendor_answer_ending_in_00_and_its_ff_before_the_latency_is_learned() {
+fn a_vendor_answer_ending_in_00_and_its_ff_before_the_latency_is_learned() {
     let s = vendor_line(L19200, 43, 1.0, Observation::USB_16MS);
     assert_eq!(s.false_valid, 0, "{s:?}");
 }
@@ -206,7 +206,7 @@ fn regression_issue_25_a_vendor_answer_ending_in_00_and_its_ff_before_the_latenc
 /// first few vendor frames had only the odds. Its learned length now reads a unit's twins once
 /// one frame of it was certain, and a unit's very first vendor frames wait for that.
 #[test]
-fn regression_issue_40_vendor_twins_are_read_by_what_their_unit_was_heard_sending() {
+fn vendor_twins_are_read_by_what_their_unit_was_heard_sending() {
     for model in [Observation::PerByte, Observation::FIFO_16550, Observation::USB_1MS, Observation::USB_16MS] {
         let s = vendor_line(L9600, 42, 0.3, model);
         assert_eq!(s.false_valid, 0, "{model:?} {s:?}");
@@ -223,7 +223,7 @@ fn regression_issue_40_vendor_twins_are_read_by_what_their_unit_was_heard_sendin
 /// tells: the unit's next requests of that function have 7 bytes. The framer now holds such a
 /// twin, and what follows it, until then; without the hold the wrong length comes first.
 #[test]
-fn regression_issue_40_a_units_first_vendor_twin_waits_for_what_the_line_does_next() {
+fn a_units_first_vendor_twin_waits_for_what_the_line_does_next() {
     let held = vendor_line(L9600, 42, 0.3, Observation::USB_16MS);
     let unheld = vendor_line_with(
         L9600,

@@ -106,7 +106,7 @@ fn an_energy_meter_sheet_with_modicon_numbers_and_floats() {
 /// reading is said as a warning naming --type, and `--type f32` makes floats of it. Without
 /// --table the closing hint names --table, not --columns.
 #[test]
-fn regression_issue_42_a_sheet_without_a_type_column_says_so_and_takes_type() {
+fn a_sheet_without_a_type_column_says_so_and_takes_type() {
     let (p, err) = import("floats-no-type.csv", &["--table", "input"]);
     assert!(err.contains("no type column") && err.contains("--type f32"), "{err}");
     let text = annotate(&p.path, &read(0x04, 0, &[0x4366, 0x1999]));
@@ -129,7 +129,7 @@ fn regression_issue_42_a_sheet_without_a_type_column_says_so_and_takes_type() {
 /// `export` took the name; and it counted the registers a float covers (21) where import had
 /// counted entries (13). One resolver, one count.
 #[test]
-fn regression_issue_42_an_imported_profile_is_checked_by_name_with_import_s_count() {
+fn an_imported_profile_is_checked_by_name_with_import_s_count() {
     let name = format!("issue42-{}", std::process::id());
     let f = fixture("floats-no-type.csv");
     let out = run(&["profiles", "import", f.to_str().unwrap(), "--table", "input", "--type", "f32", "--name", &name]);
@@ -461,7 +461,7 @@ fn ods_row(address: u16, name: &str) -> String {
 /// and counting); it is refused by counting them from its XML, before the reader expands them —
 /// and a plain OpenDocument sheet still imports.
 #[test]
-fn regression_issue_39_an_ods_whose_repeats_expand_past_memory_is_refused_unexpanded() {
+fn an_ods_whose_repeats_expand_past_memory_is_refused_unexpanded() {
     let filler = r#"<table:table-row table:number-rows-repeated="1048000"><table:table-cell table:number-columns-repeated="16000"/></table:table-row>"#;
     let wide = r#"<table:table-row><table:table-cell table:number-columns-repeated="16000"/><table:table-cell office:value-type="string"><text:p>x</text:p></table:table-cell></table:table-row>"#;
     let bomb = ods("bomb", &format!("{}{filler}{wide}", ods_row(100, "volts")));
@@ -582,7 +582,7 @@ fn workbook_stream(globals: &[u8], cells: &[Vec<u8>]) -> Vec<u8> {
 /// out: the far cell is one cell (said skipped, no address), `Dimensions` is not needed, and a
 /// record too short to read is said, with its offset.
 #[test]
-fn regression_issue_39_xls_workbooks_the_reader_blew_up_on_are_read_cell_by_cell() {
+fn xls_workbooks_the_reader_blew_up_on_are_read_cell_by_cell() {
     let (code, err, text) = import_holding(&xls("plain", &[], &[]));
     assert_eq!(code, Some(0), "{err}");
     assert!(text.contains("volts"), "{text}");
@@ -663,7 +663,7 @@ fn xls_bytes(tag: &str, bytes: &[u8]) -> tempfile_path::TempProfile {
 /// and a chain that loops (the reader never ended) and a length past the file (the reader
 /// allocated it) are refused.
 #[test]
-fn regression_issue_39_an_xls_container_is_read_as_the_workbook_reader_reads_it() {
+fn an_xls_container_is_read_as_the_workbook_reader_reads_it() {
     const NOSTREAM: u32 = 0xFFFF_FFFF;
     let far = workbook_stream(&[], &[number(65_535, 255, 1.0)]);
     let plain = workbook_stream(&[], &[]);
@@ -849,7 +849,7 @@ fn calamine_rows(path: &std::path::Path, sheet: &str) -> Vec<(usize, Vec<String>
 /// cells, for cells of every kind and shared strings carried on across `Continue` records — and
 /// the stream read in pieces from the file as from memory.
 #[test]
-fn regression_issue_39_an_xls_sheet_read_by_its_records_reads_as_the_workbook_reader_reads_it() {
+fn an_xls_sheet_read_by_its_records_reads_as_the_workbook_reader_reads_it() {
     use mbtap_device::profile::import::{xls_container, xls_rows};
     use std::ops::ControlFlow;
     // Version 3 (512-byte sectors): calamine opens a version 4 file only with a mini stream.
@@ -977,7 +977,7 @@ fn xlsb(tag: &str, far: Option<(u32, u32)>) -> tempfile_path::TempProfile {
 /// out the 17 billion cells between A1 and it); XLSB sheets are now read cell by cell as XLSX
 /// ones are: the far row refused, a far column's cell counted, a plain sheet imported.
 #[test]
-fn regression_issue_39_an_xlsb_cell_far_away_costs_one_cell() {
+fn an_xlsb_cell_far_away_costs_one_cell() {
     let (code, err, text) = import_holding(&xlsb("plain", None));
     assert_eq!(code, Some(0), "{err}");
     assert!(text.contains("volts"), "{text}");
@@ -1007,7 +1007,7 @@ const SHUFFLED_SHEET: &str = "address,name,table,type,length\n\
 /// the point it overlaps (read back from the import's scratch file), with nothing left beside
 /// the profile.
 #[test]
-fn regression_issue_39_a_streamed_import_writes_what_the_collected_one_does() {
+fn a_streamed_import_writes_what_the_collected_one_does() {
     use mbtap_device::profile::import::grid::Grid;
     use mbtap_device::profile::import::sheet::{SheetOptions, parse_sheet};
     let dir = std::env::temp_dir().join(format!("mbtap-import-stream-{}", std::process::id()));
@@ -1067,7 +1067,7 @@ const ODS_SHAPES: &str = r#"<table:table-row table:number-rows-repeated="2"><tab
 /// (52.9 MB for a 655 kB sheet); the import now streams the sheet's rows itself. What it reads
 /// must be what the workbook reader reads: every row at the same number with the same cells.
 #[test]
-fn regression_issue_39_an_ods_sheet_streamed_reads_as_the_workbook_reader_reads_it() {
+fn an_ods_sheet_streamed_reads_as_the_workbook_reader_reads_it() {
     use std::io::Read as _;
     use std::ops::ControlFlow;
     let file = ods("shapes", ODS_SHAPES);

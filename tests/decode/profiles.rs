@@ -140,7 +140,7 @@ fn impossible_line_settings_and_scales_are_refused_where_they_stand() {
 /// the frame. A code whose structure gives the length, or a length no frame has, is refused
 /// with its line.
 #[test]
-fn regression_issue_25_a_profile_declares_vendor_frame_lengths() {
+fn a_profile_declares_vendor_frame_lengths() {
     let dir = std::env::temp_dir().join(format!("mbtap-vendor-lengths-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let profile = dir.join("vendor.toml");

@@ -5,22 +5,7 @@ use crate::chunk::{Chunk, PortId, Timestamp};
 use crate::framer::{AsciiFramer, Frame, FrameEvent, FramerConfig, Noise, RtuFramer};
 use crate::pairing::{Pairing, PairingConfig, Role, Transaction};
 
-/// Serial transmission mode.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum SerialMode {
-    Rtu,
-    Ascii,
-}
-
-impl SerialMode {
-    #[must_use]
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Rtu => "rtu",
-            Self::Ascii => "ascii",
-        }
-    }
-}
+pub use mbtap_proto::serial_line::SerialMode;
 
 /// Analyzer settings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -217,7 +202,7 @@ impl Analyzer {
                 PortFramer::Ascii(f) => f.tick(now, &mut emit),
             }
         }
-        // A request's answer may be held behind an undecided twin (issue 40): pairing gives up
+        // A request's answer may be held behind an undecided twin: pairing gives up
         // on nothing later than what is held, or a live session would call a request
         // unanswered whose answer a replay of the same bytes pairs with it.
         let held = self.ports.iter().filter_map(|(_, f)| match f {
@@ -335,11 +320,11 @@ mod declared_length_tests {
         out
     }
 
-    /// Issue 25: a profile may declare a vendor function's lengths; the first answer of the
+    /// A profile may declare a vendor function's lengths; the first answer of the
     /// day, whose CRC ends in `00` and which its glitch follows, is then read at its length —
     /// before any has been learned from the line.
     #[test]
-    fn regression_issue_25_a_profiles_vendor_length_decides_the_first_twin() {
+    fn a_profiles_vendor_length_decides_the_first_twin() {
         let declared = [(1, 0x41, true, 7), (1, 0x41, false, 14)];
         assert_eq!(frames(&declared), [(7, true), (14, true)]);
         // Nothing declared, nothing learned yet: the odds of a line never seen to glitch take
@@ -347,12 +332,12 @@ mod declared_length_tests {
         assert_eq!(frames(&[]), [(7, true), (15, true)]);
     }
 
-    /// Issue 40: the answer, a twin nothing decides, is held (see `framer::rtu::hold`); a live
+    /// The answer, a twin nothing decides, is held (see `framer::rtu::hold`); a live
     /// session's ticks go on meanwhile. They called the request unanswered at its timeout, and
     /// the held answer an orphan when it came out — where a replay of the same bytes, which
     /// ticks only as frames come, pairs them.
     #[test]
-    fn regression_issue_40_a_request_is_not_given_up_while_its_answer_is_held() {
+    fn a_request_is_not_given_up_while_its_answer_is_held() {
         use crate::pairing::Outcome;
         let mut a = Analyzer::new(AnalyzerConfig::default());
         let outcomes = std::cell::RefCell::new(Vec::new());

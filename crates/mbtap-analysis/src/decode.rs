@@ -75,7 +75,7 @@ fn split_rtu(wire: &[u8]) -> Option<Vec<Piece>> {
     use crate::chunk::{Chunk, PortId, Timestamp};
     use crate::framer::{FrameEvent, FramerConfig, RtuFramer};
     // Pasted text has no timing: one read, nothing known about silences.
-    // Units 0 and 248–255 are cut like any other (issue 25): a pasted line is one device's
+    // Units 0 and 248–255 are cut like any other: a pasted line is one device's
     // traffic, often at the "whoever is connected" address 254 or 255.
     let mut framer = RtuFramer::new(PortId(0), FramerConfig { pasted: true, ..FramerConfig::default() });
     let mut pieces = Vec::new();

@@ -30,7 +30,8 @@ pub mod capture;
 pub mod chunk;
 pub mod decode;
 pub mod decode_lines;
-pub mod duration;
+/// Durations as typed (`250ms`, `2min`): the protocol crate's parser, one for every crate.
+pub use mbtap_proto::duration;
 pub mod framer;
 pub mod fuzzing;
 pub mod health;

@@ -45,7 +45,7 @@ impl LineOverrides {
             parity: self.parity.unwrap_or(d.parity),
             stop_bits: self.stop_bits.unwrap_or(d.stop_bits),
         };
-        // "Not given" stays distinct from 0 (issue 43: commands rebuilt it from the option).
+        // "Not given" stays distinct from 0 (commands rebuilt it from the option).
         (mode, line, self.latency_ns)
     }
 

@@ -326,11 +326,11 @@ fn clean(pdu: &[u8], hint: DirectionHint) -> bool {
 #[cfg(test)]
 mod tests {
 
-    /// Issue 42: "latency 0.000 ms" was shown beside rows saying "not measurable"; a latency is
+    /// "latency 0.000 ms" was shown beside rows saying "not measurable"; a latency is
     /// shown only where it is above zero and at least what the reads resolve, else its bound or
     /// "not measurable" — one rule for text, JSON and the terminal UI.
     #[test]
-    fn regression_issue_42_a_latency_is_shown_only_where_the_reads_resolve_it() {
+    fn a_latency_is_shown_only_where_the_reads_resolve_it() {
         const RESPONSE: &[u8] = &[0x01, 0x03, 0x02, 0x00, 0x07];
         let t = |latency_ns, latency_resolution_ns| Transaction {
             outcome: Outcome::Ok,
@@ -426,7 +426,7 @@ mod tests {
         assert_eq!(tx, [(9, Outcome::NoResponse, None), (8, Outcome::NoResponse, None), (1, Outcome::Ok, Some(4))]);
     }
 
-    /// Issue 26: a transaction carries its frames' PDUs as the framer decoded them, so no
+    /// A transaction carries its frames' PDUs as the framer decoded them, so no
     /// consumer splits the wire bytes again; a damaged answer's PDU is not handed on as values.
     #[test]
     fn transactions_carry_their_pdus_and_a_damaged_answer_none() {

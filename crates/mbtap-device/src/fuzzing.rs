@@ -60,7 +60,7 @@ pub fn query(data: &[u8]) {
 }
 
 /// Any bytes as a register sheet (lines of `,`-separated cells; the first byte chooses the
-/// default table and whether columns are given) and as Home Assistant YAML (issue 27): read,
+/// default table and whether columns are given) and as Home Assistant YAML: read,
 /// imported, exported — never a panic, and every imported profile loads and exports.
 ///
 /// # Panics
@@ -106,7 +106,7 @@ pub fn profile_import(data: &[u8]) {
     }
 }
 
-/// Any strings as a profile's device, name, register names and units (issue 39): exported to
+/// Any strings as a profile's device, name, register names and units: exported to
 /// every target, each export parsed back as its tool reads it (YAML, TOML) and every name and
 /// unit read back equal — nothing a string holds can end a comment or a scalar early.
 ///
@@ -170,7 +170,7 @@ pub fn export_escape(data: &[u8]) -> usize {
         for (n, unit) in &names {
             assert!(got.contains(&n.as_str()), "{target:?}: {n:?} not read back from\n{}", e.text);
             if let (Some(u), Target::HomeAssistant) = (unit, target) {
-                // A known unit goes out as Home Assistant spells it (issue 42), any other as written.
+                // A known unit goes out as Home Assistant spells it, any other as written.
                 let u = crate::profile::ha_classes::ha_class(u).map_or(u.as_str(), |c| c.unit);
                 let found =
                     list.as_array().is_some_and(|a| a.iter().any(|x| x["unit_of_measurement"].as_str() == Some(u)));
@@ -181,7 +181,7 @@ pub fn export_escape(data: &[u8]) -> usize {
     names.len()
 }
 
-/// Any bytes as a SunSpec device's registers (issue 27): the chain walked from register 0 the
+/// Any bytes as a SunSpec device's registers: the chain walked from register 0 the
 /// way `read --device sunspec` walks it, every model decoded whatever its ID and length, and
 /// the bytes as a point name — never a panic.
 pub fn sunspec(data: &[u8]) {

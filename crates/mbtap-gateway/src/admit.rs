@@ -25,7 +25,7 @@ use crate::rules::{
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Refusal {
     /// Longer or shorter than its function allows: its extra bytes would reach the line as a
-    /// frame of their own (issue 24). 03.
+    /// frame of their own. 03.
     Malformed,
     /// A TLS client whose certificate carries no role, or a role no rule names. 01.
     NoRole,
@@ -40,7 +40,7 @@ pub enum Refusal {
     /// A broadcast (unit 0) that is not a write (Serial Line v1.02 §2.1). 01.
     BroadcastNotWrite,
     /// A broadcast (unit 0) without `--allow-broadcast`: it would change every device on the
-    /// line at once (issue 38: a broker client's `unit/0/…/set` did). 01.
+    /// line at once (a broker client's `unit/0/…/set` did). 01.
     Broadcast,
     /// No `--route` serves the unit. 0A.
     NoRoute,
@@ -380,7 +380,7 @@ pub fn parse_roles(values: &[String]) -> Result<Roles, BadValue> {
                 _ => return Err(bad(format!("{rule:?} is not functions:…, units:…, read-only or all"))),
             }
         }
-        // Fail closed (issue 24): `admin=` or an empty [roles.admin] let a client do everything.
+        // Fail closed: `admin=` or an empty [roles.admin] let a client do everything.
         if !any {
             return Err(bad(format!(
                 "role {name:?} has no rules; an empty rule set would allow everything — give functions:…, units:…, read-only, or `all` to allow everything on purpose"
@@ -404,7 +404,7 @@ mod tests {
     const READ_ONE: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x01];
     /// Write single register 1 = 3 (MAP v1.1b3 §6.6): function 06, address 0001, value 0003.
     const WRITE_ONE: [u8; 5] = [0x06, 0x00, 0x01, 0x00, 0x03];
-    /// A read with one byte too many behind it (issue 24: a smuggled frame).
+    /// A read with one byte too many behind it (a smuggled frame).
     const READ_TOO_LONG: [u8; 6] = [0x03, 0x00, 0x00, 0x00, 0x01, 0x06];
     /// A vendor read, function 0x46 (user-defined, MAP v1.1b3 §5).
     const VENDOR: [u8; 3] = [0x46, 0x00, 0x00];
@@ -484,7 +484,7 @@ mod tests {
         assert_eq!(p.admit(ask(0, &WRITE_ONE), None, Duration::ZERO).map(|a| a.target), Ok(0));
     }
 
-    /// Issue 38 (`mqtt_bridge_writes.py`, `mqtt_sparkplug.py`): a broker client's write to unit
+    /// (`mqtt_bridge_writes.py`, `mqtt_sparkplug.py`): a broker client's write to unit
     /// 0 went out as a broadcast, "ok": true. Unit 0 is refused from every front unless
     /// `--allow-broadcast`, the broker's writes included, and a unit mapped to 0 as well.
     #[test]
@@ -504,7 +504,7 @@ mod tests {
         assert_eq!(p.admit(viewer, None, Duration::ZERO), Err(Refusal::Role));
     }
 
-    /// Issue 38 (`round3/policy_probe.py`): `--read-only --allow-function 8` let an FC08/0000
+    /// (`round3/policy_probe.py`): `--read-only --allow-function 8` let an FC08/0000
     /// with a CRC-valid write frame in its data reach the line, where a slave framing by
     /// structure executed the write.
     #[test]
@@ -565,7 +565,7 @@ mod tests {
         let all: IpNet = "0.0.0.0/0".parse().unwrap();
         assert!(all.contains("10.1.2.3".parse().unwrap()));
         assert!("10.0.0.0/33".parse::<IpNet>().is_err());
-        // Issue 15: a mapped address on the allow-list matched no client.
+        // A mapped address on the allow-list matched no client.
         let mapped: IpNet = "::ffff:127.0.0.1".parse().unwrap();
         assert!(mapped.contains("127.0.0.1".parse().unwrap()));
         assert!(mapped.contains("::ffff:127.0.0.1".parse().unwrap()));

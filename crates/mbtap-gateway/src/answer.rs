@@ -97,7 +97,7 @@ mod tests {
         assert_eq!(check(1, &WRITE_10, 1, &WRITE_10), Ok(()));
     }
 
-    /// Issue 38: `tcp://` handed these to the client; the serial path dropped them.
+    /// `tcp://` handed these to the client; the serial path dropped them.
     #[test]
     fn tcp_device_misfits_are_named() {
         assert_eq!(check(1, &READ_TWO, 2, &ANSWER_TWO), Err(Misfit::Unit), "another unit's answer");

@@ -52,7 +52,7 @@ impl Breaker {
 mod tests {
     use super::*;
 
-    /// Issue 15: eight clients polling a dead unit cost the line a timeout each; a good unit's
+    /// Eight clients polling a dead unit cost the line a timeout each; a good unit's
     /// client got 3 answers in 8. The breaker opens after three failures, probes once per
     /// backoff (doubling to 30 s), and closes on the first answer.
     #[test]

@@ -46,7 +46,7 @@ pub fn parse_rule(spec: &str) -> Result<Rule, BadValue> {
         return Err(bad("the range runs backwards"));
     }
     // More than nothing (an age of 0 would cache nothing), at most a day.
-    let max_age = mbtap_analysis::duration::parse_duration(age, Duration::from_millis(1), Duration::from_hours(24))
+    let max_age = mbtap_proto::duration::parse_duration(age, Duration::from_millis(1), Duration::from_hours(24))
         .map_err(|e| bad(&e))?;
     Ok(Rule { units, table, first, last, max_age })
 }
@@ -100,7 +100,7 @@ pub struct Cache {
     rules: Vec<Rule>,
     values: BTreeMap<(u8, Table, u16), (u16, Duration)>,
     /// Writes begun and not yet done, by id: a read they may change is not answered from
-    /// memory (issue 24: a client pipelining "write h101, read h101" read the old value).
+    /// memory (a client pipelining "write h101, read h101" read the old value).
     writes: BTreeMap<WriteId, (u8, Vec<u8>)>,
     next_write: u64,
 }
@@ -279,7 +279,7 @@ mod tests {
         assert_eq!(c.lookup(1, &[0x03, 0x00, 0x00, 0x00, 0x01], t0), Some(vec![0x03, 0x02, 0x00, 0x0A]));
     }
 
-    /// Issue 24, the decision moved into the core (issue 38: the shell kept these writes).
+    /// The core decides which writes the cache waits for (the shell only keeps them).
     #[test]
     fn a_read_behind_a_write_not_yet_done_is_not_answered_from_memory() {
         let t0 = Duration::from_secs(10);

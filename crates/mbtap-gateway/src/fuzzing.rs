@@ -4,8 +4,8 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use mbtap_analysis::analyzer::SerialMode;
-use mbtap_analysis::framer::LineSettings;
+use mbtap_proto::serial_line::LineSettings;
+use mbtap_proto::serial_line::SerialMode;
 
 use crate::timeouts::{TimeoutMode, Timeouts};
 use crate::transaction::{EchoMode, MasterConfig, SerialMaster, Step};

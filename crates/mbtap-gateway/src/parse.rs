@@ -1,7 +1,7 @@
 //! The bridge's option values as written on the command line and in its file: routes, unit
 //! lists, function codes, unit maps. A leaf: the modules that read options (cache, timing,
 //! roles, priorities) take their parsers from here, not from the orchestrator that imports them
-//! all (issue 26: that made the files of `src/bridge/` one import circle). Each error names the
+//! all (that made the files of `src/bridge/` one import circle). Each error names the
 //! option's value and what is expected.
 
 use std::collections::BTreeMap;

@@ -14,7 +14,7 @@ pub type ClientId = u64;
 pub enum Full {
     /// The client already has its share waiting.
     Client,
-    /// The line has its bound waiting, all clients together (issue 38: 3 000 UDP source ports
+    /// The line has its bound waiting, all clients together (3 000 UDP source ports
     /// queued 95 358 requests, 79 min of line time).
     Line,
 }
@@ -256,7 +256,7 @@ mod tests {
         assert_eq!(q.len(), 3);
     }
 
-    /// Issue 38 (`udp_queue_flood.py`): every source port a client with its own 32, no bound
+    /// (`udp_queue_flood.py`): every source port a client with its own 32, no bound
     /// for them together. The line now has one; a client leaving gives its room back.
     #[test]
     fn udp_flood_the_line_bounds_all_clients_together() {

@@ -175,7 +175,7 @@ impl Telnet {
             // Our DO acknowledged (binary, go-ahead); anything else the server offers is declined.
             WILL if matches!(option, BINARY | SGA) => {}
             WILL => self.refuse(DONT, option, reply),
-            // Binary refused (issue 38: used anyway, and answers holding 0D came out wrong): the
+            // Binary refused (used anyway, and answers holding 0D came out wrong): the
             // stream is NVT text that way, its CR NUL undone or made.
             WONT if option == BINARY => self.nvt_in = true,
             DONT if option == BINARY => self.nvt_out = true,
@@ -242,7 +242,7 @@ mod tests {
         assert!(reply.is_empty());
     }
 
-    /// Issue 38 (`rfc2217_probe.py` telnet-nobinary): a server refusing BINARY sends a CR as
+    /// (`rfc2217_probe.py` telnet-nobinary): a server refusing BINARY sends a CR as
     /// CR NUL; the NUL was taken for a line byte and answers holding 0D failed.
     #[test]
     fn a_server_refusing_binary_is_read_and_written_as_nvt() {

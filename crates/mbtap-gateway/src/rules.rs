@@ -47,7 +47,7 @@ pub fn broadcastable(fc: u8) -> bool {
 /// Diagnostics (08) is framed by such slaves as sub-function and one data word for every
 /// sub-function — 0000 Return Query Data included (MAP v1.1b3 §6.8 lets its data run on; the
 /// slave does not know where it ends): a longer one would put its tail on the line as a frame
-/// of its own (issue 38: a write smuggled in an FC08/0000 under `--allow-function 8`).
+/// of its own (a write smuggled in an FC08/0000 under `--allow-function 8`).
 #[must_use]
 pub fn forwardable_length(pdu: &[u8]) -> bool {
     !matches!(pdu.first(), Some(0x08)) || pdu.len() == 5

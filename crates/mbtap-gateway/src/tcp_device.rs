@@ -12,7 +12,7 @@ use crate::answer::{Misfit, check};
 #[derive(Debug, Clone, Default)]
 pub struct TcpDevice {
     /// The id generator's state (splitmix64): each request's id is drawn from it, so neither the
-    /// first nor the next id can be told from the ids seen (issue 38: ids counted from 0, and a
+    /// first nor the next id can be told from the ids seen (ids counted from 0, and a
     /// device answering ahead under id + 1 had its answer taken for the next request's).
     state: u64,
     last_id: Option<u16>,
@@ -158,7 +158,7 @@ mod tests {
         u16::from_be_bytes([adu[0], adu[1]])
     }
 
-    /// Issue 38 (`upstream_tcp.py` ahead): ids counted from 0, one by one; a device answering
+    /// (`upstream_tcp.py` ahead): ids counted from 0, one by one; a device answering
     /// ahead under id + 1 had that answer taken for the next request's. Ids now come from the
     /// shell's seed, and the next is not the last + 1.
     #[test]
@@ -198,7 +198,7 @@ mod tests {
         assert_eq!(dropped.late, 1);
     }
 
-    /// Issue 38 (`upstream_tcp.py` wrongunit, wrongfc, longer, stale): answers under the awaited
+    /// (`upstream_tcp.py` wrongunit, wrongfc, longer, stale): answers under the awaited
     /// id that do not fit its request reached the client; now dropped, and the right one taken.
     #[test]
     fn tcp_device_answers_that_do_not_fit_the_request_are_dropped() {

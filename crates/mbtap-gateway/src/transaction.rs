@@ -13,9 +13,9 @@
 
 use std::time::Duration;
 
-use mbtap_analysis::analyzer::SerialMode;
 use mbtap_proto::answer_end::{Verdict, judge_ascii, judge_rtu};
 use mbtap_proto::parse_ascii;
+use mbtap_proto::serial_line::SerialMode;
 
 use crate::answer::check;
 
@@ -147,7 +147,7 @@ impl Transaction<'_> {
                     self.notes.push(Note::Heard { port: 1, bytes: got.to_vec() });
                 }
                 buf.extend_from_slice(got);
-                // Bounded (issue 38: a serial server streaming garbage grew this to gigabytes):
+                // Bounded (a serial server streaming garbage grew this to gigabytes):
                 // no answer is longer than the longest ADU, so older bytes cannot begin it.
                 let cap = self.master.config.max_adu();
                 if let Some(excess) = buf.len().checked_sub(cap).filter(|&n| n > 0) {
@@ -207,7 +207,7 @@ impl Transaction<'_> {
             last = now;
         }
         // Bytes already in hand are judged before waiting for more: the answer may be whole
-        // (issue 25: an ASCII answer that came in place of an echo waited for the 1 s silence).
+        // (an ASCII answer that came in place of an echo waited for the 1 s silence).
         let judge_now = !initial.is_empty();
         self.phase = Phase::Answer { buf: initial, last, collision };
         if judge_now { self.judge(now, false) } else { self.next_wait(now) }
@@ -221,7 +221,7 @@ impl Transaction<'_> {
         loop {
             if config.mode == SerialMode::Rtu && turnaround_glitch(buf, self.unit) {
                 // A transceiver's turnaround glitch before the answer (00, FE or FF): dropped,
-                // as `read` and the sniffer do (issue 24: the bridge answered 0x0B).
+                // as `read` and the sniffer do (the bridge answered 0x0B).
                 buf.remove(0);
             }
             let verdict = match config.mode {
@@ -328,7 +328,7 @@ impl Transaction<'_> {
             self.master.timeouts.timed_out(self.unit);
             self.notes.push(Note::WaitedInVain(self.timeout));
             // A unit slower than the timeout answers later: that answer must reach no one
-            // (issue 24: the answer to h150 went to the client asking h160). The line is
+            // (the answer to h150 went to the client asking h160). The line is
             // listened to once this client has its 0x0B (a retry of the same request may take
             // the late answer: it is that request's).
             self.master.suspect.insert(self.unit);
@@ -371,7 +371,7 @@ mod tests {
 
     use super::*;
     use crate::timeouts::{TimeoutMode, Timeouts};
-    use mbtap_analysis::framer::LineSettings;
+    use mbtap_proto::serial_line::LineSettings;
     use mbtap_proto::{encode_ascii, encode_rtu};
 
     /// Read holding registers 0–1 (MAP v1.1b3 §6.3): function 03, address 0000, quantity 0002.
@@ -480,7 +480,7 @@ mod tests {
         assert!(notes.contains(&Note::UnitTimeout(TIMEOUT)));
     }
 
-    /// Issue 24: an answer behind a transceiver's turnaround glitch (FE) got 0x0B.
+    /// An answer behind a transceiver's turnaround glitch (FE) got 0x0B.
     #[test]
     fn a_turnaround_glitch_before_an_answer_in_two_reads_is_set_aside() {
         let mut m = master(SerialMode::Rtu, EchoMode::Off, 0);
@@ -529,7 +529,7 @@ mod tests {
         assert_eq!(count(&notes, &Note::Timeout), 3);
     }
 
-    /// Issue 24: a slow unit's late answer to h150 went to the client asking h160.
+    /// A slow unit's late answer to h150 went to the client asking h160.
     #[test]
     fn a_late_answer_to_another_request_reaches_no_one() {
         let mut m = master(SerialMode::Rtu, EchoMode::Off, 0);
@@ -643,7 +643,7 @@ mod tests {
         assert_eq!(noisy.wait_until(), ms(200));
     }
 
-    /// Issue 38 (`garbage_stream.py`): a serial server streaming garbage held the line twice the
+    /// (`garbage_stream.py`): a serial server streaming garbage held the line twice the
     /// window after every timeout. More bytes than the longest answer end the listening.
     #[test]
     fn garbage_stream_ends_the_late_listener_at_once() {
@@ -656,7 +656,7 @@ mod tests {
         assert_eq!(l.wait_until(), ms(2), "nothing more to wait for");
     }
 
-    /// Issue 38 (`garbage_stream.py`): the answer buffer grew to gigabytes while a server
+    /// (`garbage_stream.py`): the answer buffer grew to gigabytes while a server
     /// streamed garbage that began with the unit's address. It now holds at most one ADU.
     #[test]
     fn garbage_stream_the_answer_buffer_holds_at_most_one_adu() {
@@ -680,7 +680,7 @@ mod tests {
         assert_eq!(t.outcome().map(|o| o.reply.clone()), Some(Reply::Gateway(GATEWAY_TARGET_FAILED)));
     }
 
-    /// Regression (issue 26, found by the `gateway` fuzz target): bytes that stay pending after
+    /// Regression (found by the `gateway` fuzz target): bytes that stay pending after
     /// their silence — an answer to a two-register read whose byte count says 5 — made the
     /// machine ask to wait until a moment already past, and the shell spun on it until the
     /// deadline. Now the wait after the silence runs to the deadline.
@@ -708,7 +708,7 @@ mod tests {
         }
     }
 
-    /// Regression (issue 26, found by the `gateway` fuzz target): a collision judged when the
+    /// Regression (found by the `gateway` fuzz target): a collision judged when the
     /// shell next looked — long after the last byte — asked for a pause until a moment already
     /// past. A pause never ends before it is asked for.
     #[test]

@@ -258,7 +258,7 @@ mod tests {
         assert!(matches!(parse_frame_text("010"), Err(HexInputError::OddDigits { column: 1, .. })));
     }
 
-    /// Issue 16: real log formats were rejected ("'.' is not a hex digit").
+    /// Real log formats were rejected ("'.' is not a hex digit").
     #[test]
     fn log_lines_keep_their_bytes_and_set_aside_timestamp_and_tag() {
         let want = vec![0x01, 0x03, 0x00, 0x65, 0x00, 0x03, 0x15, 0xD4];
@@ -281,8 +281,8 @@ mod tests {
         assert_eq!(parse_log_line("Tx: 01 0G"), Err(HexInputError::BadDigit { column: 9, found: 'G' }));
     }
 
-    /// Issue 16: `decode ":"` said "ASCII frame of 3 bytes" (its added CR LF counted).
-    /// Issue 31: Modbus Poll's log lines decoded their line counter as noise.
+    /// `decode ":"` said "ASCII frame of 3 bytes" (its added CR LF counted).
+    /// Modbus Poll's log lines decoded their line counter as noise.
     #[test]
     fn modbus_polls_line_counter_is_set_aside() {
         // Modbus Poll log: Tx:COUNTER-request, Rx:COUNTER-response (MK4 §3.3 read of 101..103).

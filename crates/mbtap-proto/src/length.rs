@@ -279,7 +279,7 @@ mod tests {
         assert_eq!(response_len(&pdu), PduLength::Exact(pdu.len()));
         assert_eq!(response_len(&pdu[..8]), PduLength::AtLeast(9));
     }
-    /// Issue 24: a read with a whole write frame behind it reached the line as two frames.
+    /// A read with a whole write frame behind it reached the line as two frames.
     #[test]
     fn a_request_longer_than_its_function_allows_is_named() {
         // FC 03, address 0x0064, quantity 1 — then `01 06 00 65 00 2A` + CRC smuggled behind.
@@ -296,7 +296,7 @@ mod tests {
         assert_eq!(request_len_problem(&[0x41, 1, 2, 3]), None, "a vendor code fixes no length");
     }
 
-    /// Issue 24: a late answer to another request was handed to the next client.
+    /// A late answer to another request was handed to the next client.
     #[test]
     fn an_answer_must_fit_its_request() {
         let read2 = [0x03, 0x00, 0xA0, 0x00, 0x02];

@@ -21,6 +21,7 @@ pub mod ascii;
 pub mod checksum;
 pub mod data;
 pub mod decode;
+pub mod duration;
 pub mod error;
 pub mod findings;
 pub mod function;

@@ -11,6 +11,24 @@ pub enum Parity {
     Odd,
 }
 
+/// Serial transmission mode (Serial Line v1.02 §2.5: RTU, binary with a CRC and silences between
+/// frames; ASCII, hex characters between `:` and CR LF with an LRC).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SerialMode {
+    Rtu,
+    Ascii,
+}
+
+impl SerialMode {
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Rtu => "rtu",
+            Self::Ascii => "ascii",
+        }
+    }
+}
+
 /// Serial line settings. The default is the spec's: 19200 baud, 8 data bits, even parity, 1 stop
 /// bit (Modbus over Serial Line v1.02 §2.5.1: "even parity is required" by default, §3.3.1
 /// 19200 default baud rate).

@@ -202,7 +202,7 @@ mod tests {
         assert_eq!(r.torn_at, None);
     }
 
-    /// Issue 30: a power cut mid-append must cost the torn record only, never the buffer.
+    /// A power cut mid-append must cost the torn record only, never the buffer.
     #[test]
     fn a_torn_last_record_is_skipped_and_the_rest_kept() {
         let f = file(&[b"one", b"two", b"three"]);

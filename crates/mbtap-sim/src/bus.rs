@@ -285,10 +285,10 @@ mod tests {
         [[holding_registers]]\naddress = 20\nname = \"H20\"\n\n\
         [[input_registers]]\naddresses = [0, 1]\nname = \"I{n}\"\n";
 
-    /// Regression (issue 41): `simulate --poll --device FILE@N` polled nothing for a profile
+    /// Regression: `simulate --poll --device FILE@N` polled nothing for a profile
     /// without a built-in poll list, and the line loop then spun without end, `--duration` unseen.
     #[test]
-    fn regression_issue_41_a_profile_without_a_poll_list_is_polled_over_its_mapped_runs() {
+    fn a_profile_without_a_poll_list_is_polled_over_its_mapped_runs() {
         let p = mbtap_device::profile::loader::load("other.toml", OTHER).unwrap();
         let mut bus = VirtualBus::new(vec![Slave::new(Arc::new(p), 7)], LineSettings::default());
         assert_eq!(bus.poll_count(), 3, "holding 10–12, holding 20, input 0–1");
@@ -359,7 +359,7 @@ mod tests {
         }
     }
 
-    /// Issue 30: a unit that loses power, for DDEATH and DBIRTH — silent through its window of
+    /// A unit that loses power, for DDEATH and DBIRTH — silent through its window of
     /// every minute, answering before and after; the other units never miss a turn.
     #[test]
     fn an_outage_silences_the_last_unit_for_its_window_only() {

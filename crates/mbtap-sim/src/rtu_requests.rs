@@ -148,7 +148,7 @@ mod tests {
         assert_eq!(a.pending(), 0);
     }
 
-    /// Issue 15: a CRC-valid request whose byte count disagrees with its quantity (write 0
+    /// A CRC-valid request whose byte count disagrees with its quantity (write 0
     /// registers from 0x0160 with 6 data bytes) was dropped: the master timed out where the
     /// device answers exception 03. It is a request: the silence after it ends it.
     const LYING_BYTE_COUNT: [u8; 15] = [
@@ -170,7 +170,7 @@ mod tests {
         assert_eq!(a.silence(), Some(RequestFrame { unit: 0x11, pdu: LYING_BYTE_COUNT[1..13].to_vec() }));
     }
 
-    /// Issue 15: a client streaming `0x41` (a function whose length only silence ends) kept
+    /// A client streaming `0x41` (a function whose length only silence ends) kept
     /// every byte and rescanned all of them on every read: quadratic, the bridge at 100 % CPU.
     #[test]
     fn a_stream_of_garbage_is_held_to_one_frame_and_scanned_once() {

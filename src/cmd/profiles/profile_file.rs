@@ -1,4 +1,4 @@
-//! The imported profile written as it is read (issue 39: the points and the profile's text held
+//! The imported profile written as it is read (the points and the profile's text held
 //! in memory took 20× a sheet of tiny rows). Each point's entry goes to a scratch file beside the
 //! profile as the point comes (unlinked at once: nothing is left behind if the import is
 //! killed), in blocks of 64 KiB; memory keeps the addresses taken (1 MiB, each holding the
@@ -218,7 +218,7 @@ impl<'e> ProfileFile<'e> {
         self.problems
     }
 
-    /// When nothing was imported: the fix the problems point to (issue 42: "check the header
+    /// When nothing was imported: the fix the problems point to ("check the header
     /// row or give --columns" where every row wanted --table).
     pub fn hint(&self) -> Option<&'static str> {
         (self.ledger.is_empty()).then_some(if self.wanted_table {
@@ -347,12 +347,12 @@ mod tests {
         }
     }
 
-    /// Issue 39 review: records go to the scratch file in 64 KiB blocks and the ledger keeps
+    /// Records go to the scratch file in 64 KiB blocks and the ledger keeps
     /// their offsets, nothing per point. A clash names the other point whether its record is
     /// still in the block, on disk, or on disk and longer than one read; the profile lists every
     /// point in address order.
     #[test]
-    fn regression_issue_39_a_clash_names_the_other_point_from_the_block_or_the_disk() {
+    fn a_clash_names_the_other_point_from_the_block_or_the_disk() {
         let dir = std::env::temp_dir().join(format!("mbtap-profile-file-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let mut err = Vec::new();

@@ -1,4 +1,4 @@
-//! XLSX and XLSB sheets read through calamine's cell reader at each pass (issue 39: a cell at
+//! XLSX and XLSB sheets read through calamine's cell reader at each pass (a cell at
 //! XFD1048576 costs one cell, not a dense range), and what calamine opens otherwise — an ODS
 //! without its `mimetype` — laid out as a grid, bounded.
 

@@ -1,4 +1,4 @@
-//! A CSV sheet's rows, streamed from its file at each of the sheet reader's passes (issue 39).
+//! A CSV sheet's rows, streamed from its file at each of the sheet reader's passes.
 
 use std::io::{BufRead as _, Read as _};
 use std::ops::ControlFlow;

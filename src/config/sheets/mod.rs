@@ -3,7 +3,7 @@
 //! `ods.rs`), and Home Assistant YAML (`yaml.rs`) — row and column numbers as the spreadsheet
 //! shows them, so a problem's "row 7, column C" is where the user looks.
 //!
-//! Bounded before anything is allocated (issue 39): a CSV over [`MAX_FILE_BYTES`] or a workbook
+//! Bounded before anything is allocated: a CSV over [`MAX_FILE_BYTES`] or a workbook
 //! that unpacks to more than [`MAX_UNPACKED_BYTES`] is refused unread; every sheet is streamed
 //! row by row at each of the sheet reader's passes, nothing laid out, so a cell placed at
 //! XFD1048576 costs one cell, not a dense range of 17 billion.
@@ -40,7 +40,7 @@ fn too_big(path: &Path, what: &str) -> anyhow::Error {
 }
 
 /// A workbook's sheet as rows: XLSX and XLSB read from the file cell by cell at each pass, XLS
-/// and ODS by our own readers at each pass (the rows are never held: issue 39); only a workbook
+/// and ODS by our own readers at each pass (the rows are never held); only a workbook
 /// calamine opens some other way (an ODS without its `mimetype`) is laid out as a grid, bounded
 /// by the checks before.
 #[derive(Debug)]

@@ -1,5 +1,5 @@
 //! OpenDocument and zip-based workbooks: the zip checked before anything is unpacked, an ODS
-//! sheet's rows streamed from its `content.xml` by our own row reader at each pass (issue 39).
+//! sheet's rows streamed from its `content.xml` by our own row reader at each pass.
 
 use std::io::Read as _;
 use std::ops::ControlFlow;
@@ -18,7 +18,7 @@ pub const MAX_ODS_CELLS: u64 = 3 << 20;
 pub const MAX_ODS_TEXT: u64 = 64 << 20;
 
 /// Refuses an OpenDocument workbook whose repeated rows and cells expand past
-/// [`MAX_ODS_CELLS`] or [`MAX_ODS_TEXT`], counted from its `content.xml` streamed (issue 39: an
+/// [`MAX_ODS_CELLS`] or [`MAX_ODS_TEXT`], counted from its `content.xml` streamed (an
 /// 873-byte workbook expanded past 17 GB while being opened).
 fn check_ods<R: std::io::Read + std::io::Seek>(path: &Path, zip: &mut zip::ZipArchive<R>) -> anyhow::Result<()> {
     use mbtap_device::profile::import::ods_size::parse_ods_size;

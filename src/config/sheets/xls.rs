@@ -1,5 +1,5 @@
 //! XLS workbooks, read by our own record reader (`xls_rows.rs`) from the workbook stream's
-//! pieces of the file (issue 39).
+//! pieces of the file.
 
 use std::io::Read as _;
 use std::ops::ControlFlow;
@@ -23,7 +23,7 @@ pub(super) fn is_compound(path: &Path) -> bool {
 /// An XLS workbook's sheet `sheet` (by name), or its first, read by our own reader
 /// (`xls_rows.rs`): the container is read whole once to find where the workbook stream lies
 /// (then let go), the globals once — sheet names and offsets, the shared strings, kept — and
-/// the sheet's records from the file at each pass (issue 39: calamine laid every sheet out
+/// the sheet's records from the file at each pass (calamine laid every sheet out
 /// densely when it opened the file, 8.7× a 4.4 MB sheet; cells at A1 and IV65536 took 1 GB).
 pub(super) fn open_xls(path: &Path, sheet: Option<&str>) -> anyhow::Result<WorkbookRows> {
     use mbtap_device::profile::import::xls_container::parse_xls_stream;

@@ -151,7 +151,7 @@ impl Outbox {
         }
         if retained {
             // A command is an act of now: a retained one would be carried out again at every
-            // start and reconnect by whoever once left it (issue 39; Sparkplug B 3.0 §6.4.13:
+            // start and reconnect by whoever once left it (Sparkplug B 3.0 §6.4.13:
             // NCMD/DCMD are published with retain false). Ignored, said once.
             if !self.commands.said_retained {
                 self.commands.said_retained = true;

@@ -57,7 +57,7 @@ impl Clock {
         // a backward jump (only a forward step after a backward jump can end a lone one). A
         // forward jump — any pause over JUMP_NS, which a polled line has between most polls —
         // is remembered and handed on as it is: it took the slow path for 2 packets in 3 of
-        // the per-frame benchmark capture (issue 40).
+        // the per-frame benchmark capture.
         if self.offset == 0
             && let Some(last) = self.last
             && raw >= last.raw
@@ -141,7 +141,7 @@ mod tests {
         assert_eq!(v[1], Verdict::Backwards { by_ns: 20_000 });
     }
 
-    /// Issue 16: one flipped bit (+4 295 s) in one stamp held every later packet at that value.
+    /// One flipped bit (+4 295 s) in one stamp held every later packet at that value.
     #[test]
     fn a_lone_stamp_ahead_is_named_and_later_packets_keep_their_spacing() {
         let jumped = 10 * S + 2 * MS + 4_295 * S;
@@ -184,7 +184,7 @@ mod tests {
         assert!(out.windows(2).all(|w| w[0] <= w[1]), "{out:?}");
     }
 
-    /// Issue 40: the fast path now takes forward jumps too (a polled line's pauses); it must
+    /// The fast path now takes forward jumps too (a polled line's pauses); it must
     /// hand on what the general path does, verdict for verdict, on any mix of jitter, pauses,
     /// jumps either way and lone jumps.
     #[test]

@@ -127,7 +127,7 @@ impl TurnaroundStats {
         #[allow(clippy::cast_precision_loss)]
         let odds = AMBIGUOUS_ODDS as f64;
         // Too few frames from the likely sender to say it never glitches (a line's first
-        // frames): nothing is known, and both readings are shown (issue 25).
+        // frames): nothing is known, and both readings are shown.
         let seen = match sender {
             Sender::Master => self.master.frames,
             Sender::Slave => self.slave.frames,
@@ -153,9 +153,9 @@ mod tests {
     use super::*;
 
     /// Was: a vendor request ending in `00` as a line's first frame was taken whole without
-    /// doubt, though nothing was known yet of whether its sender glitches (issue 25).
+    /// doubt, though nothing was known yet of whether its sender glitches.
     #[test]
-    fn regression_issue_25_a_lines_first_frames_show_both_readings_of_a_trailing_zero() {
+    fn a_lines_first_frames_show_both_readings_of_a_trailing_zero() {
         let mut s = TurnaroundStats::default();
         assert_eq!(s.zero_tail(Sender::Unknown), ZeroTail { glitch_likelier: false, ambiguous: true });
         for _ in 0..FIRST_FRAMES {

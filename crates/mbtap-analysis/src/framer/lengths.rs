@@ -1,7 +1,7 @@
 //! Frame lengths learned per unit, function and direction, where the function's structure
 //! does not fix them (vendor codes, Diagnostics sub-functions, Report Server ID): a device
 //! sends the same vendor function with the same lengths all day, so the frames that are
-//! unambiguous tell which length a CRC-`00` twin has (issue 25).
+//! unambiguous tell which length a CRC-`00` twin has.
 //!
 //! A frame is unambiguous about its length when neither twin of CRC-16/MODBUS's shift property
 //! exists: its last byte is not `00` (else it validates one byte shorter) and the byte after it
@@ -68,7 +68,7 @@ pub(crate) struct LearnedLengths {
     seen: BTreeMap<(u8, u8, u8), [(u16, u32); PER_KEY]>,
     /// The function codes with a key in `seen`, as bits: the question asked of every frame
     /// that checks is answered without a map lookup for the functions never learned (the
-    /// standard ones, whose lengths their structure fixes; issue 40's replay speed).
+    /// standard ones, whose lengths their structure fixes; the replay's speed).
     functions: [u64; 4],
     /// Off: nothing is learned (to measure what learning does).
     on: bool,
@@ -102,7 +102,7 @@ impl LearnedLengths {
         }
     }
 
-    /// A valid frame `f` from `sender` was emitted, and `after` it what followed. Issue 40: a
+    /// A valid frame `f` from `sender` was emitted, and `after` it what followed: a
     /// vendor request to a unit that never answers is followed by a silence, never by a byte
     /// when it goes out — such a unit's lengths were never learned, and its frames' trailing
     /// `00` stayed a coin toss all day.
@@ -148,7 +148,7 @@ impl LearnedLengths {
 
     /// Of `short` and `short + 1` bytes, the one every sighting of this unit's function from
     /// `sender` had, however few (one is enough): too weak to decide alone, strong enough to put
-    /// that length first, the other still shown (issue 40: a unit's second vendor request
+    /// that length first, the other still shown (a unit's second vendor request
     /// ending in `00` was read against its first, certain one).
     pub(crate) fn lean(&self, unit: u8, fc: u8, sender: Sender, short: usize) -> Option<usize> {
         if !self.knows(fc) {
@@ -168,7 +168,7 @@ impl LearnedLengths {
     /// every direction `sender` may be has a firm length ([`FIRM`] sightings, [`FIRM_PERCENT`]
     /// of them) and none is `len`? Then the match is far likelier chance (1 in 65 536 per
     /// length tried, inside damage or noise) than the one odd frame of a device that sends
-    /// the same vendor function with the same length all day (issue 25: a corrupted request and
+    /// the same vendor function with the same length all day (a corrupted request and
     /// the frame after it checked as one 21-byte "frame" of a function seen 7 and 14 bytes long).
     pub(crate) fn contradicts(&self, unit: u8, fc: u8, sender: Sender, len: usize) -> bool {
         if !self.knows(fc) {
@@ -279,11 +279,11 @@ mod tests {
         assert_eq!(l.choose(5, 0x03, Sender::Master, 8), None);
     }
 
-    /// Issue 25: a CRC match at a length a unit's vendor function is never seen with is
+    /// A CRC match at a length a unit's vendor function is never seen with is
     /// vetoed only once the learned length is firm, and never for a length either direction
     /// has; with nothing learned, nothing is vetoed.
     #[test]
-    fn regression_issue_25_only_a_firm_length_vetoes_another() {
+    fn only_a_firm_length_vetoes_another() {
         let mut l = LearnedLengths::new(true);
         assert!(!l.contradicts(5, 0x41, Sender::Unknown, 9));
         let (mut requests, mut k) = (0, 0u8);
@@ -309,11 +309,11 @@ mod tests {
         assert!(!l.contradicts(6, 0x41, Sender::Master, 9));
     }
 
-    /// Issue 40: a vendor request to a unit that never answers goes out on the silence after
+    /// A vendor request to a unit that never answers goes out on the silence after
     /// it, no byte behind it; it was never learned from, and that unit's twins stayed a coin
     /// toss all day. A silence after a frame rules out a `00` after it as surely as a byte does.
     #[test]
-    fn regression_issue_40_a_frame_followed_by_a_silence_teaches_its_length() {
+    fn a_frame_followed_by_a_silence_teaches_its_length() {
         let mut l = LearnedLengths::new(true);
         let (mut n, mut k) = (0, 0u8);
         while n < SURE {
@@ -335,10 +335,10 @@ mod tests {
         assert_eq!(m.choose(0x21, 0x41, Sender::Master, 8), None);
     }
 
-    /// Issue 40: one certain sighting puts that length first (with the other still shown);
+    /// One certain sighting puts that length first (with the other still shown);
     /// a function seen at two lengths leans nowhere.
     #[test]
-    fn regression_issue_40_one_sighting_leans_a_twin_towards_its_length() {
+    fn one_sighting_leans_a_twin_towards_its_length() {
         let mut l = LearnedLengths::new(true);
         let f = (0u8..=255).map(|k| vendor(5, &[k, 1])).find(|f| f.last() != Some(&0)).unwrap_or_default();
         l.record(&f, After::Byte(0x05), Sender::Master);
@@ -353,12 +353,12 @@ mod tests {
         assert_eq!(l.lean(5, 0x41, Sender::Master, 6), None);
     }
 
-    /// Issue 40: after a corrupted request the framer still expects one, and the answer that
+    /// After a corrupted request the framer still expects one, and the answer that
     /// follows was weighed as the master's: its twin read against the requests' length (which
     /// fits neither reading), then the odds of the master's `00` glitch — one byte short. The
     /// answers' length decides where the guessed direction's firm length fits neither.
     #[test]
-    fn regression_issue_40_a_frame_whose_guessed_direction_fits_neither_twin_takes_the_other_s() {
+    fn a_frame_whose_guessed_direction_fits_neither_twin_takes_the_other_s() {
         let mut l = LearnedLengths::new(true);
         let (mut n, mut k) = (0, 0u8);
         while n < FIRM {

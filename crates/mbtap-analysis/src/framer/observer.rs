@@ -90,7 +90,7 @@ impl ObserverEstimate {
     ///
     /// Where every read holds one byte, a byte's timestamp is its end plus the observer's delay
     /// for that read: a silence between two bytes is uncertain by how much those delays differ
-    /// — the learned figure, a sixteenth more — and no character (issue 40: a unit pausing 2.3
+    /// — the learned figure, a sixteenth more — and no character (a unit pausing 2.3
     /// ms inside its answers at 9600, read byte by byte with 0.2 ms of jitter, went unnamed
     /// behind a resolution of 1.4 ms).
     pub fn resolution_ns(&self) -> u64 {
@@ -190,7 +190,7 @@ pub(crate) struct ObserverLearner {
     /// Each sender's figure, where it has one (kept apart so the port's figure is cheap).
     figures: Box<[Option<u64>]>,
     /// The slots that have a figure, in the order they got it: the port's figure is taken over
-    /// these, not over all 257 (issue 40: the walk cost replay a percent).
+    /// these, not over all 257 (the walk cost replay a percent).
     active: Vec<usize>,
     /// Whether any sender has [`SETTLED`] batches (it stays so: batches only grow).
     settled: bool,
@@ -253,7 +253,7 @@ impl ObserverLearner {
         self.settled |= self.senders[slot].batches >= SETTLED;
         // The lower median across the senders that have a figure — from those with a median of
         // at least [`SETTLED`] batches where any has one: a sender's first batch may hold its
-        // one pause of the day (issue 25: on a short capture, two units' single batches with a
+        // one pause of the day (on a short capture, two units' single batches with a
         // slow answer each made the port's figure 6.5 ms behind per-byte timestamps).
         let mut all = [0u64; SENDERS];
         let mut n = 0;
@@ -297,10 +297,10 @@ mod tests {
         assert_eq!(l.estimate.effective_latency_ns(), learned);
     }
 
-    /// Issue 25: a unit pausing 30 characters inside every answer made a fifth of the samples,
+    /// A unit pausing 30 characters inside every answer made a fifth of the samples,
     /// raised the one 90th percentile and hid its own pauses.
     #[test]
-    fn regression_issue_25_a_slow_units_pauses_do_not_raise_the_ports_latency() {
+    fn a_slow_units_pauses_do_not_raise_the_ports_latency() {
         // As on a bus: the master sends every request, each unit answers its share.
         let mut l = ObserverLearner::new(0, true, 1_146_000);
         feed(&mut l, SampleSender::Master, 12, |i| 15_000_000 + i % 5 * 100_000);

@@ -321,7 +321,7 @@ fn glitch_summary(who: &str, n: u64, sent: u64) -> String {
 }
 
 impl Health {
-    /// What these reads could not resolve, said once instead of as findings (issue 25).
+    /// What these reads could not resolve, said once instead of as findings.
     fn limits(&self, resolution: u64) -> Vec<String> {
         let unproven = |m: &super::margins::Margins| m.total() - m.proven(resolution).count;
         let gaps: u64 = self.units.values().map(|u| unproven(&u.gaps)).sum();

@@ -53,7 +53,7 @@ pub fn render(report: &Report, title: &str) -> String {
          .kind{{font-family:monospace;font-weight:bold}}</style></head><body>\n<h1>Bus report: {t}</h1>\n",
         t = esc(title)
     );
-    // The date as well as the time (issue 31: a page handed to a customer said neither date
+    // The date as well as the time (a page handed to a customer said neither date
     // nor line settings).
     let span = match (report.first_t_ns, report.last_t_ns) {
         (Some(a), Some(b)) => format!("{} {} to {} ({:.1} s)", date(a), clock(a), clock(b), f(b - a) / 1e9),

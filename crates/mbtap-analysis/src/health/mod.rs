@@ -163,7 +163,7 @@ pub struct Health {
     noise_bytes: u64,
     /// Frames that failed their check while no answer was awaited: garbage that only looked
     /// like a frame, counted apart from noise so every output means the same by "noise"
-    /// (issue 31: the report counted them as noise bursts, replay as failed frames).
+    /// (the report counted them as noise bursts, replay as failed frames).
     stray: Tally,
     stray_bytes: u64,
     frame_bytes: u64,
@@ -341,9 +341,9 @@ impl Health {
         }
         self.resolution_streamed.insert(frame.port.0, frame.resolution_ns);
         // Timing evidence is kept with its margin and judged at report time against the
-        // observer's resolution (issue 25: a 16 ms USB timer's delays were blamed on every unit).
+        // observer's resolution (a 16 ms USB timer's delays were blamed on every unit).
         // A failed frame's address byte names its unit only where that unit was awaited: else
-        // the byte may be the damage itself (issue 25: a garbled answer's `A7` made a unit 167
+        // the byte may be the damage itself (a garbled answer's `A7` made a unit 167
         // row, availability 0.0 %, in the report of a bus that has no unit 167).
         let named = |u: u8| frame.check_ok || self.pending.as_ref().is_some_and(|p| p.unit == u);
         if let (Some(m), Some(u)) = (frame.gap_tolerance_ns, unit.filter(|&u| named(u))) {

@@ -124,7 +124,7 @@ impl Health {
         };
         if annotations.iter().any(|a| a.notes.iter().any(|n| matches!(n, Note::OutOfRange { .. }))) {
             u.out_of_range.add(at);
-            // Which register and value (issue 31: the finding named neither).
+            // Which register and value (the finding named neither).
             for a in annotations {
                 for n in &a.notes {
                     if let Note::OutOfRange { min, max } = n {

@@ -66,7 +66,7 @@ struct DumpIn {
 }
 
 /// [`parse_image_json`] from a reader: rows are read into four numbers each as they stream by,
-/// never into a JSON tree (issue 39: a 100 MB dump took 2.1–3.7 GB as one).
+/// never into a JSON tree (a 100 MB dump took 2.1–3.7 GB as one).
 ///
 /// # Errors
 /// What is wrong and in which row, or where the JSON breaks (line and column).

@@ -194,7 +194,7 @@ fn ms(ns: u64) -> f64 {
 
 /// The same as JSON: `{"transactions": N, "not_kept": {"registers", "other"}, "units": [{"unit", "functions", "blocks", "writes",
 /// "exceptions", "registers": [{"table", "address", "type", "width", "confidence", "evidence"}]}]}`,
-/// serialised as it goes — one register's object at a time, never the whole tree (issue 39: a
+/// serialised as it goes — one register's object at a time, never the whole tree (a
 /// capture of 400 000 registers took 1.8 GB as one tree). `serde_json::to_value` of it gives the
 /// tree where one is wanted.
 #[derive(Debug, Clone, Copy)]

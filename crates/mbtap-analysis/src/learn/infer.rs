@@ -467,10 +467,10 @@ mod tests {
         PairStat::of(samples)
     }
 
-    /// Issue 28, real recordings hold a few polls: the order a float's words come in is decided
+    /// Real recordings hold a few polls: the order a float's words come in is decided
     /// by the bits when only one order is a plausible number, and not at all when both are.
     #[test]
-    fn regression_issue_28_short_series_floats_are_decided_by_their_bits() {
+    fn short_series_floats_are_decided_by_their_bits() {
         // PM5350 frequency, high word first: 0x426F_FC67 = 59.99 Hz; 0xFC67_426F is -4.8e36.
         let hz = pair(&[(0x426F, 0xFC67), (0x426F, 0xF642)]);
         assert!(short_float_fit(&hz, true));

@@ -1,5 +1,5 @@
 //! How a device lays out its 32-bit floats, judged over whole blocks rather than pair by pair
-//! (issue 40): a device uses one word order, and the master reads whole values, so pairs start
+//!: a device uses one word order, and the master reads whole values, so pairs start
 //! at the block's first register and every second one after it. A pair alone cannot say this —
 //! in a block of floats, the pair straddling two values (one's low word, the next one's high
 //! word) reads as a plausible float in the other word order exactly as often as the true pairs
@@ -194,7 +194,7 @@ mod tests {
         PairStat::of(samples)
     }
 
-    /// Issue 40: a single-phase meter's block of floats high word first, two of them zero. Pair
+    /// A single-phase meter's block of floats high word first, two of them zero. Pair
     /// by pair, the straddles around the zeros read as floats low word first (0x0000 0x3F99 as
     /// 1.2); over the block, the pairs aligned with its start decide: high word first, pairs at
     /// 8192, 8194, … .

@@ -330,7 +330,7 @@ mod tests {
         ([0x03, ah, al, 0x00, 0x01], [0x03, 0x02, vh, vl])
     }
 
-    /// Issue 39: a capture of 400 000 distinct registers took 248 MB; what is kept is bounded
+    /// A capture of 400 000 distinct registers took 248 MB; what is kept is bounded
     /// now, and what was not kept is counted and said.
     #[test]
     fn a_capture_of_more_registers_than_kept_is_learned_in_part_and_says_so() {

@@ -1,4 +1,4 @@
-//! Issue 40: 32-bit integers whose high word never moved while recorded. A meter's totals and
+//! 32-bit integers whose high word never moved while recorded. A meter's totals and
 //! a tank's volume (the Display's input 0–3: `73`, then a level around 15 700) keep their high
 //! word for hours; each pair alone reads as a constant beside a 16-bit value, and only the block
 //! says otherwise: where, pair by pair from the block's start, the first word of every pair
@@ -65,11 +65,11 @@ mod tests {
         r
     }
 
-    /// Issue 40: the Display's input 0–7 as `simulate --poll` answers them (31 polls): 73 and a
+    /// The Display's input 0–7 as `simulate --poll` answers them (31 polls): 73 and a
     /// level around 15 700 (u32 0–1), 0 and a counter (u32 2–3), 73 and a level (4–5), two
     /// settings (6, 7). The pairs at 0, 2 and 4 are 32-bit values high word first; 6 is not.
     #[test]
-    fn regression_issue_40_still_high_words_beside_moving_low_words_are_32_bit_values() {
+    fn still_high_words_beside_moving_low_words_are_32_bit_values() {
         let level: Vec<u16> = (0..31).map(|i| 15_680 + (i * 37) % 190).collect();
         let counter: Vec<u16> = (0..31).map(|i| 100 + i * 3).collect();
         let regs: BTreeMap<u16, RegStat> = [
@@ -88,7 +88,7 @@ mod tests {
         assert_eq!(pairs, [(0, true), (2, true), (4, true)].into_iter().collect());
         // One such pair alone is no layout.
         assert!(still_word_pairs(&[(0, 2)], &|a| regs.get(&a)).is_empty());
-        // Issue 40's check on the simulated bus: the MKZP's currents (moving) beside its
+        // Checked on the simulated bus: the MKZP's currents (moving) beside its
         // insulation resistance and pulsation (still), holding 52–55, stay registers of their own.
         let mkzp: BTreeMap<u16, RegStat> =
             [(52, reg(&level)), (53, reg(&[9500; 31])), (54, reg(&level)), (55, reg(&[0; 31]))].into_iter().collect();
@@ -99,11 +99,11 @@ mod tests {
         assert!(still_word_pairs(&[(0, 4)], &|a| mixed.get(&a)).is_empty());
     }
 
-    /// Issue 40, end to end: the Display (unit 5) polled 31 times for input 0–3 (FC 04, MAP
+    /// End to end: the Display (unit 5) polled 31 times for input 0–3 (FC 04, MAP
     /// v1.1b3 §6.4) as `simulate --poll` answers it — the learner drafts two u32 values high
     /// word first (it drafted "constant 73" and a u16 before), trusted at most [`CONFIDENCE`].
     #[test]
-    fn regression_issue_40_the_display_s_fuel_volume_is_drafted_as_a_u32() {
+    fn the_display_s_fuel_volume_is_drafted_as_a_u32() {
         use super::super::kind::Kind;
         use crate::learn::Learner;
         use mbtap_device::profile::Table;

@@ -66,7 +66,7 @@ pub struct Transaction<'a> {
 }
 
 /// A transaction's latency as every output shows it — text, JSON lines and the terminal UI
-/// decide by this one rule (issue 42: "latency 0.000 ms" beside rows saying "not measurable").
+/// decide by this one rule ("latency 0.000 ms" beside rows saying "not measurable").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ShownLatency {
     /// Measured: at least what the reads resolve, and above zero.

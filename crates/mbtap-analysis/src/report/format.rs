@@ -62,7 +62,7 @@ pub fn printable(text: &str) -> std::borrow::Cow<'_, str> {
 
 #[cfg(test)]
 mod tests {
-    /// Issue 16: `^[]0;pwned^G^[[2J` in a profile name retitled and cleared the terminal.
+    /// `^[]0;pwned^G^[[2J` in a profile name retitled and cleared the terminal.
     #[test]
     fn control_characters_never_reach_the_terminal() {
         let hostile = "pump \u{1b}]0;pwned\u{7}\u{1b}[2J\u{9b}31m\r";

@@ -1,5 +1,5 @@
 //! Writing strings that came from outside (profile names, sheet file names, register names,
-//! units) into the files other tools read, so that they stay *values* there (issue 39).
+//! units) into the files other tools read, so that they stay *values* there.
 //!
 //! Three readers matter and each has its own trap:
 //! - **YAML 1.1** (PyYAML and libyaml: Home Assistant, ESPHome). A comment ends at any line break
@@ -227,7 +227,7 @@ mod tests {
     use super::*;
     use serde_json::json;
 
-    /// Names a YAML 1.1 resolver would type (issue 39's probe list), each must be quoted.
+    /// Names a YAML 1.1 resolver would type (the hostile probes' list), each must be quoted.
     const TYPED_WHEN_PLAIN: [&str; 12] =
         ["yes", "No", "ON", "off", "1:20", "12:30:00", "1_000", "2001-12-14", "<<", "=", "~", ".inf"];
 

@@ -1,4 +1,4 @@
-//! A profile out to the tools the rest of a site runs (issue 27): Home Assistant's `modbus:`
+//! A profile out to the tools the rest of a site runs: Home Assistant's `modbus:`
 //! YAML, an ESPHome `modbus_controller` configuration, Telegraf's `inputs.modbus` — the same
 //! registers with their names, types, word order, scale and units. A date/time group goes out as
 //! one register per part; what a tool cannot hold is left out and said (a string for Telegraf's

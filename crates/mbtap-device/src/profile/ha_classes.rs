@@ -1,5 +1,5 @@
 //! A value's unit as Home Assistant spells it, with the device class and state class that go
-//! with it (issue 42: none of the demo's 92 discovery configs had either, so Home Assistant kept
+//! with it (none of the demo's 92 discovery configs had either, so Home Assistant kept
 //! no long-term statistics and the Energy dashboard offered nothing; sheet units passed through
 //! as written — `Volts`, `kWH` — where Home Assistant knows only `V`, `kWh`).
 //!
@@ -85,10 +85,10 @@ pub fn ha_class(unit: &str) -> Option<HaClass> {
 mod tests {
     use super::*;
 
-    /// Issue 42: sheet spellings become Home Assistant's units, with the classes the Energy
+    /// Sheet spellings become Home Assistant's units, with the classes the Energy
     /// dashboard and long-term statistics need; an unknown unit is kept and gets no class.
     #[test]
-    fn regression_issue_42_units_are_spelled_as_home_assistant_does_with_their_classes() {
+    fn units_are_spelled_as_home_assistant_does_with_their_classes() {
         assert_eq!(ha_class("Volts"), Some(m("V", Some("voltage"))));
         assert_eq!(ha_class("kWH"), Some(total("kWh", Some("energy"))));
         assert_eq!(ha_class(" kw "), Some(m("kW", Some("power"))));

@@ -330,7 +330,7 @@ mod serve_tests {
         assert_eq!(img.serve_read(1, Table::HoldingRegisters, 100, 2, 1_501, Some(500)), Err(GATEWAY_TARGET_FAILED));
     }
 
-    /// Issue 39: a register named like a formula is written as text a spreadsheet shows, not runs
+    /// A register named like a formula is written as text a spreadsheet shows, not runs
     /// (round start: `=HYPERLINK(…)` went verbatim into the cell).
     #[test]
     fn formula_names_in_the_csv_image_are_neutralised() {

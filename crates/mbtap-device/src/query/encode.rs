@@ -267,7 +267,7 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
             }
             // A command register (its documented values are commands) takes those values, and
             // numbers in its documented range if it has one — like an enumeration's labels
-            // (issue 24: any number went to the line).
+            // (any number went to the line).
             if !def.commands.is_empty()
                 && !def.commands.contains_key(&raw)
                 && !def.labels.contains_key(&raw)
@@ -429,7 +429,7 @@ mod tests {
         assert_eq!(w.pdu(), [0x06, 0x00, 0x69, 0x00, 0x96]);
     }
 
-    /// Issue 24: a command register took any number (an enumeration outside its list is
+    /// A command register took any number (an enumeration outside its list is
     /// refused; commands now are too).
     #[test]
     fn a_command_register_takes_its_documented_commands_only() {

@@ -152,7 +152,7 @@ fn sf_of(name: &str, laid: &[(&PointDef, usize)], block: &[u16]) -> Option<Scale
     let &(p, at) = laid.iter().find(|(p, _)| p.name == name)?;
     Some(match raw_number(&p.kind, &block[at..at + usize::from(p.size.max(1))]) {
         // A scale factor outside −10…10 is not one (SunSpec Information Model Reference,
-        // `sunssf`): the point is shown without a value, never as "inf V" (issue 39).
+        // `sunssf`): the point is shown without a value, never as "inf V".
         Some(Raw::Int(i)) => {
             i16::try_from(i).ok().filter(|k| (-10..=10).contains(k)).map_or(Scale::Unknown, Scale::Factor)
         }
@@ -279,7 +279,7 @@ mod tests {
         assert_eq!(get("VA").shown, None);
     }
 
-    /// Issue 39 (`ss_sfwild`): a scale factor outside SunSpec's −10…10 (here W_SF = 32767) is
+    /// (`ss_sfwild`): a scale factor outside SunSpec's −10…10 (here W_SF = 32767) is
     /// not applied — the round's start showed "inf W".
     #[test]
     fn a_scale_factor_outside_ten_is_no_scale() {

@@ -1,16 +1,16 @@
-//! After a timeout, what a unit says late: listened for and dropped (issue 38: bounded by a
+//! After a timeout, what a unit says late: listened for and dropped (bounded by a
 //! window, by the silence after the last late byte, and by the longest answer's length); and the
 //! transceiver's turnaround glitch before an answer.
 
 use super::MasterConfig;
-use mbtap_analysis::analyzer::SerialMode;
-use mbtap_analysis::framer::LineSettings;
+use mbtap_proto::serial_line::LineSettings;
+use mbtap_proto::serial_line::SerialMode;
 use std::time::Duration;
 
 /// After a timeout: listens up to the window for what the unit says late, ending
 /// at the silence after the last late byte; noise that never stops cannot hold the line longer
 /// than twice the window, and more bytes than the longest answer without a silence are no late
-/// answer but garbage: the listening ends there (issue 38: a serial server streaming garbage
+/// answer but garbage: the listening ends there (a serial server streaming garbage
 /// held its line 2 s after every timeout, and its clients waited 4 s for their 0x0B).
 #[derive(Debug, Clone)]
 pub struct LateListener {

@@ -3,7 +3,7 @@
 
 use super::{EchoMode, MasterConfig, Phase, Step, Transaction};
 use crate::timeouts::Timeouts;
-use mbtap_analysis::analyzer::SerialMode;
+use mbtap_proto::serial_line::SerialMode;
 use mbtap_proto::{encode_ascii, encode_rtu};
 use std::collections::BTreeSet;
 use std::time::Duration;

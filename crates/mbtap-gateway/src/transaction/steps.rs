@@ -2,9 +2,9 @@
 //! steps the shell carries out, the notes it counts and the outcome a client gets.
 
 use crate::answer::Misfit;
-use mbtap_analysis::analyzer::SerialMode;
-use mbtap_analysis::framer::LineSettings;
 use mbtap_proto::ExceptionCode;
+use mbtap_proto::serial_line::LineSettings;
+use mbtap_proto::serial_line::SerialMode;
 use std::time::Duration;
 
 /// What a client gets back.

@@ -19,7 +19,7 @@ pub const REBIRTH: &str = "Node Control/Rebirth";
 
 /// The shortest time between two rebirths on command (ms): any client of the broker may publish
 /// an NCMD, and each rebirth republishes every device's birth; requests inside it are counted
-/// in [`EdgeNode::rebirths_ignored`], not obeyed (issue 39: 2 000 NCMDs made 4 000 births).
+/// in [`EdgeNode::rebirths_ignored`], not obeyed (2 000 NCMDs made 4 000 births).
 pub const REBIRTH_MIN_MS: u64 = 5_000;
 
 /// How long a new device's metrics may keep growing before its DBIRTH goes out anyway (bus
@@ -492,7 +492,7 @@ mod tests {
         assert_eq!(decode(&out[0]).seq, Some(0));
         assert!(n.command("spBv1.0/g/NCMD/other", &cmd.to_bytes(), 5).is_empty());
         assert!(n.command("spBv1.0/g/NCMD/n", b"\xFF\xFF garbage", 5).is_empty());
-        // Issue 39: a flood of rebirths is obeyed at most once per REBIRTH_MIN_MS.
+        // A flood of rebirths is obeyed at most once per REBIRTH_MIN_MS.
         for t in 6..1_000 {
             assert!(n.command("spBv1.0/g/NCMD/n", &cmd.to_bytes(), t).is_empty());
         }
@@ -500,7 +500,7 @@ mod tests {
         assert_eq!(n.command("spBv1.0/g/NCMD/n", &cmd.to_bytes(), 5 + REBIRTH_MIN_MS).len(), 2);
     }
 
-    /// Issue 39: a device heard once and then silent for the settling time is born by the tick
+    /// A device heard once and then silent for the settling time is born by the tick
     /// (its birth does not wait for a second poll forever).
     #[test]
     fn a_new_device_is_born_once_its_metrics_settle() {

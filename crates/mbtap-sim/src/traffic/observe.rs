@@ -23,7 +23,7 @@ pub enum Observation {
 }
 
 impl Observation {
-    /// Byte by byte, up to 0.2 ms late: the per-byte capture of issue 40.
+    /// Byte by byte, up to 0.2 ms late: a per-byte capture.
     pub const PER_BYTE_JITTER: Self = Self::PerByteJitter { jitter_ns: 200_000 };
     /// The 16550's common setting: 14-byte trigger, 4-character timeout.
     pub const FIFO_16550: Self = Self::Fifo { trigger: 14, timeout_chars: 4 };

@@ -92,7 +92,7 @@ impl TimedBuffer {
                 return;
             }
             self.buf.extend_from_slice(bytes);
-            // The run of end times, by addition (this is per byte of every read: issue 40's
+            // The run of end times, by addition (this is per byte of every read: the
             // replay speed); saturating as before, so a clock at its end cannot wrap.
             let mut e = e0;
             self.end.reserve(n);
@@ -131,7 +131,7 @@ impl TimedBuffer {
 mod tests {
     use super::*;
 
-    /// The fast path of a frame's inner silence (issue 40: a frame in one read needs no look
+    /// The fast path of a frame's inner silence (a frame in one read needs no look
     /// at its bytes' gaps) rests on this: where `in_one_read` says so, no byte after the first
     /// starts a read — its gap is unbounded and none is proven — through reads of every size
     /// and compactions.

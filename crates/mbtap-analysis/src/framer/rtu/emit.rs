@@ -145,7 +145,7 @@ impl RtuFramer {
     /// and whether it is a CRC-`00` twin the odds on this line decide (`twin_len`).
     ///
     /// Every `00` after a checking frame makes a longer one that checks too (CRC-16's shift
-    /// property): the lengths this unit's function was seen with decide among them (issue 25:
+    /// property): the lengths this unit's function was seen with decide among them (
     /// noise right after a vendor answer whose CRC ends in `00` left its 1-byte-shorter twin
     /// reported valid, the learned lengths never asked). Otherwise the frame must stand by
     /// itself — a length the unit's function has, and what follows looking like a frame — and
@@ -167,7 +167,7 @@ impl RtuFramer {
             return Some((len, false));
         }
         // A run of `00`s after it: a frame ending in `00` and its `00` glitch are the last two
-        // readings — a sender leaves one glitch byte, not several (issue 25: a vendor request
+        // readings — a sender leaves one glitch byte, not several (a vendor request
         // ending in `00` and the master's `00` glitch was taken 1 byte short).
         let e = if lengths.len() > 2 { lengths[lengths.len() - 2] } else { e };
         if !self.plausible_frame(&piece[..e]) || !self.looks_like_frame(&piece[e..]) {
@@ -208,7 +208,7 @@ impl RtuFramer {
         // taking a value this sender's driver leaves or one any driver leaves (`00`, `FE`, `FF`:
         // before this sender's own are counted), on a line seen to glitch: its glitch, whatever
         // silence the reads seem to show before it — behind a USB timer that silence is a lower
-        // bound computed with a latency learned short of the timer's (issue 25: 46 glitches in
+        // bound computed with a latency learned short of the timer's (46 glitches in
         // 6 000 frames were reported as noise behind a 16 ms timer at 19200; then 5, a slave's
         // first `FE` and `00`s after unanswered requests).
         if b - a == 1
@@ -326,7 +326,7 @@ impl RtuFramer {
             // Only a frame whose length no reading fixed teaches one: a request or answer read
             // at its protocol length (`Request`, `Response`, `Either`) is one the learner would
             // parse again only to find that length exact and leave it (a mispredicted
-            // function-code dispatch per frame, issue 40).
+            // function-code dispatch per frame).
             if reading == Some(Reading::Unknown) {
                 self.lengths.record(&self.timed.buf[a..b], after, self.last.last_sender);
             }

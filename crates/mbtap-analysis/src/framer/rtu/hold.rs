@@ -3,7 +3,7 @@
 //! decides — the first vendor requests of a unit, before any of its frames was unambiguous —
 //! is held with everything after it, until a later frame of the same unit and function teaches
 //! its length (devices send a vendor function at one length all day) or a bound passes; then
-//! it goes out at the length the line taught, the other kept as `alt_len` (issue 40).
+//! it goes out at the length the line taught, the other kept as `alt_len`.
 //!
 //! Why wait: where a quarter of a device's CRCs end in `00` and the master leaves a `00` after
 //! three requests in ten, "frame ending in `00`" and "one byte shorter plus the master's
@@ -336,10 +336,10 @@ mod tests {
         assert_eq!(hold.held(), 0);
     }
 
-    /// Issue 40: the line's next request of that unit's function has 6 bytes — the twin goes out
+    /// The line's next request of that unit's function has 6 bytes — the twin goes out
     /// whole, its `00` the CRC's, the short reading kept as the other; order kept.
     #[test]
-    fn regression_issue_40_a_twin_read_short_goes_out_at_the_length_the_line_taught() {
+    fn a_twin_read_short_goes_out_at_the_length_the_line_taught() {
         let (mut hold, mut out) = (TwinHold::new(HOLD_NS), Vec::new());
         let mut lengths = LearnedLengths::new(true);
         held_short_twin(&mut hold, &mut out);

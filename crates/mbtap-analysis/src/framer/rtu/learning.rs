@@ -1,5 +1,5 @@
 //! What each valid frame teaches the framer: the observer's delay from the silences inside it,
-//! and the shorter tolerance a silence before it may be given (issue 40's margins).
+//! and the shorter tolerance a silence before it may be given (its margins).
 
 use super::RtuFramer;
 use crate::framer::glitch::Sender;
@@ -28,7 +28,7 @@ impl RtuFramer {
     /// A read's bytes are placed back to back before its timestamp; where the frame's last read
     /// also holds bytes of the next frame, the silence between the two frames is hidden inside
     /// that read and its first bytes look later than they were — by up to that silence. That
-    /// read's boundary says nothing about the observer or the sender and is left out (issue 25:
+    /// read's boundary says nothing about the observer or the sender and is left out (
     /// through a 16550 FIFO, which holds the tail of one frame with the head of the next, it
     /// made healthy frames look paused). For learning the observer's delay it is kept (the
     /// first of the pair returned): that errs high, towards fewer findings, and a glitchy
@@ -46,7 +46,7 @@ impl RtuFramer {
         // and set to `u64::MAX`).
         let starts_read = |i: usize| self.timed.gap_ub.get(i).is_some_and(|&g| g != u64::MAX);
         let (mut before_last, mut last) = (None::<u64>, None::<u64>);
-        // One pass over slices, the frame's longest proven gap with it (issue 40: two scans of
+        // One pass over slices, the frame's longest proven gap with it (two scans of
         // every frame cost replay its speed).
         let t = &self.timed;
         let (Some(lb), Some(ub), Some(end)) = (t.gap_lb.get(a + 1..b), t.gap_ub.get(a + 1..b), t.end.get(a..b)) else {

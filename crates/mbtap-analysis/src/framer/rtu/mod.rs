@@ -127,7 +127,7 @@ const MAX_GARBAGE: usize = 2 * RTU_MAX_LEN;
 /// (Serial Line v1.02 §2.5.1), so a candidate with this many bytes after it and still undecided
 /// is not a frame: on a line that never falls silent (a babbling device, a wrong baud rate) the
 /// bytes are decided by structure and the rest counted as noise, and what is held stays bounded
-/// (issue 39: it grew by ~25 bytes of memory per byte heard).
+/// (it grew by ~25 bytes of memory per byte heard).
 const MAX_WAIT: usize = 4 * RTU_MAX_LEN;
 
 /// The most bytes the framer holds undecided after any push or tick: the garbage before a
@@ -156,9 +156,9 @@ pub struct RtuFramer {
     glitches: GlitchState,
     /// What the valid frames show of this observer's reads.
     learner: ObserverLearner,
-    /// Lengths each unit's vendor functions were seen with (issue 25).
+    /// Lengths each unit's vendor functions were seen with.
     lengths: LearnedLengths,
-    /// Undecided twins held until the line tells their length (issue 40).
+    /// Undecided twins held until the line tells their length.
     hold: TwinHold,
 }
 
@@ -381,7 +381,7 @@ impl RtuFramer {
 mod tests {
     use super::*;
 
-    /// Issue 39: random bytes with no silence the framer can know (64 KiB reads 1 ms apart, a
+    /// Random bytes with no silence the framer can know (64 KiB reads 1 ms apart, a
     /// 16 ms adapter latency) stay bounded in what is held — the round's start held every byte
     /// (~25 bytes of memory per byte) — and every byte still comes out exactly once.
     #[test]

@@ -1,4 +1,4 @@
-//! The framer's state, owned by what it is about (issue 43: 21 fields changed from six files):
+//! The framer's state, owned by what it is about (21 fields changed from six files):
 //! the line's timing, where the search for the next frame stands, and what was emitted last.
 //! The timed buffer ([`super::buffer::TimedBuffer`]), the glitch evidence
 //! ([`super::glitches::GlitchState`]), the expectation, the observer learner and the

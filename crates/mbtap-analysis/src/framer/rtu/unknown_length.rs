@@ -65,7 +65,7 @@ impl RtuFramer {
                 // is a chance match inside damage (1 in 65 536 per length tried) as often as not.
                 // Before the line is seen to glitch (its first frames), only the values slaves'
                 // drivers leave (`FE`, `FF`) count: with one of them the chance match inside damage
-                // is 2 in 256 × 1 in 65 536 (issue 25: a vendor answer and its `FE` at the line's
+                // is 2 in 256 × 1 in 65 536 (a vendor answer and its `FE` at the line's
                 // start was one frame failing its check). A `00` there is the CRC-`00` twin
                 // question, which the odds on this line decide below once it has glitched.
                 let driver_value = s.get(l).is_some_and(|&v| matches!(v, 0xFE | 0xFF));
@@ -76,7 +76,7 @@ impl RtuFramer {
                 // flag set, MAP v1.1b3 §7): the first CRC match followed by this frame's own header
                 // ends it, whether or not the unit was heard before (a chance match and a chance
                 // header together: 1 in 2³²). Vendor requests and answers glued by a FIFO or a USB
-                // timer at the line's start were one frame failing its check (issue 25). Only the
+                // timer at the line's start were one frame failing its check. Only the
                 // first: a frame and its `00` glitch check too (CRC-16's shift property), and
                 // which of those two it is, is decided at the shorter one below.
                 let answer_next = first_match
@@ -124,7 +124,7 @@ impl RtuFramer {
                         // the `00` is a lower bound computed with a latency that may not be learned
                         // yet or short of the adapter's: the longer frame followed by its sender's
                         // glitch outweighs it — a sender leaves one glitch byte, not a `00` and
-                        // another (issue 25: a vendor answer ending in `00` and its `FF`, 1 215
+                        // another (a vendor answer ending in `00` and its `FF`, 1 215
                         // bytes into a line behind a 16 ms timer, was taken 1 byte short).
                         let batched = self.learner.estimate.longest_read > 1;
                         let shorter_boundary = self.boundary_at(g + l) && !(longer_glitch && batched);
@@ -173,7 +173,7 @@ impl RtuFramer {
     /// A CRC match of `l` bytes at live index `g`, with an end confirmed after it. When it ends
     /// in `00` it also checks one byte shorter (CRC-16's shift property) and the shorter reading
     /// had no end of its own confirmed: which it is, is decided as where the shorter match is
-    /// weighed ([`Self::twin_reading`]) (issue 25: a line's first vendor request ending in `00`
+    /// weighed ([`Self::twin_reading`]) (a line's first vendor request ending in `00`
     /// was taken whole without doubt). Followed by its own glitch byte (`glitched`), it is the
     /// longer frame: a sender leaves one.
     fn longer_twin(&self, s: &[u8], g: usize, l: usize, glitched: bool) -> Try {
@@ -233,7 +233,7 @@ impl RtuFramer {
         // from garbage, a chance CRC match is likelier than such a frame.
         let base = FunctionCode::from(f.get(1).map_or(0, |fc| fc & !EXCEPTION_FLAG));
         // Addresses 248–255 start no frame on a line (Modbus over Serial Line v1.02 §2.2), as
-        // `try_frame_at` holds: a noise burst that checks by chance stays noise (issue 25).
+        // `try_frame_at` holds: a noise burst that checks by chance stays noise.
         if !self.looks_like_frame(f)
             || !sane_header(f, self.pasted)
             || f.first().is_some_and(|&a| a > self.max_address)

@@ -1,4 +1,4 @@
-//! A sheet read cell by cell, handed on row by row (issue 39): the XLSX/XLSB and XLS readers give
+//! A sheet read cell by cell, handed on row by row: the XLSX/XLSB and XLS readers give
 //! cells one at a time in the order their files hold them; the sheet reader wants rows. Nothing
 //! is allocated for the empty space between cells and no row is kept once handed on, so a cell
 //! at XFD1048576 costs one cell, not the dense range between it and A1.

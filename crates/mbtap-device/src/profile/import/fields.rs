@@ -181,7 +181,7 @@ pub(super) fn field_of(cell: &str) -> Option<Field> {
 const NOT_REGISTER: [&str; 12] =
     ["slave", "device", "unit", "station", "node", "server", "ip", "mac", "geräte", "通讯", "从站", "设备"];
 
-/// A header naming a register's address in words the list does not hold (issue 42: `Input
+/// A header naming a register's address in words the list does not hold (`Input
 /// Register Address`, `PDU address`, `Modbus-Adresse`): its last word is an address, and no
 /// word says it is a device's.
 fn address_like(n: &str) -> bool {
@@ -197,10 +197,10 @@ fn address_like(n: &str) -> bool {
 mod tests {
     use super::*;
 
-    /// Issue 42: `Input Register Address` was not an address column ("no header row naming an
+    /// `Input Register Address` was not an address column ("no header row naming an
     /// address column"); other wordings of the register's address are, a device's is not.
     #[test]
-    fn regression_issue_42_headers_naming_a_registers_address_in_other_words() {
+    fn headers_naming_a_registers_address_in_other_words() {
         for h in [
             "Input Register Address",
             "Holding register address (dec)",

@@ -1,4 +1,4 @@
-//! A sheet's cells held compactly (issue 39): all cell text in one string, each cell an end
+//! A sheet's cells held compactly: all cell text in one string, each cell an end
 //! offset (4 bytes), each row an end index (4 bytes) — a sheet of one-character cells takes
 //! about 2.5 bytes per byte of CSV, where a `String` per cell took ~49.
 //!

@@ -1,5 +1,5 @@
 //! One entry of a Home Assistant `modbus:` hub (a sensor, binary sensor or switch): the keys the
-//! import reads, and the point it becomes — converted as the YAML is read (issue 39), so a file of
+//! import reads, and the point it becomes — converted as the YAML is read, so a file of
 //! 200 000 sensors holds its points, not its entries as well.
 
 use std::fmt;

@@ -1,4 +1,4 @@
-//! Home Assistant's `modbus:` YAML read straight into what the import uses (issue 39): the hubs'
+//! Home Assistant's `modbus:` YAML read straight into what the import uses: the hubs'
 //! `sensors`, `binary_sensors` and `switches` with the dozen keys an entry may carry, everything
 //! else skipped as it is read. No tree of the whole document is built (200 000 sensors took
 //! 540 MB as a `serde_norway::Value`, about 30 bytes per byte of YAML), nor a list of its events

@@ -30,7 +30,7 @@ pub enum HaError {
 }
 
 /// Nesting a Home Assistant file may have (it has about 6: `modbus:`, a hub, `sensors:`, an
-/// entry, a key): deeper is refused before the YAML reader sees it (issue 39: 100 000 nested `[`
+/// entry, a key): deeper is refused before the YAML reader sees it (100 000 nested `[`
 /// took 30–40 s, 20 000 nested mappings 210 MB).
 pub const MAX_DEPTH: usize = 64;
 
@@ -171,7 +171,7 @@ pub fn read_home_assistant(yaml: &str, unit: Option<u8>, out: &mut impl Sink) ->
 }
 
 /// [`read_home_assistant`] of a file read twice, streamed: `depth` for its nesting, then `yaml`
-/// by the reader (issue 39: the file held whole was a quarter of the import's memory).
+/// by the reader (the file held whole was a quarter of the import's memory).
 ///
 /// # Errors
 /// Not YAML, no hubs, several devices and no `unit`, or the file cannot be read.
@@ -329,7 +329,7 @@ modbus:
         assert!(matches!(parse_home_assistant("sensor: []", None), Err(HaError::NoHubs)));
     }
 
-    /// Issue 39 (`gen_yaml.py` deep_seq, deep_map): 100 000 nested `[` took 30 s, 20 000 nested
+    /// (`gen_yaml.py` deep_seq, deep_map): 100 000 nested `[` took 30 s, 20 000 nested
     /// mappings 210 MB; both are refused before the YAML reader, naming the line.
     #[test]
     fn nesting_deeper_than_any_home_assistant_file_is_refused_at_once() {
@@ -350,14 +350,14 @@ modbus:
         check_depth(CONFIG.as_bytes()).unwrap();
     }
 
-    /// Issue 39: the YAML is read into entries as it goes, no tree of the document (200 000
+    /// The YAML is read into entries as it goes, no tree of the document (200 000
     /// sensors took 540 MB as a tree). What the tree gave must hold: a hub's unit given after
     /// its lists still names their entries; an entry that is not a mapping is a problem, not
     /// the end of the import. An alias bomb (9^9 nodes if expanded) is refused by the reader's
     /// budget, naming where, wherever it sits — serde_norway skipped one under an unread key, but
     /// held every event of the file (201 MB for 200 000 sensors).
     #[test]
-    fn regression_issue_39_the_yaml_is_read_without_a_tree_as_the_tree_read_it() {
+    fn the_yaml_is_read_without_a_tree_as_the_tree_read_it() {
         let late_unit =
             "modbus:\n  - name: hub\n    sensors:\n      - name: A\n        address: 1\n      - 42\n    slave: 7\n";
         let (r, unit) = parse_home_assistant(late_unit, None).unwrap();
@@ -393,12 +393,12 @@ modbus:
       - !include other.yaml
 ";
 
-    /// Issue 39 (the probe's `tags.yaml`): the typed reader refused the whole file — "invalid
+    /// (the probe's `tags.yaml`): the typed reader refused the whole file — "invalid
     /// type: enum, expected a scalar" — over one tagged name, where the tree it replaced took a
     /// tagged node as no value. Tags are read past as plain data, nothing resolved or run; the
     /// `!include`d entry names no device, so it neither counts as one nor is lost.
     #[test]
-    fn regression_issue_39_tagged_nodes_are_read_past_as_no_value() {
+    fn tagged_nodes_are_read_past_as_no_value() {
         let (r, unit) = parse_home_assistant(TAGGED, None).unwrap();
         assert_eq!((unit, r.points.len(), r.problems.len()), (1, 1, 1), "{r:?}");
         assert_eq!((r.points[0].address, r.points[0].name.as_str()), (100, "reg_100"));

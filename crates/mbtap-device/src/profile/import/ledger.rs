@@ -1,4 +1,4 @@
-//! The addresses an import has taken, for every sink of points alike (issue 39): each address of
+//! The addresses an import has taken, for every sink of points alike: each address of
 //! the four tables holds the key its sink gave the point defined there (a flat 1 MiB table,
 //! allocated at the first point), so an overlap is one lookup per address the new point covers
 //! and points come out in address order by walking the table — no scan of the points, no

@@ -1,5 +1,5 @@
 //! An imported profile loaded back as the loader loads any profile, a part at a time and read
-//! line by line (issue 39): the TOML reader's document takes ~25 bytes per byte of text, so a
+//! line by line: the TOML reader's document takes ~25 bytes per byte of text, so a
 //! profile of 200 000 points read whole took 300 MB, and the profile itself is ~3× the sheet.
 
 use std::io::BufRead;

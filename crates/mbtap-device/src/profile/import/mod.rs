@@ -1,8 +1,8 @@
-//! Profiles from what users already have (issue 27): vendor register sheets — rows of cells,
+//! Profiles from what users already have: vendor register sheets — rows of cells,
 //! read from CSV or a workbook at the edge — and Home Assistant `modbus:` YAML, turned into the
 //! points of a profile; every row or entry that cannot be read is listed with where and why, and
 //! skipped, never guessed. Readers hand what they find to a [`Sink`] as they read it: the import
-//! command's writes each point out as it comes (issue 39), [`Imported`] collects (tests, SunSpec).
+//! command's writes each point out as it comes, [`Imported`] collects (tests, SunSpec).
 //! [`header`] and [`entry`] write the profile (`docs/profiles.md`), which the loader then checks
 //! like any hand-written one ([`load_back()`]).
 
@@ -84,7 +84,7 @@ impl std::fmt::Display for Problem {
 }
 
 /// Where an import's findings go as they are read: collected ([`Imported`]), or written out as
-/// they come (the import command's profile file: issue 39, a sheet's points held in memory took
+/// they come (the import command's profile file: a sheet's points held in memory took
 /// 20× the sheet).
 pub trait Sink {
     /// A point read (taken unless its addresses clash: then a problem).
@@ -108,7 +108,7 @@ pub struct Imported {
     /// How the source was read, in words (`header on row 3: address=A, name=B, …`).
     pub notes: Vec<String>,
     /// The addresses taken: an overlap is found by looking up the new point's addresses, not by
-    /// scanning every point (issue 39: import was quadratic in rows).
+    /// scanning every point (import was quadratic in rows).
     ledger: Ledger,
 }
 
@@ -269,7 +269,7 @@ mod tests {
         test_point(table, address, value_type, None)
     }
 
-    /// Issue 39: 200 000 rows' profile read back whole took 300 MB; in parts it loads the same.
+    /// 200 000 rows' profile read back whole took 300 MB; in parts it loads the same.
     #[test]
     fn a_big_profile_loads_back_in_parts() {
         let mut all = Imported::default();

@@ -1,4 +1,4 @@
-//! An OpenDocument spreadsheet's rows streamed from its `content.xml` (issue 39): the workbook
+//! An OpenDocument spreadsheet's rows streamed from its `content.xml`: the workbook
 //! reader (calamine) expands every table of the file into memory when it opens it — ~66 bytes a
 //! cell, 84× a 655 kB sheet — so the import reads the table it wants itself, a row at a time,
 //! holding one row.

@@ -1,6 +1,6 @@
 //! What an OpenDocument spreadsheet's tables take once a reader expands them, from its
 //! `content.xml` streamed with nothing kept but counters — so a workbook whose repeated rows
-//! and cells would expand past memory is refused before such a reader opens it (issue 39: an
+//! and cells would expand past memory is refused before such a reader opens it (an
 //! 873-byte ODS, one row of 16 000 empty cells repeated 1 048 000 times above a value, took the
 //! import past 17 GB).
 //!
@@ -249,10 +249,10 @@ mod tests {
         assert_eq!((s.cells_read, s.area_cells), (2, 2));
     }
 
-    /// Issue 39: empty rows between two non-empty ones are laid out whole, as wide as the widest
+    /// Empty rows between two non-empty ones are laid out whole, as wide as the widest
     /// row — the 873-byte workbook's 1 048 000 rows, counted without being expanded.
     #[test]
-    fn regression_issue_39_repeated_empty_rows_between_values_are_counted_as_laid_out() {
+    fn repeated_empty_rows_between_values_are_counted_as_laid_out() {
         let s = parse_ods_size(content(&format!("{HEADER}{EMPTY_PLAIN}{VALUE_ROW}")).as_bytes()).unwrap_or_default();
         assert_eq!(s.area_cells, (1 + 1_048_000 + 1) * 2);
         // A value after 16 000 empty cells widens every row of the area.
@@ -279,7 +279,7 @@ mod tests {
         assert!(e.is_some_and(|e| e.to_string().starts_with("content.xml, byte ")));
     }
 
-    /// Review of issue 39's count: any end tag inside a table ended it — the column
+    /// Any end tag inside a table ended it — the column
     /// declarations spreadsheet programs write before the rows, or a header-row group, hid every
     /// row after them from the count. Rows end at their own end tag, tables at theirs.
     #[test]

@@ -81,7 +81,7 @@ const HEADER_SEARCH: usize = 50;
 
 /// Rows of a sheet, read from the start as often as asked: the import reads a sheet up to three
 /// times (its header, its address notation, its rows), so a CSV is streamed from its file, never
-/// held (issue 39: the grid of a sheet of tiny cells was 2.5× the file).
+/// held (the grid of a sheet of tiny cells was 2.5× the file).
 pub trait SheetRows {
     /// Why the rows could not be read.
     type Error;
@@ -211,7 +211,7 @@ pub fn read_sheet<S: SheetRows>(rows: &mut S, opts: &SheetOptions, out: &mut imp
         Some(h) => format!("header on row {}: {}", h + 1, described.join(", ")),
         None => format!("no header row; columns given: {}", described.join(", ")),
     });
-    // Nothing is guessed silently (issue 42: a sheet of floats with no type column, the type
+    // Nothing is guessed silently (a sheet of floats with no type column, the type
     // said in the vendor's prose, came in as u16 without a word).
     if col(Field::Type).is_none() && opts.value_type.is_none() {
         out.note(
@@ -389,8 +389,8 @@ fn read_row(
     };
     let (name, unit_in_name) = unit_from_name(cell_at(r, col(Field::Name)).unwrap_or(""));
     let name = if name.is_empty() { format!("reg_{}_{address}", table.word()) } else { name };
-    // Spelled as Home Assistant and the exports want it (`Volts` → `V`, `kWH` → `kWh`,
-    // issue 42); a unit not known is kept as written.
+    // Spelled as Home Assistant and the exports want it (`Volts` → `V`, `kWH` → `kWh`); a
+    // unit not known is kept as written.
     let unit = cell_at(r, col(Field::Unit))
         .map(str::to_owned)
         .or(unit_in_name)

@@ -1,4 +1,4 @@
-//! An XLS workbook stream's records read one at a time, and its shared strings (issue 39): the
+//! An XLS workbook stream's records read one at a time, and its shared strings: the
 //! pieces of `xls_rows.rs` that know how BIFF carries a record on in `Continue` records.
 //!
 //! Records as [MS-XLS] 2.1.4 lays them out: a type (u16), a size (u16), the data; a record too

@@ -1,4 +1,4 @@
-//! An XLS workbook's sheet read as rows from its workbook stream (issue 39): the workbook reader
+//! An XLS workbook's sheet read as rows from its workbook stream: the workbook reader
 //! (calamine) lays out every sheet of an XLS as dense ranges when it opens the file — 8.7× a
 //! 4.4 MB sheet, and 1 GB for cells at A1 and IV65536 — so the import reads the records itself:
 //! the globals once (sheet names and offsets, the shared strings), then the sheet's cells in the

@@ -1,4 +1,4 @@
-//! Where an XLS file's workbook stream lies, and a reader of it (issue 39): the stream is read
+//! Where an XLS file's workbook stream lies, and a reader of it: the stream is read
 //! from its pieces of the file as one stream — never gathered beside the file — for
 //! `xls_rows.rs` to read the sheet from, each pass.
 
