@@ -9,7 +9,9 @@
 //! it last brought bytes in, for eviction), [`connection`] (one TCP client,
 //! on its own), [`request`] (each request through admission, cache and queue), [`udp`] (Modbus
 //! UDP clients), [`emulated`] (devices emulated in this process in place of a line),
-//! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text), [`serial_front`] (a serial
+//! [`tls`] (Modbus/TCP Security), [`metrics`] (Prometheus text, and the web view's figures),
+//! [`web`] (`--web`: the live page and `/api/state`), [`client_book`] (who asks, for the web
+//! view), [`serial_front`] (a serial
 //! port on which the bridge is the slave: `--listen-serial`, and reverse mode with a `tcp://`
 //! line behind it), [`slave_port`] (that port's request framing and answers), [`device`] (a
 //! Modbus TCP device as a line's back), [`run`] (starts them all), [`config`] (the

@@ -14,7 +14,8 @@
 //! - [`queue`]: the fair per-client queue with a priority class and coalescing of twins.
 //! - [`cache`]: answers from memory and the polling plan (agent mode).
 //! - [`line`]: what one line decides around each request, whatever its back (a serial line, a
-//!   Modbus TCP device, emulated devices): breaker, cache fill, quiet time, line-time class.
+//!   Modbus TCP device, emulated devices): breaker, cache fill, quiet time, each unit's gap
+//!   (`--unit-gap`), line-time class.
 //! - [`breaker`]: a dead unit answered at once between probes; [`timeouts`]: how long to wait
 //!   for each unit.
 //! - [`transaction`]: one serial request with its echo, answer, retries and late answers, as a
@@ -23,6 +24,10 @@
 //!   (delivered or withheld): one rule for clients with ids (MBAP) and without (RTU framing).
 //! - [`seats`]: which open connection gives up its seat to a newcomer.
 //! - [`rules`]: the read-only allow-list and the exceptions the gateway answers with.
+//! - [`audit`]: what a request changes (the audit of writes records it) and its ending in words.
+//! - [`tcp_device`]: a Modbus TCP device as a line's back — its transaction ids and framing.
+//! - [`rfc2217`]: the Telnet COM-port control codec of a serial server (RFC 2217).
+//! - [`fuzzing`]: the fuzz targets' bodies.
 //!
 //! Specs: MODBUS Application Protocol v1.1b3 (MAP), MODBUS over Serial Line v1.02, MODBUS
 //! Messaging on TCP/IP v1.0b, MODBUS/TCP Security.
