@@ -2,6 +2,7 @@
 //! depth and a latency histogram, per unit; connections and refusals for the server. Their
 //! Prometheus text is written in [`exposition`].
 
+pub(crate) mod endpoint;
 mod exposition;
 pub mod snapshot;
 
