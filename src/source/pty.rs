@@ -3,8 +3,7 @@
 //! A pty master reports hang-up while no program holds the slave open, and tokio keeps a
 //! "read closed" readiness for good once seen: with tokio-serial's stream, every read after
 //! the application had once been away (or before it first opened the path) woke at once,
-//! failed with EAGAIN and tried again — a core burnt while the application sat idle (issue
-//! 24). Here the master's readiness is registered afresh after every hang-up, so an idle
+//! failed with EAGAIN and tried again — a core burnt while the application sat idle. Here the master's readiness is registered afresh after every hang-up, so an idle
 //! application costs nothing.
 
 use std::fs::File;

@@ -125,8 +125,8 @@ impl mbtap_analysis::analyzer::Sink for ValidFrames {
 /// hundredths of a second at replay's speed); a longer one is said by its size alone.
 const COUNT_UP_TO: u64 = 64 << 20;
 
-/// What a session that recorded says as it ends: where the file is and what it holds (issue
-/// 42: quitting the terminal UI of a `--record` session said nothing — not where the file was,
+/// What a session that recorded says as it ends: where the file is and what it holds
+/// (quitting the terminal UI of a `--record` session said nothing — not where the file was,
 /// nor how many frames).
 #[must_use]
 pub fn ended_note(path: &Path) -> Option<String> {

@@ -13,7 +13,7 @@ use mbtap_device::profile::annotate::{Annotation, Lang};
 use super::registers::Registers;
 use super::stats::{BusStats, DeviceStats};
 
-/// Transactions kept for scroll-back unless told otherwise (the default).
+/// Transactions kept for scroll-back unless told otherwise (a default that holds a busy line's last minutes).
 pub const DEFAULT_SCROLLBACK: usize = 100_000;
 
 /// What a row is.

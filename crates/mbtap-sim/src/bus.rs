@@ -39,7 +39,7 @@ pub struct VirtualBus {
     rng: u64,
 }
 
-/// A fault the line can suffer, for training and tests (issue: fault injection).
+/// A fault the line can suffer, for training and tests (fault injection).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Fault {
     /// One bit of a response flipped on the wire: a bad CRC.

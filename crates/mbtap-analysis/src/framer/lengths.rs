@@ -215,8 +215,8 @@ impl LearnedLengths {
             [one] => Some(*one),
             // Who sent it was guessed from the expectation, which damage misleads (a corrupted
             // request leaves the master expected, and the answer comes): where that direction's
-            // firm length is none of the candidates, the other direction's may decide (issue
-            // 40: an answer after a corrupted request was read as the master's request with its
+            // firm length is none of the candidates, the other direction's may decide
+            // (an answer after a corrupted request was read as the master's request with its
             // `00` glitch, one byte short).
             [] if sender != Sender::Unknown && candidates.iter().all(|&l| self.contradicts(unit, fc, sender, l)) => {
                 self.choose_among(unit, fc, Sender::Unknown, candidates)

@@ -144,8 +144,8 @@ impl Unit {
 }
 
 /// Registers and adjacent pairs kept, all units together: each costs up to ~0.5 KB once heard
-/// [`stats::RECENT`] times, so this keeps the learner under ~35 MB whatever the capture (issue
-/// 39: a capture of 400 000 distinct registers took 248 MB). A real bus polls far fewer.
+/// [`stats::RECENT`] times, so this keeps the learner under ~35 MB whatever the capture (without
+/// the bound, a capture of 400 000 distinct registers took 248 MB). A real bus polls far fewer.
 pub const MAX_REGISTERS: usize = 65_536;
 /// Blocks, exception ranges and written addresses kept, all units together.
 pub const MAX_OTHER: usize = 32_768;

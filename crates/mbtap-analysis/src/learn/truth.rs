@@ -269,7 +269,7 @@ mod tests {
         (right, total, wrong, l)
     }
 
-    /// The bar: ≥ 95 % of registers typed right on traffic with known semantics, and no
+    /// The bar: ≥ 95 % of registers typed right on traffic with known semantics, and no
     /// two independent registers joined (an independent register swallowed into a pair would
     /// show up as "not guessed at its address").
     #[test]

@@ -19,7 +19,7 @@ use crate::framer::glitch::Sender;
 use crate::framer::lengths::LearnedLengths;
 
 /// The longest a twin is held by default, in bus time: long enough for a unit polled every few
-/// seconds to send its vendor function again (on the line a unit that never answers is
+/// seconds to send its vendor function again (on a real line a unit that never answers is
 /// asked again 10–20 s later), once per unit's function, at a live view's first sight of it.
 pub const HOLD_NS: u64 = 20_000_000_000;
 /// The most bytes held behind a twin (a bound on memory whatever the line does).

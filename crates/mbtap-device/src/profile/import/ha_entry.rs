@@ -61,7 +61,7 @@ impl Scalar {
 /// A node's value, or `other` when it carries an application tag (`!secret host`, `!lambda …`,
 /// `!include other.yaml`, `!!python/object …`): a tag is plain data to the import — nothing is
 /// resolved or run — and its content is not the value Home Assistant would see (a secret's
-/// name is not the secret), so the node counts as no value (the issue-39 probe's `tags.yaml`).
+/// name is not the secret), so the node counts as no value (a hostile probe's `tags.yaml`).
 /// The core schema's own tags (`!!str`, `!!int`, …, and the non-specific `!`) only type it.
 pub(super) fn untagged<T>(node: serde_saphyr::Tagged<T>, other: impl FnOnce() -> T) -> T {
     // YAML 1.2 §10.3 (core schema) and the failsafe/JSON schemas' tags, as the parser resolves

@@ -227,7 +227,7 @@ mod tests {
 
     /// A header row of two text cells.
     const HEADER: &str = r#"<table:table-row><table:table-cell office:value-type="string"><text:p>Address</text:p></table:table-cell><table:table-cell office:value-type="string"><text:p>Name</text:p></table:table-cell></table:table-row>"#;
-    /// A row of 16 000 empty cells, repeated 1 048 000 times (the issue's 873-byte workbook).
+    /// A row of 16 000 empty cells, repeated 1 048 000 times (an 873-byte workbook).
     const EMPTY_PLAIN: &str = r#"<table:table-row table:number-rows-repeated="1048000"><table:table-cell table:number-columns-repeated="16000"/></table:table-row>"#;
     /// One value in column A.
     const VALUE_ROW: &str = r#"<table:table-row><table:table-cell office:value-type="float" office:value="101"><text:p>101</text:p></table:table-cell></table:table-row>"#;
