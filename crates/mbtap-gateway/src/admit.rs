@@ -484,7 +484,7 @@ mod tests {
         assert_eq!(p.admit(ask(0, &WRITE_ONE), None, Duration::ZERO).map(|a| a.target), Ok(0));
     }
 
-    /// (`mqtt_bridge_writes.py`, `mqtt_sparkplug.py`): a broker client's write to unit
+    /// A broker client's write to unit
     /// 0 went out as a broadcast, "ok": true. Unit 0 is refused from every front unless
     /// `--allow-broadcast`, the broker's writes included, and a unit mapped to 0 as well.
     #[test]
@@ -504,7 +504,7 @@ mod tests {
         assert_eq!(p.admit(viewer, None, Duration::ZERO), Err(Refusal::Role));
     }
 
-    /// (`round3/policy_probe.py`): `--read-only --allow-function 8` let an FC08/0000
+    /// `--read-only --allow-function 8` let an FC08/0000
     /// with a CRC-valid write frame in its data reach the line, where a slave framing by
     /// structure executed the write.
     #[test]

@@ -256,7 +256,7 @@ mod tests {
         assert_eq!(q.len(), 3);
     }
 
-    /// (`udp_queue_flood.py`): every source port a client with its own 32, no bound
+    /// Every source port a client with its own 32, no bound
     /// for them together. The line now has one; a client leaving gives its room back.
     #[test]
     fn udp_flood_the_line_bounds_all_clients_together() {

@@ -242,7 +242,7 @@ mod tests {
         assert!(reply.is_empty());
     }
 
-    /// (`rfc2217_probe.py` telnet-nobinary): a server refusing BINARY sends a CR as
+    /// A server refusing BINARY sends a CR as
     /// CR NUL; the NUL was taken for a line byte and answers holding 0D failed.
     #[test]
     fn a_server_refusing_binary_is_read_and_written_as_nvt() {

@@ -4,7 +4,7 @@
 //! a silent one and goes first — one that never sent a byte before one that did, then the one
 //! stalled longest (its last byte, or its opening, oldest) whatever its age — a flood of young silent sockets must not reset newcomers (500 of
 //! them reset 20–55 %), and a handshake still under way outlasts sockets that stopped talking
-//! (`tls_flood.py`: the oldest silent socket was now and then a TLS client mid-handshake). Else the one idle
+//! (else the oldest silent socket is now and then a TLS client mid-handshake). Else the one idle
 //! longest, if idle at least [`EVICT_AFTER_IDLE`]; a client that keeps asking is never evicted.
 //! One source address may hold [`SILENT_PER_ADDRESS`] silent sockets. Time is an input (the
 //! shell's clock since an origin it picks).
@@ -90,7 +90,7 @@ mod tests {
         Seat { ip: ip.parse().unwrap(), opened: ms(opened), last_request: last.map(ms), last_byte: None }
     }
 
-    /// (`round3/tls_flood.py`, one address for the flood and the good clients): a TLS
+    /// (One address for the flood and the good clients.) A TLS
     /// client mid-handshake was now and then the oldest silent socket and was reset. A socket
     /// that is still talking outlasts those that stalled, whatever their ages.
     #[test]
@@ -111,7 +111,7 @@ mod tests {
         assert_eq!(for_address(flood.iter().enumerate(), ip, ms(150)), Some(1));
     }
 
-    /// (`starve.py`): silent sockets younger than 200 ms filled the table and every
+    /// Silent sockets younger than 200 ms filled the table and every
     /// newcomer was refused. The oldest silent one makes room, whatever its age.
     #[test]
     fn starve_the_oldest_silent_seat_makes_room_whatever_its_age() {

@@ -158,7 +158,7 @@ mod tests {
         u16::from_be_bytes([adu[0], adu[1]])
     }
 
-    /// (`upstream_tcp.py` ahead): ids counted from 0, one by one; a device answering
+    /// Ids counted from 0, one by one; a device answering
     /// ahead under id + 1 had that answer taken for the next request's. Ids now come from the
     /// shell's seed, and the next is not the last + 1.
     #[test]
@@ -198,7 +198,7 @@ mod tests {
         assert_eq!(dropped.late, 1);
     }
 
-    /// (`upstream_tcp.py` wrongunit, wrongfc, longer, stale): answers under the awaited
+    /// Answers under the awaited
     /// id that do not fit its request reached the client; now dropped, and the right one taken.
     #[test]
     fn tcp_device_answers_that_do_not_fit_the_request_are_dropped() {

@@ -643,7 +643,7 @@ mod tests {
         assert_eq!(noisy.wait_until(), ms(200));
     }
 
-    /// (`garbage_stream.py`): a serial server streaming garbage held the line twice the
+    /// A serial server streaming garbage held the line twice the
     /// window after every timeout. More bytes than the longest answer end the listening.
     #[test]
     fn garbage_stream_ends_the_late_listener_at_once() {
@@ -656,7 +656,7 @@ mod tests {
         assert_eq!(l.wait_until(), ms(2), "nothing more to wait for");
     }
 
-    /// (`garbage_stream.py`): the answer buffer grew to gigabytes while a server
+    /// The answer buffer grew to gigabytes while a server
     /// streamed garbage that began with the unit's address. It now holds at most one ADU.
     #[test]
     fn garbage_stream_the_answer_buffer_holds_at_most_one_adu() {

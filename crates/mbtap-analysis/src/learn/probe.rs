@@ -200,7 +200,7 @@ impl Probe {
         let span = || format!("{} {address}..{}", table.word(), u32::from(address) + u32::from(quantity) - 1);
         // Some devices and gateways end their connection after each request: the read that
         // went out on the closed one goes again, once, on a new one — at the same pace, as
-        // `next` gives it (`p3_probe.sh`: the probe stopped at its second read).
+        // `next` gives it (else the probe stops at its second read).
         let reopened = std::mem::take(&mut self.reopened);
         if let Reply::Closed(why) = reply {
             if reopened {
@@ -410,7 +410,7 @@ mod tests {
         assert!(matches!(p.next(250_000_000), Step::Read { .. }));
     }
 
-    /// (`p3_probe.sh`, `evil_modbus.py close`): a device that answers and then closes
+    /// A device that answers and then closes
     /// its connection lost the next read, and the probe stopped at its second read. The read
     /// goes again on the new connection and the probe maps what the open one maps, each read
     /// tried at most twice; one that closes without ever answering stops it, said as such.

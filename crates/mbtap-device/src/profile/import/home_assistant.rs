@@ -329,7 +329,7 @@ modbus:
         assert!(matches!(parse_home_assistant("sensor: []", None), Err(HaError::NoHubs)));
     }
 
-    /// (`gen_yaml.py` deep_seq, deep_map): 100 000 nested `[` took 30 s, 20 000 nested
+    /// (deep sequences and mappings): 100 000 nested `[` took 30 s, 20 000 nested
     /// mappings 210 MB; both are refused before the YAML reader, naming the line.
     #[test]
     fn nesting_deeper_than_any_home_assistant_file_is_refused_at_once() {
