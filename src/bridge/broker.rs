@@ -18,7 +18,7 @@ use mbtap_device::query::resolve;
 use mbtap_gateway::admit::{Role, RoleRules};
 use mbtap_gateway::clients::BROKER;
 use mbtap_gateway::transaction::Reply;
-use mbtap_publish::remote::{Ask, Outcome};
+use mbtap_publish::remote::{Ask, WriteResult};
 
 /// What the bridge needs to carry out the broker's writes.
 pub struct BrokerWrites {
@@ -66,7 +66,7 @@ async fn apply(
     routes: &Routes,
     opts: &ServerOptions,
     client: &mut Client<'_>,
-) -> Outcome {
+) -> WriteResult {
     let text = &ask.item.text;
     let profile = writes.profiles.get(&ask.unit);
     let target = resolve::resolve(&ask.item, profile).map_err(|e| e.to_string())?;

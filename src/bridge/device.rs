@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use mbtap_gateway::rules::GATEWAY_TARGET_FAILED;
 use mbtap_gateway::tcp_device::Heard;
-use mbtap_gateway::transaction::{Outcome, Reply, SerialMaster};
+use mbtap_gateway::transaction::{Ending, Reply, SerialMaster};
 
 use super::port::Port;
 use super::shared::Job;
@@ -21,7 +21,7 @@ impl Port<'_> {
     /// when the connection broke (the caller answers 0x0A and connects again). Every answer
     /// goes through the core's one answer check ([`mbtap_gateway::answer::check`], inside
     /// [`mbtap_gateway::tcp_device::TcpDevice::bytes`]).
-    pub(super) async fn transact_tcp(&mut self, master: &mut SerialMaster, job: &Job) -> std::io::Result<Outcome> {
+    pub(super) async fn transact_tcp(&mut self, master: &mut SerialMaster, job: &Job) -> std::io::Result<Ending> {
         let shared = self.shared;
         let mut reply = Reply::Gateway(GATEWAY_TARGET_FAILED);
         for _attempt in 0..=master.config.retries {
@@ -55,7 +55,7 @@ impl Port<'_> {
         // Answers are matched by the bridge's own transaction id and checked: a late one cannot
         // be taken for this request's, so every answer may fill the cache.
         let cacheable = matches!(reply, Reply::Pdu(_));
-        Ok(Outcome { reply, last: shared.now(), cacheable, flush: None })
+        Ok(Ending { reply, last: shared.now(), cacheable, flush: None })
     }
 
     /// Sends `adu` and reads until its answer (None: none within `timeout`).

@@ -23,7 +23,7 @@ use crate::source::stream::Transport;
 use mbtap_analysis::chunk::{PortId, Timestamp};
 use mbtap_gateway::line::{Back, Start, class};
 use mbtap_gateway::rules::GATEWAY_PATH_UNAVAILABLE;
-use mbtap_gateway::transaction::{LateListener, MasterConfig, Note, Outcome, Reply, SerialMaster, Step, Transaction};
+use mbtap_gateway::transaction::{Ending, LateListener, MasterConfig, Note, Reply, SerialMaster, Step, Transaction};
 
 /// Runs the line forever.
 pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mpsc::UnboundedSender<MonitorChunk>>) {
@@ -104,7 +104,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
             answer(&shared, job, Reply::Gateway(GATEWAY_PATH_UNAVAILABLE));
             continue;
         };
-        let Outcome { reply, last, cacheable, flush } = outcome;
+        let Ending { reply, last, cacheable, flush } = outcome;
         let last = shared.instant(last);
         let finished = decide.finished(job.unit, &reply, cacheable, shared.now());
         shared.metrics.resting(job.unit, decide.resting(job.unit, shared.now()));
@@ -153,7 +153,7 @@ pub(super) fn answer(shared: &LineShared, mut job: Job, reply: Reply) {
 
 impl Port<'_> {
     /// Drives one request through the gateway core's transaction machine.
-    async fn transact(&mut self, master: &mut SerialMaster, job: &Job) -> std::io::Result<Outcome> {
+    async fn transact(&mut self, master: &mut SerialMaster, job: &Job) -> std::io::Result<Ending> {
         let (mut t, mut step) = master.transaction(job.unit, &job.pdu);
         let result = self.drive(&mut t, &mut step, job.unit).await;
         self.notes(&mut t, job.unit);

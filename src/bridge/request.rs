@@ -65,7 +65,7 @@ pub(super) struct Pending {
     pub(super) transaction_id: u16,
     pub(super) unit: u8,
     pub(super) function: u8,
-    pub(super) answer: Answer,
+    pub(super) answer: Delivery,
 }
 
 impl Pending {
@@ -73,9 +73,9 @@ impl Pending {
     /// for a broadcast, which nobody answers.
     pub(super) async fn answer_pdu(self) -> Option<Vec<u8>> {
         let reply = match self.answer {
-            Answer::Now(r) => r,
+            Delivery::Now(r) => r,
             // The line dropped the job (it never will, but a closed channel must not hang).
-            Answer::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
+            Delivery::Later(r) => r.await.unwrap_or(Reply::Gateway(GATEWAY_TARGET_FAILED)),
         };
         match reply {
             Reply::Pdu(pdu) => Some(pdu),
@@ -85,7 +85,8 @@ impl Pending {
     }
 }
 
-pub(super) enum Answer {
+/// How an answer reaches the listener: at once (refused, or from the cache), or from the line.
+pub(super) enum Delivery {
     Now(Reply),
     Later(oneshot::Receiver<Reply>),
 }
@@ -199,9 +200,9 @@ pub(super) fn request(
 ) -> Pending {
     let function = pdu.first().copied().unwrap_or(0);
     let answer = match admit(client, unit, pdu, routes, opts) {
-        Admission::Refused(why) => Answer::Now(Reply::Gateway(why.exception())),
-        Admission::Now(reply) => Answer::Now(reply),
-        Admission::Later(rx) => Answer::Later(rx),
+        Admission::Refused(why) => Delivery::Now(Reply::Gateway(why.exception())),
+        Admission::Now(reply) => Delivery::Now(reply),
+        Admission::Later(rx) => Delivery::Later(rx),
     };
     Pending { transaction_id, unit, function, answer }
 }

@@ -1,5 +1,5 @@
 //! The one ending of the analyzing commands (`sniff`, `tap`, `demo`, `replay` and the bridge's
-//! `--monitor`). A command builds its source — a [`Job`] — and its options; the runner
+//! `--monitor`). A command builds its source — a [`EventSource`] — and its options; the runner
 //! owns the rest: the terminal UI or text/JSON lines on stdout (with the health report and the
 //! learned draft when asked), the publishers (spy server, MQTT), and what is said at the end —
 //! the summary, where a recording went.
@@ -19,7 +19,7 @@ use crate::tui::source::TuiSource;
 
 /// A source of events: runs into `writer` until it ends or is stopped, and says on `err` what
 /// the user should know on the way. Implemented by each source's options.
-pub trait Job: Send + 'static {
+pub trait EventSource: Send + 'static {
     /// # Errors
     /// [`SourceError::NotStarted`] when the source never began (nothing heard, no summary due);
     /// [`SourceError::Stopped`] when it failed after it had begun.
@@ -91,7 +91,7 @@ impl Runner {
     ///
     /// # Errors
     /// The job's error, or the output's.
-    pub fn run(self, job: impl Job) -> anyhow::Result<ExitCode> {
+    pub fn run(self, job: impl EventSource) -> anyhow::Result<ExitCode> {
         let Self {
             title,
             format,
@@ -158,7 +158,7 @@ impl Shown<'_> {
 
 /// Runs `job` into `writer`, then writes the summary (and report, and draft) unless the job
 /// never began; the job's error wins over the summary's.
-fn to_stdout<W: Write>(mut writer: EventWriter<W>, job: impl Job) -> anyhow::Result<()> {
+fn to_stdout<W: Write>(mut writer: EventWriter<W>, job: impl EventSource) -> anyhow::Result<()> {
     match job.run(&mut writer, &mut io::stderr()) {
         Ok(()) => writer.finish().map(|_| ()).map_err(Into::into),
         Err(SourceError::NotStarted(e)) => Err(e),

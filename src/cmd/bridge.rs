@@ -10,7 +10,7 @@ use std::process::ExitCode;
 use clap::ArgMatches;
 
 use crate::cli::args::{EventFormatArg, LineArgs};
-use crate::cli::runner::{Job, Runner};
+use crate::cli::runner::{EventSource, Runner};
 use crate::cmd::runtime;
 use crate::output::{EventWriter, SourceError};
 
@@ -363,7 +363,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
 /// The bridge as the runner's source: what its lines carry, shown by `--monitor`.
 struct Monitor(crate::bridge::run::BridgeOptions);
 
-impl Job for Monitor {
+impl EventSource for Monitor {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
         // The bridge fails only while it sets up (a listener that cannot bind, a port that will
         // not open); once serving, it serves until stopped.

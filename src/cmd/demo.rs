@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use mbtap_analysis::framer::LineSettings;
 
 use crate::cli::args::{EventFormatArg, FaultArg, LangArg, fault_list};
-use crate::cli::runner::{Job, Runner};
+use crate::cli::runner::{EventSource, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::demo::DemoOptions;
 
@@ -83,7 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 /// The simulated line as the runner's source.
 struct Demo(DemoOptions);
 
-impl Job for Demo {
+impl EventSource for Demo {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, _: &mut dyn Write) -> Result<(), SourceError> {
         // The demo fails only while it sets its line up (a built-in profile that does not load).
         let started = crate::runtime()?.block_on(crate::source::demo::demo(self.0, writer));

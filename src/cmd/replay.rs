@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 
 use crate::cli::args::{CaptureLineArgs, EventFormatArg, OutputArgs};
-use crate::cli::runner::{Job, Runner};
+use crate::cli::runner::{EventSource, Runner};
 use crate::output::{EventWriter, SourceError};
 
 #[derive(Debug, clap::Args)]
@@ -58,7 +58,7 @@ struct Replay<R> {
     force: bool,
 }
 
-impl<R: Read + Send + 'static> Job for Replay<R> {
+impl<R: Read + Send + 'static> EventSource for Replay<R> {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
         let Self { input, line, file, image, force } = self;
         // Recorded input shown in the UI is held to its own time.

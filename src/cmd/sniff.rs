@@ -4,7 +4,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 use crate::cli::args::LiveArgs;
-use crate::cli::runner::{Job, Runner};
+use crate::cli::runner::{EventSource, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::sniff::SniffOptions;
 
@@ -34,7 +34,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 /// The live port as the runner's source.
 struct Sniff(SniffOptions);
 
-impl Job for Sniff {
+impl EventSource for Sniff {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
         crate::runtime().map_err(SourceError::NotStarted)?.block_on(crate::source::sniff::sniff(self.0, writer, err))
     }

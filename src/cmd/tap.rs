@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use crate::cli::args::LiveArgs;
-use crate::cli::runner::{Job, Runner};
+use crate::cli::runner::{EventSource, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::tap::TapOptions;
 
@@ -39,7 +39,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 /// The relay as the runner's source.
 struct Tap(TapOptions);
 
-impl Job for Tap {
+impl EventSource for Tap {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
         crate::runtime().map_err(SourceError::NotStarted)?.block_on(crate::source::tap::tap(self.0, writer, err))
     }

@@ -60,12 +60,15 @@ pub async fn confirm(learner: &mut Learner, opts: &ConfirmOptions) -> anyhow::Re
                     ended = Some(format!("--confirm-for {:?} reached", opts.limit));
                     break 'rounds;
                 }
+                // Paced from the end of the last exchange: however late a request reaches the
+                // wire, the next one follows it by at least the rate's interval.
                 if let Some(t) = last_sent {
                     tokio::time::sleep(gap.saturating_sub(t.elapsed())).await;
                 }
-                last_sent = Some(Instant::now());
                 sent += 1;
-                match link.ask(unit, ask.pdu()).await {
+                let asked = link.ask(unit, ask.pdu()).await;
+                last_sent = Some(Instant::now());
+                match asked {
                     Ok(answer) if answer.first().is_some_and(|f| f & 0x80 == 0) && !answer.is_empty() => {
                         answered += 1;
                         let t = t0.saturating_add(u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX));

@@ -6,13 +6,13 @@ use mbtap_device::profile::Profile;
 use mbtap_device::query::encode::encode_write;
 use mbtap_device::query::plan::{Plan, Read};
 use mbtap_device::query::resolve;
-use mbtap_publish::remote::{Ask, Outcome};
+use mbtap_publish::remote::{Ask, WriteResult};
 
 use super::exec;
 use super::link::Link;
 
 /// Carries out `ask` on `unit` (the watched unit; another is refused).
-pub async fn apply(link: &mut Link, unit: u8, ask: &Ask, profile: Option<&Profile>) -> Outcome {
+pub async fn apply(link: &mut Link, unit: u8, ask: &Ask, profile: Option<&Profile>) -> WriteResult {
     if ask.unit != unit {
         return Err(format!("{}: this watch reads and writes unit {unit} only, not unit {}", ask.item.text, ask.unit));
     }

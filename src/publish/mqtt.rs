@@ -275,7 +275,12 @@ impl Mqtt {
 
     /// What became of a write the broker asked for: published on `PREFIX/unit/U/write` (plain;
     /// Sparkplug hosts see the value read back as DDATA), refusals counted.
-    pub fn write_result(&self, ask: &mbtap_publish::remote::Ask, outcome: &mbtap_publish::remote::Outcome, t_ns: u64) {
+    pub fn write_result(
+        &self,
+        ask: &mbtap_publish::remote::Ask,
+        outcome: &mbtap_publish::remote::WriteResult,
+        t_ns: u64,
+    ) {
         match outcome {
             Err(why) => lock(&self.outbox).refuse(Some(ask.unit), why),
             Ok(back) => {

@@ -40,7 +40,9 @@ fn a_units_gap_paces_its_requests_and_no_one_elses() {
     assert!(took >= Duration::from_millis(800), "20 reads with a 40 ms gap took {took:?}");
     let m = common::metrics_text(b.metrics.as_deref().unwrap());
     let waited = common::metric(&m, "mbtap_bridge_unit_gap_wait_seconds_total{unit=\"1\"}").unwrap_or(0.0);
-    assert!(waited >= 0.7, "{waited} s waited for unit 1's gap:\n{m}");
+    // Each request waits what is left of its 40 ms when it arrives (less when the client is
+    // slow to ask again): nineteen gaps count most of 0.76 s.
+    assert!(waited >= 0.5, "{waited} s waited for unit 1's gap:\n{m}");
     assert_eq!(common::metric(&m, "mbtap_bridge_unit_gap_wait_seconds_total{unit=\"5\"}"), None, "{m}");
     std::fs::remove_dir_all(&d).ok();
 }

@@ -120,8 +120,14 @@ fn confirm_settles_what_one_poll_left_undecided_with_reads_only_within_the_rate(
     assert!(confirmed.status.success(), "{said}");
     let after = drafted(&confirmed.stdout);
     // Settled: the voltages (u32, 0.1 V) and the rest of the block as pairs from its start.
+    // (A current that only rose over the few seconds asked may be called a counter: the series
+    // cannot say otherwise; its width and word order are what is settled.)
     for a in [0x5B00u64, 0x5B02, 0x5B04, 0x5B0C] {
-        assert_eq!(after.get(&a), Some(&("u32 high word first".to_owned(), 2)), "{a:#x}: {after:?}\n{said}");
+        let (kind, width) = after.get(&a).unwrap_or_else(|| panic!("{a:#x}: {after:?}\n{said}"));
+        assert!(
+            kind.starts_with("u32") && kind.ends_with("high word first") && *width == 2,
+            "{a:#x}: {after:?}\n{said}"
+        );
     }
     assert!(said.contains("asked") && said.contains("→ u32 high word first"), "{said}");
     // The wire: reads only (03), of the three blocks, as many as said, never faster than --rate.

@@ -22,7 +22,7 @@ use crate::answer::check;
 use crate::rules::GATEWAY_TARGET_FAILED;
 
 mod steps;
-pub use steps::{EchoMode, MasterConfig, Note, Outcome, Reply, Step};
+pub use steps::{EchoMode, Ending, MasterConfig, Note, Reply, Step};
 
 mod late;
 mod master;
@@ -66,7 +66,7 @@ pub struct Transaction<'m> {
     notes: Vec<Note>,
     was_suspect: bool,
     flush: Option<Duration>,
-    outcome: Option<Outcome>,
+    outcome: Option<Ending>,
 }
 
 impl Transaction<'_> {
@@ -77,7 +77,7 @@ impl Transaction<'_> {
 
     /// The result, once the step is [`Step::Done`].
     #[must_use]
-    pub fn outcome(&self) -> Option<&Outcome> {
+    pub fn outcome(&self) -> Option<&Ending> {
         self.outcome.as_ref()
     }
 
@@ -351,7 +351,7 @@ impl Transaction<'_> {
         let cacheable =
             matches!(reply, Reply::Pdu(_)) && !self.was_suspect && !self.master.suspect.contains(&self.unit);
         self.phase = Phase::Done;
-        self.outcome = Some(Outcome { reply, last, cacheable, flush: self.flush.take() });
+        self.outcome = Some(Ending { reply, last, cacheable, flush: self.flush.take() });
         Step::Done
     }
 }
@@ -424,7 +424,7 @@ mod tests {
         }
 
         /// Runs one transaction to its end: the outcome and every note.
-        fn drive(&mut self, m: &mut SerialMaster, unit: u8, pdu: &[u8]) -> (Outcome, Vec<Note>) {
+        fn drive(&mut self, m: &mut SerialMaster, unit: u8, pdu: &[u8]) -> (Ending, Vec<Note>) {
             let (mut t, mut step) = m.transaction(unit, pdu);
             let mut notes = Vec::new();
             loop {

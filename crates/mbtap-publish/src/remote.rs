@@ -12,7 +12,7 @@ use mbtap_device::query::table_word;
 
 /// What became of one ask: the value read back (if the read back answered), or why it was not
 /// written.
-pub type Outcome = Result<Option<mbtap_device::query::rows::Row>, String>;
+pub type WriteResult = Result<Option<mbtap_device::query::rows::Row>, String>;
 
 /// One write asked for.
 #[derive(Debug, Clone, PartialEq, Eq)]

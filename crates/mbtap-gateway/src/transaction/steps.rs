@@ -133,7 +133,7 @@ pub enum Note {
 
 /// How a transaction ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Outcome {
+pub struct Ending {
     pub reply: Reply,
     /// When the line last carried a byte (or the wait ended).
     pub last: Duration,
