@@ -11,7 +11,7 @@ use tokio::net::TcpStream;
 use tokio_serial::{SerialPort, SerialStream};
 
 use mbtap_analysis::framer::{LineSettings, Parity};
-use mbtap_gateway::rfc2217::{self, LineSetup, Telnet};
+use mbtap_proto::rfc2217::{self, LineSetup, Telnet};
 
 /// The most bytes one [`LineStream::clear_input`] drops before it returns: sixteen of the
 /// longest MBAP or RTU ADUs (260 bytes, Messaging on TCP/IP v1.0b §4.1).

@@ -28,6 +28,7 @@ pub mod function;
 pub mod hexinput;
 pub mod length;
 pub mod request;
+pub mod rfc2217;
 pub mod response;
 pub mod rtu;
 pub mod serial_line;
