@@ -33,7 +33,7 @@ impl Requests {
         mode: SerialMode,
         line: LineSettings,
     ) -> std::io::Result<(Vec<RequestFrame>, Vec<u8>)> {
-        let silence = Duration::from_nanos(line.t35_ns()) + Duration::from_millis(1);
+        let silence = mbtap_sim::rtu_requests::end_silence(line);
         let pending = match mode {
             SerialMode::Rtu => self.rtu.pending(),
             SerialMode::Ascii => 0,

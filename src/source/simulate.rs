@@ -93,12 +93,6 @@ pub struct PollOptions {
 /// The default line: all three built-in devices at the addresses used throughout the docs.
 pub const DEFAULT_DEVICES: [(&str, u8); 3] = [("mk4", 1), ("display", 5), ("mkzp", 17)];
 
-/// Silence after which buffered bytes end a frame: t3.5, at least 1.75 ms above 19200 baud
-/// (Serial Line v1.02 §2.5.1.1), plus slack for the pseudo-terminal and the timer's 1 ms steps.
-fn silence(line: LineSettings) -> Duration {
-    Duration::from_nanos(line.t35_ns()) + Duration::from_millis(2)
-}
-
 /// Runs until Ctrl-C or the duration ends.
 ///
 /// # Errors
@@ -146,7 +140,7 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
         return result;
     }
     let deadline = opts.duration.map(|d| Instant::now() + d);
-    let gap = silence(opts.line);
+    let gap = mbtap_sim::rtu_requests::end_silence(opts.line);
     let mut assembler = match opts.mode {
         SerialMode::Rtu => Assembler::Rtu(RequestAssembler::default()),
         SerialMode::Ascii => Assembler::Ascii(AsciiRequestAssembler::default()),

@@ -3,7 +3,21 @@
 //! (Serial Line v1.02 §2.5.1.2); when neither can tell, the silence after the frame ends it
 //! (t3.5, Serial Line v1.02 §2.5.1.1), which the caller reports with [`RequestAssembler::silence`].
 
+use mbtap_proto::serial_line::LineSettings;
 use mbtap_proto::{PduLength, crc16, request_len};
+
+/// Slack on top of t3.5 before a silence ends a request: a timer's 1 ms steps and a
+/// pseudo-terminal's or USB adapter's delivery.
+const SILENCE_SLACK: std::time::Duration = std::time::Duration::from_millis(2);
+
+/// The silence after which the bytes heard end a request on `line`: t3.5 (at least 1.75 ms above
+/// 19200 baud, Serial Line v1.02 §2.5.1.1) and [`SILENCE_SLACK`] — one rule for every front that
+/// frames requests as a slave (`simulate`'s pseudo-terminal, `--listen-serial`, `simulate
+/// --serial`).
+#[must_use]
+pub fn end_silence(line: LineSettings) -> std::time::Duration {
+    std::time::Duration::from_nanos(line.t35_ns()) + SILENCE_SLACK
+}
 
 /// One request: the unit it is addressed to and its PDU.
 #[derive(Debug, Clone, PartialEq, Eq)]
