@@ -17,15 +17,7 @@ const PALETTE: [&str; 8] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e
 /// `2026-12-02` (UTC) of a time in ns since the Unix epoch (civil date from days: the
 /// proleptic Gregorian calendar).
 fn date(t_ns: u64) -> String {
-    let days = i64::try_from(t_ns / 86_400_000_000_000).unwrap_or(0) + 719_468;
-    let era = days.div_euclid(146_097);
-    let doe = days.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
+    let (year, month, day) = crate::report::format::civil_date(i64::try_from(t_ns / 86_400_000_000_000).unwrap_or(0));
     format!("{year:04}-{month:02}-{day:02}")
 }
 

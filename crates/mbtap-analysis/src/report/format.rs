@@ -3,6 +3,21 @@
 
 use std::fmt::Write as _;
 
+/// The civil date (year, month, day) of a day counted from 1970-01-01: the proleptic Gregorian
+/// calendar, H. Hinnant's days-to-civil algorithm (exact for any day an `i64` holds here).
+#[must_use]
+pub fn civil_date(days_since_epoch: i64) -> (i64, i64, i64) {
+    let z = days_since_epoch + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    (yoe + era * 400 + i64::from(month <= 2), month, day)
+}
+
 /// `HH:MM:SS.mmm` (UTC) of a time in ns since the epoch: the UI's and the reports' clock.
 #[must_use]
 pub fn clock_ms(t_ns: u64) -> String {
