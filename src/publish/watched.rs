@@ -2,8 +2,8 @@
 //! the idle timeout is closed, and when every place is taken the gateway's one seat decision
 //! ([`mbtap_gateway::seats::for_room`]) says whose place the newcomer takes — a socket
 //! that never sent a byte, then the one stalled longest, else the idlest — instead of being
-//! refused while idle sockets hold every place. (It had a rule of its own, a 200 ms grace for
-//! silent sockets, which lets a flood of young silent sockets starve newcomers.)
+//! refused while idle sockets hold every place. (A grace for young silent sockets would let a
+//! flood of them starve newcomers: none is given.)
 //! tokio-modbus runs each connection's request loop itself; the stream it is given
 //! ([`Watched`]) keeps the time of the last byte read and ends (EOF) when it idles out or is
 //! evicted.

@@ -152,8 +152,8 @@ impl TurnaroundStats {
 mod tests {
     use super::*;
 
-    /// Was: a vendor request ending in `00` as a line's first frame was taken whole without
-    /// doubt, though nothing was known yet of whether its sender glitches.
+    /// A vendor request ending in `00` as a line's first frame is not taken whole without doubt:
+    /// nothing is known yet of whether its sender glitches, so both readings are shown.
     #[test]
     fn a_lines_first_frames_show_both_readings_of_a_trailing_zero() {
         let mut s = TurnaroundStats::default();
