@@ -84,16 +84,13 @@ impl ClientBook {
             let clients = list
                 .iter()
                 .map(|e| {
-                    json!({
-                        "address": e.who.address.map(|a| a.to_string()),
-                        "transport": e.who.transport,
-                        "role": e.who.role,
-                        "requests": e.requests,
-                        "refusals": e.refusals.values().sum::<u64>(),
-                        "refused_for": e.refusals,
-                        "first_ms": e.first_ms,
-                        "last_ms": e.last_ms,
-                    })
+                    let mut c = e.who.json();
+                    c["requests"] = json!(e.requests);
+                    c["refusals"] = json!(e.refusals.values().sum::<u64>());
+                    c["refused_for"] = json!(e.refusals);
+                    c["first_ms"] = json!(e.first_ms);
+                    c["last_ms"] = json!(e.last_ms);
+                    c
                 })
                 .collect();
             (clients, i.forgotten)

@@ -58,6 +58,18 @@ pub struct Who {
     pub role: Option<String>,
 }
 
+impl Who {
+    /// As the audit's lines and the web view's clients name it.
+    #[must_use]
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "transport": self.transport,
+            "address": self.address.map(|a| a.to_string()),
+            "role": self.role,
+        })
+    }
+}
+
 /// The audit log's writer.
 #[derive(Debug)]
 pub struct Audit {
@@ -90,15 +102,10 @@ impl Audit {
 
     /// Records one request: who, the unit, what it changes, how it ended. Never blocks.
     pub fn record(&self, who: &Who, unit: u8, change: &Change, outcome: &str) {
-        let (secs, nanos) =
-            SystemTime::now().duration_since(UNIX_EPOCH).map_or((0, 0), |d| (d.as_secs(), d.subsec_nanos()));
+        let now = now_rfc3339();
         let line = serde_json::json!({
-            "time": rfc3339(secs, nanos),
-            "client": {
-                "transport": who.transport,
-                "address": who.address.map(|a| a.to_string()),
-                "role": who.role,
-            },
+            "time": now,
+            "client": who.json(),
             "unit": unit,
             "function": change.function,
             "what": change.what,
@@ -114,11 +121,10 @@ impl Audit {
     /// Records a value set by name from the broker (`simulate --values-from`): no Modbus
     /// request, the `NAME=VALUE` asked and how it ended.
     pub fn record_set(&self, who: &Who, unit: u8, item: &str, outcome: &str) {
-        let (secs, nanos) =
-            SystemTime::now().duration_since(UNIX_EPOCH).map_or((0, 0), |d| (d.as_secs(), d.subsec_nanos()));
+        let now = now_rfc3339();
         let line = serde_json::json!({
-            "time": rfc3339(secs, nanos),
-            "client": {"transport": who.transport, "address": who.address.map(|a| a.to_string()), "role": who.role},
+            "time": now,
+            "client": who.json(),
             "unit": unit,
             "set": item,
             "outcome": outcome,
@@ -209,6 +215,13 @@ impl Writer {
             Err(e) => eprintln!("mbtap: --audit {}: cannot open a new file after rotating ({e})", self.path.display()),
         }
     }
+}
+
+/// The clock's time now, as [`rfc3339`] writes it.
+fn now_rfc3339() -> String {
+    let (secs, nanos) =
+        SystemTime::now().duration_since(UNIX_EPOCH).map_or((0, 0), |d| (d.as_secs(), d.subsec_nanos()));
+    rfc3339(secs, nanos)
 }
 
 /// Seconds and nanoseconds since 1970 as RFC 3339 UTC (`2026-12-07T05:20:34.123456Z`).

@@ -92,6 +92,21 @@ fn fits(p: &PairStat) -> bool {
     p.recent.iter().all(|&(h, l)| h <= SMALL_HIGH || (h == 0xFFFF && l >= 0x8000) || (h == 0x8000 && l == 0))
 }
 
+/// The kind the bits of `p` show, else the plain 32-bit value its high word says (signed where
+/// the high word is all ones or a signed value's "no value"), with the reason.
+fn kind_of(p: &PairStat, decided: Option<(Kind, String)>, otherwise: &str) -> (Kind, String) {
+    decided.unwrap_or_else(|| {
+        let signed = p.recent.iter().any(|&(h, _)| h == 0xFFFF || h == 0x8000);
+        let kind = if signed { Kind::I32 { high_first: true } } else { Kind::U32 { high_first: true, counter: false } };
+        (kind, otherwise.to_owned())
+    })
+}
+
+/// One joined pair's guess, trusted no more than a few samples allow.
+fn joined(address: u16, p: &PairStat, kind: Kind, evidence: String) -> Guess {
+    Guess { address, kind, confidence: FEW.min(super::series::confidence(p.samples, 1)), evidence }
+}
+
 /// The pairs the block rule joins: first address → kind and evidence. `blocks`: (first,
 /// quantity) of the table's reads; `pair(a)`: the joint samples of `a` and `a + 1`.
 #[must_use]
@@ -110,21 +125,9 @@ pub fn int_blocks<'a>(blocks: &[(u16, u16)], pair: &dyn Fn(u16) -> Option<&'a Pa
             && p.recent.iter().all(|&(h, l)| h == 0 || (h == 0xFFFF && l >= 0x8000))
             && p.recent.iter().any(|&(h, l)| h != 0 || l != 0)
         {
-            let (kind, why) = int_by_bits(p).unwrap_or_else(|| {
-                let signed = p.recent.iter().any(|&(h, _)| h == 0xFFFF);
-                let kind = if signed {
-                    Kind::I32 { high_first: true }
-                } else {
-                    Kind::U32 { high_first: true, counter: false }
-                };
-                (kind, "a zero high word".to_owned())
-            });
-            out.entry(first).or_insert(Guess {
-                address: first,
-                kind,
-                confidence: FEW.min(super::series::confidence(p.samples, 1)),
-                evidence: format!("{} sample(s): {why}; the master reads exactly these two registers", p.samples),
-            });
+            let (kind, why) = kind_of(p, int_by_bits(p), "a zero high word");
+            let evidence = format!("{} sample(s): {why}; the master reads exactly these two registers", p.samples);
+            out.entry(first).or_insert_with(|| joined(first, p, kind, evidence));
             continue;
         }
         if quantity < 4 || quantity % 2 != 0 {
@@ -135,31 +138,21 @@ pub fn int_blocks<'a>(blocks: &[(u16, u16)], pair: &dyn Fn(u16) -> Option<&'a Pa
         if pairs.len() != starts.len() || pairs.iter().any(|p| p.recent.is_empty() || !few(p) || !fits(p)) {
             continue;
         }
-        let decided = pairs.iter().filter(|p| int_by_bits(p).is_some()).count();
+        // Each pair's bits read once: they count towards the block and type the pair.
+        let by_bits: Vec<Option<(Kind, String)>> = pairs.iter().map(|p| int_by_bits(p)).collect();
+        let decided = by_bits.iter().filter(|d| d.is_some()).count();
         if decided < 2 || decided * 4 < pairs.len() {
             continue;
         }
-        for (&a, p) in starts.iter().zip(&pairs) {
-            let (kind, why) = int_by_bits(p).unwrap_or_else(|| {
-                let signed = p.recent.iter().any(|&(h, _)| h == 0xFFFF || h == 0x8000);
-                let kind = if signed {
-                    Kind::I32 { high_first: true }
-                } else {
-                    Kind::U32 { high_first: true, counter: false }
-                };
-                (kind, "its high word a 32-bit value's".to_owned())
-            });
-            out.entry(a).or_insert(Guess {
-                address: a,
-                kind,
-                confidence: FEW.min(super::series::confidence(p.samples, 1)),
-                evidence: format!(
-                    "{} sample(s): {why}; the block at {first} ({quantity} registers) reads as {} such pairs from its \
-                     first register, {decided} decided by their bits",
-                    p.samples,
-                    pairs.len()
-                ),
-            });
+        for ((&a, p), bits) in starts.iter().zip(&pairs).zip(by_bits) {
+            let (kind, why) = kind_of(p, bits, "its high word a 32-bit value's");
+            let evidence = format!(
+                "{} sample(s): {why}; the block at {first} ({quantity} registers) reads as {} such pairs from its \
+                 first register, {decided} decided by their bits",
+                p.samples,
+                pairs.len()
+            );
+            out.entry(a).or_insert_with(|| joined(a, p, kind, evidence));
         }
     }
     out
