@@ -14,9 +14,9 @@ const LIBRARIES: [(&str, &[&str]); 6] = [
     ("mbtap-analysis", &["mbtap-proto", "mbtap-device"]),
     ("mbtap-sim", &["mbtap-proto", "mbtap-device", "mbtap-analysis"]),
     ("mbtap-publish", &["mbtap-device"]),
-    // The gateway's protocol facts (line settings, the serial mode, durations) are the protocol
-    // crate's: it stands beside the analysis, not on it.
-    ("mbtap-gateway", &["mbtap-proto", "mbtap-device"]),
+    // The gateway's protocol facts (line settings, the serial mode, durations, the data model's
+    // tables) are the protocol crate's: it stands on that crate alone, beside the others.
+    ("mbtap-gateway", &["mbtap-proto"]),
 ];
 
 fn library_src(root: &Path, krate: &str) -> PathBuf {

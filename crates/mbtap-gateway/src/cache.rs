@@ -7,10 +7,10 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
-use mbtap_device::profile::Table;
+use mbtap_proto::Table;
 
 use crate::BadValue;
-use mbtap_device::query::{is_bits, read_function, table_read_by, table_word};
+use mbtap_proto::table::{is_bits, read_function, table_read_by, table_word};
 
 /// One `--cache` rule.
 #[derive(Debug, Clone, PartialEq, Eq)]

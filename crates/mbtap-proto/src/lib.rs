@@ -10,7 +10,7 @@
 //! [`length`] says how long a frame of a function code must be; [`answer_end`] uses it to find
 //! where an answer arriving byte by byte ends (the bridge's question); [`hexinput`] reads frames
 //! that people paste as text; [`serial_line`] holds the
-//! line settings and the RTU timing they imply.
+//! line settings and the RTU timing they imply; [`table`] the data model's four tables.
 //!
 //! This crate depends on `nom` and `thiserror` only: every parser here is fuzzed from
 //! `fuzz/` without compiling the analysis, the terminal or an async runtime.
@@ -32,6 +32,7 @@ pub mod response;
 pub mod rfc2217;
 pub mod rtu;
 pub mod serial_line;
+pub mod table;
 pub mod tcp;
 
 pub use adu::{Adu, Check, Mode, detect_mode, parse_adu};
@@ -46,4 +47,5 @@ pub use length::{PduLength, answer_fits, answer_len, request_len, request_len_pr
 pub use request::{Request, parse_request};
 pub use response::{Response, parse_response};
 pub use rtu::{RtuFrame, encode_rtu, parse_rtu};
+pub use table::Table;
 pub use tcp::{MbapHeader, Streaming, TcpFrame, encode_tcp, parse_mbap, parse_tcp, parse_tcp_frame};

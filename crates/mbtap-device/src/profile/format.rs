@@ -214,43 +214,24 @@ pub enum DatePart {
     Second,
 }
 
-/// Which table a block or reservation belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Table {
+pub use mbtap_proto::Table;
+
+/// How a profile names a table (`holding_registers`, …): [`Table`] lives in the protocol crate,
+/// which knows nothing of serde, so the profile format reads it through this mirror.
+#[derive(Deserialize)]
+#[serde(remote = "Table", rename_all = "snake_case")]
+enum TableName {
     Coils,
     DiscreteInputs,
     HoldingRegisters,
     InputRegisters,
 }
 
-impl Table {
-    #[must_use]
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Coils => "coils",
-            Self::DiscreteInputs => "discrete_inputs",
-            Self::HoldingRegisters => "holding_registers",
-            Self::InputRegisters => "input_registers",
-        }
-    }
-
-    /// The table word users type (`holding`, `input`, `coil`, `discrete`).
-    #[must_use]
-    pub const fn word(self) -> &'static str {
-        match self {
-            Self::Coils => "coil",
-            Self::DiscreteInputs => "discrete",
-            Self::HoldingRegisters => "holding",
-            Self::InputRegisters => "input",
-        }
-    }
-}
-
 /// A repeated group: `count` copies, `stride` registers apart, from `start`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BlockDef {
+    #[serde(with = "TableName")]
     pub table: Table,
     pub start: u16,
     pub count: u16,
@@ -264,6 +245,7 @@ pub struct BlockDef {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReservedDef {
+    #[serde(with = "TableName")]
     pub table: Table,
     pub addresses: [u16; 2],
 }

@@ -12,8 +12,6 @@ pub mod plan;
 pub mod resolve;
 pub mod rows;
 
-use crate::profile::Table;
-
 /// Why an item cannot be read or written. Each says what was wrong, where, and what to do.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum QueryError {
@@ -39,49 +37,4 @@ pub enum QueryError {
     AllReserved { item: String },
 }
 
-/// The table words users type, and the table each means.
-pub const TABLE_WORDS: &[(&str, Table)] = &[
-    ("coils", Table::Coils),
-    ("coil", Table::Coils),
-    ("discrete", Table::DiscreteInputs),
-    ("discrete_inputs", Table::DiscreteInputs),
-    ("holding", Table::HoldingRegisters),
-    ("holding_registers", Table::HoldingRegisters),
-    ("input", Table::InputRegisters),
-    ("input_registers", Table::InputRegisters),
-];
-
-/// The table a word names, if it names one.
-#[must_use]
-pub fn table_word(word: &str) -> Option<Table> {
-    TABLE_WORDS.iter().find(|(w, _)| w.eq_ignore_ascii_case(word)).map(|&(_, t)| t)
-}
-
-/// The function code that reads `table` (MAP v1.1b3 §6.1–§6.4).
-#[must_use]
-pub const fn read_function(table: Table) -> u8 {
-    match table {
-        Table::Coils => 0x01,
-        Table::DiscreteInputs => 0x02,
-        Table::HoldingRegisters => 0x03,
-        Table::InputRegisters => 0x04,
-    }
-}
-
-/// The table a read function code reads, when it is one (MAP v1.1b3 §6.1–§6.4).
-#[must_use]
-pub const fn table_read_by(function: u8) -> Option<Table> {
-    match function {
-        0x01 => Some(Table::Coils),
-        0x02 => Some(Table::DiscreteInputs),
-        0x03 => Some(Table::HoldingRegisters),
-        0x04 => Some(Table::InputRegisters),
-        _ => None,
-    }
-}
-
-/// Whether a table holds bits (coils, discrete inputs) rather than 16-bit registers.
-#[must_use]
-pub const fn is_bits(table: Table) -> bool {
-    matches!(table, Table::Coils | Table::DiscreteInputs)
-}
+pub use mbtap_proto::table::{TABLE_WORDS, is_bits, read_function, table_read_by, table_word};
