@@ -11,7 +11,10 @@
 //! - [`bridge`] — Modbus TCP ⇄ serial: server, line masters, the serial front (and reverse mode
 //!   through it), metrics, its config file.
 //! - [`tui`] — the terminal UI (ratatui), rendered from the model the events build.
-//! - [`source`] — live serial ports, pseudo-terminals and the clock: the I/O loops.
+//! - [`source`] — the analysing sources' loops (`sniff`, `tap`, `scan`, `play`, `demo`) and
+//!   `simulate`'s pseudo-terminal with the devices every front serves.
+//! - [`io`] — ports and transports (serial, RS-485, streams, the pty), the clock, fine waits and
+//!   the one stop of every loop ([`io::signals`]).
 //! - [`master`] — `read`/`write`/`watch`: requests to a device through tokio-modbus (RTU on a
 //!   serial port, TCP, RTU over TCP), planned and checked by `mbtap_device::query`.
 //! - [`publish`] — what the sniffer hears, served to others: a read-only Modbus TCP server of
@@ -19,16 +22,15 @@
 //! - [`output`] — the output sink: events as text or JSON lines, the UI feed, reports; and the
 //!   progress of reading a capture file.
 //! - [`config`] — the user configuration file, and device profiles by the names users give them.
-//! - [`signals`] — Ctrl-C, SIGTERM and the UI's `q`: one stop for every loop.
 
 pub mod bridge;
 pub mod cli;
 pub mod cmd;
 pub mod config;
+pub mod io;
 pub mod master;
 pub mod output;
 pub mod publish;
-pub mod signals;
 pub mod source;
 pub mod tui;
 

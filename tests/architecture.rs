@@ -281,6 +281,14 @@ fn the_readmes_layout_names_every_crate_and_its_modules() {
     for named in layout.split("crates/").skip(1).filter_map(|s| s.split('/').next()) {
         assert!(crates.iter().any(|c| c == named), "the Layout names crates/{named}/, which is not there");
     }
+    // Every room of the binary's src/, each named in the Layout.
+    for e in std::fs::read_dir(root.join("src")).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let named = if e.path().is_dir() { format!("src/{name}/") } else { format!("src/{name}") };
+        if name != "lib.rs" {
+            assert!(layout.contains(&named), "the Layout does not name {named}");
+        }
+    }
     // The gateway's modules, each named in its entry.
     let entry = layout.split("crates/mbtap-gateway/").nth(1).unwrap().split("\nsrc/").next().unwrap();
     let lib = std::fs::read_to_string(root.join("crates/mbtap-gateway/src/lib.rs")).unwrap();

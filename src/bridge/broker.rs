@@ -49,12 +49,12 @@ pub fn start(writes: &Arc<BrokerWrites>, routes: Arc<Routes>, opts: Arc<ServerOp
         let mut client = Client::local(BROKER, Role::Broker(writes.role.as_ref()), &routes, &opts)
             .known_as("mqtt", writes.role_name.clone());
         for ask in asks {
-            if crate::signals::stop_requested() {
+            if crate::io::signals::stop_requested() {
                 // Stopping: what still waits is not carried out (the bound keeps it short).
                 break;
             }
             let outcome = handle.block_on(apply(&ask, &writes, &routes, &opts, &mut client));
-            writes.publisher.write_result(&ask, &outcome, crate::source::serial::now().0);
+            writes.publisher.write_result(&ask, &outcome, crate::io::serial::now().0);
         }
     });
 }

@@ -127,7 +127,7 @@ pub(super) async fn connection<S>(
     };
     let mut buf = Vec::with_capacity(600);
     let mut chunk = [0u8; 1024];
-    let mut rtu_frames = mbtap_sim::RequestAssembler::default();
+    let mut rtu_frames = mbtap_proto::request_frames::RtuRequestFramer::default();
     // The idle timer counts from the last whole request, not the last byte: bytes that never
     // make a request do not keep a connection alive. A request begun must end within
     // REQUEST_DEADLINE.

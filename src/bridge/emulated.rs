@@ -9,7 +9,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-pub use crate::source::emulated::Emulated;
+pub use crate::source::simulate::emulated::Emulated;
 use mbtap_gateway::line::{Back, Line, Start, class};
 use mbtap_gateway::rules::GATEWAY_TARGET_FAILED;
 use mbtap_gateway::transaction::Reply;

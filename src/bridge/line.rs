@@ -18,8 +18,8 @@ use super::metrics::Metrics;
 use super::port::Port;
 pub use super::port::{LineOptions, MonitorChunk};
 use super::shared::{Job, LineShared};
-use crate::source::pace::wait_until;
-use crate::source::stream::Transport;
+use crate::io::pace::wait_until;
+use crate::io::stream::Transport;
 use mbtap_analysis::chunk::{PortId, Timestamp};
 use mbtap_gateway::line::{Back, Start, class};
 use mbtap_gateway::rules::GATEWAY_PATH_UNAVAILABLE;
@@ -34,7 +34,7 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         stream: None,
         backoff: Duration::from_millis(100),
         next_open: Instant::now(),
-        watch: crate::source::serial::DeviceWatch::default(),
+        watch: crate::io::serial::DeviceWatch::default(),
         missing: None,
         opened_once: false,
         // Transaction ids toward the device start where nobody can guess (counted from
@@ -181,7 +181,7 @@ impl Port<'_> {
                     port.send(&self.opts.rs485, &adu).await?;
                     self.observe_sent(&adu);
                     // With --rs485 rts the send returned when the last character left (tcdrain).
-                    let drained = self.opts.rs485.rs485 == crate::source::rs485::Rs485Mode::Rts;
+                    let drained = self.opts.rs485.rs485 == crate::io::rs485::Rs485Mode::Rts;
                     t.sent(shared.now(), drained)
                 }
                 Step::WaitUntil(until) => {
@@ -277,7 +277,7 @@ impl Port<'_> {
     /// Bytes read from the line, stamped when the read returned.
     pub(super) fn observe(&self, port: u8, bytes: &[u8]) {
         if let Some(m) = self.monitor {
-            let _ = m.send((PortId(port), crate::source::serial::now(), bytes.to_vec(), false));
+            let _ = m.send((PortId(port), crate::io::serial::now(), bytes.to_vec(), false));
         }
     }
 
@@ -287,7 +287,7 @@ impl Port<'_> {
     pub(super) fn observe_sent(&self, bytes: &[u8]) {
         if let Some(m) = self.monitor {
             let on_wire = self.opts.line.char_ns().saturating_mul(bytes.len() as u64);
-            let t = Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
+            let t = Timestamp(crate::io::serial::now().0.saturating_add(on_wire));
             let _ = m.send((PortId(0), t, bytes.to_vec(), true));
         }
     }

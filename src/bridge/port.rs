@@ -1,6 +1,6 @@
 //! The line's port and its settings: a serial port opened by name (a by-id link or
 //! `usb:VID:PID[:SERIAL]` found again wherever the adapter came back), or a serial server or
-//! Modbus TCP device connected to ([`crate::source::stream`]); reopened with backoff when it goes
+//! Modbus TCP device connected to ([`crate::io::stream`]); reopened with backoff when it goes
 //! away, its absence said once a minute.
 
 use std::time::Duration;
@@ -10,7 +10,7 @@ use tokio::time::Instant;
 use tokio_serial::{SerialPort, SerialPortBuilderExt};
 
 use super::shared::LineShared;
-use crate::source::stream::{LineStream, Transport};
+use crate::io::stream::{LineStream, Transport};
 use mbtap_analysis::analyzer::SerialMode;
 use mbtap_analysis::chunk::{PortId, Timestamp};
 use mbtap_analysis::framer::LineSettings;
@@ -35,7 +35,7 @@ pub struct LineOptions {
     /// `--echo`: whether the adapter hears its own transmission.
     pub echo: EchoMode,
     /// `--rs485`: transmitter direction control.
-    pub rs485: crate::source::rs485::Rs485Args,
+    pub rs485: crate::io::rs485::Rs485Args,
     /// `--cache` rules for this line's units.
     pub cache: Vec<Rule>,
     /// `--poll`: ranges the bridge keeps fresh itself.
@@ -50,7 +50,7 @@ pub struct LineOptions {
     /// silence that ends an answer of unknown length.
     pub latency: Duration,
     /// Devices emulated in this process answer instead of a port (`simulate --listen`).
-    pub emulated: Option<std::sync::Arc<crate::source::emulated::Emulated>>,
+    pub emulated: Option<std::sync::Arc<crate::source::simulate::emulated::Emulated>>,
 }
 
 impl LineOptions {
@@ -69,7 +69,7 @@ impl LineOptions {
             unit_timeouts: std::collections::BTreeMap::new(),
             unit_gaps: mbtap_gateway::line::UnitGaps::default(),
             echo: EchoMode::default(),
-            rs485: crate::source::rs485::Rs485Args::default(),
+            rs485: crate::io::rs485::Rs485Args::default(),
             cache: Vec::new(),
             polls: Vec::new(),
             retries: 0,
@@ -110,7 +110,7 @@ pub(super) struct Port<'a> {
     pub(super) device: mbtap_gateway::tcp_device::TcpDevice,
     pub(super) backoff: Duration,
     pub(super) next_open: Instant,
-    pub(super) watch: crate::source::serial::DeviceWatch,
+    pub(super) watch: crate::io::serial::DeviceWatch,
     /// The port was open once: each later opening is a reopening.
     pub(super) opened_once: bool,
     /// Since when the port has been said missing (None: open, or not tried yet).
@@ -163,11 +163,10 @@ impl Port<'_> {
     fn open_serial(&mut self) -> Result<LineStream, String> {
         let opts = self.opts;
         (|| -> Result<LineStream, String> {
-            let path = crate::source::serial::resolve_port(&opts.port).map_err(|e| format!("{e:#}"))?;
+            let path = crate::io::serial::resolve_port(&opts.port).map_err(|e| format!("{e:#}"))?;
             // Checked at start-up; a port that comes back must take the mode again.
             opts.rs485.prepare(&path).map_err(|e| format!("{e:#}"))?;
-            let port =
-                crate::source::serial::builder(&path, opts.line).open_native_async().map_err(|e| e.to_string())?;
+            let port = crate::io::serial::builder(&path, opts.line).open_native_async().map_err(|e| e.to_string())?;
             let _ = port.clear(tokio_serial::ClearBuffer::All);
             if let Some(said) = self.watch.opened(&opts.port, &path) {
                 self.shared.metrics.note(&said);

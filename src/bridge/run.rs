@@ -65,7 +65,7 @@ impl BridgeOptions {
     /// admission under `policy` (`simulate --read-only`, `--allow-broadcast`: the bridge's rules).
     #[must_use]
     pub fn emulating(
-        emulated: Arc<crate::source::emulated::Emulated>,
+        emulated: Arc<crate::source::simulate::emulated::Emulated>,
         line: mbtap_analysis::framer::LineSettings,
         mode: mbtap_analysis::analyzer::SerialMode,
         duration: Option<Duration>,
@@ -181,7 +181,7 @@ pub async fn bridge<W: Write>(
         let connections: Arc<server::Table> = Arc::default();
         for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
             let Some(addr) = addr else { continue };
-            let addr = crate::source::listen::bind_addr(addr);
+            let addr = crate::io::listen::bind_addr(addr);
             let listener = TcpListener::bind(&addr).await.with_context(|| format!("listening on {addr}"))?;
             let local = listener.local_addr().with_context(|| format!("listening on {addr}"))?;
             let what = if rtu { "RTU over TCP" } else { "Modbus TCP" };
@@ -204,7 +204,7 @@ pub async fn bridge<W: Write>(
             tokio::spawn(crate::bridge::serial_front::serve(front.clone(), Arc::clone(&routes), server_opts, monitor));
         }
         if let Some(addr) = &opts.listen_udp {
-            let addr = crate::source::listen::bind_addr(addr);
+            let addr = crate::io::listen::bind_addr(addr);
             let socket =
                 tokio::net::UdpSocket::bind(&addr).await.with_context(|| format!("--listen-udp: binding {addr}"))?;
             let local = socket.local_addr().with_context(|| format!("--listen-udp: binding {addr}"))?;
@@ -216,7 +216,7 @@ pub async fn bridge<W: Write>(
         if let Some(addr) = &opts.tls.listen_tls {
             // Files are read (and checked) before listening: a bad certificate stops the start.
             let tls = crate::bridge::tls::Tls::start(&opts.tls, Arc::clone(&opts.roles))?;
-            let addr = crate::source::listen::bind_addr(addr);
+            let addr = crate::io::listen::bind_addr(addr);
             let listener =
                 TcpListener::bind(&addr).await.with_context(|| format!("--listen-tls: listening on {addr}"))?;
             let local = listener.local_addr().with_context(|| format!("--listen-tls: listening on {addr}"))?;
@@ -255,7 +255,7 @@ pub async fn bridge<W: Write>(
     drop(monitor_tx);
     let served = Arc::new(served);
     if let Some(addr) = &opts.metrics {
-        let addr = crate::source::listen::bind_addr(addr);
+        let addr = crate::io::listen::bind_addr(addr);
         let listener = TcpListener::bind(&addr).await.with_context(|| format!("metrics: listening on {addr}"))?;
         let local = listener.local_addr().with_context(|| format!("metrics: listening on {addr}"))?;
         let _ = writeln!(err, "mbtap: metrics at http://{local}/metrics");
@@ -266,7 +266,7 @@ pub async fn bridge<W: Write>(
         .is_some()
         .then(|| Session::new(AnalyzerConfig { mode, framer: FramerConfig::new(settings, 0), pairing }));
     let mut writer = writer;
-    let stop = crate::signals::shutdown_signal();
+    let stop = crate::io::signals::shutdown_signal();
     tokio::pin!(stop);
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     let mut tick = tokio::time::interval(Duration::from_millis(100));
@@ -287,7 +287,7 @@ pub async fn bridge<W: Write>(
             }
             _ = tick.tick() => {
                 if let (Some(s), Some(w)) = (session.as_mut(), writer.as_deref_mut()) {
-                    s.tick(crate::source::serial::now(), w);
+                    s.tick(crate::io::serial::now(), w);
                     s.flush(w, err);
                 }
                 for note in served.notes() {

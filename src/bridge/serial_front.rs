@@ -25,7 +25,7 @@ use mbtap_analysis::analyzer::SerialMode;
 use mbtap_analysis::framer::LineSettings;
 use mbtap_gateway::admit::Role;
 use mbtap_gateway::lifetime::{Fate, Ids, Lifetime};
-use mbtap_sim::RequestFrame;
+use mbtap_proto::request_frames::RequestFrame;
 
 /// Broadcasts heard and not yet carried out, at most (a master does not wait for them, but
 /// leaves the turnaround delay between them: more at once is a flood; the oldest are dropped).
@@ -62,7 +62,7 @@ pub struct SerialFront {
     pub mode: SerialMode,
     /// Time from the end of a request to the answer, at least (a slave's turnaround).
     pub turnaround: Duration,
-    pub rs485: crate::source::rs485::Rs485Args,
+    pub rs485: crate::io::rs485::Rs485Args,
     /// The addresses answered as (`--answer-as`); empty: every unit a line serves.
     pub answer_as: BTreeSet<u8>,
     /// The option the user gave for it, for what is said at start (`--listen-serial`,
@@ -84,7 +84,7 @@ type Monitor = Option<mpsc::UnboundedSender<MonitorChunk>>;
 /// Bytes the port heard, stamped when the read returned.
 fn observe_heard(monitor: &Monitor, bytes: &[u8]) {
     if let Some(m) = monitor.as_ref().filter(|_| !bytes.is_empty()) {
-        let _ = m.send((mbtap_analysis::chunk::PortId(0), crate::source::serial::now(), bytes.to_vec(), false));
+        let _ = m.send((mbtap_analysis::chunk::PortId(0), crate::io::serial::now(), bytes.to_vec(), false));
     }
 }
 
@@ -92,7 +92,7 @@ fn observe_heard(monitor: &Monitor, bytes: &[u8]) {
 fn observe_answer(monitor: &Monitor, bytes: &[u8], char_ns: u64) {
     if let Some(m) = monitor {
         let on_wire = char_ns.saturating_mul(bytes.len() as u64);
-        let t = mbtap_analysis::chunk::Timestamp(crate::source::serial::now().0.saturating_add(on_wire));
+        let t = mbtap_analysis::chunk::Timestamp(crate::io::serial::now().0.saturating_add(on_wire));
         let _ = m.send((mbtap_analysis::chunk::PortId(1), t, bytes.to_vec(), true));
     }
 }
@@ -105,7 +105,7 @@ pub async fn serve(front: SerialFront, routes: Arc<Routes>, opts: Arc<ServerOpti
         let opened = front
             .rs485
             .prepare(&front.port)
-            .and_then(|()| Ok(crate::source::serial::builder(&front.port, front.line).open_native_async()?));
+            .and_then(|()| Ok(crate::io::serial::builder(&front.port, front.line).open_native_async()?));
         let mut port = match opened {
             Ok(p) => p,
             Err(e) => {
@@ -146,7 +146,7 @@ async fn serve_port(
     let peer = SocketAddr::from(([0, 0, 0, 0], 0));
     let mut client =
         Client::new(mbtap_gateway::clients::SERIAL_FRONT, Role::Plain, peer, routes, opts).known_as("serial", None);
-    let mut heard = super::slave_port::Requests::default();
+    let mut heard = super::slave_port::Requests::new(front.mode, front.line);
     // A serial master asks one thing at a time and has no ids (`mbtap_gateway::lifetime`): its
     // next request — to any unit — means it gave up on the last; an answer that would reach it
     // after its own timeout (learnt from when it asks again) is never written.
@@ -156,7 +156,7 @@ async fn serve_port(
     let mut backlog: VecDeque<RequestFrame> = VecDeque::new();
     loop {
         let Some(r) = backlog.pop_front() else {
-            let (requests, bytes) = heard.next(port, front.mode, front.line).await?;
+            let (requests, bytes) = heard.next(port).await?;
             observe_heard(monitor, &bytes);
             take_newest(&mut backlog, requests, routes);
             continue;
@@ -177,7 +177,7 @@ async fn serve_port(
         let pdu = loop {
             tokio::select! {
                 pdu = &mut answer => break Some(pdu),
-                more = heard.next(port, front.mode, front.line) => {
+                more = heard.next(port) => {
                     let (requests, bytes) = more?;
                     observe_heard(monitor, &bytes);
                     if !requests.is_empty() {

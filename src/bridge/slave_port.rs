@@ -1,6 +1,6 @@
 //! A serial port on which the bridge is the slave (reverse mode, `--listen-serial`): requests
-//! framed from the bytes the way a slave's UART sees them (structure and CRC, the silence for
-//! functions of unknown length: [`mbtap_sim::RequestAssembler`]; ASCII by ':' … CR LF),
+//! framed from the bytes the way a slave's UART sees them by the serial fronts' one framer
+//! ([`mbtap_proto::request_frames`]: structure, CRC and silence in RTU; ':' … CR LF in ASCII),
 //! and answers written after the slave's turnaround under the port's direction control.
 
 use std::time::Duration;
@@ -10,56 +10,43 @@ use tokio_serial::SerialStream;
 
 use mbtap_analysis::analyzer::SerialMode;
 use mbtap_analysis::framer::LineSettings;
+use mbtap_proto::request_frames::{RequestFrame, RequestFramer, end_silence};
 use mbtap_proto::{encode_ascii, encode_rtu};
-use mbtap_sim::{AsciiRequestAssembler, RequestAssembler, RequestFrame};
 
 /// The requests heard on one port, in its mode.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Requests {
-    rtu: RequestAssembler,
-    ascii: AsciiRequestAssembler,
+    framer: RequestFramer,
+    line: LineSettings,
     buf: Vec<u8>,
 }
 
 impl Requests {
+    /// Requests framed in `mode` on `line`.
+    #[must_use]
+    pub fn new(mode: SerialMode, line: LineSettings) -> Self {
+        Self { framer: RequestFramer::new(mode), line, buf: Vec::new() }
+    }
+
     /// Waits for bytes (or, with an RTU frame begun, the silence that ends it); the requests
     /// they complete, and the bytes read (for the monitor). `Ok` with nothing: a silence.
     ///
     /// # Errors
     /// The port failed or closed.
-    pub async fn next(
-        &mut self,
-        port: &mut SerialStream,
-        mode: SerialMode,
-        line: LineSettings,
-    ) -> std::io::Result<(Vec<RequestFrame>, Vec<u8>)> {
-        let silence = mbtap_sim::rtu_requests::end_silence(line);
-        let pending = match mode {
-            SerialMode::Rtu => self.rtu.pending(),
-            SerialMode::Ascii => 0,
-        };
-        let wait = if pending > 0 { silence } else { Duration::from_hours(1) };
+    pub async fn next(&mut self, port: &mut SerialStream) -> std::io::Result<(Vec<RequestFrame>, Vec<u8>)> {
+        let wait = if self.framer.waits_for_silence() { end_silence(self.line) } else { Duration::from_hours(1) };
         self.buf.resize(512, 0);
         let mut requests = Vec::new();
         match tokio::time::timeout(wait, port.read(&mut self.buf)).await {
             Ok(Ok(0)) => Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the port closed")),
             Ok(Ok(n)) => {
                 let got = self.buf.get(..n).unwrap_or_default().to_vec();
-                match mode {
-                    SerialMode::Rtu => {
-                        self.rtu.push(&got);
-                        requests.extend(std::iter::from_fn(|| self.rtu.next_request()));
-                    }
-                    SerialMode::Ascii => {
-                        self.ascii.push(&got);
-                        requests.extend(std::iter::from_fn(|| self.ascii.next_request()));
-                    }
-                }
+                self.framer.push(&got, &mut requests);
                 Ok((requests, got))
             }
             Ok(Err(e)) => Err(e),
             Err(_) => {
-                requests.extend(self.rtu.silence());
+                requests.extend(self.framer.silence());
                 Ok((requests, Vec::new()))
             }
         }
@@ -72,7 +59,7 @@ impl Requests {
 /// The port failed.
 pub async fn answer(
     port: &mut SerialStream,
-    rs485: &crate::source::rs485::Rs485Args,
+    rs485: &crate::io::rs485::Rs485Args,
     mode: SerialMode,
     turnaround: Duration,
     unit: u8,

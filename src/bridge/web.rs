@@ -73,7 +73,7 @@ impl WebOptions {
 /// # Errors
 /// The address cannot be bound, or is open without an allow-list.
 pub async fn bind(opts: &WebOptions) -> anyhow::Result<TcpListener> {
-    let addr = crate::source::listen::bind_addr(&opts.addr);
+    let addr = crate::io::listen::bind_addr(&opts.addr);
     let listener = TcpListener::bind(&addr).await.with_context(|| format!("--web {addr}: cannot listen there"))?;
     opts.check(listener.local_addr()?)?;
     Ok(listener)

@@ -26,6 +26,42 @@ pub trait EventSource: Send + 'static {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError>;
 }
 
+/// What kind of input a runner has, said once by the command: it decides how values age, how
+/// the UI and stdout keep time, and nothing else asks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Input {
+    /// A live line (`sniff`, `tap`, the bridge's `--monitor`): values age by the clock, events
+    /// reach a pipe as they come.
+    Live,
+    /// A recording (`replay`): values age by the newest bus time heard, the UI plays it at its
+    /// recorded speed, stdout is written in blocks (the file is read as fast as it reads).
+    Recording,
+    /// The demo's simulated line: it runs in real time on its own clock, so values age by its
+    /// bus time and the UI shows it as it comes.
+    Simulated,
+}
+
+impl Input {
+    /// Values age by the host clock (a live line) rather than by the newest bus time heard.
+    #[must_use]
+    pub const fn ages_by_clock(self) -> bool {
+        matches!(self, Self::Live)
+    }
+
+    /// The input keeps its own time: the UI offers its speed keys.
+    #[must_use]
+    pub const fn keeps_own_time(self) -> bool {
+        matches!(self, Self::Recording | Self::Simulated)
+    }
+
+    /// Events are held to their recorded time before the UI shows them, and stdout takes them
+    /// in 64 KiB blocks: the input arrives faster than it happened.
+    #[must_use]
+    pub const fn arrives_early(self) -> bool {
+        matches!(self, Self::Recording)
+    }
+}
+
 /// What an analyzing command shows, publishes and says at the end.
 #[derive(Debug)]
 pub struct Runner {
@@ -39,11 +75,8 @@ pub struct Runner {
     pub line: LineSettings,
     /// The report and the draft asked for (`--report`, `--report-every`, `--learn`).
     pub output: Option<OutputArgs>,
-    /// The input keeps its own time (a recording, the demo's line): the UI plays it at its speed.
-    pub pacing: bool,
-    /// Stdout in 64 KiB blocks (a capture replayed as fast as it reads) rather than line by line
-    /// (a live line, whose events a pipe should see as they come).
-    pub block_buffered: bool,
+    /// What the input is: said once, it decides the UI's pacing and stdout's buffering.
+    pub input: Input,
     pub publishing: Publishing,
     /// The recording this session writes: where it went and how much, said at the end.
     pub recording: Option<PathBuf>,
@@ -53,9 +86,16 @@ pub struct Runner {
 }
 
 impl Runner {
-    /// A runner showing `format` with these profiles, nothing published.
+    /// A runner of `input` showing `format` with these profiles, nothing published.
     #[must_use]
-    pub fn new(title: String, format: EventFormatArg, profiles: Profiles, lang: Lang, line: LineSettings) -> Self {
+    pub fn new(
+        title: String,
+        input: Input,
+        format: EventFormatArg,
+        profiles: Profiles,
+        lang: Lang,
+        line: LineSettings,
+    ) -> Self {
         Self {
             title,
             format,
@@ -63,24 +103,22 @@ impl Runner {
             lang,
             line,
             output: None,
-            pacing: false,
-            block_buffered: false,
+            input,
             publishing: Publishing::default(),
             recording: None,
             serve_after_end: false,
         }
     }
 
-    /// A runner as the shared output options say: their profiles (loaded once), format,
-    /// language, report and draft, and their publishers started. `live`: values age by the
-    /// clock (a live line) rather than by the newest bus time heard (a capture).
+    /// A runner of `input` as the shared output options say: their profiles (loaded once),
+    /// format, language, report and draft, and their publishers started.
     ///
     /// # Errors
     /// A profile that does not load, a publisher that cannot start.
-    pub fn from_output(title: String, output: OutputArgs, line: LineSettings, live: bool) -> anyhow::Result<Self> {
+    pub fn from_output(title: String, input: Input, output: OutputArgs, line: LineSettings) -> anyhow::Result<Self> {
         let profiles = crate::config::devices::load_devices(&output.devices)?;
-        let publishing = Publishing::start(&output.publish, live, &title, &profiles)?;
-        let mut runner = Self::new(title, output.format, profiles, output.lang.into(), line);
+        let publishing = Publishing::start(&output.publish, input.ages_by_clock(), &title, &profiles)?;
+        let mut runner = Self::new(title, input, output.format, profiles, output.lang.into(), line);
         runner.publishing = publishing;
         runner.output = Some(output);
         Ok(runner)
@@ -92,31 +130,20 @@ impl Runner {
     /// # Errors
     /// The job's error, or the output's.
     pub fn run(self, job: impl EventSource) -> anyhow::Result<ExitCode> {
-        let Self {
-            title,
-            format,
-            profiles,
-            lang,
-            line,
-            output,
-            pacing,
-            block_buffered,
-            publishing,
-            recording,
-            serve_after_end,
-        } = self;
+        let Self { title, format, profiles, lang, line, output, input, publishing, recording, serve_after_end } = self;
         let taps = publishing.taps();
         let ended = if format == EventFormatArg::Tui {
-            let ui = TuiSource { profiles, lang, line, pacing };
+            let ui = TuiSource { profiles, lang, line, pacing: input.keeps_own_time() };
             ui.run(&title, move |writer, err| {
                 writer.taps = taps;
+                writer.paced = input.arrives_early();
                 job.run(writer, err).map_err(SourceError::into_error)
             })
             .map(|_| ())
         } else {
             let shown = Shown { format, profiles, lang, output: output.as_ref(), taps };
             let stdout = io::stdout();
-            if block_buffered {
+            if input.arrives_early() {
                 to_stdout(shown.writer(io::BufWriter::with_capacity(1 << 16, stdout.lock()))?, job)
             } else {
                 to_stdout(shown.writer(io::LineWriter::new(stdout.lock()))?, job)
@@ -127,7 +154,7 @@ impl Runner {
         }
         if ended.is_ok() && serve_after_end && publishing.spy.is_some() {
             eprintln!("mbtap: the capture is replayed; serving its register image until Ctrl-C");
-            crate::runtime()?.block_on(crate::signals::shutdown_signal());
+            crate::runtime()?.block_on(crate::io::signals::shutdown_signal());
         }
         publishing.finish();
         ended.map(|()| ExitCode::SUCCESS)

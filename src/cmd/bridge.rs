@@ -10,7 +10,7 @@ use std::process::ExitCode;
 use clap::ArgMatches;
 
 use crate::cli::args::{EventFormatArg, LineArgs};
-use crate::cli::runner::{EventSource, Runner};
+use crate::cli::runner::{EventSource, Input, Runner};
 use crate::cmd::runtime;
 use crate::output::{EventWriter, SourceError};
 
@@ -178,7 +178,7 @@ pub struct Args {
     pub duration: Option<std::time::Duration>,
     /// RS-485 direction control of the serial lines.
     #[command(flatten)]
-    pub rs485: crate::source::rs485::Rs485Args,
+    pub rs485: crate::io::rs485::Rs485Args,
     /// Modbus/TCP Security: the TLS listener, its certificates and the clients' roles.
     #[command(flatten)]
     pub tls: crate::bridge::tls::TlsArgs,
@@ -294,7 +294,7 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         // A serial server's TCP stream keeps no timing: silences shorter than its latency are
         // not taken as the end of an answer whose length the structure does not give.
         latency: std::time::Duration::from_nanos(
-            crate::source::stream::Transport::of(&port).latency_ns(latency_ns).unwrap_or(0),
+            crate::io::stream::Transport::of(&port).latency_ns(latency_ns).unwrap_or(0),
         ),
         port,
         emulated: None,
@@ -354,8 +354,14 @@ pub fn run(args: Args, matches: Option<&ArgMatches>) -> anyhow::Result<ExitCode>
         runtime()?.block_on(crate::bridge::run::bridge::<io::Sink>(opts, None, &mut io::stderr()))?;
         return Ok(ExitCode::SUCCESS);
     };
-    let mut runner =
-        Runner::new("bridge".into(), format, profiles, mbtap_device::profile::annotate::Lang::En, settings);
+    let mut runner = Runner::new(
+        "bridge".into(),
+        Input::Live,
+        format,
+        profiles,
+        mbtap_device::profile::annotate::Lang::En,
+        settings,
+    );
     runner.publishing = crate::publish::Publishing { spy: None, mqtt: publisher };
     runner.run(Monitor(opts))
 }

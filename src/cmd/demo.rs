@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use mbtap_analysis::framer::LineSettings;
 
 use crate::cli::args::{EventFormatArg, FaultArg, LangArg, fault_list};
-use crate::cli::runner::{EventSource, Runner};
+use crate::cli::runner::{EventSource, Input, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::demo::DemoOptions;
 
@@ -59,12 +59,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let format =
         format.unwrap_or_else(|| if io::stdout().is_terminal() { EventFormatArg::Tui } else { EventFormatArg::Text });
     let profiles = mbtap_sim::demo_profiles()?;
-    // The demo's line is simulated: values age by its own time, not the clock's.
-    let publishing = crate::publish::Publishing::start(&publish, false, "demo", &profiles)?;
+    let publishing = crate::publish::Publishing::start(&publish, Input::Simulated.ages_by_clock(), "demo", &profiles)?;
     let line = heard_at.unwrap_or_default();
-    let mut runner = Runner::new("demo (simulated bus)".into(), format, profiles, lang.into(), line);
+    let mut runner = Runner::new("demo (simulated bus)".into(), Input::Simulated, format, profiles, lang.into(), line);
     runner.publishing = publishing;
-    runner.pacing = true;
     runner.recording.clone_from(&record);
     // The report as sniff's output options ask it (the demo's devices are its own).
     runner.output = Some(crate::cli::args::OutputArgs {

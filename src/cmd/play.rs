@@ -22,7 +22,7 @@ pub struct Args {
     #[arg(long, value_name = "SECONDS", default_value_t = 5.0, value_parser = crate::cli::numbers::seconds)]
     pub max_gap: f64,
     #[command(flatten)]
-    pub rs485: crate::source::rs485::Rs485Args,
+    pub rs485: crate::io::rs485::Rs485Args,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {

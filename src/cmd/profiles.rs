@@ -16,6 +16,7 @@ use crate::config::devices::{load_profile_file, resolve_profile, user_profile_di
 pub mod fuzzing;
 mod import;
 mod profile_file;
+mod sheets;
 use import::{import, parse_type_arg};
 
 /// Device profiles: list them, show or check one, import one from a vendor's sheet, export one

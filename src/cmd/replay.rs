@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 
 use crate::cli::args::{CaptureLineArgs, EventFormatArg, OutputArgs};
-use crate::cli::runner::{EventSource, Runner};
+use crate::cli::runner::{EventSource, Input, Runner};
 use crate::output::{EventWriter, SourceError};
 
 #[derive(Debug, clap::Args)]
@@ -42,9 +42,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     output.devices = [crate::config::devices::devices_beside(&file)?, output.devices].concat();
     let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
     let (_, settings, _) = line.overrides().resolve();
-    let mut runner = Runner::from_output(file.display().to_string(), output, settings, false)?;
-    runner.pacing = true;
-    runner.block_buffered = true;
+    let mut runner = Runner::from_output(file.display().to_string(), Input::Recording, output, settings)?;
     runner.serve_after_end = true;
     runner.run(Replay { input, line, file, image, force })
 }
@@ -61,8 +59,6 @@ struct Replay<R> {
 impl<R: Read + Send + 'static> EventSource for Replay<R> {
     fn run<W: Write>(self, writer: &mut EventWriter<W>, err: &mut dyn Write) -> Result<(), SourceError> {
         let Self { input, line, file, image, force } = self;
-        // Recorded input shown in the UI is held to its own time.
-        writer.paced = writer.tui.is_some();
         if image.is_some() {
             writer.image = Some(mbtap_device::profile::image::RegisterImage::default());
         }

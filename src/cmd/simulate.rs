@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use mbtap_analysis::framer::LineSettings;
 
 use crate::cli::args::{FaultArg, LineArgs, fault_list};
-use crate::source::emulate_from;
+use crate::source::simulate::emulate_from;
 
 #[derive(Debug, clap::Args)]
 // Command-line switches are bools by nature; each is an independent option, not a state.
@@ -77,7 +77,7 @@ pub struct Args {
     #[arg(long, value_name = "PORT")]
     pub serial: Option<String>,
     #[command(flatten)]
-    pub rs485: crate::source::rs485::Rs485Args,
+    pub rs485: crate::io::rs485::Rs485Args,
     /// Serve the devices to Modbus TCP clients here (`127.0.0.1:1502`; port 0 picks one), through
     /// the bridge's admission, queue and limits.
     #[arg(long, value_name = "ADDR:PORT")]
@@ -216,7 +216,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     // On a real bus the emulated devices answer at their own addresses only: another unit's
     // request is another slave's to answer, as a real slave stays silent for it.
     let own_units: std::collections::BTreeSet<u8> = emulated.iter().map(mbtap_sim::Device::address).collect();
-    let shared = Arc::new(crate::source::emulated::Emulated {
+    let shared = Arc::new(crate::source::simulate::emulated::Emulated {
         devices: Mutex::new(emulated),
         started: Instant::now(),
         turnaround: turnaround_ms.map(|ms| Duration::from_secs_f64(ms / 1000.0)),
@@ -225,7 +225,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     });
     let listening = listen.is_some() || listen_rtu.is_some() || listen_udp.is_some() || serial.is_some();
     if let Some(port) = &serial {
-        rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
+        rs485.prepare(&crate::io::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
     }
     let link = link.or_else(|| (!listening).then(|| PathBuf::from("/tmp/mbtap-bus")));
     let audit = audit.open()?;

@@ -4,7 +4,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 use crate::cli::args::LiveArgs;
-use crate::cli::runner::{EventSource, Runner};
+use crate::cli::runner::{EventSource, Input, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::sniff::SniffOptions;
 
@@ -26,7 +26,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { port, live: LiveArgs { line, output, record, duration } } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
-    let mut runner = Runner::from_output(port.clone(), output, settings, true)?;
+    let mut runner = Runner::from_output(port.clone(), Input::Live, output, settings)?;
     runner.recording.clone_from(&record);
     runner.run(Sniff(SniffOptions { port, mode, line: settings, latency_ns, record, duration }))
 }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use crate::cli::args::LiveArgs;
-use crate::cli::runner::{EventSource, Runner};
+use crate::cli::runner::{EventSource, Input, Runner};
 use crate::output::{EventWriter, SourceError};
 use crate::source::tap::TapOptions;
 
@@ -30,7 +30,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let Args { port, link, live: LiveArgs { line, output, record, duration } } = args;
     let (mode, settings, latency_ns) = line.overrides().resolve();
-    let mut runner = Runner::from_output(port.clone(), output, settings, true)?;
+    let mut runner = Runner::from_output(port.clone(), Input::Live, output, settings)?;
     runner.title = format!("{port} ⇄ {}", link.display());
     runner.recording.clone_from(&record);
     runner.run(Tap(TapOptions { port, link, mode, line: settings, latency_ns, record, duration }))

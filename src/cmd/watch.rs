@@ -56,7 +56,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let rt = crate::cmd::runtime()?;
     let mut any_failed = false;
     rt.block_on(async {
-        let stop = crate::signals::shutdown_signal();
+        let stop = crate::io::signals::shutdown_signal();
         tokio::pin!(stop);
         let mut round = 0u64;
         let mut next = tokio::time::Instant::now();
@@ -77,14 +77,14 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
                         break;
                     }
                     let outcome = crate::master::remote::apply(&mut link, unit, &ask, profile.as_ref()).await;
-                    mq.write_result(&ask, &outcome, crate::source::serial::now().0);
+                    mq.write_result(&ask, &outcome, crate::io::serial::now().0);
                 }
                 if stopped {
                     break;
                 }
             }
             let started = Instant::now();
-            let t_ns = crate::source::serial::now().0;
+            let t_ns = crate::io::serial::now().0;
             let (rows, failures) = exec::read_all(&mut link, unit, &targets, &plan, profile.as_ref()).await;
             any_failed |= !failures.is_empty();
             if let Some(mq) = &mqtt {

@@ -12,9 +12,9 @@ use mbtap_device::query::plan::{Plan, Read};
 use mbtap_device::query::rows::{rows, short_table};
 use mbtap_device::query::{QueryError, items, resolve};
 
+use crate::io::stream::Transport;
 use crate::master::link::Link;
 use crate::master::{MasterArgs, MasterFormat, exec, show};
-use crate::source::stream::Transport;
 
 /// Write values to a device by the profile's names or by address.
 ///

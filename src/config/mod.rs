@@ -1,5 +1,5 @@
 //! The configuration file: settings that would otherwise be repeated on every command line.
-//! Today it assigns profiles to units:
+//! It assigns profiles to units:
 //!
 //! ```toml
 //! [devices]
@@ -13,7 +13,6 @@
 
 pub mod devices;
 pub mod merge;
-pub mod sheets;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

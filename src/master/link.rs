@@ -19,7 +19,7 @@ use mbtap_gateway::transaction::Reply;
 use crate::bridge::line::LineOptions;
 use crate::bridge::request::{Admission, Client, Route, Routes, ServerOptions, admit};
 use crate::bridge::shared::LineShared;
-use crate::source::stream::Transport;
+use crate::io::stream::Transport;
 
 /// How a closed connection is said.
 pub const CLOSED: &str = "the device closed the connection";

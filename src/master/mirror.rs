@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use mbtap_device::profile::{Profile, Table};
 use mbtap_sim::mirror::MirrorMap;
 
-use crate::source::emulated::Emulated;
+use crate::source::simulate::emulated::Emulated;
 
 /// What to mirror and how.
 #[derive(Debug)]
@@ -49,9 +49,9 @@ pub fn prepare(
 ) -> anyhow::Result<(mbtap_sim::Device, MirrorOptions)> {
     use std::fmt::Write as _;
     anyhow::ensure!(!fresh.is_zero(), "--fresh: expected a period above 0, e.g. 1s");
-    let (source_profile, unit) = crate::source::emulate_from::profile_at(source, "--mirror-device")?;
+    let (source_profile, unit) = crate::source::simulate::emulate_from::profile_at(source, "--mirror-device")?;
     let (served_profile, address) = match served {
-        Some(spec) => crate::source::emulate_from::profile_at(spec, "--as")?,
+        Some(spec) => crate::source::simulate::emulate_from::profile_at(spec, "--as")?,
         None => (source_profile.clone(), unit),
     };
     let map = if let Some(spec) = map {
@@ -68,8 +68,8 @@ pub fn prepare(
     let reads = map.reads();
     // A serial source's line is its own (--mirror-line), said so a mismatch is seen at start;
     // a networked one has no line settings of mbtap's.
-    let source_line = match crate::source::stream::Transport::of_device(target) {
-        crate::source::stream::Transport::Serial(_) | crate::source::stream::Transport::Rfc2217(_) => {
+    let source_line = match crate::io::stream::Transport::of_device(target) {
+        crate::io::stream::Transport::Serial(_) | crate::io::stream::Transport::Rfc2217(_) => {
             let (mode, settings, _) = line.overrides().resolve();
             format!(" on a {settings} {} line", mode.name())
         }

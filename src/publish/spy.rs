@@ -62,7 +62,7 @@ fn bits(v: &[u16]) -> Vec<bool> {
 impl Spy {
     /// Binds `addr` and serves on a thread of its own.
     pub fn start(addr: &str, max_age: Option<Duration>, live: bool) -> anyhow::Result<Arc<Self>> {
-        let listener = std::net::TcpListener::bind(crate::source::listen::bind_addr(addr))
+        let listener = std::net::TcpListener::bind(crate::io::listen::bind_addr(addr))
             .with_context(|| format!("--serve {addr}: cannot listen there"))?;
         listener.set_nonblocking(true).context("--serve: setting the socket non-blocking")?;
         let bound = listener.local_addr().context("--serve: the bound address")?;
@@ -141,7 +141,7 @@ impl Spy {
     }
 
     fn now_ns(&self, img: &Image) -> u64 {
-        if self.live { crate::source::serial::now().0 } else { img.latest_ns }
+        if self.live { crate::io::serial::now().0 } else { img.latest_ns }
     }
 
     /// The answer to one request.

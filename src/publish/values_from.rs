@@ -7,7 +7,7 @@
 use std::sync::{Arc, PoisonError};
 use std::time::Duration;
 
-use crate::source::emulated::Emulated;
+use crate::source::simulate::emulated::Emulated;
 
 /// Sets taken per pass, and how often the queue is looked at: a flood of sets is bounded by
 /// the broker's own command queue ([`crate::publish::outbox::COMMANDS_WAITING`]), never by memory.
@@ -66,7 +66,7 @@ pub fn start(
                         outcome.as_ref().map_or_else(String::as_str, |_| "done"),
                     );
                 }
-                mqtt.write_result(&ask, &outcome, crate::source::serial::now().0);
+                mqtt.write_result(&ask, &outcome, crate::io::serial::now().0);
             }
         }
     });

@@ -6,8 +6,8 @@ use std::io::Write;
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::io::serial::now;
 use crate::output::EventWriter;
-use crate::source::serial::now;
 use crate::source::session::Session;
 use mbtap_analysis::analyzer::AnalyzerConfig;
 use mbtap_analysis::chunk::{Chunk, PortId, Timestamp};
@@ -66,7 +66,7 @@ pub async fn demo<W: Write>(opts: DemoOptions, writer: &mut EventWriter<W>) -> a
             .recording(recorder);
     let start = tokio::time::Instant::now();
     let start_t = now();
-    let mut stop = Box::pin(crate::signals::shutdown_signal());
+    let mut stop = Box::pin(crate::io::signals::shutdown_signal());
     'run: loop {
         for frame in bus.next_transaction() {
             let at = Duration::from_nanos(frame.end_ns);

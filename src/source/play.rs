@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use crate::source::serial::builder;
+use crate::io::serial::builder;
 use mbtap_analysis::capture::{CaptureReader, Item};
 use mbtap_analysis::framer::LineSettings;
 
@@ -24,7 +24,7 @@ pub fn play(
     line: LineSettings,
     speed: f64,
     max_gap: Duration,
-    rs485: crate::source::rs485::Rs485Args,
+    rs485: crate::io::rs485::Rs485Args,
 ) -> anyhow::Result<(u64, u64)> {
     let input = crate::output::progress::open_capture(file, true)?;
     rs485.prepare(port)?;

@@ -28,7 +28,7 @@ pub async fn scan(port: &str, bauds: &[u32], dwell: Duration, err: &mut dyn Writ
         for parity in [Parity::Even, Parity::None, Parity::Odd] {
             for data_bits in [8u8, 7] {
                 let line = LineSettings { baud, data_bits, parity, stop_bits: 1 };
-                let mut p = crate::source::serial::builder(port, line)
+                let mut p = crate::io::serial::builder(port, line)
                     .open_native_async()
                     .with_context(|| format!("opening {port} at {line}"))?;
                 let heard = listen(&mut p, dwell).await;
@@ -74,7 +74,7 @@ async fn listen(port: &mut tokio_serial::SerialStream, dwell: Duration) -> Vec<(
         if n == 0 {
             break;
         }
-        out.push((crate::source::serial::now().0, buf.get(..n).unwrap_or_default().to_vec()));
+        out.push((crate::io::serial::now().0, buf.get(..n).unwrap_or_default().to_vec()));
     }
     out
 }

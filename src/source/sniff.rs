@@ -8,17 +8,17 @@
 //! `rtu-over-tcp://HOST:PORT` (or `rtu+tcp://`) listens to a serial server in transparent mode
 //! (ser2net raw, USR, Elfin, NPort): the remote line's bytes as TCP delivers them. TCP keeps no
 //! timing — a segment may hold parts of several frames, or be held back — so the framer is told
-//! not to trust silences shorter than [`crate::source::stream::SERIAL_SERVER_LATENCY`] and finds frame ends by their
+//! not to trust silences shorter than [`crate::io::stream::SERIAL_SERVER_LATENCY`] and finds frame ends by their
 //! structure and CRC; a connection that drops is made again every second.
 
 use std::io::Write;
 use std::time::Duration;
 
+use crate::io::serial::now;
+use crate::io::stream::{LineStream, Transport};
 use crate::output::{EventWriter, SourceError};
 use crate::source::record::Recorder;
-use crate::source::serial::now;
 use crate::source::session::Session;
-use crate::source::stream::{LineStream, Transport};
 use mbtap_analysis::analyzer::{AnalyzerConfig, SerialMode};
 use mbtap_analysis::chunk::{Chunk, PortId};
 use mbtap_analysis::framer::{FramerConfig, LineSettings};
@@ -49,7 +49,7 @@ fn serial_server(port: &str) -> Option<&str> {
 /// the serial server it names.
 async fn open_source(
     opts: &SniffOptions,
-    watch: &mut crate::source::serial::DeviceWatch,
+    watch: &mut crate::io::serial::DeviceWatch,
     err: &mut dyn Write,
 ) -> anyhow::Result<LineStream> {
     LineStream::open_line(&opts.port, opts.line, watch, err).await
@@ -74,7 +74,7 @@ pub async fn sniff<W: Write>(
     let remote = serial_server(&opts.port).is_some();
     let latency_ns = match Transport::of(&opts.port).latency_ns(opts.latency_ns) {
         Some(ns) if remote => ns,
-        _ => crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err),
+        _ => crate::io::serial::prepare_latency(&opts.port, opts.latency_ns, err),
     };
     let description = LineOverrides::describe(opts.mode, opts.line, latency_ns);
     let recorder = match &opts.record {
@@ -88,7 +88,7 @@ pub async fn sniff<W: Write>(
         ..AnalyzerConfig::default()
     };
     let mut session = Session::new(config).recording(recorder).telling_observers();
-    let mut watch = crate::source::serial::DeviceWatch::default();
+    let mut watch = crate::io::serial::DeviceWatch::default();
     let mut stream = open_source(&opts, &mut watch, err).await.map_err(SourceError::NotStarted)?;
     let _ = writeln!(
         err,
@@ -104,7 +104,7 @@ pub async fn sniff<W: Write>(
     let mut buf = vec![0u8; 4096];
     // The deadline is part of the stop: it holds while the port is away too (it did not, and a
     // sniff of a vanished port with --duration ran on forever).
-    let mut stop = Box::pin(crate::signals::stop_or_deadline(deadline));
+    let mut stop = Box::pin(crate::io::signals::stop_or_deadline(deadline));
     loop {
         if deadline.is_some_and(|d| tokio::time::Instant::now() >= d) {
             break;

@@ -13,12 +13,12 @@ use std::time::Duration;
 
 use anyhow::Context;
 
+use crate::io::rs485::Rs485Args;
+use crate::io::serial::now;
+use crate::io::stream::{LineStream, Transport};
 use crate::output::{EventWriter, SourceError};
 use crate::source::record::Recorder;
-use crate::source::rs485::Rs485Args;
-use crate::source::serial::now;
 use crate::source::session::Session;
-use crate::source::stream::{LineStream, Transport};
 use mbtap_analysis::analyzer::{AnalyzerConfig, SerialMode};
 use mbtap_analysis::chunk::{Chunk, PortId};
 use mbtap_analysis::framer::{FramerConfig, LineSettings};
@@ -60,15 +60,15 @@ pub async fn tap<W: Write>(
     let transport = Transport::of(&opts.port);
     let latency_ns = match transport.latency_ns(opts.latency_ns) {
         Some(ns) if transport.networked() => ns,
-        _ => crate::source::serial::prepare_latency(&opts.port, opts.latency_ns, err),
+        _ => crate::io::serial::prepare_latency(&opts.port, opts.latency_ns, err),
     };
-    let mut watch = crate::source::serial::DeviceWatch::default();
+    let mut watch = crate::io::serial::DeviceWatch::default();
     let mut bus =
         LineStream::open_line(&opts.port, opts.line, &mut watch, err).await.map_err(SourceError::NotStarted)?;
     // The pty lives as long as we hold the master; the application opens the slave's path.
-    let (mut app, slave_path) = super::pty::open().map_err(SourceError::NotStarted)?;
+    let (mut app, slave_path) = crate::io::pty::open().map_err(SourceError::NotStarted)?;
     let slave_path = slave_path.to_string_lossy().into_owned();
-    super::link::make(&opts.link, &slave_path).map_err(SourceError::NotStarted)?;
+    crate::io::link::make(&opts.link, &slave_path).map_err(SourceError::NotStarted)?;
     let _ = writeln!(
         err,
         "mbtap: tapping {} at {}; point the application at {} ({slave_path})",
@@ -97,7 +97,7 @@ pub async fn tap<W: Write>(
         Session::new(AnalyzerConfig { mode: opts.mode, framer, pairing }).recording(recorder).telling_observers();
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     // The deadline is part of the stop, so it holds while the port is away too.
-    let mut stop = Box::pin(crate::signals::stop_or_deadline(deadline));
+    let mut stop = Box::pin(crate::io::signals::stop_or_deadline(deadline));
     let (mut from_app, mut from_bus) = (vec![0u8; 4096], vec![0u8; 4096]);
     let mut last_flush = tokio::time::Instant::now();
     let mut app_closed = false;
@@ -165,7 +165,7 @@ pub async fn tap<W: Write>(
         }
     }
     session.finish(writer, err)?;
-    super::link::remove(&opts.link, &slave_path);
+    crate::io::link::remove(&opts.link, &slave_path);
     Ok(())
 }
 
@@ -174,10 +174,10 @@ pub async fn tap<W: Write>(
 /// block). `None` when a stop was asked for.
 async fn reopen(
     opts: &TapOptions,
-    app: &mut super::pty::PtyMaster,
+    app: &mut crate::io::pty::PtyMaster,
     stop: &mut std::pin::Pin<Box<impl std::future::Future<Output = ()>>>,
     mut recorder: Option<&mut Recorder>,
-    watch: &mut crate::source::serial::DeviceWatch,
+    watch: &mut crate::io::serial::DeviceWatch,
     err: &mut dyn Write,
 ) -> Option<LineStream> {
     let mut scratch = [0u8; 1024];

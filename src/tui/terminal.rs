@@ -27,7 +27,7 @@ impl crate::output::UiFeed for Shared {
         if paced {
             // Wait (the producer's thread) until the event is due; a stop ends all waiting.
             let t = crate::output::event_time(e);
-            while !crate::signals::stop_requested() {
+            while !crate::io::signals::stop_requested() {
                 match self.due_in(t) {
                     None => break,
                     Some(d) => std::thread::sleep(d),
@@ -210,7 +210,7 @@ where
     let mut terminal = ratatui::init();
     let ui = ui_loop(&mut terminal, shared, source, pacing);
     ratatui::restore();
-    crate::signals::request_stop();
+    crate::io::signals::request_stop();
     let produced = handle.join().unwrap_or_else(|_| Err(anyhow::anyhow!("the producer thread panicked")));
     ui?;
     produced
@@ -223,7 +223,7 @@ fn ui_loop(terminal: &mut ratatui::DefaultTerminal, shared: &Shared, source: &st
             let model = shared.model();
             terminal.draw(|f| super::render::draw(f, &mut app, &model, source)).context("drawing the terminal")?;
         }
-        if crate::signals::signalled() {
+        if crate::io::signals::signalled() {
             return Ok(());
         }
         // Redraw at most every 50 ms: smooth, and cheap on a busy bus.

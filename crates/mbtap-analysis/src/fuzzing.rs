@@ -31,6 +31,32 @@ pub fn rtu(data: &[u8]) {
         let _ = response_len(f.pdu);
     }
     render_all(data, Mode::Rtu);
+    request_frames(data, mbtap_proto::serial_line::SerialMode::Rtu);
+}
+
+/// The same bytes heard by a slave's port in `mode`, in reads whose sizes the bytes choose and
+/// with a silence after every fourth read: every request framed is a whole one (unit, non-empty
+/// PDU) and the framer holds at most one longest frame's bytes while it waits.
+fn request_frames(data: &[u8], mode: mbtap_proto::serial_line::SerialMode) {
+    use mbtap_proto::request_frames::{RequestFrame, RequestFramer};
+    let mut framer = RequestFramer::new(mode);
+    let mut out: Vec<RequestFrame> = Vec::new();
+    let mut rest = data;
+    let mut reads = 0u32;
+    while let Some((&size, tail)) = rest.split_first() {
+        let (chunk, after) = tail.split_at(usize::from(size % 64).min(tail.len()));
+        framer.push(chunk, &mut out);
+        reads += 1;
+        if reads.is_multiple_of(4) {
+            out.extend(framer.silence());
+        }
+        if let RequestFramer::Rtu(f) = &framer {
+            assert!(f.pending() <= 2 * mbtap_proto::rtu::RTU_MAX_LEN + 64, "{} bytes held", f.pending());
+        }
+        rest = after;
+    }
+    out.extend(framer.silence());
+    assert!(out.iter().all(|r| !r.pdu.is_empty() && r.pdu.len() <= 253), "a frame outside the spec's sizes");
 }
 
 /// One ASCII frame.
@@ -39,6 +65,7 @@ pub fn ascii(data: &[u8]) {
         let _ = (f.check_ok(), f.unit(), f.pdu());
     }
     render_all(data, Mode::Ascii);
+    request_frames(data, mbtap_proto::serial_line::SerialMode::Ascii);
 }
 
 /// A TCP byte stream.

@@ -9,7 +9,8 @@
 //! [`request`] / [`response`] (PDU) → [`decode`] (direction hint) and [`findings`].
 //! [`length`] says how long a frame of a function code must be; [`answer_end`] uses it to find
 //! where an answer arriving byte by byte ends (the bridge's question); [`hexinput`] reads frames
-//! that people paste as text; [`serial_line`] holds the
+//! that people paste as text; [`request_frames`] frames requests as a slave hears them (the
+//! serial fronts' one framer); [`serial_line`] holds the
 //! line settings and the RTU timing they imply; [`table`] the data model's four tables.
 //!
 //! This crate depends on `nom` and `thiserror` only: every parser here is fuzzed from
@@ -28,6 +29,7 @@ pub mod function;
 pub mod hexinput;
 pub mod length;
 pub mod request;
+pub mod request_frames;
 pub mod response;
 pub mod rfc2217;
 pub mod rtu;

@@ -10,13 +10,11 @@
 //! - Devices: [`slave`] (a profile's device), [`recorded`] + [`recording`] (a recording's),
 //!   [`mirror`] (another live device's), one [`device::Device`] over the three, [`answers`]
 //!   (their read/write answers, one encoding).
-//! - The line: [`rtu_requests`] / [`ascii_requests`] (requests assembled from a slave's port),
-//!   [`bus`] (the virtual bus: master, devices, faults), [`world`] (what the devices measure),
+//! - The line: [`bus`] (the virtual bus: master, devices, faults), [`world`] (what the devices measure),
 //!   [`poll_list`], [`uart`] (what a receiver at other settings hears), [`scan_line`].
 //! - [`traffic`] — synthetic traffic with ground truth, observation models, scoring.
 
 pub mod answers;
-pub mod ascii_requests;
 pub mod bus;
 pub mod device;
 pub mod fuzzing;
@@ -25,7 +23,6 @@ pub mod mirror;
 pub mod poll_list;
 pub mod recorded;
 pub mod recording;
-pub mod rtu_requests;
 pub mod scan_line;
 pub mod slave;
 pub mod store;
@@ -33,11 +30,9 @@ pub mod traffic;
 pub mod uart;
 pub mod world;
 
-pub use ascii_requests::AsciiRequestAssembler;
 pub use device::Device;
 pub use recorded::RecordedDevice;
 pub use recording::Recorder;
-pub use rtu_requests::{RequestAssembler, RequestFrame};
 pub use scan_line::scan_line;
 pub use slave::Slave;
 

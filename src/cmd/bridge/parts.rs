@@ -9,7 +9,7 @@ pub(super) fn usb_serial(serial: Option<String>, serial_match: Option<String>) -
     let Some(m) = serial_match else { return Ok(serial) };
     let spec = format!("usb:{m}");
     anyhow::ensure!(
-        crate::source::serial::UsbMatch::parse(&spec).is_some(),
+        crate::io::serial::UsbMatch::parse(&spec).is_some(),
         "--serial-match {m:?}: expected VID:PID or VID:PID:SERIAL in hex, e.g. 0403:6001"
     );
     Ok(Some(spec))
@@ -64,19 +64,19 @@ pub(super) fn caches(
 /// Direction control the ports cannot do is refused now, never a silent fallback: `--rs485` on
 /// a port reached over the network, or one that refuses the mode.
 pub(super) fn check_rs485<'a>(
-    rs485: &crate::source::rs485::Rs485Args,
+    rs485: &crate::io::rs485::Rs485Args,
     ports: impl Iterator<Item = &'a str>,
 ) -> anyhow::Result<()> {
-    if rs485.rs485 == crate::source::rs485::Rs485Mode::Off {
+    if rs485.rs485 == crate::io::rs485::Rs485Mode::Off {
         return Ok(());
     }
     for port in ports {
         anyhow::ensure!(
-            !crate::source::stream::Transport::of(port).networked(),
+            !crate::io::stream::Transport::of(port).networked(),
             "--rs485 {:?}: {port} is reached over the network, where the serial server drives the line; leave --rs485 out for it",
             rs485.rs485
         );
-        rs485.prepare(&crate::source::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
+        rs485.prepare(&crate::io::serial::resolve_port(port).with_context(|| format!("--serial {port}"))?)?;
     }
     Ok(())
 }

@@ -108,22 +108,18 @@ pub(super) fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             sink.reading(&file.display().to_string(), args.files.len() > 1);
             match format {
                 ImportFormat::Csv => {
-                    let mut rows = crate::config::sheets::csv_rows(file)?;
+                    let mut rows = super::sheets::csv_rows(file)?;
                     if let Some(note) = rows.encoding_note() {
                         sink.note(note.to_owned());
                     }
                     read_sheet(&mut rows, &opts, &mut sink)?;
                 }
                 ImportFormat::Xlsx => {
-                    read_sheet(
-                        &mut crate::config::sheets::read_workbook(file, args.sheet.as_deref())?,
-                        &opts,
-                        &mut sink,
-                    )?;
+                    read_sheet(&mut super::sheets::read_workbook(file, args.sheet.as_deref())?, &opts, &mut sink)?;
                 }
                 ImportFormat::Sunspec => anyhow::bail!("--format sunspec reads a device: give --from"),
                 ImportFormat::HomeAssistant => {
-                    let unit = crate::config::sheets::read_yaml(file, args.unit, &mut sink)?;
+                    let unit = super::sheets::read_yaml(file, args.unit, &mut sink)?;
                     sink.note(format!("device {unit}"));
                 }
             }

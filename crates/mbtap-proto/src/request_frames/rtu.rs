@@ -1,34 +1,14 @@
-//! Request frames out of the bytes a simulated slave hears, the way a slave's UART sees them:
-//! the function code says how long a request is (MAP v1.1b3 §6) and the CRC confirms it
-//! (Serial Line v1.02 §2.5.1.2); when neither can tell, the silence after the frame ends it
-//! (t3.5, Serial Line v1.02 §2.5.1.1), which the caller reports with [`RequestAssembler::silence`].
+//! RTU requests out of the bytes a slave hears, the way a slave's UART sees them: the function
+//! code says how long a request is (MAP v1.1b3 §6) and the CRC confirms it (Serial Line v1.02
+//! §2.5.1.2); when neither can tell, the silence after the frame ends it (t3.5, Serial Line
+//! v1.02 §2.5.1.1), which the caller reports with [`RtuRequestFramer::silence`].
 
-use mbtap_proto::serial_line::LineSettings;
-use mbtap_proto::{PduLength, crc16, request_len};
-
-/// Slack on top of t3.5 before a silence ends a request: a timer's 1 ms steps and a
-/// pseudo-terminal's or USB adapter's delivery.
-const SILENCE_SLACK: std::time::Duration = std::time::Duration::from_millis(2);
-
-/// The silence after which the bytes heard end a request on `line`: t3.5 (at least 1.75 ms above
-/// 19200 baud, Serial Line v1.02 §2.5.1.1) and [`SILENCE_SLACK`] — one rule for every front that
-/// frames requests as a slave (`simulate`'s pseudo-terminal, `--listen-serial`, `simulate
-/// --serial`).
-#[must_use]
-pub fn end_silence(line: LineSettings) -> std::time::Duration {
-    std::time::Duration::from_nanos(line.t35_ns()) + SILENCE_SLACK
-}
-
-/// One request: the unit it is addressed to and its PDU.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct RequestFrame {
-    pub unit: u8,
-    pub pdu: Vec<u8>,
-}
+use super::RequestFrame;
+use crate::{PduLength, crc16, request_len};
 
 /// Collects bytes and hands out whole requests.
 #[derive(Debug, Default, Clone)]
-pub struct RequestAssembler {
+pub struct RtuRequestFramer {
     buf: Vec<u8>,
     /// Bytes thrown away because no request could be made of them (noise, a bad CRC).
     pub discarded: u64,
@@ -37,9 +17,9 @@ pub struct RequestAssembler {
 /// Address byte and CRC around the PDU (Serial Line v1.02 §2.5.1).
 const OVERHEAD: usize = 3;
 /// The longest RTU frame (Serial Line v1.02 §2.5.1: 256 bytes).
-const RTU_MAX_LEN: usize = mbtap_proto::rtu::RTU_MAX_LEN;
+const RTU_MAX_LEN: usize = crate::rtu::RTU_MAX_LEN;
 
-impl RequestAssembler {
+impl RtuRequestFramer {
     /// Adds bytes as they were read.
     pub fn push(&mut self, bytes: &[u8]) {
         self.buf.extend_from_slice(bytes);
@@ -116,8 +96,12 @@ fn exact_request_at(bytes: &[u8]) -> bool {
     n.checked_add(OVERHEAD).and_then(|total| bytes.get(..total)).and_then(checked).is_some()
 }
 
-/// `frame` as a request when its CRC (low byte first) matches.
+/// `frame` as a request when it fits an RTU frame (at most 256 bytes, Serial Line v1.02 §2.5.1)
+/// and its CRC (low byte first) matches.
 fn checked(frame: &[u8]) -> Option<RequestFrame> {
+    if frame.len() > RTU_MAX_LEN {
+        return None;
+    }
     let body_len = frame.len().checked_sub(2)?;
     let (body, crc) = frame.split_at(body_len);
     let (&unit, pdu) = body.split_first()?;
@@ -136,7 +120,7 @@ mod tests {
 
     #[test]
     fn whole_request_in_pieces() {
-        let mut a = RequestAssembler::default();
+        let mut a = RtuRequestFramer::default();
         a.push(&READ_VOLTAGES[..3]);
         assert_eq!(a.next_request(), None);
         a.push(&READ_VOLTAGES[3..]);
@@ -146,7 +130,7 @@ mod tests {
 
     #[test]
     fn noise_before_a_request_is_skipped_and_counted() {
-        let mut a = RequestAssembler::default();
+        let mut a = RtuRequestFramer::default();
         a.push(&[0xFF, 0x00]);
         a.push(&READ_VOLTAGES);
         assert_eq!(a.next_request().map(|r| r.unit), Some(1));
@@ -155,16 +139,16 @@ mod tests {
 
     #[test]
     fn silence_ends_a_frame_of_unknown_length_or_drops_noise() {
-        let mut a = RequestAssembler::default();
+        let mut a = RtuRequestFramer::default();
         a.push(&[0x01, 0x04, 0x01]);
         assert_eq!(a.silence(), None);
         assert_eq!(a.discarded, 3);
         assert_eq!(a.pending(), 0);
     }
 
-    /// A CRC-valid request whose byte count disagrees with its quantity (write 0
-    /// registers from 0x0160 with 6 data bytes) was dropped: the master timed out where the
-    /// device answers exception 03. It is a request: the silence after it ends it.
+    /// A CRC-valid request whose byte count disagrees with its quantity (write 0 registers from
+    /// 0x0160 with 6 data bytes) is still a request: the silence after it ends it, and the
+    /// device, not the framer, answers it (exception 03), so the master never waits in vain.
     const LYING_BYTE_COUNT: [u8; 15] = [
         0x11, // unit 17
         0x10, // write multiple registers
@@ -177,18 +161,18 @@ mod tests {
 
     #[test]
     fn a_request_whose_byte_count_lies_is_forwarded_at_the_silence() {
-        let mut a = RequestAssembler::default();
+        let mut a = RtuRequestFramer::default();
         a.push(&LYING_BYTE_COUNT);
         assert_eq!(a.next_request(), None, "its length is not what its fields say");
         assert_eq!(a.pending(), LYING_BYTE_COUNT.len(), "kept for the silence");
         assert_eq!(a.silence(), Some(RequestFrame { unit: 0x11, pdu: LYING_BYTE_COUNT[1..13].to_vec() }));
     }
 
-    /// A client streaming `0x41` (a function whose length only silence ends) kept
-    /// every byte and rescanned all of them on every read: quadratic, the bridge at 100 % CPU.
+    /// A client streaming `0x41` (a function whose length only silence ends) costs at most one
+    /// frame's bytes held and each byte scanned a bounded number of times: linear, not quadratic.
     #[test]
     fn a_stream_of_garbage_is_held_to_one_frame_and_scanned_once() {
-        let mut a = RequestAssembler::default();
+        let mut a = RtuRequestFramer::default();
         for _ in 0..1000 {
             a.push(&[0x41; 1024]);
             assert_eq!(a.next_request(), None);
@@ -200,9 +184,32 @@ mod tests {
         assert_eq!(a.next_request(), Some(RequestFrame { unit: 1, pdu: READ_VOLTAGES[1..6].to_vec() }));
     }
 
+    /// Write multiple registers to unit 1 from 0 with a byte count of 250: its fields make a
+    /// frame of 259 bytes, longer than any RTU frame (256, Serial Line v1.02 §2.5.1), so even with
+    /// a good CRC it is no request a slave can have heard.
+    fn overlong_write() -> Vec<u8> {
+        let mut frame = vec![0x01, 0x10, 0x00, 0x00, 0x00, 0x7D, 0xFA];
+        frame.extend(std::iter::repeat_n(0xAB, 250));
+        let crc = crc16(&frame);
+        frame.extend(crc.to_le_bytes());
+        frame
+    }
+
+    #[test]
+    fn a_frame_longer_than_rtu_allows_is_never_a_request() {
+        let frame = overlong_write();
+        assert_eq!(frame.len(), 259);
+        let mut a = RtuRequestFramer::default();
+        a.push(&frame);
+        assert_eq!(a.next_request(), None);
+        assert_eq!(a.silence(), None);
+        a.push(&READ_VOLTAGES);
+        assert_eq!(a.next_request().map(|r| r.unit), Some(1), "the next request is still heard");
+    }
+
     #[test]
     fn any_bytes_never_panic() {
-        let mut a = RequestAssembler::default();
+        let mut a = RtuRequestFramer::default();
         for i in 0..5000u32 {
             a.push(&i.to_le_bytes());
             while a.next_request().is_some() {}

@@ -21,8 +21,8 @@ use std::path::Path;
 use mbtap_device::profile::import::grid::Grid;
 use mbtap_device::profile::import::sheet::SheetRows;
 
-pub use csv::{CsvRows, csv_rows};
-pub use yaml::{MAX_YAML_BYTES, read_yaml};
+pub use csv::csv_rows;
+pub use yaml::read_yaml;
 
 /// The largest CSV read (64 MiB; the largest register sheet — every address of four tables at
 /// 200 bytes a row — is ~52 MB).

@@ -1,21 +1,21 @@
-//! Request frames out of the characters a simulated ASCII slave hears: ':' starts a frame,
+//! ASCII requests out of the characters a slave hears: ':' starts a frame,
 //! CR LF ends it, the LRC confirms it (Serial Line v1.02 §2.5.2). Anything before a ':' is
 //! noise; a frame that grows past 513 characters without its end is dropped.
 
-use mbtap_proto::ascii::{ASCII_END, ASCII_MAX_LEN, ASCII_START};
-use mbtap_proto::{AsciiFrame, parse_ascii};
+use crate::ascii::{ASCII_END, ASCII_MAX_LEN, ASCII_START};
+use crate::{AsciiFrame, parse_ascii};
 
 use super::RequestFrame;
 
 /// Collects characters and hands out whole requests.
 #[derive(Debug, Default, Clone)]
-pub struct AsciiRequestAssembler {
+pub struct AsciiRequestFramer {
     buf: Vec<u8>,
     /// Characters thrown away: noise, frames with a bad LRC or bad characters, overlong frames.
     pub discarded: u64,
 }
 
-impl AsciiRequestAssembler {
+impl AsciiRequestFramer {
     /// Adds characters as they were read.
     pub fn push(&mut self, bytes: &[u8]) {
         self.buf.extend_from_slice(bytes);
@@ -69,7 +69,7 @@ mod tests {
     #[test]
     fn whole_request_after_noise() {
         let frame: Vec<u8> = READ_VOLTAGES.iter().copied().filter(|&b| b != b' ').collect();
-        let mut a = AsciiRequestAssembler::default();
+        let mut a = AsciiRequestFramer::default();
         a.push(b"\x00\xFFjunk");
         a.push(&frame[..5]);
         assert_eq!(a.next_request(), None);
@@ -80,7 +80,7 @@ mod tests {
 
     #[test]
     fn bad_lrc_is_dropped_and_a_restart_wins() {
-        let mut a = AsciiRequestAssembler::default();
+        let mut a = AsciiRequestFramer::default();
         a.push(b":0104");
         a.push(b":01040");
         a.push(b"1AE000449\r\n"); // LRC off by one
@@ -90,7 +90,7 @@ mod tests {
 
     #[test]
     fn any_bytes_never_panic() {
-        let mut a = AsciiRequestAssembler::default();
+        let mut a = AsciiRequestFramer::default();
         for i in 0..5000u32 {
             let b = i.to_le_bytes();
             a.push(&[b[0] % 3 + b':', b[1], b'\r', b'\n'][..usize::try_from(i % 5).unwrap()]);

@@ -49,7 +49,7 @@ pub fn from_capture(
     notes: &mut String,
 ) -> anyhow::Result<Vec<Device>> {
     let (path, wanted) = split_units(spec)?;
-    if let Some(image) = super::image_file::load(path)? {
+    if let Some(image) = crate::source::image_file::load(path)? {
         return from_image(path, &image, wanted.as_ref(), turnaround_ms, notes);
     }
     let input = crate::output::progress::open_capture(path, false)?;

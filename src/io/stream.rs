@@ -71,7 +71,7 @@ impl<'a> Transport<'a> {
     /// How late its bytes may arrive, decided once for every command (sniff, tap, learn, the
     /// bridge): what `--latency-ms` gave (`given`, `None`: not given — never taken for 0), else
     /// for a line reached over the network [`SERIAL_SERVER_LATENCY`]; `None` for a local port
-    /// whose adapter is asked ([`crate::source::serial::prepare_latency`]).
+    /// whose adapter is asked ([`crate::io::serial::prepare_latency`]).
     #[must_use]
     pub const fn latency_ns(self, given: Option<u64>) -> Option<u64> {
         match (given, self.networked()) {
@@ -238,7 +238,7 @@ impl LineStream {
     }
 
     /// Sends one frame.
-    pub async fn send(&mut self, rs485: &crate::source::rs485::Rs485Args, frame: &[u8]) -> std::io::Result<()> {
+    pub async fn send(&mut self, rs485: &crate::io::rs485::Rs485Args, frame: &[u8]) -> std::io::Result<()> {
         match self {
             Self::Serial(port) => rs485.send(port, frame).await,
             Self::Tcp(tcp) => tcp.write_all(frame).await,
@@ -282,13 +282,13 @@ impl LineStream {
     pub async fn open_line(
         port: &str,
         line: LineSettings,
-        watch: &mut crate::source::serial::DeviceWatch,
+        watch: &mut crate::io::serial::DeviceWatch,
         err: &mut dyn std::io::Write,
     ) -> anyhow::Result<Self> {
         use anyhow::Context as _;
         match Transport::of(port) {
             Transport::Serial(name) => Ok(Self::Serial(
-                crate::source::serial::open_named(name, line, watch, err)
+                crate::io::serial::open_named(name, line, watch, err)
                     .with_context(|| format!("opening serial port {name} ({line})"))?,
             )),
             Transport::ModbusTcp(addr) => anyhow::bail!(

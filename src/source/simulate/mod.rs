@@ -1,9 +1,12 @@
 //! `mbtap simulate --link PATH`: simulated slaves on a pseudo-terminal, for trying mbtap, the
 //! tests, and commissioning a SCADA before the hardware arrives.
 //!
-//! A master opens PATH as its serial port. Requests are assembled from what it writes
-//! ([`mbtap_sim::RequestAssembler`]), handed to every simulated slave, and the one that answers
-//! is heard after a turnaround delay. Values move with the host clock ([`mbtap_sim::world`]).
+//! A master opens PATH as its serial port. Requests are framed from what it writes (the serial
+//! fronts' one framer, [`mbtap_proto::request_frames`]), handed to every simulated slave, and
+//! the one that answers is heard after a turnaround delay. Values move with the host clock ([`mbtap_sim::world`]).
+
+pub mod emulate_from;
+pub mod emulated;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -16,45 +19,17 @@ use tokio_serial::{SerialPort, SerialStream};
 
 use mbtap_analysis::analyzer::SerialMode;
 use mbtap_analysis::framer::LineSettings;
+use mbtap_proto::request_frames::{RequestFramer, end_silence};
 use mbtap_proto::{encode_ascii, encode_rtu};
 use mbtap_sim::bus::VirtualBus;
 use mbtap_sim::uart::Listener;
-use mbtap_sim::{AsciiRequestAssembler, Device, RequestAssembler, RequestFrame, Slave};
+use mbtap_sim::{Device, Slave};
 
-use super::emulated::Emulated;
+use emulated::Emulated;
 
 /// A profile device's time from a request to its answer when none is given (the MK4 document
 /// gives no figure; a few milliseconds is typical of such controllers).
 pub const DEFAULT_TURNAROUND: Duration = Duration::from_millis(3);
-
-/// Frames requests in the line's mode.
-enum Assembler {
-    Rtu(RequestAssembler),
-    Ascii(AsciiRequestAssembler),
-}
-
-impl Assembler {
-    fn push(&mut self, bytes: &[u8], out: &mut Vec<RequestFrame>) {
-        match self {
-            Self::Rtu(a) => {
-                a.push(bytes);
-                out.extend(std::iter::from_fn(|| a.next_request()));
-            }
-            Self::Ascii(a) => {
-                a.push(bytes);
-                out.extend(std::iter::from_fn(|| a.next_request()));
-            }
-        }
-    }
-
-    /// The line went quiet: RTU ends a frame by silence; ASCII waits for CR LF.
-    fn silence(&mut self) -> Option<RequestFrame> {
-        match self {
-            Self::Rtu(a) if a.pending() > 0 => a.silence(),
-            _ => None,
-        }
-    }
-}
 
 /// Simulation settings.
 #[derive(Debug)]
@@ -102,7 +77,7 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
     let slave_path = slave.name().context("the pseudo-terminal has no name")?;
     // Our handle on the far end holds an exclusive lock: let it go so the master can open it.
     drop(slave);
-    super::link::make(link, &slave_path)?;
+    crate::io::link::make(link, &slave_path)?;
     let _ = writeln!(
         err,
         "mbtap: open {} ({slave_path}) at {} {} as the master's serial port",
@@ -136,15 +111,12 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
         let listener = Listener::new(opts.line, poll.heard_at.unwrap_or(opts.line));
         let follow = poll.follow_baud.then_some(opts.line);
         let result = drive_line(&mut master_side, bus, listener, follow, opts.duration).await;
-        super::link::remove(link, &slave_path);
+        crate::io::link::remove(link, &slave_path);
         return result;
     }
     let deadline = opts.duration.map(|d| Instant::now() + d);
-    let gap = mbtap_sim::rtu_requests::end_silence(opts.line);
-    let mut assembler = match opts.mode {
-        SerialMode::Rtu => Assembler::Rtu(RequestAssembler::default()),
-        SerialMode::Ascii => Assembler::Ascii(AsciiRequestAssembler::default()),
-    };
+    let gap = end_silence(opts.line);
+    let mut framer = RequestFramer::new(opts.mode);
     let mut buf = [0u8; 512];
     let mut out = Vec::with_capacity(260);
     let char_time = Duration::from_nanos(opts.line.char_ns());
@@ -178,14 +150,14 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
                             .context("echoing to the pseudo-terminal")?;
                     }
                 }
-                assembler.push(buf.get(..n).unwrap_or_default(), &mut requests);
+                framer.push(buf.get(..n).unwrap_or_default(), &mut requests);
             }
             // EIO while no master has the far end open; try again shortly.
             Ok(Err(_)) => {
                 tokio::time::sleep(Duration::from_millis(20)).await;
                 continue;
             }
-            Err(_) => requests.extend(assembler.silence()),
+            Err(_) => requests.extend(framer.silence()),
         }
         // Paced: a request is over when its characters would have crossed the line.
         let heard = if requests.is_empty() { None } else { request_start.take() };
@@ -207,9 +179,9 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
             let Some((pdu, wait)) = answered else { continue };
             if let (true, Some((first, count))) = (opts.paced, heard) {
                 let ended = first + char_time * u32::try_from(count).unwrap_or(u32::MAX);
-                super::pace::wait_until(ended + wait).await;
+                crate::io::pace::wait_until(ended + wait).await;
             } else if !wait.is_zero() {
-                super::pace::wait_until(tokio::time::Instant::now() + wait).await;
+                crate::io::pace::wait_until(tokio::time::Instant::now() + wait).await;
             }
             out.clear();
             match opts.mode {
@@ -226,7 +198,7 @@ pub async fn simulate(opts: SimulateOptions, link: &Path, err: &mut dyn Write) -
             let _ = AsyncWriteExt::flush(&mut master_side).await;
         }
     }
-    super::link::remove(link, &slave_path);
+    crate::io::link::remove(link, &slave_path);
     let _ = master_side.clear(tokio_serial::ClearBuffer::All);
     Ok(())
 }
@@ -249,7 +221,7 @@ async fn drive_line(
     duration: Option<Duration>,
 ) -> anyhow::Result<()> {
     let mut start = tokio::time::Instant::now();
-    let mut stop = Box::pin(crate::signals::shutdown_signal());
+    let mut stop = Box::pin(crate::io::signals::shutdown_signal());
     let mut batch = Vec::with_capacity(64);
     let began = Instant::now();
     let mut scratch = [0u8; 256];
