@@ -1,4 +1,4 @@
-//! Beyond the line's limit (issue 19), end to end on a paced 9600 8E1 line (`mbtap simulate
+//! Beyond the line's limit, end to end on a paced 9600 8E1 line (`mbtap simulate
 //! --paced --baud 9600`): 64 Modbus TCP clients each reading the same 10 MK4 holding
 //! registers once a second (their starts spread over the second), with and without
 //! `--cache 1:holding:100-109=1s`, and with agent polling (`--poll …@500ms`, values kept 1 s);

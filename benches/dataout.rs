@@ -230,7 +230,7 @@ fn broker(d: &Path, name: &str) -> (Kill, u16) {
     (b, port)
 }
 
-/// Issue 30: Sparkplug B messages per second from a replayed capture (counted by a subscriber
+/// Sparkplug B messages per second from a replayed capture (counted by a subscriber
 /// printing topics only: the payloads are binary), and the store-and-forward rates — holding a
 /// replay's messages on disk with no broker, then forwarding them when one is there.
 fn sparkplug(d: &Path) {

@@ -1,4 +1,4 @@
-//! The bridge on RS-485 line physics (issue 18), end to end with the real binaries on a paced
+//! The bridge on RS-485 line physics, end to end with the real binaries on a paced
 //! 9600 8E1 line (`mbtap simulate --paced --baud 9600`, which takes each frame's line time):
 //! 1. `--echo on` against an echoing adapter (`simulate --echo`) vs `--echo off` against a
 //!    plain one: one client back to back, transactions per second and latency p50 / p99;

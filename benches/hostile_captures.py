@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Writes the three hostile pcapng files behind BENCHMARKS.md's "memory against hostile
-captures" table (issue 16): each is a valid file built to make a reader's memory follow it.
+captures" table: each is a valid file built to make a reader's memory follow it.
 
     python3 benches/hostile_captures.py DIR
 

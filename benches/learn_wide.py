@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the capture behind BENCHMARKS.md's learner bound (issue 39): the learner's worst case,
+"""Writes the capture behind BENCHMARKS.md's learner bound: the learner's worst case,
 every register heard often enough to fill its history.
 
     python3 benches/learn_wide.py OUT.pcap [BLOCKS] [POLLS]

@@ -1,4 +1,4 @@
-//! Modbus/TCP Security's cost (issue 19): one bridge with a plain and a TLS listener in front
+//! Modbus/TCP Security's cost: one bridge with a plain and a TLS listener in front
 //! of `mbtap simulate`, certificates made with the openssl CLI, the read answered from the
 //! bridge's cache (so the serial line's time is not in the figures). Measures a request's round
 //! trip over the plain listener and over TLS on an established session (p50 / p99, one client

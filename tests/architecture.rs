@@ -1,6 +1,6 @@
-//! The tree keeps the architecture (issue 13): no import cycles between the top-level modules
+//! The tree keeps the architecture: no import cycles between the top-level modules
 //! of the binary or of the pure crates, at most a dozen entries in `src/`, and no edge crate
-//! named in the pure crates' sources. Issue 43: the libraries depend on each other only
+//! named in the pure crates' sources. The libraries depend on each other only
 //! downward, in the order [`LIBRARIES`] gives, and none holds more than 40 % of the lines.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
@@ -126,7 +126,7 @@ fn the_pure_crates_name_no_edge_crate() {
     }
 }
 
-/// Issue 43: a library names in its manifest only the libraries below it, so no crate reaches
+/// A library names in its manifest only the libraries below it, so no crate reaches
 /// up (and no circle can form); every library is a workspace member.
 #[test]
 fn the_libraries_depend_only_downward() {
@@ -145,7 +145,7 @@ fn the_libraries_depend_only_downward() {
     }
 }
 
-/// Issue 43: no library holds more than 40 % of the project's lines (src/ and crates/), so the
+/// No library holds more than 40 % of the project's lines (src/ and crates/), so the
 /// tree says where a change belongs.
 #[test]
 fn no_library_holds_more_than_two_fifths_of_the_lines() {
@@ -163,7 +163,7 @@ fn no_library_holds_more_than_two_fifths_of_the_lines() {
 }
 
 /// Per directory module: file → the sibling files its code names (`super::X`, `self::X` in
-/// mod.rs, `crate::…::DIR::X`), comments left out. Issue 26: the top-level check did not see
+/// Mod.rs, `crate::…::DIR::X`), comments left out. The top-level check did not see
 /// circles between the files of one module (`src/bridge/`, `src/tui/`).
 fn file_graphs(src: &Path) -> Vec<(PathBuf, BTreeMap<String, BTreeSet<String>>)> {
     let mut dirs = vec![src.to_path_buf()];

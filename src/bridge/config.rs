@@ -80,9 +80,9 @@ pub fn options(text: &str, known: &[String]) -> Result<Vec<String>, String> {
     let roles = doc.get("roles").cloned();
     let table = match doc.get("bridge") {
         Some(toml::Value::Table(t)) => {
-            // Keys above `[bridge]` (or tables beside it) were ignored (`read-only =
-            // true` at the top of the file had no effect): the file defines `[bridge]` and
-            // `[roles.NAME]` only, and anything else stops the start.
+            // The file defines `[bridge]` and `[roles.NAME]` only, and anything else stops the
+            // start: a key above `[bridge]` (`read-only = true` at the top of the file) would
+            // otherwise look set and do nothing.
             let mut outside: Vec<(usize, &String)> = doc
                 .keys()
                 .filter(|k| !matches!(k.as_str(), "bridge" | "roles"))

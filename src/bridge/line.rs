@@ -37,8 +37,8 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         watch: crate::io::serial::DeviceWatch::default(),
         missing: None,
         opened_once: false,
-        // Transaction ids toward the device start where nobody can guess (counted from
-        // 0, an unsolicited answer under the next id was taken).
+        // Transaction ids toward the device start where nobody can guess (counted from 0, an
+        // unsolicited answer under the next id would be taken).
         device: mbtap_gateway::tcp_device::TcpDevice::seeded(super::device::random_seed()),
     };
     let device = matches!(Transport::of(&opts.port), Transport::ModbusTcp(_));
@@ -57,8 +57,8 @@ pub async fn run(opts: LineOptions, shared: Arc<LineShared>, monitor: Option<mps
         let Some((client, job)) = shared.next() else {
             // Wake on a new request, or now and then to retry opening the port.
             let _ = tokio::time::timeout(Duration::from_millis(500), shared.wake.notified()).await;
-            // With backoff (a server streaming an endless negotiation was reconnected
-            // every half second, each attempt reading at full speed: 98 % CPU).
+            // With backoff: a server streaming an endless negotiation, reconnected every half
+            // second, costs a core (each attempt reads at full speed).
             if port.stream.is_none() && Instant::now() >= port.next_open {
                 port.reopen().await;
             }

@@ -25,8 +25,8 @@ pub struct Route {
 }
 
 /// The lines a bridge serves, in the order given, and the counters of the server in front of
-/// them: connections and refusals belong to no line (they were counted on the first line's
-/// metrics), so they are kept and exported once, without a line label.
+/// them: connections and refusals belong to no line, so they are kept and exported once,
+/// without a line label.
 #[derive(Debug, Default)]
 pub struct Routes {
     pub lines: Vec<Route>,

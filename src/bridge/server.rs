@@ -141,8 +141,8 @@ pub async fn serve(
                                 tls_stream.get_ref().1.peer_certificates().and_then(|c| c.first()).map(|c| c.to_vec());
                             let role = cert.as_deref().and_then(super::tls::role_of);
                             let policy = role.as_ref().and_then(|r| tls.roles.get(r));
-                            // A session whose certificate a reloaded CRL revokes ends at once
-                            // (it was still answered after SIGHUP).
+                            // A session whose certificate a reloaded CRL revokes ends at once,
+                            // not at its next connection.
                             let revoked = tls.revocation(cert.as_deref().unwrap_or_default());
                             tokio::select! {
                                 () = connection(tls_stream, peer, client, &routes, &opts, &seen, Role::Tls(policy), role.clone()) => {}

@@ -1,8 +1,8 @@
 //! A socket that notes when it last brought bytes in: the seat decision
 //! (`mbtap_gateway::seats`) tells a client still talking — a TLS handshake under way, a request
-//! arriving — from a socket that stalled, whatever their ages (a TLS flood: with a
-//! silent socket's seat going to each newcomer, 2–3 % of TLS clients were reset mid-handshake
-//! as the oldest silent socket).
+//! arriving — from a socket that stalled, whatever their ages (under a TLS flood, handing the
+//! oldest socket's seat to each newcomer whatever it is doing resets 2–3 % of TLS clients
+//! mid-handshake).
 
 use std::pin::Pin;
 use std::sync::Arc;

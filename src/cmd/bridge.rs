@@ -479,7 +479,8 @@ mod tests {
         assert!(e.contains("allow-ip = []") && e.contains(file.to_str().unwrap()), "{e}");
     }
 
-    /// `read-only = true` and `allow-ip` above `[bridge]` had no effect.
+    /// `read-only = true` and `allow-ip` above `[bridge]` would look set and do nothing: the
+    /// start is refused, naming the file, the line and the key.
     #[test]
     fn keys_outside_the_bridge_table_refuse_to_start() {
         let file =
@@ -491,8 +492,8 @@ mod tests {
         assert!(e.contains("line 3") && e.contains("bridg"), "{e}");
     }
 
-    /// `tls-allow-ip = []` and `crl = []` passed silently while `allow-ip = []` was
-    /// refused; an empty `[roles.admin]` let a client do everything.
+    /// Every empty list (`tls-allow-ip = []`, `crl = []`, …) is refused as `allow-ip = []` is,
+    /// and so is an empty `[roles.admin]`, which would let a client do everything.
     #[test]
     fn every_empty_list_and_empty_role_is_refused() {
         for (key, line) in [("tls-allow-ip", 3), ("crl", 3), ("allow-function", 3), ("route", 3)] {

@@ -165,9 +165,9 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
 mod tests {
     use super::*;
 
-    /// The SYNOPSIS read `mbtap-bridge [--config] [--serial]…` (hyphenated, no
-    /// values), no page had EXAMPLES or FILES, and `mbtap(1)` named an `mbtap-help(1)` that does
-    /// not exist.
+    /// Each page's SYNOPSIS names the command as typed (`mbtap bridge`, not `mbtap-bridge`) with
+    /// its options' values, every page has EXAMPLES and FILES, and `mbtap(1)` names no
+    /// `mbtap-help(1)` (there is none).
     #[test]
     fn pages_have_a_typed_synopsis_examples_and_files_and_no_help_page() {
         let pages = pages().unwrap();

@@ -186,8 +186,8 @@ fn list() -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// A profile loaded — by name or file, as every command finds it (the name
-/// `profiles import` said was usable failed here with "os error 2") — its first problem with
+/// A profile loaded — by name or file, as every command finds it (a name `profiles import`
+/// says is usable is usable here) — its first problem with
 /// file:line:column, or a summary counting entries as import counts them, and the registers
 /// they cover.
 fn check(spec: &str) -> anyhow::Result<ExitCode> {

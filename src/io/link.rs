@@ -50,7 +50,8 @@ mod tests {
         d
     }
 
-    /// `simulate --link` and `tap --link` deleted whatever was at the path.
+    /// `simulate --link` and `tap --link` replace only a link of their own: a user's file at the
+    /// path is refused and left as it is.
     #[test]
     fn a_regular_file_at_the_link_is_refused_and_kept() {
         let d = dir("file");

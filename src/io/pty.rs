@@ -1,10 +1,11 @@
 //! The pseudo-terminal `tap` offers the application, read and written without a busy loop.
 //!
 //! A pty master reports hang-up while no program holds the slave open, and tokio keeps a
-//! "read closed" readiness for good once seen: with tokio-serial's stream, every read after
-//! the application had once been away (or before it first opened the path) woke at once,
-//! failed with EAGAIN and tried again — a core burnt while the application sat idle. Here the master's readiness is registered afresh after every hang-up, so an idle
-//! application costs nothing.
+//! "read closed" readiness for good once seen: through tokio-serial's stream, every read after
+//! the application has once been away (or before it first opens the path) wakes at once, fails
+//! with EAGAIN and tries again — a core burnt while the application sits idle. Here the
+//! master's readiness is registered afresh after every hang-up, so an idle application costs
+//! nothing.
 
 use std::fs::File;
 use std::io::{Read as _, Write as _};

@@ -36,7 +36,7 @@ pub fn builder(path: &str, line: LineSettings) -> SerialPortBuilder {
 /// What happened when we asked for low latency.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum LowLatency {
-    /// The USB-serial driver's latency timer was set to 1 ms (was `previous` ms).
+    /// The USB-serial driver's latency timer is set to 1 ms (from `previous` ms).
     Set { previous: String },
     /// The driver has a latency timer (`current` ms) but we may not change it.
     Denied { path: String, error: String, current: Option<u64> },

@@ -86,7 +86,7 @@ impl<'a> Transport<'a> {
 /// buffering and the network's split and join the line's bytes far beyond t3.5 at any baud rate,
 /// so silences shorter than this are not taken as frame ends (sniffing) or as the end of an
 /// answer whose length its structure does not give (the bridge). One figure for every command:
-/// the bridge had 50 ms and sniff 100 ms for the same kind of line.
+/// the line behind a serial server is the same line whoever listens to it.
 pub const SERIAL_SERVER_LATENCY: u64 = 100_000_000;
 
 /// An open line.
@@ -186,8 +186,8 @@ impl LineStream {
     }
 
     /// Drops what was received and not read (a late answer, noise): it must not be taken for
-    /// the next request's answer. Bounded (a server streaming garbage kept this loop
-    /// reading, never yielding, and stalled every route): at most [`CLEAR_LIMIT`] bytes a call;
+    /// the next request's answer. Bounded (a server streaming garbage would keep an unbounded
+    /// loop reading, never yielding, and stall every route): at most [`CLEAR_LIMIT`] bytes a call;
     /// what is left is the answer check's to drop. Returns the bytes dropped.
     pub fn clear_input(&mut self) -> usize {
         let mut buf = [0u8; 512];

@@ -31,8 +31,7 @@ pub enum EventFormat {
 #[derive(Debug)]
 pub enum SourceError {
     /// The source never began (a port that did not open, a file that is no capture): nothing
-    /// was heard, so only the error is said (an empty summary went to stdout beside
-    /// the real error).
+    /// was heard, so only the error is said (no empty summary on stdout beside it).
     NotStarted(anyhow::Error),
     /// It began and then failed: the summary of what was heard is still written, then the error.
     Stopped(anyhow::Error),

@@ -139,8 +139,9 @@ pub fn control(
 mod tests {
     use super::*;
 
-    /// Home Assistant takes `[a-zA-Z0-9_-]` ids only: a prefix holding a target's address became a
-    /// topic HA logged as illegal and ignored. Ids stay in the alphabet, stable, and apart.
+    /// Home Assistant takes `[a-zA-Z0-9_-]` ids only (a topic outside it is logged as illegal and
+    /// ignored), so a prefix holding a target's address is mapped into it: ids stay in the
+    /// alphabet, stable, and apart.
     #[test]
     fn discovery_ids_use_home_assistants_alphabet_and_stay_apart() {
         use mbtap_device::profile::Table;
@@ -155,9 +156,9 @@ mod tests {
         assert_eq!(ha_id("mbtap_site"), "mbtap_site", "a legal id is kept as it is");
     }
 
-    /// No config had a device or state class (no long-term statistics, nothing for
-    /// the Energy dashboard), and `via_device` named a device no config announced. The MK4's
-    /// voltage (input 430, `V`) is a voltage measurement, and no config names a `via_device`.
+    /// A config carries its device and state class (long-term statistics, the Energy
+    /// dashboard) and names no `via_device` that no config announces: the MK4's voltage (input
+    /// 430, `V`) is a voltage measurement.
     #[test]
     fn discovery_gives_classes_and_no_unannounced_via_device() {
         use mbtap_device::profile::Table;
@@ -171,8 +172,8 @@ mod tests {
         assert!(config["device"].get("via_device").is_none(), "{config}");
     }
 
-    /// The MKZP (a profile without a vendor) was announced with `"manufacturer":
-    /// null`, which Home Assistant's schema refuses, and coils as numeric sensors.
+    /// The MKZP (a profile without a vendor) is announced without `"manufacturer"` (a `null`
+    /// there fails Home Assistant's schema), and its coils as binary sensors.
     #[test]
     fn discovery_leaves_out_absent_keys_and_announces_bits_as_binary_sensors() {
         use mbtap_device::profile::Table;

@@ -230,7 +230,8 @@ pub(super) fn default_buffer_dir(prefix: &str) -> PathBuf {
 mod tests {
     use super::*;
 
-    /// `$SYS/x`, a tab or 70 kB were accepted and every message silently dropped.
+    /// `$SYS/x`, a tab or 70 kB would have the broker drop every message silently: refused at
+    /// the start.
     #[test]
     fn a_prefix_the_broker_would_drop_is_refused() {
         assert!(check_prefix("mbtap/site/line1").is_ok());

@@ -403,8 +403,8 @@ mod tests {
     }
 
     /// A FIFO, a directory, a symbolic link and a file larger than any segment in the
-    /// buffer are said and left in place — never opened for reading (a FIFO blocked forwarding
-    /// for good), never deleted (a 64 GiB sparse segment was deleted as "0 messages"), never
+    /// buffer are said and left in place — never opened for reading (a FIFO would block
+    /// forwarding for good), never deleted (a 64 GiB sparse file is not "0 messages"), never
     /// written through; the other segments are forwarded and new ones numbered above them.
     #[test]
     fn what_is_not_a_segment_is_left_in_place_and_the_rest_forwarded() {

@@ -115,8 +115,8 @@ impl Spy {
                     };
                     // A client that breaks its connection ends only that connection. An accept
                     // error (out of file descriptors) ends tokio-modbus's loop: it is said once
-                    // per spell, counted, and serving starts again (the server stopped
-                    // for good while the process went on).
+                    // per spell, counted, and serving starts again (a process that lives on
+                    // must not stop serving for good).
                     let mut said = false;
                     loop {
                         match server.serve(&on_connected, |_err| {}).await {

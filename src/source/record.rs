@@ -125,9 +125,8 @@ impl mbtap_analysis::analyzer::Sink for ValidFrames {
 /// hundredths of a second at replay's speed); a longer one is said by its size alone.
 const COUNT_UP_TO: u64 = 64 << 20;
 
-/// What a session that recorded says as it ends: where the file is and what it holds
-/// (quitting the terminal UI of a `--record` session said nothing — not where the file was,
-/// nor how many frames).
+/// What a session that recorded says as it ends, whichever way it ends (the terminal UI's `q`
+/// too): where the file is and what it holds.
 #[must_use]
 pub fn ended_note(path: &Path) -> Option<String> {
     let len = std::fs::metadata(path).ok()?.len();
@@ -162,7 +161,7 @@ mod tests {
         assert_eq!(ended_note(Path::new("/nonexistent/x.pcapng")), None);
     }
 
-    /// A full disk ended `sniff` and `tap`; the message did not name the file.
+    /// A full disk stops the recording, not `sniff` or `tap`, and the message names the file.
     #[test]
     fn a_full_disk_stops_the_recording_not_the_caller_and_names_the_file() {
         // /dev/full accepts the open and fails every write with ENOSPC, as a full disk does.

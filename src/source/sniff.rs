@@ -102,8 +102,8 @@ pub async fn sniff<W: Write>(
     let deadline = opts.duration.map(|d| tokio::time::Instant::now() + d);
     let mut last_flush = tokio::time::Instant::now();
     let mut buf = vec![0u8; 4096];
-    // The deadline is part of the stop: it holds while the port is away too (it did not, and a
-    // sniff of a vanished port with --duration ran on forever).
+    // The deadline is part of the stop: it holds while the port is away too (a sniff of a
+    // vanished port with --duration ends on time).
     let mut stop = Box::pin(crate::io::signals::stop_or_deadline(deadline));
     loop {
         if deadline.is_some_and(|d| tokio::time::Instant::now() >= d) {

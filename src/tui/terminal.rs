@@ -256,9 +256,9 @@ fn ui_loop(terminal: &mut ratatui::DefaultTerminal, shared: &Shared, source: &st
     }
 }
 
-/// What an export says: every row shown, or how many of them and why the rest were not
-/// ("(27 shown)" beside "exported 26 rows" — a row the model had already let go of,
-/// the oldest when memory is full, was shown in the list but could not be written).
+/// What an export says: every row shown, or how many of them and why the rest are not (a row
+/// the model has let go of — the oldest, when memory is full — can still be on screen but can
+/// no longer be written, so "exported 26 rows" beside "(27 shown)" says why).
 fn export_said(path: &str, exported: usize, shown: usize) -> String {
     if exported >= shown {
         format!("exported all {exported} rows shown to {path}")

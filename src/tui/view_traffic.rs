@@ -24,8 +24,8 @@ pub fn draw(frame: &mut Frame<'_>, area: Rect, app: &mut App, model: &Model) {
         }
     }
     app.traffic_offset = app.traffic_offset.min(total.saturating_sub(height));
-    // The status column as wide as the longest status shown (`ok gap <t3.5` was cut
-    // to `<t3.`), between 6 and 20 columns.
+    // The status column as wide as the longest status shown (`ok gap <t3.5` whole, not cut to
+    // `<t3.`), between 6 and 20 columns.
     let mut status_width = 6u16;
     let rows: Vec<Row<'_>> = app
         .visible()

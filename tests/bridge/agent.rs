@@ -1,4 +1,4 @@
-//! Beyond the line's limit (issue 19): identical reads from many clients go out once
+//! Beyond the line's limit: identical reads from many clients go out once
 //! (coalescing), and `--cache` answers covered reads from memory while fresh, forgets what a
 //! write overlaps and never keeps an exception. Against `mbtap simulate --paced` on a real
 //! pseudo-terminal at 9600 baud (a line that takes its time): `#[ignore]`d in a plain

@@ -1,5 +1,5 @@
 //! The real `mbtap bridge` refuses to start on settings that would fail open or make no sense,
-//! naming where each came from (issue 15): nothing here opens a port or a socket.
+//! Naming where each came from: nothing here opens a port or a socket.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::process::{Command, Output};
@@ -64,7 +64,7 @@ fn an_empty_allow_list_in_the_file_refuses_to_start() {
     }
 }
 
-/// Issue 31: with no such serial port the bridge said only "listening", and every client got
+/// With no such serial port the bridge said only "listening", and every client got
 /// "gateway path unavailable" with no word why. It says so at once (and once a minute).
 #[test]
 fn a_missing_serial_port_is_said_at_start() {
@@ -78,7 +78,7 @@ fn a_missing_serial_port_is_said_at_start() {
     assert!(err.contains("serial port /nonexistent/ttyUSB-test: cannot open it") && err.contains("0x0A"), "{err}");
 }
 
-/// Issue 31: `sniff` on a missing port printed an empty summary to stdout beside the error.
+/// `sniff` on a missing port printed an empty summary to stdout beside the error.
 #[test]
 fn sniff_on_a_missing_port_says_only_the_error() {
     let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
@@ -90,7 +90,7 @@ fn sniff_on_a_missing_port_says_only_the_error() {
     assert!(stderr(&o).contains("/nonexistent/ttyUSB-test"), "{}", stderr(&o));
 }
 
-/// Issue 31: `--link-type` (a capture's link type) and "or what the capture says" were listed in
+/// `--link-type` (a capture's link type) and "or what the capture says" were listed in
 /// the help of commands that read no capture.
 #[test]
 fn help_lists_only_options_that_apply() {
@@ -107,7 +107,7 @@ fn help_lists_only_options_that_apply() {
     }
 }
 
-/// Issue 38: with `--role` rules and `--mqtt-writes` but no `--mqtt-role`, anyone who could
+/// With `--role` rules and `--mqtt-writes` but no `--mqtt-role`, anyone who could
 /// publish on the broker wrote under the plain listeners' rules. The bridge refuses to start.
 #[test]
 fn mqtt_writes_with_roles_need_an_mqtt_role() {

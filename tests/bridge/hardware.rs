@@ -1,5 +1,5 @@
-//! The bridge on real RS-485 hardware, as far as pseudo-terminals and scripted adapters go
-//! (issue 18): RTU over TCP on the client side of reverse mode, adapters that echo what is
+//! The bridge on real RS-485 hardware, as far as pseudo-terminals and scripted adapters go:
+//! RTU over TCP on the client side of reverse mode, adapters that echo what is
 //! sent, per-unit timeouts, ports that come back under another name, and direction control
 //! refused clearly where the port cannot do it. What only real hardware can prove is listed in
 //! the README's "Wiring and adapters". Real ptys (socat, `mbtap simulate`): `#[ignore]`d in a
@@ -104,8 +104,8 @@ fn per_unit_timeouts_fixed_and_learnt() {
     let learnt = gauge(&text, "mbtap_bridge_unit_timeout_seconds", 1).unwrap();
     assert!((0.02..1.0).contains(&learnt), "unit 1's learnt timeout {learnt} s: {text}");
     assert_eq!(gauge(&text, "mbtap_bridge_unit_timeout_seconds", 9), Some(0.05), "{text}");
-    // The ceiling is the default --timeout-ms, 800 since issue 38 (a dead unit's 0x0B before a
-    // client's own 1 s timeout).
+    // The ceiling is the default --timeout-ms, 800 (a dead unit's 0x0B before a client's own
+    // 1 s timeout).
     assert_eq!(gauge(&text, "mbtap_bridge_unit_timeout_seconds", 8), Some(0.8), "never heard: the ceiling");
     assert_eq!(gauge(&text, "mbtap_bridge_timeout_wait_seconds_total", 9), Some(0.05), "{text}");
     assert_eq!(gauge(&text, "mbtap_bridge_timeout_wait_seconds_total", 1), Some(0.0), "{text}");

@@ -1,4 +1,4 @@
-//! `bridge --listen-serial` (issue 41): a master already on a device's line (the "inverter",
+//! `bridge --listen-serial`: a master already on a device's line (the "inverter",
 //! pymodbus on a pty) and a TCP client (mbpoll) share one device through the bridge. The device
 //! is the power meter of a public recording emulated on the line (`simulate --from`, its values
 //! fixed), so every answer each master gets can be checked against the recording: both get

@@ -1,4 +1,4 @@
-//! Issue 38, the one gateway path: the holes the `tcp://` back, UDP, the listeners and the
+//! The one gateway path: the holes the `tcp://` back, UDP, the listeners and the
 //! broker opened, each against the real binary. A Modbus TCP device here is a thread of the
 //! test (std sockets on loopback, port 0) that answers as the case needs; no pty, no broker, so
 //! these run in a plain `cargo test` — except the dead-unit case, which drives the simulator.
@@ -83,8 +83,8 @@ pub(crate) fn connect(addr: &str) -> TcpStream {
     s
 }
 
-/// `upstream_tcp.py` wrongunit: the device answers as unit + 1. The client got that answer as
-/// its unit's; now it is dropped, counted, and the client answered 0x0B.
+/// A TCP device answering as unit + 1: that answer is no answer to the client's unit — it is
+/// dropped, counted, and the client answered 0x0B.
 #[test]
 fn tcp_device_answer_from_another_unit_is_dropped() {
     let dev = device(|unit, pdu| Some((unit.wrapping_add(1), honest(pdu))));
@@ -95,8 +95,8 @@ fn tcp_device_answer_from_another_unit_is_dropped() {
     assert_eq!(counter(m, "mbtap_bridge_misfit_answers_total{reason=\"unit\"}"), 1);
 }
 
-/// `upstream_tcp.py` wrongfc and longer: an FC04 answer to an FC03 request, one register more
-/// than asked. Both reached the client; now both are dropped.
+/// A TCP device answering FC04 to an FC03 request, or one register more than asked: neither
+/// reaches the client.
 #[test]
 fn tcp_device_answers_of_another_function_or_length_are_dropped() {
     let dev = device(|unit, pdu| {
@@ -123,7 +123,7 @@ fn tcp_device_answers_of_another_function_or_length_are_dropped() {
     assert_eq!(call(&mut c, 3, 1, &READ_TWO), [0x03, 0x04, 0x04, 0x4C, 0x04, 0x4D]);
 }
 
-/// `mqtt_bridge_writes.py` / `mqtt_sparkplug.py` and every front: a write to unit 0 went out as
+/// From the broker (plain MQTT or Sparkplug) and every front: a write to unit 0 would go out as
 /// a broadcast to every device. Refused (01, counted) unless `--allow-broadcast`.
 #[test]
 fn broadcast_writes_are_refused_unless_allowed() {
@@ -153,8 +153,8 @@ fn an_fc08_with_a_frame_hidden_in_its_data_never_reaches_the_line() {
     assert_eq!(counter(m, "mbtap_bridge_requests_total{unit=\"1\"}"), 1);
 }
 
-/// `udp_amplify.py`: `--rate-limit` counted per address:port, so every new source port got a
-/// fresh budget. One source address is one client now, whatever its ports.
+/// `--rate-limit` counts per source address, whatever its ports: a UDP sender that changes
+/// its source port gets no fresh budget.
 #[test]
 fn udp_senders_share_one_budget_per_address() {
     let dev = device(|unit, pdu| Some((unit, honest(pdu))));
@@ -189,8 +189,8 @@ fn udp_senders_share_one_budget_per_address() {
     assert_eq!(counter(b.metrics.as_deref().unwrap(), "mbtap_bridge_refused_total{reason=\"rate_limit\"}"), 1);
 }
 
-/// `starve.py`: silent sockets younger than the grace filled `--max-connections`, and every
-/// newcomer was reset. Now the oldest silent socket makes room, whatever its age.
+/// Silent sockets younger than the grace cannot hold `--max-connections` against every
+/// newcomer: the oldest silent socket makes room, whatever its age.
 #[test]
 fn silent_sockets_do_not_lock_new_clients_out() {
     let dev = device(|unit, pdu| Some((unit, honest(pdu))));

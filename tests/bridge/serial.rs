@@ -153,7 +153,7 @@ fn pymodbus_reads_and_writes_through_the_bridge() {
     assert!(text.contains("ALL OK"), "{text}");
 }
 
-/// Issue 29: a pymodbus Modbus UDP client through `--listen-udp` — the same reads, writes,
+/// A pymodbus Modbus UDP client through `--listen-udp` — the same reads, writes,
 /// device exception and gateway exception as over TCP; a read-only bridge refuses its write
 /// with exception 01, counted, as it would a TCP client's.
 #[test]
@@ -307,7 +307,7 @@ fn read_only_allowlists_exceptions_and_broadcasts() {
     }
 }
 
-/// Issue 15: `--read-only` let diagnostics (restart, listen-only — also broadcast), 2B/0D,
+/// `--read-only` let diagnostics (restart, listen-only — also broadcast), 2B/0D,
 /// vendor codes, 0x00, 0x7F and 0x80+ onto the line; a broadcast read went out as `00 03 …`.
 /// Each is now answered 01 and nothing reaches the line; an explicitly allowed vendor read passes.
 #[test]
@@ -365,7 +365,7 @@ fn rtu_over_tcp_carries_raw_frames() {
     assert_eq!(answer[11..], crc, "a valid RTU frame back");
 }
 
-/// Issue 15: the idle timer reset on every byte, so connections sending one byte a second held
+/// The idle timer reset on every byte, so connections sending one byte a second held
 /// `--max-connections` forever; and idle sockets refused every newcomer. Now a request begun
 /// must end within 2 s, and a full table evicts its idlest connection for a newcomer.
 #[test]
@@ -416,7 +416,7 @@ fn slowloris_and_idle_sockets_lock_no_one_out() {
     drop(idle);
 }
 
-/// Issue 15: the metrics endpoint took any number of connections and held each 2 s: a flood
+/// The metrics endpoint took any number of connections and held each 2 s: a flood
 /// ran the bridge out of file descriptors. Now at most 8 scrapes are served at once, each for
 /// at most half a second, and the Modbus side is answered throughout.
 #[test]
@@ -440,7 +440,7 @@ fn a_metrics_flood_holds_few_descriptors_and_stalls_no_one() {
     assert!(metrics(&others[0]).contains("mbtap_bridge_responses_total"), "scrapes are answered again");
 }
 
-/// Issue 15: eight clients polling a unit that never answers cost the line `--timeout-ms`
+/// Eight clients polling a unit that never answers cost the line `--timeout-ms`
 /// each, round after round; a good client got 3 answers in 8. Now the dead unit's circuit
 /// breaker answers 0x0B at once between probes, and the good client is served.
 #[test]
@@ -491,7 +491,7 @@ fn a_dead_unit_does_not_starve_the_line() {
     );
 }
 
-/// Issue 15: `--monitor` back-dated the bridge's own requests by their transmission time
+/// `--monitor` back-dated the bridge's own requests by their transmission time
 /// ("only 316–1666 µs after previous frame" where the line showed ≥ 1.80 ms), and showed relayed
 /// vendor and exception-shaped transactions as orphan responses and no-response, answers before
 /// their requests. The monitor now shows what went over the line, in order.
@@ -527,7 +527,7 @@ fn the_monitor_shows_the_line_in_order_with_its_real_gaps() {
     assert!(outcomes.iter().all(|o| matches!(*o, "ok" | "exception")), "{outcomes:?}");
 }
 
-/// Issue 15: a CRC-valid request whose byte count disagrees with its quantity was dropped on
+/// A CRC-valid request whose byte count disagrees with its quantity was dropped on
 /// `--listen-rtu` (and in reverse mode): the master timed out where the device answers 03.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
@@ -547,7 +547,7 @@ fn a_request_whose_byte_count_lies_reaches_the_device() {
     assert_eq!(answer[..3], [0x01, 0x90, 0x03], "the device's own exception 03 (Illegal Data Value)");
 }
 
-/// Issue 15: an RTU-over-TCP client streaming bytes that never form a request (`0x41`, a
+/// An RTU-over-TCP client streaming bytes that never form a request (`0x41`, a
 /// function only silence can end, with no pause) kept the bridge rescanning its whole buffer on
 /// every read. Now the garbage is held to one frame's length, the client is cut off after 4 KiB
 /// without a request, and a good client is answered all along.
@@ -787,7 +787,7 @@ fn smuggle(pdu: &[u8], hidden: &[u8]) -> Vec<u8> {
 /// MK4 (unit 1) holding 105, Level 2 set point, := 42: `01 06 0069 002A`.
 const WRITE_105_42: [u8; 6] = [0x01, 0x06, 0x00, 0x69, 0x00, 0x2A];
 
-/// Issue 24: under `--read-only` a Modbus TCP "read" longer than its function allows was
+/// Under `--read-only` a Modbus TCP "read" longer than its function allows was
 /// forwarded whole, and the slave executed the write smuggled behind it (FC 03, 08/0000 and
 /// 2B/0E as carriers), with and without the cache and polling. Now each is answered 03 and
 /// nothing reaches the line.
@@ -811,9 +811,8 @@ fn a_write_smuggled_behind_a_read_never_reaches_the_line() {
             &[0x2B, 0x0E, 0x01, 0x00],       // read device identification
         ];
         for (tid, carrier) in (10u16..).zip(carriers) {
-            // 03 for each: since issue 38 an FC08 longer than one data word is malformed under
-            // every policy (it was refused 01 by read-only alone, and passed with
-            // --allow-function 8).
+            // 03 for each: an FC08 longer than one data word is malformed under every policy
+            // (not 01 by read-only alone, and not passed by --allow-function 8).
             let answer = c.call(tid, 1, &smuggle(carrier, &WRITE_105_42));
             assert_eq!(answer, [carrier[0] | 0x80, 0x03], "{name}: {carrier:02X?} + a write");
         }
@@ -825,7 +824,7 @@ fn a_write_smuggled_behind_a_read_never_reaches_the_line() {
     }
 }
 
-/// Issue 24: with a device slower than the timeout, the answer to one read was given to the
+/// With a device slower than the timeout, the answer to one read was given to the
 /// next client's read (4 registers to a request for 2). Now an answer must fit its request,
 /// late bytes are flushed after a timeout, and the next client gets its own answer or 0x0B.
 #[test]
@@ -853,7 +852,7 @@ fn a_late_answer_never_reaches_the_next_request() {
     assert!(text.contains("mbtap_bridge_late_answers_total{unit=\"1\"}"), "{text}");
 }
 
-/// Issue 24: with `--cache`, a client pipelining "write h105 = V, read h105" read the old value
+/// With `--cache`, a client pipelining "write h105 = V, read h105" read the old value
 /// from the cache. A read queued behind an overlapping write waits for it.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
@@ -873,7 +872,7 @@ fn a_read_behind_its_own_write_reads_the_new_value() {
     }
 }
 
-/// Issue 24: the connection limit was shared but eviction looked only at the listener taking
+/// The connection limit was shared but eviction looked only at the listener taking
 /// the connection: idle sockets on `--listen-rtu` locked every Modbus TCP client out.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
@@ -892,7 +891,7 @@ fn idle_sockets_on_one_listener_lock_no_one_out_of_another() {
     }
 }
 
-/// Issue 25: the first request after `bridge --mode ascii` started was answered about 1 s late
+/// The first request after `bridge --mode ascii` started was answered about 1 s late
 /// (the answer that came in place of the echo check waited for the ASCII inter-character
 /// timeout before it was judged); a client with mbpoll's default 1 s timeout gave up. The
 /// client here gives up after 900 ms: a functional bound (a default master must be answered),
@@ -910,7 +909,7 @@ fn the_ascii_bridge_answers_its_first_request_at_once() {
     assert_eq!(c.call(2, 17, &[0x03, 0x00, 0x32, 0x00, 0x01])[..2], [0x03, 0x02]);
 }
 
-/// Issue 26: with two serial lines, the server's counters (connections, refusals) were counted
+/// With two serial lines, the server's counters (connections, refusals) were counted
 /// on the first line's metrics and exported as `line="0"`. They belong to no line: exported
 /// once without a line label, while each line's own series keep theirs.
 #[test]

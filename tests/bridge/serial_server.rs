@@ -1,4 +1,4 @@
-//! Issue 29: `sniff rtu-over-tcp://HOST:PORT` hears a remote line through a serial server —
+//! `sniff rtu-over-tcp://HOST:PORT` hears a remote line through a serial server —
 //! Debian's ser2net in raw TCP mode in front of `mbtap simulate --poll` (the whole line, master
 //! and slaves, on a pseudo-terminal). TCP keeps no timing: frames are found by structure and CRC.
 //! Needs ser2net (CI installs it): run with `--ignored`.
@@ -84,7 +84,7 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
-/// Issue 29: mbpoll and pymodbus through `mbtap bridge` to `mbtap simulate` behind ser2net —
+/// Mbpoll and pymodbus through `mbtap bridge` to `mbtap simulate` behind ser2net —
 /// raw TCP (`rtu-over-tcp://`) and RFC 2217 (`rfc2217://`, the bridge setting the remote
 /// port's line) — every read and write right, a missing unit answered 0x0B.
 #[test]
@@ -162,7 +162,7 @@ fn read_and_watch_reach_a_line_behind_ser2net_rfc2217() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
-/// Issue 29: a Modbus TCP device that takes one connection at a time (a pymodbus server that
+/// A Modbus TCP device that takes one connection at a time (a pymodbus server that
 /// closes every second connection) behind `--serial tcp://`: 8 clients at once through the
 /// bridge, 50 requests each on both units, every answer right and its own — and the device saw
 /// one connection, never a refused one.
@@ -222,7 +222,7 @@ fn eight_clients_share_a_device_that_takes_one_connection() {
     assert_eq!(said, ["accepted"], "the device saw: {said:?}");
 }
 
-/// Issue 29: `tap rtu-over-tcp://` — an application reads a device behind ser2net through
+/// `tap rtu-over-tcp://` — an application reads a device behind ser2net through
 /// mbtap's pseudo-terminal, and the tap hears the transaction, request and answer paired.
 #[test]
 #[ignore = "needs ser2net; .ci/run installs it and runs this with --ignored"]

@@ -1,4 +1,4 @@
-//! Modbus/TCP Security on the bridge (issue 19): certificates made by the openssl CLI in the
+//! Modbus/TCP Security on the bridge: certificates made by the openssl CLI in the
 //! test — a CA, the bridge's certificate, clients with the role extension (OID
 //! 1.3.6.1.4.1.50316.802.1) "operator" and "viewer", one without a role, an expired one, one
 //! from another CA — and a real TLS client (Python's ssl, and pymodbus's TLS client) through the
@@ -260,7 +260,7 @@ fn crl_setup(d: &Path) {
     openssl(d, &["ca", "-config", "ca.cnf", "-keyfile", "ca.key", "-cert", "ca.pem", "-gencrl", "-out", "crl.pem"]);
 }
 
-/// Issue 24: a session whose certificate a reloaded CRL revokes was still answered; a role's
+/// A session whose certificate a reloaded CRL revokes was still answered; a role's
 /// `units:` rule was checked before `--map-unit` (a role for units 2–20 wrote to serial unit 1
 /// through TCP unit 10); a read-only role forwarded a read with a whole write frame behind it.
 #[test]

@@ -388,7 +388,7 @@ fn mqtts_with_a_ca_file_and_a_password_from_a_file() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--mqtt-ca"));
 }
 
-/// Issue 31: discovery published `"manufacturer": null` for the MKZP (refused by Home
+/// Discovery published `"manufacturer": null` for the MKZP (refused by Home
 /// Assistant's schema) and coils as numeric sensors. Every discovery message of a demo run is
 /// checked with Home Assistant's own MQTT discovery schemas (the `homeassistant` package).
 #[test]
@@ -432,7 +432,7 @@ fn home_assistant_check(got: &[(String, String)]) -> serde_json::Value {
     verdict
 }
 
-/// Issue 30: with writes from the broker on, the MK4's writable coils are announced as Home
+/// With writes from the broker on, the MK4's writable coils are announced as Home
 /// Assistant switches and its ranged set points as numbers (passing Home Assistant's own
 /// schemas), and what such a control sends to its command topic reaches the device.
 #[test]
@@ -524,7 +524,7 @@ fn publish(port: u16, topic: &str, payload: &str) {
     assert!(ok.success());
 }
 
-/// Issue 30: writes from the broker go through the profile as `mbtap write` does — a value by
+/// Writes from the broker go through the profile as `mbtap write` does — a value by
 /// address and one by name reach the simulated MK4 and come back read; a value out of the
 /// profile's range and a read-only register are refused, published as refused, counted, and the
 /// device keeps what it had. A passive command refuses `--mqtt-writes` at start.
@@ -624,7 +624,7 @@ fn raw_through(tcp: &str, address: u16) -> serde_json::Value {
     row["raw"].clone()
 }
 
-/// Issue 30: the broker's writes through a bridge pass the profile and then the bridge's own
+/// The broker's writes through a bridge pass the profile and then the bridge's own
 /// admission, as a Modbus TCP client's would: a plain bridge writes; `--read-only` and a
 /// read-only `--mqtt-role` refuse (published with the bridge's reason) and the value never
 /// reaches the line.
@@ -691,9 +691,8 @@ fn publish_retained(port: u16, topic: &str, payload: &[&str]) {
     assert!(ok.success());
 }
 
-/// Issue 38/39 (`mqtt_watch_writes.py`, `mqtt_bridge_writes.py`): a retained `…/set` left on the
-/// broker by anyone was carried out again at every start and reconnect. A retained command is
-/// ignored (said once); a set sent now is carried out.
+/// A retained `…/set` left on the broker by anyone is not carried out again at every start
+/// and reconnect: a retained command is ignored (said once); a set sent now is carried out.
 #[test]
 #[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
 fn a_retained_set_is_not_carried_out_at_start() {
@@ -719,9 +718,9 @@ fn a_retained_set_is_not_carried_out_at_start() {
     assert_eq!(r[0]["read_back"]["raw"], 250, "{r:#?}");
 }
 
-/// Issue 39 (`mqtt_watch_writes.py`): a retained message over the packet limit on the set topic
-/// made watch reconnect every second (an `offline` will each time) and carry out nothing until
-/// someone cleared it. It is read and dropped now; the connection stays, `online` is published
+/// A retained message over the packet limit on the set topic does not make watch reconnect
+/// every second (an `offline` will each time) and carry out nothing until someone clears it:
+/// it is read and dropped; the connection stays, `online` is published
 /// once, and a set sent after it is carried out.
 #[test]
 #[ignore = "needs mosquitto; .ci/run installs it and runs this with --ignored"]
@@ -744,7 +743,7 @@ fn an_oversized_retained_message_neither_cuts_the_connection_nor_stops_commands(
     assert!(!statuses.iter().any(|p| p == "offline"), "the connection was lost: {statuses:?}");
 }
 
-/// Issue 41: an emulated meter's values set from the broker (`simulate --values-from`), by the
+/// An emulated meter's values set from the broker (`simulate --values-from`), by the
 /// names and scales of its profile, appear at the next read; a name it lacks is refused on the
 /// write topic, the value kept.
 #[test]

@@ -2,7 +2,7 @@
 //! project: a subscriber decoding every payload with the specification's own `sparkplug_b.proto`
 //! (pysparkplug's compiled copy, `tests/interop/sparkplug_host.py`). Births with bdSeq, data by
 //! exception with a seq that counts without a gap, DDEATH when a simulated unit loses power and
-//! DBIRTH when it is back, rebirth on NCMD, the NDEATH will on kill -9 (issue 30); a broker
+//! DBIRTH when it is back, rebirth on NCMD, the NDEATH will on kill -9; a broker
 //! stopped for 30 s (every value measured meanwhile arrives, historical, in order, with its
 //! timestamp) and mbtap restarted while it is away. Needs mosquitto, python3, paho-mqtt and
 //! pysparkplug: `#[ignore]`d in a plain `cargo test`, run by `.ci/run`.
@@ -384,7 +384,7 @@ fn held_messages_survive_a_restart_of_mbtap() {
     assert_seq_counts(&host.got()[host.got().iter().rposition(|m| is(m, "NBIRTH", None)).unwrap()..]);
 }
 
-/// Issue 30: a DCMD from the host reaches the simulated MK4 through the profile (a scaled set
+/// A DCMD from the host reaches the simulated MK4 through the profile (a scaled set
 /// point by its published name) and the value comes back as DDATA; one out of the profile's
 /// range is refused and never written.
 #[test]
@@ -442,7 +442,7 @@ fn a_dcmd_write_reaches_the_device_and_comes_back_as_data() {
     }));
 }
 
-/// Regression (issue 30): rumqttc refuses packets over 10 KiB by default and drops the
+/// Rumqttc refuses packets over 10 KiB by default and drops the
 /// connection over one; a DBIRTH declaring a busy device's metrics is bigger, so the node fell
 /// into a loop of reconnects and births and sent almost no data. A generated line (every read of
 /// another range: the births grow with every new register) is replayed whole into the broker.
@@ -490,7 +490,7 @@ fn host_state(port: u16, id: &str, online: bool) {
     assert!(ok.success());
 }
 
-/// Issue 30: with `--sparkplug-host`, the node is not born until its primary host's STATE says
+/// With `--sparkplug-host`, the node is not born until its primary host's STATE says
 /// online; what it measures meanwhile arrives after the births as historical data; when the host
 /// goes offline it holds again, and when it is back it is born again with the session's bdSeq.
 #[test]

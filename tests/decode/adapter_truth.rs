@@ -1,4 +1,4 @@
-//! Issue 25: the health report through the adapters people have, with no `--latency-ms` — a
+//! The health report through the adapters people have, with no `--latency-ms` — a
 //! healthy bus gets no timing finding, a slow unit is named alone where the observer can see
 //! its pauses, and what the reads cannot resolve is said once. The traffic's physics (observer
 //! delays, 1.05 × t3.5 pauses, a unit pausing 30 characters) come from the generator's models.
@@ -83,7 +83,7 @@ fn the_slow_unit_is_named_alone_through_a_fifo_and_a_16_ms_timer() {
     }
 }
 
-/// Issue 40 (a regression of issue 25's margins): a unit pausing 2 characters inside its
+/// A unit pausing 2 characters inside its
 /// answers at 9600 8E1 (2.3 ms of silence; t1.5 is 1.72 ms), read one byte per read up to 0.2 ms
 /// late, got no finding — the resolution was the latency plus a character (1.4 ms). Where every
 /// read holds one byte only the delays' spread is uncertain: the unit is named, no other.

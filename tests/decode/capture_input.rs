@@ -237,7 +237,7 @@ fn corrupt_pcap_record_is_skipped() {
     assert!(warnings(&got)[0].contains(&format!("offset {bad_at}")), "{:?}", warnings(&got));
 }
 
-/// Issue 16 regression: 200 000 packets naming an undescribed interface gave 200 000
+/// 200 000 packets naming an undescribed interface gave 200 000
 /// identical warnings. Now: the first, then one count at the end.
 #[test]
 fn packets_of_an_undescribed_interface_are_said_once_then_counted() {
@@ -255,7 +255,7 @@ fn packets_of_an_undescribed_interface_are_said_once_then_counted() {
     assert!(w[1].contains("1000 packets named interfaces never described"), "{w:?}");
 }
 
-/// Issue 16 regression: one corrupt region longer than the read buffer (1 MiB) gave a
+/// One corrupt region longer than the read buffer (1 MiB) gave a
 /// "still searching" line per buffer (2 048 for 2 GB). Now one warning with where it began
 /// and how much was skipped.
 #[test]

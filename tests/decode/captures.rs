@@ -51,7 +51,7 @@ fn jsonl_contract_on_every_capture() {
     });
 }
 
-/// Issue 31: `replay` did not use the `NAME.devices` file beside a capture (the tests above
+/// `replay` did not use the `NAME.devices` file beside a capture (the tests above
 /// read it themselves). The real binary annotates the MKZP examples with no `--device`, says
 /// where the profiles came from, and `--device` still wins.
 #[test]
@@ -72,7 +72,7 @@ fn replay_uses_the_devices_file_beside_the_capture() {
     );
 }
 
-/// Issue 28: `mbtap learn` on a recorded line (the simulated bus, polled many times) drafts a
+/// `mbtap learn` on a recorded line (the simulated bus, polled many times) drafts a
 /// profile per unit that `profiles check` accepts, and finds the blocks the master polls.
 #[test]
 fn learn_drafts_profiles_that_load() {
@@ -85,7 +85,7 @@ fn learn_drafts_profiles_that_load() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // Issue 40: `-o FILE` holds one profile; several units heard, it is refused with what to
+    // `-o FILE` holds one profile; several units heard, it is refused with what to
     // do (it wrote `draft-unit-N.toml` files nobody asked for), and nothing is written.
     let draft = dir.join("draft.toml");
     let o = std::process::Command::new(bin)
@@ -114,7 +114,7 @@ fn learn_drafts_profiles_that_load() {
     }
 }
 
-/// Issue 28: `mbtap diff` — a capture against its own register image is the same (exit 0); an
+/// `mbtap diff` — a capture against its own register image is the same (exit 0); an
 /// image where the operating mode was changed shows that register, named and labelled by the
 /// profile, before and after (exit 1, as diff(1)).
 #[test]
@@ -151,7 +151,7 @@ fn diff_names_what_changed_between_a_capture_and_an_image() {
     assert!(out.contains("1 differ"), "{out}");
 }
 
-/// Issue 28: on recordings of real meters (bytes or register values from public reports, see
+/// On recordings of real meters (bytes or register values from public reports, see
 /// `captures/README.md`), `mbtap learn` finds the float pairs and their word order the reports
 /// give — high word first on the EV meter (six floats at input 6–17) and the PM5350 (frequency
 /// at holding 3109), low word first on the device of the Node-RED report (holding 2 and 6) —
@@ -231,7 +231,7 @@ fn non_zero_pairs(txt: &str, first_of: &dyn Fn(usize) -> u64) -> std::collection
     out
 }
 
-/// Issue 40, a three-phase meter (FC04 blocks of 82 and 60 registers, 64 polls, every value a
+/// A three-phase meter (FC04 blocks of 82 and 60 registers, 64 polls, every value a
 /// float high word first; `captures/rtu-shape-three-phase-floats.txt`): pair by pair, `learn`
 /// drafted 1 of its 43 non-zero floats right — constants as two u16 (13.09 = 0x4151 0x70A4),
 /// voltages as u32 "carries", 0x4516 1000…4000 as a constant and a u16, 12.0 over a zero low
@@ -252,7 +252,7 @@ fn learn_types_every_float_of_a_three_phase_meter_by_its_blocks() {
     assert_eq!(wide.len(), floats.len(), "{learned:?}");
 }
 
-/// Issue 40, a single-phase meter tapped for two polls (FC03 at 0x2000 and 0x4000, floats high
+/// A single-phase meter tapped for two polls (FC03 at 0x2000 and 0x4000, floats high
 /// word first, zeros between them): the frequency 0x4248 0x3333 (50.05 Hz) at 8206/8207 was
 /// joined as 8205/8206 low word first (50.0), against every other pair of the same answer.
 #[test]
@@ -267,7 +267,7 @@ fn learn_keeps_a_blocks_word_order_and_alignment_on_two_polls() {
     assert!(!learned.get(&8205).is_some_and(|t| t.contains("word first")), "{learned:?}");
 }
 
-/// Issue 39: `diff` of captures whose every block is corrupt said "0 differ, 0 the same" with
+/// `diff` of captures whose every block is corrupt said "0 differ, 0 the same" with
 /// exit 0 and dropped the reader's warning. The warning is said with the file, and "nothing to
 /// compare" exits 2.
 #[test]
@@ -290,7 +290,7 @@ fn diff_of_unreadable_captures_says_so_and_does_not_claim_sameness() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 39: an image file is read row by row into four numbers each, and one larger than any
+/// An image file is read row by row into four numbers each, and one larger than any
 /// image of every address is refused unread (a 100 MB dump took 2.1–3.7 GB as a JSON tree).
 #[test]
 fn diff_refuses_an_image_file_larger_than_any_image() {
@@ -308,7 +308,7 @@ fn diff_refuses_an_image_file_larger_than_any_image() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 43: the commands end through one runner now; the real binary's `replay` still prints,
+/// The commands end through one runner now; the real binary's `replay` still prints,
 /// on every capture and in both formats, exactly the events and the summary the analysis gives
 /// the library's writer (what the golden transcripts above hold) — byte for byte.
 #[test]

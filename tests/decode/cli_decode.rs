@@ -259,7 +259,7 @@ fn the_config_file_assigns_devices_and_the_command_line_overrides_it() {
     assert!(err.contains("config.toml:3:1: device unit \"999\""), "{err}");
 }
 
-/// Issue 14: `010304050001953B00` passed its CRC as a 9-byte response (byte count 4); it is a
+/// `010304050001953B00` passed its CRC as a 9-byte response (byte count 4); it is a
 /// request (read 1 register from 0x0405) followed by the `00` a transceiver leaves at turnaround
 /// — CRC-16/MODBUS validates any valid frame with a `00` appended.
 #[test]
@@ -279,7 +279,7 @@ fn decode_010304050001953b00_is_a_request_and_a_glitch() {
     assert_eq!(events[1]["hex"], "00");
 }
 
-/// Issue 14: three valid frames pasted glued from a sniffer log were one frame with the CRC
+/// Three valid frames pasted glued from a sniffer log were one frame with the CRC
 /// taken from the end of the line ("CRC FAILED"). Split as a replay splits them.
 #[test]
 fn glued_frames_on_one_line_are_split_into_them() {
@@ -298,7 +298,7 @@ fn glued_frames_on_one_line_are_split_into_them() {
     assert_eq!(o.status.code(), Some(0), "{s}");
 }
 
-/// Issue 14: a truncated answer after its request was shown as a request with absurd
+/// A truncated answer after its request was shown as a request with absurd
 /// quantities; `replay` calls the same bytes a bad response. Now `decode` does too.
 #[test]
 fn a_truncated_answer_after_its_request_is_a_truncated_response() {
@@ -310,7 +310,7 @@ fn a_truncated_answer_after_its_request_is_a_truncated_response() {
     assert_eq!(o.status.code(), Some(1));
 }
 
-/// Issue 16: `decode` read all of stdin before printing anything (`tail -f log | mbtap decode`
+/// `decode` read all of stdin before printing anything (`tail -f log | mbtap decode`
 /// printed nothing). Now each line's result comes out as the line comes in.
 #[test]
 fn decode_streams_one_line_in_one_result_out() {
@@ -342,7 +342,7 @@ fn decode_streams_one_line_in_one_result_out() {
     assert_eq!(child.wait().unwrap().code(), Some(0));
 }
 
-/// Issue 16: one Latin-1 byte in a comment rejected the whole input ("stream did not contain
+/// One Latin-1 byte in a comment rejected the whole input ("stream did not contain
 /// valid UTF-8", no line number); a line of megabytes was held whole.
 #[test]
 fn decode_reads_bytes_names_bad_lines_and_cuts_endless_ones() {
@@ -368,7 +368,7 @@ fn decode_reads_bytes_names_bad_lines_and_cuts_endless_ones() {
     assert_eq!(o.status.code(), Some(2), "some input was not a frame");
 }
 
-/// Issue 16: `decode ":"` said "ASCII frame of 3 bytes".
+/// `decode ":"` said "ASCII frame of 3 bytes".
 #[test]
 fn a_lone_colon_counts_what_was_typed() {
     let o = mbtap(&["decode", ":"], None);
@@ -376,7 +376,7 @@ fn a_lone_colon_counts_what_was_typed() {
     assert!(err.contains("needs at least 6 characters after ':'") && err.contains("has 0"), "{err}");
 }
 
-/// Issue 16: real log formats were refused; the timestamp and the tag are set aside (and
+/// Real log formats were refused; the timestamp and the tag are set aside (and
 /// shown in JSON lines), the tag read as the direction.
 #[test]
 fn log_formats_are_read_and_what_was_stripped_is_shown() {
@@ -389,7 +389,7 @@ fn log_formats_are_read_and_what_was_stripped_is_shown() {
     assert_eq!((j["timestamp"].as_str(), j["tag"].as_str()), (Some("12:00:01.123"), Some(">")));
 }
 
-/// Issue 16: a name with an escape sequence (`^[]0;pwned^G^[[2J`) reached the terminal raw,
+/// A name with an escape sequence (`^[]0;pwned^G^[[2J`) reached the terminal raw,
 /// retitling and clearing it; an ASCII frame from the bus could do the same.
 #[test]
 fn control_characters_from_profiles_and_frames_never_reach_the_terminal() {
@@ -409,7 +409,7 @@ fn control_characters_from_profiles_and_frames_never_reach_the_terminal() {
     assert!(s.contains("\\u{1b}"), "shown escaped: {s}");
 }
 
-/// Issue 14: a response cut short (byte count 6, the frame ends 3 bytes early) was shown only
+/// A response cut short (byte count 6, the frame ends 3 bytes early) was shown only
 /// as a request with an absurd quantity, while `replay` called the same bytes a bad response.
 /// Without the request before it `decode` cannot choose: it shows both readings.
 #[test]
@@ -430,7 +430,7 @@ fn a_truncated_response_is_shown_as_both_readings() {
     assert!(!String::from_utf8_lossy(&o.stdout).contains("truncated"));
 }
 
-/// Issue 31: `decode -` took `-` for a frame instead of standard input, and Modbus Poll's log
+/// `decode -` took `-` for a frame instead of standard input, and Modbus Poll's log
 /// lines (`Tx:000001-…`) decoded their counter as noise.
 #[test]
 fn a_dash_reads_stdin_and_modbus_poll_logs_decode() {
@@ -441,7 +441,7 @@ fn a_dash_reads_stdin_and_modbus_poll_logs_decode() {
     assert!(out.contains("Read Holding Registers") && !out.contains("noise"), "{out}");
 }
 
-/// Issue 25, pasted verbatim: a request to unit 254 and the `00` a transceiver left after it
+/// Pasted verbatim: a request to unit 254 and the `00` a transceiver left after it
 /// was one 9-byte "request, CRC ok (0x00C5)" with a trailing byte (units 248–255 did not get the
 /// glitch split every other unit gets).
 #[test]
@@ -453,7 +453,7 @@ fn a_reserved_unit_gets_its_glitch_split_like_any_other() {
     assert!(!out.contains("trailing"), "{out}");
 }
 
-/// Issue 25, pasted verbatim: two CRC-valid 5-byte exception answers glued (a slave answering
+/// Pasted verbatim: two CRC-valid 5-byte exception answers glued (a slave answering
 /// for an absent one) were one 10-byte frame with a failed CRC; the first, function 0, is shown
 /// as such with a finding.
 #[test]

@@ -276,8 +276,8 @@ fn an_exception_with_code_00_is_no_frame() {
     assert_eq!(e[2], ("F-", answer, None), "{e:02X?}");
 }
 
-/// Unit 247's vendor request as the generator sent it at a line's start in the adapter matrix
-/// of issue 25 (seed 700, 9600 8E1): unit `F7`, function `41` (user-defined), data `87 01 4C`,
+/// Unit 247's vendor request as the generator sends it at a line's start in the adapter matrix
+/// (seed 700, 9600 8E1): unit `F7`, function `41` (user-defined), data `87 01 4C`,
 /// CRC `75 A5`.
 const VENDOR_REQUEST_247: [u8; 7] = [0xF7, 0x41, 0x87, 0x01, 0x4C, 0x75, 0xA5];
 /// Its answer: unit `F7`, function `41`, 9 data bytes, CRC `79 15`.

@@ -84,7 +84,7 @@ fn events_cover_every_byte_once() {
     }
 }
 
-/// Issue 25: vendor-function frames whose CRC ends in `00`, on a line with `00` turnaround
+/// Vendor-function frames whose CRC ends in `00`, on a line with `00` turnaround
 /// glitches: each unit sends its vendor function with the same lengths all day, and the frames
 /// that are unambiguous about their length decide the twins — far fewer shown with two lengths,
 /// and far fewer with the wrong one first, than a framer that does not learn them.
@@ -139,7 +139,7 @@ fn vendor_line_with(
     score(&wire, &run_framer(&wire, &chunks, framer))
 }
 
-/// Issue 25, false valid frames through a 16 ms USB timer: a vendor answer whose CRC ends in
+/// False valid frames through a 16 ms USB timer: a vendor answer whose CRC ends in
 /// `00`, glued to noise (no silence the timer lets through), was reported valid one byte short
 /// — its learned length never asked; and a corrupted vendor request glued to the next frame
 /// checked as one long "frame" of a length its function never has. Zero now on this line.
@@ -150,7 +150,7 @@ fn vendor_twins_glued_to_noise_take_their_learned_length() {
     assert!(s.good_ratio() > 0.999, "{s:?}");
 }
 
-/// Issue 25: a vendor request whose CRC ends in `00`, followed by the master's `00` glitch,
+/// A vendor request whose CRC ends in `00`, followed by the master's `00` glitch,
 /// makes three readings that check (7, 8 and 9 bytes): the frame is the second — a sender
 /// leaves one glitch byte — where the first used to be taken through a FIFO.
 #[test]
@@ -159,7 +159,7 @@ fn a_frame_ending_in_00_and_its_00_glitch_is_the_longer_reading() {
     assert_eq!(s.false_valid, 0, "{s:?}");
 }
 
-/// Issue 25: behind a 16 ms USB timer at 19200, on a bus that glitches after every frame and
+/// Behind a 16 ms USB timer at 19200, on a bus that glitches after every frame and
 /// keeps only 1.05 × t3.5 between frames, 46 of 5 832 glitch bytes — each alone between a
 /// frame's end and the next frame's start — were reported as noise bursts (a `noise` finding
 /// on a healthy bus): the silence the reads seemed to show before them was computed with a
@@ -187,7 +187,7 @@ fn glitches_between_frames_are_glitches_behind_a_usb_timer() {
     assert_eq!(s.glitch_reported, s.glitch_total, "{s:?}");
 }
 
-/// Issue 25: 1 215 bytes into a glitchy line behind a 16 ms USB timer, before the observer's
+/// 1 215 bytes into a glitchy line behind a 16 ms USB timer, before the observer's
 /// latency was learned, a read boundary fell right before a vendor answer's last byte, a CRC
 /// `00`: the apparent silence there made the answer one byte short, reported valid without doubt,
 /// though its `00` was followed by the slave's own `FF` glitch (a sender leaves one glitch byte).
@@ -199,7 +199,7 @@ fn a_vendor_answer_ending_in_00_and_its_ff_before_the_latency_is_learned() {
     assert_eq!(s.false_valid, 0, "{s:?}");
 }
 
-/// Issue 40: on the issue's line (vendor functions with a quarter of their CRCs ending in `00`,
+/// On the issue's line (vendor functions with a quarter of their CRCs ending in `00`,
 /// 30 % turnaround glitches), 1 frame in ~3 500 transactions was shown with two lengths, the
 /// wrong one first, in every observer model: the requests to a unit that never answers were
 /// never learned from (a silence follows them, never a byte, when they go out), and a unit's
@@ -217,7 +217,7 @@ fn vendor_twins_are_read_by_what_their_unit_was_heard_sending() {
     }
 }
 
-/// Issue 40: a unit's first vendor request whose CRC ends in `00` (here unit 1's, 7 bytes, at
+/// A unit's first vendor request whose CRC ends in `00` (here unit 1's, 7 bytes, at
 /// byte 1 957 of the line) reads as well one byte shorter with the master's `00` glitch after
 /// it, and the line's odds (30 % glitches) put the short reading first. What the line does next
 /// tells: the unit's next requests of that function have 7 bytes. The framer now holds such a

@@ -594,7 +594,7 @@ fn joining_the_line_mid_frame_is_not_noise() {
     assert_eq!(of_kind(&r, "noise").len(), 1, "{}", r.text());
 }
 
-/// Issue 31: `replay` said 8 noise bursts (67 bytes) of the recorded noisy line, `report` 29 and
+/// `replay` said 8 noise bursts (67 bytes) of the recorded noisy line, `report` 29 and
 /// 278 (it counted failed frames nothing awaited as noise), and the units' failed checks added
 /// up to 16 of the bus's 37 with nothing said of the rest. One count, one meaning: the same
 /// noise in both; the failed checks are the units' and the strays, adding up.

@@ -1,4 +1,4 @@
-//! Error messages say what went wrong once, and name the thing (issue 16).
+//! Error messages say what went wrong once, and name the thing.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 
 use std::process::Command;
@@ -102,14 +102,14 @@ fn user_link_types_are_read_and_an_unknown_one_is_an_error() {
     assert_eq!(String::from_utf8_lossy(&o.stdout).matches("\"event\":\"frame\"").count(), 2);
 }
 
-/// Issue 16: `--baud 0` was accepted.
+/// `--baud 0` was accepted.
 #[test]
 fn a_zero_baud_rate_is_refused_on_the_command_line() {
     let e = stderr_of(&["generate", "/tmp/never-written.pcapng", "--baud", "0"]);
     assert!(e.contains("--baud") && e.contains('0'), "{e}");
 }
 
-/// Issue 16: one flipped bit in one record's length field (a megabyte claimed) ended the
+/// One flipped bit in one record's length field (a megabyte claimed) ended the
 /// replay — "the file ends in the middle of a block … its last 128 877 bytes are ignored",
 /// 4 of 299 transactions kept. The reader now skips to the next readable record and reads on.
 #[test]
@@ -132,7 +132,7 @@ fn a_damaged_length_field_costs_one_record_not_the_rest_of_the_file() {
     );
 }
 
-/// Issue 16: an ASCII capture replayed as RTU was "16 bytes of noise" with no hint, and a
+/// An ASCII capture replayed as RTU was "16 bytes of noise" with no hint, and a
 /// capture without stored settings was read as 19200 8E1 silently.
 #[test]
 fn a_capture_says_which_settings_it_assumed_and_what_its_bytes_look_like() {
@@ -152,7 +152,7 @@ fn a_capture_says_which_settings_it_assumed_and_what_its_bytes_look_like() {
     assert_eq!(String::from_utf8_lossy(&o.stdout).matches("\"check_ok\":true").count(), 2);
 }
 
-/// Issue 16 regression: binary garbage holds ':' and LF as often as anything else, and was
+/// Binary garbage holds ':' and LF as often as anything else, and was
 /// told "the bytes look like Modbus ASCII". Only bytes that are mostly hex digits between
 /// ':' and CR LF earn that hint; garbage gets the neutral "mbtap scan" one.
 #[test]
@@ -184,7 +184,7 @@ fn polls_with_one_flipped_second(n: u32, bad: u32, bit: u32) -> std::path::PathB
     pcap_records(147, &records)
 }
 
-/// Issue 16 regression: one flipped bit in one timestamp held every later packet at that
+/// One flipped bit in one timestamp held every later packet at that
 /// value: every later answer was "less than t3.5 after the request" (357 findings in the
 /// issue's file). Now the lone jump is one warning with its offset and timing after it is the
 /// file's own. The one packet whose true time is unknown may still cost one finding. The
@@ -213,7 +213,7 @@ fn one_flipped_timestamp_bit_does_not_spoil_the_timing_after_it() {
     }
 }
 
-/// Issue 16: long work shows progress on a terminal and never on a pipe. `script` (util-linux,
+/// Long work shows progress on a terminal and never on a pipe. `script` (util-linux,
 /// Essential in Debian) gives the real binary a pseudo-terminal for stderr; the threshold of
 /// one second is set to 0 so the first read draws the line. The line is cleared before the
 /// warnings print (`\r ESC [K`), so they never land on it.

@@ -1,4 +1,4 @@
-//! Issue 27: `mbtap profiles import` on register sheets in the shapes vendors publish (Modicon
+//! `mbtap profiles import` on register sheets in the shapes vendors publish (Modicon
 //! numbers, `0000H`, `0x`, title rows, merged and section rows in XLSX, German and Chinese
 //! headers, a function-code column, tabs, units in names, scales as `/10`, `÷100`, `x10^-2`)
 //! and Home Assistant YAML — each profile then annotates traffic of that device, read by
@@ -100,7 +100,7 @@ fn an_energy_meter_sheet_with_modicon_numbers_and_floats() {
     assert!(text.contains("Phase 1 line to neutral volts = 230.5 V"), "{text}");
 }
 
-/// Issue 42: a sheet with no type column (the vendor says "all registers are floats" in
+/// A sheet with no type column (the vendor says "all registers are floats" in
 /// prose), headed `Input Register Address`: it was "no header row naming an address column",
 /// and with the header fixed it came in as u16 without a word. The header is read, the u16
 /// reading is said as a warning naming --type, and `--type f32` makes floats of it. Without
@@ -124,7 +124,7 @@ fn a_sheet_without_a_type_column_says_so_and_takes_type() {
     assert!(!out.status.success() && err.contains("give --table holding|input"), "{err}");
 }
 
-/// Issue 42: after `profiles import` into the profile directory ("usable by name at once"),
+/// After `profiles import` into the profile directory ("usable by name at once"),
 /// `profiles check NAME` failed with "No such file or directory (os error 2)" where `show` and
 /// `export` took the name; and it counted the registers a float covers (21) where import had
 /// counted entries (13). One resolver, one count.
@@ -172,7 +172,7 @@ fn an_xlsx_with_merged_title_section_rows_and_chinese_headers() {
 fn six_digit_modicon_numbers_units_in_names_and_powers_of_ten() {
     let (p, _) = import("pump-modicon6.csv", &[]);
     let text = annotate(&p.path, &read(0x03, 0, &[125]));
-    // `m3/h` in the header, `m³/h` as Home Assistant spells it (issue 42).
+    // `m3/h` in the header, `m³/h` as Home Assistant spells it.
     assert!(text.contains("Flow = 12.5 m³/h"), "{text}");
     let text = annotate(&p.path, &read(0x04, 0, &[0xFFF6]));
     assert!(text.contains("Motor temperature = -1.0 °C"), "{text}");
@@ -256,7 +256,7 @@ fn imported_profiles_are_listed_with_where_they_came_from() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 27: what `profiles export` writes is accepted by the tools that read it — Home
+/// What `profiles export` writes is accepted by the tools that read it — Home
 /// Assistant's own `modbus` schema, `esphome config`, and Telegraf's plugin keys — for a
 /// built-in profile and for one imported from Home Assistant YAML (a round trip). Needs the
 /// homeassistant and esphome Python packages (CI installs them): run with `--ignored`.
@@ -264,7 +264,7 @@ fn imported_profiles_are_listed_with_where_they_came_from() {
 #[ignore = "needs homeassistant and esphome (CI installs them)"]
 fn exports_are_accepted_by_home_assistant_esphome_and_telegraf() {
     let (imported, _) = import("ha-modbus.yaml", &[]);
-    // Issue 42: an energy meter's sheet (kWh: `device_class: energy`, `total_increasing`).
+    // An energy meter's sheet (kWh: `device_class: energy`, `total_increasing`).
     let (meter, _) = import("energy-meter-modicon.csv", &[]);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop/export_check.py");
     for profile in ["mk4", "mkzp", "display", imported.path.to_str().unwrap(), meter.path.to_str().unwrap()] {
@@ -293,7 +293,7 @@ fn exports_are_accepted_by_home_assistant_esphome_and_telegraf() {
     }
 }
 
-/// A profile of hostile strings (issue 39's probe): the device carries U+2028 and U+0085 each
+/// A profile of hostile strings: the device carries U+2028 and U+0085 each
 /// followed by YAML keys (`shell_command`, `external_components`), a vertical tab, and register
 /// names a YAML 1.1 resolver types (`yes`, `off`, `1:20`, `1_000`, `2001-12-14`, `<<`, `=`) or a
 /// spreadsheet runs (`=HYPERLINK`). Field by field: device line, then one register per name.
@@ -314,7 +314,7 @@ device = \"meter\\u2028shell_command:\\n  x: rm -rf /\\u0085external_components:
 const HOSTILE_NAMES: [&str; 9] =
     ["yes", "off", "1:20", "1_000", "2001-12-14", "<<", "=", "=HYPERLINK(\"http://x\")", "a\u{2029}b: c"];
 
-/// Issue 39: every export of [`HOSTILE_PROFILE`] read back by PyYAML (YAML 1.1, as Home Assistant
+/// Every export of [`HOSTILE_PROFILE`] read back by PyYAML (YAML 1.1, as Home Assistant
 /// and ESPHome read) and tomllib has only the keys mbtap writes and every name as written; the
 /// exports pass Home Assistant's own schema and `esphome config`. Failed on the round's start: the
 /// device's line separators ended the header comment and injected top-level keys, the vertical
@@ -382,7 +382,7 @@ fn import_into(dir: &Path, name: &str, extra: &[&str]) -> Output {
     Command::new(MBTAP).args(&args).env("MBTAP_PROFILE_DIR", dir).output().unwrap()
 }
 
-/// Issue 39: an import never replaces a profile without `--force` (round start: a hand-tuned
+/// An import never replaces a profile without `--force` (round start: a hand-tuned
 /// profile of the same name was overwritten without a word), and never writes through a link
 /// placed in the profile directory — with `--force` the link itself is replaced.
 #[test]
@@ -414,7 +414,7 @@ fn import_keeps_an_existing_profile_and_never_writes_through_a_link() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 39: a name a built-in profile already has is written, and the user told that the
+/// A name a built-in profile already has is written, and the user told that the
 /// built-in is what the name finds (round start: said nothing).
 #[test]
 fn an_import_named_like_a_built_in_is_said_to_be_shadowed() {
@@ -456,7 +456,7 @@ fn ods_row(address: u16, name: &str) -> String {
     )
 }
 
-/// Issue 39: a workbook of a few hundred bytes whose repeated empty rows and cells stand for 17
+/// A workbook of a few hundred bytes whose repeated empty rows and cells stand for 17
 /// billion cells between two values took the import past 17 GB (ended by the kernel, or 60 s
 /// and counting); it is refused by counting them from its XML, before the reader expands them —
 /// and a plain OpenDocument sheet still imports.
@@ -575,7 +575,7 @@ fn workbook_stream(globals: &[u8], cells: &[Vec<u8>]) -> Vec<u8> {
     stream
 }
 
-/// Issue 39: XLS workbooks of a few kilobytes — cells at A1 and IV65536 (calamine laid out the
+/// XLS workbooks of a few kilobytes — cells at A1 and IV65536 (calamine laid out the
 /// 16.7 M cells between them: 1.05 GB), a `Dimensions` record whose last row comes before its
 /// first (calamine reserved ~2³² rows and the process aborted), a `CodePage` too short to read
 /// (calamine panicked). Refused at first; now the sheet is read record by record, nothing laid
@@ -655,7 +655,7 @@ fn xls_bytes(tag: &str, bytes: &[u8]) -> tempfile_path::TempProfile {
     file
 }
 
-/// Issue 39: the workbook reader takes the first directory entry named `Workbook` in the
+/// The workbook reader takes the first directory entry named `Workbook` in the
 /// directory's order — linked into the tree or not — and trusts every chain and length. The
 /// check read the container with a library that walks the tree: an entry no storage links to,
 /// holding cells at A1 and IV65536, was laid out unchecked (1 GB). Now the container is read as
@@ -843,7 +843,7 @@ fn calamine_rows(path: &std::path::Path, sheet: &str) -> Vec<(usize, Vec<String>
     theirs
 }
 
-/// Issue 39: calamine lays every sheet of an XLS out densely when it opens the file (38.7 MB for
+/// Calamine lays every sheet of an XLS out densely when it opens the file (38.7 MB for
 /// a 4.4 MB sheet; 1 GB for cells at A1 and IV65536); the import now reads the sheet's records
 /// itself. What it reads must be what calamine reads: every row at the same number with the same
 /// cells, for cells of every kind and shared strings carried on across `Continue` records — and
@@ -973,7 +973,7 @@ fn xlsb(tag: &str, far: Option<(u32, u32)>) -> tempfile_path::TempProfile {
     file
 }
 
-/// Issue 39: an 878-byte XLSB with one cell at XFD1048576 aborted the process (the reader laid
+/// An 878-byte XLSB with one cell at XFD1048576 aborted the process (the reader laid
 /// out the 17 billion cells between A1 and it); XLSB sheets are now read cell by cell as XLSX
 /// ones are: the far row refused, a far column's cell counted, a plain sheet imported.
 #[test]
@@ -1001,7 +1001,7 @@ const SHUFFLED_SHEET: &str = "address,name,table,type,length\n\
     x,Broken,holding,u16,\n\
     12,Gamma,holding,f32,\n";
 
-/// Issue 39: the import writes each point as it is read and keeps no points or profile text in
+/// The import writes each point as it is read and keeps no points or profile text in
 /// memory (80 MB for a 4 MB sheet of tiny rows, 20×). What it writes must be what the collected
 /// import writes — the same profile, entries in address order — and an overlap must still name
 /// the point it overlaps (read back from the import's scratch file), with nothing left beside
@@ -1063,7 +1063,7 @@ fn a_streamed_import_writes_what_the_collected_one_does() {
 /// boolean, a date, a covered cell, and a million empty rows at the end.
 const ODS_SHAPES: &str = r#"<table:table-row table:number-rows-repeated="2"><table:table-cell/></table:table-row><table:table-row><table:table-cell table:number-columns-repeated="2"/><table:table-cell office:value-type="float" office:value="1.5"><text:p>1.5</text:p></table:table-cell><table:table-cell office:value-type="string"><text:p>two<text:s text:c="3"/>spaces</text:p><text:p>and <text:span>a span</text:span> &amp; more</text:p><office:annotation><text:p>not this</text:p></office:annotation></table:table-cell><table:table-cell office:value-type="boolean" office:boolean-value="true"><text:p>TRUE</text:p></table:table-cell><table:table-cell office:value-type="percentage" office:value="0.25"><text:p>25%</text:p></table:table-cell><table:table-cell office:value-type="date" office:date-value="2026-12-04"><text:p>04.12.26</text:p></table:table-cell><table:covered-table-cell office:value-type="string" office:string-value="covered"/><table:table-cell office:value-type="float" office:value="40001" table:number-columns-repeated="3"/></table:table-row><table:table-row table:number-rows-repeated="2"><table:table-cell office:value-type="float" office:value="7"><text:p>7</text:p></table:table-cell></table:table-row><table:table-row table:number-rows-repeated="5"><table:table-cell table:number-columns-repeated="4"/></table:table-row><table:table-row><table:table-cell/><table:table-cell><text:p>untyped: empty</text:p></table:table-cell><table:table-cell office:value-type="string"><text:p/></table:table-cell><table:table-cell office:value-type="float" office:value="-3"/></table:table-row><table:table-row table:number-rows-repeated="1000000"><table:table-cell table:number-columns-repeated="1024"/></table:table-row>"#;
 
-/// Issue 39: the workbook reader expands every table of an ODS into memory when it opens it
+/// The workbook reader expands every table of an ODS into memory when it opens it
 /// (52.9 MB for a 655 kB sheet); the import now streams the sheet's rows itself. What it reads
 /// must be what the workbook reader reads: every row at the same number with the same cells.
 #[test]

@@ -108,7 +108,7 @@ fn enum_without_labels_and_backwards_ranges_are_refused() {
     assert!(e.message.contains("runs backwards"), "{e}");
 }
 
-/// Issue 16: `profiles check` accepted `[line] baud = 0`, `framing = "9Z7"`, `mode = "tcp"`,
+/// `profiles check` accepted `[line] baud = 0`, `framing = "9Z7"`, `mode = "tcp"`,
 /// and `scale = nan` or `inf`. Each is refused at its line and column now.
 #[test]
 fn impossible_line_settings_and_scales_are_refused_where_they_stand() {
@@ -133,7 +133,7 @@ fn impossible_line_settings_and_scales_are_refused_where_they_stand() {
     assert!(load("ok.toml", &ok).is_ok());
 }
 
-/// Issue 25: a profile declares a vendor function's frame lengths (`[[vendor_functions]]`);
+/// A profile declares a vendor function's frame lengths (`[[vendor_functions]]`);
 /// `replay --device` reads the first answer of a capture at its declared length although its
 /// CRC ends in `00` and its `00` glitch is glued to it — 13, 14 and 15 bytes all check, and
 /// nothing has been learned from the line yet. Without the profile the glitch is taken into

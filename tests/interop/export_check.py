@@ -1,4 +1,4 @@
-"""Checks what `mbtap profiles export` writes with the tools that read it (issue 27):
+"""Checks what `mbtap profiles export` writes with the tools that read it:
 
   export_check.py home-assistant FILE   Home Assistant's own `modbus` CONFIG_SCHEMA (the
                                         homeassistant package), as its configuration check does

@@ -1,4 +1,4 @@
-"""Reads an mbtap export back as its tool's YAML 1.1 or TOML reader would (issue 39):
+"""Reads an mbtap export back as its tool's YAML 1.1 or TOML reader would:
 
   export_readback.py yaml|toml FILE EXPECTED_JSON
 

@@ -1,4 +1,4 @@
-"""A Modbus RTU device on a pseudo-terminal that answers late (issue 39's regression of hostile
+"""A Modbus RTU device on a pseudo-terminal that answers late (regression of hostile
 round 3 `watch_swap.sh`): holding register N holds 1000 + N; every FC03 request is answered after
 DELAY_MS. usage: late_slave.py LINK DELAY_MS   (LINK: the symlink made to the pty; runs until
 killed)."""

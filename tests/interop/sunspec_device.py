@@ -1,4 +1,4 @@
-"""A simulated SunSpec device for the SunSpec interop test (issue 27): a pymodbus Modbus TCP
+"""A simulated SunSpec device for the SunSpec interop test: a pymodbus Modbus TCP
 server, unit 1, whose holding registers hold "SunS" at 40000 and the chain: common (1), a
 three-phase inverter (103), a second 103 (a repeated model), a model nobody defines (64999),
 then the end marker. Points not set hold their type's "not implemented" value. The model

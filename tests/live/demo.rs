@@ -86,7 +86,7 @@ fn no_fault_no_finding() {
     assert!(s["transactions"].as_u64().unwrap() > 50, "{s}");
 }
 
-/// Issue 31: `demo --duration 2s` was refused while `--interval 1s` worked elsewhere: one
+/// `demo --duration 2s` was refused while `--interval 1s` worked elsewhere: one
 /// duration syntax everywhere (a bare number is still seconds).
 #[test]
 fn durations_take_one_syntax_everywhere() {

@@ -171,7 +171,7 @@ fn sniff_survives_the_port_disappearing_and_coming_back() {
     assert_eq!(good_frames(&replay(&rec)), want, "the recording went on");
 }
 
-/// Issue 16: a +1 h clock step in a capture made `play` wait an hour in silence (a corrupt
+/// A +1 h clock step in a capture made `play` wait an hour in silence (a corrupt
 /// timestamp near 2^64, forever). A gap is capped at `--max-gap`, and said.
 #[test]
 #[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
@@ -249,9 +249,9 @@ fn sniff_duration_holds_while_the_port_is_gone() {
     assert!(err.contains("waiting for it to come back"), "the port did vanish: {err}");
 }
 
-/// Issue 28: `sniff --learn` drafts a register map from a live line and keeps it up to date:
+/// `sniff --learn` drafts a register map from a live line and keeps it up to date:
 /// the drafts are there while it still listens (rewritten every 10 s of line time), one per
-/// unit heard in the directory given (issue 40: a file holds one unit's profile), and each
+/// unit heard in the directory given (a file holds one unit's profile), and each
 /// loads as a profile.
 #[test]
 #[ignore = "needs a pseudo-terminal with `mbtap simulate --poll`; .ci/run runs this with --ignored"]
@@ -289,7 +289,7 @@ fn sniff_learn_keeps_draft_profiles_up_to_date_while_listening() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 28: `mbtap learn PORT` listens to a live line (here `simulate --poll` on a pty) for
+/// `mbtap learn PORT` listens to a live line (here `simulate --poll` on a pty) for
 /// `--duration`, then says what it learned of every unit the master polls, as for a capture.
 #[test]
 #[ignore = "needs a pseudo-terminal with `mbtap simulate --poll`; .ci/run runs this with --ignored"]

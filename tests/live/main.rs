@@ -1,4 +1,4 @@
-//! Integration tests, one binary by theme (issue 26: each test binary links the whole crate,
+//! Integration tests, one binary by theme (each test binary links the whole crate,
 //! so a few themed binaries instead of one per file): live lines and what shows them: pseudo-terminals, tap, spy, simulate --poll, the demo, the terminal UI in tmux, the report in a browser, Wireshark's tshark.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 

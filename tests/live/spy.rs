@@ -208,7 +208,7 @@ fn the_spy_server_holds_at_most_64_connections() {
     }
 }
 
-/// Issue 24: 64 sockets that never asked held every place of the spy server (0 of 48 clients
+/// 64 sockets that never asked held every place of the spy server (0 of 48 clients
 /// served) until they closed themselves. As on the bridge, a socket that has not asked within
 /// its grace gives its place to a newcomer.
 #[test]

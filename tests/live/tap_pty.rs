@@ -151,7 +151,7 @@ fn socat_pair(a: &std::path::Path, b: &std::path::Path) -> Kill {
     k
 }
 
-/// Issue 15: when the real port was lost, `tap` exited and the application got "device
+/// When the real port was lost, `tap` exited and the application got "device
 /// disconnected"; and it flushed its recording only when traffic came, so a SIGKILL after a
 /// quiet spell lost everything since. Now the application's side stays open while the port is
 /// reopened, and the recording is on disk within about a second, traffic or not.
@@ -195,7 +195,7 @@ fn cpu_ticks(pid: u32) -> u64 {
     fields[11].parse::<u64>().unwrap() + fields[12].parse::<u64>().unwrap()
 }
 
-/// Issue 24: `tap` burnt a core (4.9 s of CPU in 5 s) while the application held the pty open
+/// `tap` burnt a core (4.9 s of CPU in 5 s) while the application held the pty open
 /// without traffic, and after the application closed its side a SIGKILL lost the last
 /// transactions (nothing was flushed while it stayed closed). CPU is a resource, measured from
 /// the kernel's count, not a timing assert.

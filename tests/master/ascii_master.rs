@@ -1,4 +1,4 @@
-//! `read`, `write`, `watch`, `probe` with `--mode ascii` (issue 41): the same values over a
+//! `read`, `write`, `watch`, `probe` with `--mode ascii`: the same values over a
 //! Modbus ASCII line as over RTU, from the same emulated device; against a third-party ASCII
 //! slave (pymodbus) too.
 

@@ -1,5 +1,5 @@
 //! `mbtap simulate --from CAPTURE` and `--device FILE@UNIT` behind the bridge's Modbus TCP
-//! listener (issue 41): a recording becomes a device that answers what the recording showed,
+//! listener: a recording becomes a device that answers what the recording showed,
 //! byte for byte, refuses what it refused, and never invents what it did not show. The
 //! expected answers are read from the captures' `.txt` hex (the bytes the recordings were
 //! made from), not from our own replay.

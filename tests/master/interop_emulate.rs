@@ -1,4 +1,4 @@
-//! Emulated devices read by third-party masters (issue 41): pymodbus and mbpoll (libmodbus)
+//! Emulated devices read by third-party masters: pymodbus and mbpoll (libmodbus)
 //! over Modbus TCP read a device emulated from an imported profile, from a real recording in
 //! `captures/` and from a probe dump, and get exactly what the source holds. Needs python3 with
 //! pymodbus and mbpoll: `#[ignore]`d in a plain `cargo test`, run by `.ci/run` with `--ignored`.

@@ -1,4 +1,4 @@
-//! Integration tests, one binary by theme (issue 26: each test binary links the whole crate,
+//! Integration tests, one binary by theme (each test binary links the whole crate,
 //! so a few themed binaries instead of one per file): mbtap as a master: read, write, watch, probe, SunSpec, against simulate and third-party peers.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // tests may fail loudly
 

@@ -1,4 +1,4 @@
-//! Issue 28: `mbtap probe` against `mbtap simulate` on a pseudo-terminal, through `mbtap tap`
+//! `mbtap probe` against `mbtap simulate` on a pseudo-terminal, through `mbtap tap`
 //! recording the line: each simulated device's map found exactly as its built-in profile defines
 //! it, with reads only (every request on the recorded line is a read or an identification), the
 //! same map as reading every address in fewer than half the requests, a skeleton profile that
@@ -120,7 +120,7 @@ fn probe_finds_each_simulated_devices_map_reading_only() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 28: `mbtap diff` of two probe dumps — the MK4 probed, its operating mode written
+/// `mbtap diff` of two probe dumps — the MK4 probed, its operating mode written
 /// (holding 101), probed again: the diff names that register, labelled by the profile, with
 /// the value before and the value written, and exits 1 (as diff(1)).
 #[test]

@@ -199,7 +199,7 @@ fn profiles_show_into_a_closed_pipe_does_not_panic() {
 const HOSTILE_PROFILE: &str = "[profile]\nname = \"evil\\u001b]0;pwned\\u0007\"\ndevice = \"Pump\\u001b[2J\"\n\
     functions = [3, 4]\n\n[[input_registers]]\naddress = 430\nname = \"Volts\\u001b[31m\"\nunit = \"V\\u009b1m\"\nscale = 0.1\n";
 
-/// Issue 24: control characters in profile names and units reached the terminal in
+/// Control characters in profile names and units reached the terminal in
 /// `profiles show` and `read`'s text output.
 #[test]
 fn control_characters_in_profiles_never_reach_the_terminal() {
@@ -218,7 +218,7 @@ fn control_characters_in_profiles_never_reach_the_terminal() {
     assert!(text(&read).contains("Volts"), "{}", text(&read));
 }
 
-/// Issue 24: `write --unit 0` broadcast a profile write without --force; a command register
+/// `write --unit 0` broadcast a profile write without --force; a command register
 /// took any number.
 #[test]
 fn a_broadcast_write_or_an_undocumented_command_needs_force() {
@@ -239,7 +239,7 @@ fn a_broadcast_write_or_an_undocumented_command_needs_force() {
     assert!(o.status.success() && text(&o).contains("broadcast holding 105"), "{}", text(&o));
 }
 
-/// Issue 31: `read --device mkzp holding 50` asked unit 1 (the profile's default address, where
+/// `read --device mkzp holding 50` asked unit 1 (the profile's default address, where
 /// the simulated line has the MK4) and the error blamed the register. It says which unit was
 /// asked and why.
 #[test]
@@ -309,11 +309,9 @@ fn watch_late_device(delay_ms: u32) -> (usize, usize) {
     (right, wrong)
 }
 
-/// Issue 39 (hostile round 3 `watch_swap.sh`): a device slower than the timeout answered the
-/// first range while the second was awaited, and its values were shown under the second's
-/// registers (16 of 20 at the round's start). After a timeout the line is listened to for the
-/// late answer before the next request: nothing is shown under the wrong register; a device
-/// within the timeout is read right.
+/// A device slower than the timeout answers the first range while the second is awaited:
+/// after a timeout the line is listened to for the late answer before the next request, so
+/// nothing is shown under the wrong register; a device within the timeout is read right.
 #[test]
 fn a_late_answer_is_never_shown_under_another_request_s_registers() {
     let (_, wrong) = watch_late_device(450);

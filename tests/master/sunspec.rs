@@ -1,4 +1,4 @@
-//! Issue 27: `mbtap read … --device sunspec` against a simulated SunSpec device (pymodbus, on
+//! `mbtap read … --device sunspec` against a simulated SunSpec device (pymodbus, on
 //! Modbus TCP and as RTU on a pseudo-terminal) gives the same values as pysunspec2 — the SunSpec
 //! Alliance's reference implementation — reading the same device: a chain with a repeated model
 //! (two three-phase inverters) and a model nobody defines (shown raw, by ID). Needs pymodbus,

@@ -656,8 +656,8 @@ mod tests {
         assert_eq!(l.wait_until(), ms(2), "nothing more to wait for");
     }
 
-    /// The answer buffer grew to gigabytes while a server
-    /// streamed garbage that began with the unit's address. It now holds at most one ADU.
+    /// A server streaming garbage that begins with the unit's address costs at most one ADU
+    /// of buffer, however long it streams.
     #[test]
     fn garbage_stream_the_answer_buffer_holds_at_most_one_adu() {
         /// A vendor request (function 0x41, MAP v1.1b3 §5: user-defined): its answer's length

@@ -110,7 +110,7 @@ impl Mqtt {
     /// Every interval of bus time: held values; every [`FIGURES_EVERY_NS`] (or the interval,
     /// if longer) of bus time and at least a second of the clock: unit health, findings, own
     /// counts. The figures cost a health report each, so they never follow a short interval (at
-    /// `--mqtt-interval 0` they were computed per event: quadratic over a long capture).
+    /// `--mqtt-interval 0`, per event, they would be quadratic over a long capture).
     pub(super) fn tick(&self, st: &mut State, t_ns: u64) {
         if self.sparkplug {
             let mut ob = lock(&self.outbox);

@@ -148,8 +148,8 @@ impl LearnedLengths {
 
     /// Of `short` and `short + 1` bytes, the one every sighting of this unit's function from
     /// `sender` had, however few (one is enough): too weak to decide alone, strong enough to put
-    /// that length first, the other still shown (a unit's second vendor request
-    /// ending in `00` was read against its first, certain one).
+    /// that length first, the other still shown (a unit's second vendor request ending in
+    /// `00` is read as its first, certain one was).
     pub(crate) fn lean(&self, unit: u8, fc: u8, sender: Sender, short: usize) -> Option<usize> {
         if !self.knows(fc) {
             return None;
@@ -215,9 +215,9 @@ impl LearnedLengths {
             [one] => Some(*one),
             // Who sent it was guessed from the expectation, which damage misleads (a corrupted
             // request leaves the master expected, and the answer comes): where that direction's
-            // firm length is none of the candidates, the other direction's may decide
-            // (an answer after a corrupted request was read as the master's request with its
-            // `00` glitch, one byte short).
+            // firm length is none of the candidates, the other direction's may decide (else
+            // an answer after a corrupted request reads as the master's request with its `00`
+            // glitch, one byte short).
             [] if sender != Sender::Unknown && candidates.iter().all(|&l| self.contradicts(unit, fc, sender, l)) => {
                 self.choose_among(unit, fc, Sender::Unknown, candidates)
             }
@@ -309,9 +309,9 @@ mod tests {
         assert!(!l.contradicts(6, 0x41, Sender::Master, 9));
     }
 
-    /// A vendor request to a unit that never answers goes out on the silence after
-    /// it, no byte behind it; it was never learned from, and that unit's twins stayed a coin
-    /// toss all day. A silence after a frame rules out a `00` after it as surely as a byte does.
+    /// A vendor request to a unit that never answers goes out on the silence after it, no byte
+    /// behind it, and is learned from: a silence after a frame rules out a `00` after it as
+    /// surely as a byte does, so that unit's twins do not stay a coin toss all day.
     #[test]
     fn a_frame_followed_by_a_silence_teaches_its_length() {
         let mut l = LearnedLengths::new(true);

@@ -90,9 +90,9 @@ impl ObserverEstimate {
     ///
     /// Where every read holds one byte, a byte's timestamp is its end plus the observer's delay
     /// for that read: a silence between two bytes is uncertain by how much those delays differ
-    /// — the learned figure, a sixteenth more — and no character (a unit pausing 2.3
-    /// ms inside its answers at 9600, read byte by byte with 0.2 ms of jitter, went unnamed
-    /// behind a resolution of 1.4 ms).
+    /// — the learned figure, a sixteenth more — and no character (a unit pausing 2.3 ms inside
+    /// its answers at 9600, read byte by byte with 0.2 ms of jitter, is named; behind a
+    /// resolution of 1.4 ms it would not be).
     pub fn resolution_ns(&self) -> u64 {
         if self.reads > 0 && self.longest_read <= 1 {
             let l = self.effective_latency_ns();

@@ -1,7 +1,6 @@
 //! A value's unit as Home Assistant spells it, with the device class and state class that go
-//! with it (none of the demo's 92 discovery configs had either, so Home Assistant kept
-//! no long-term statistics and the Energy dashboard offered nothing; sheet units passed through
-//! as written — `Volts`, `kWH` — where Home Assistant knows only `V`, `kWh`).
+//! with it (without them Home Assistant keeps no long-term statistics and the Energy dashboard
+//! offers nothing; a sheet's `Volts` or `kWH` is unknown to it, its `V` and `kWh` known).
 //!
 //! The classes are Home Assistant's `SensorDeviceClass` and `SensorStateClass` values; each unit
 //! here is one that class accepts. An energy unit is `total_increasing` (a meter's register

@@ -331,7 +331,7 @@ mod serve_tests {
     }
 
     /// A register named like a formula is written as text a spreadsheet shows, not runs
-    /// (round start: `=HYPERLINK(…)` went verbatim into the cell).
+    /// (`=HYPERLINK(…)` never reaches a cell as a formula).
     #[test]
     fn formula_names_in_the_csv_image_are_neutralised() {
         let img = image();

@@ -267,7 +267,7 @@ fn encode_def(c: &mut Check<'_>, text: &str, def: &Def, p: &Profile) -> Result<V
             }
             // A command register (its documented values are commands) takes those values, and
             // numbers in its documented range if it has one — like an enumeration's labels
-            // (any number went to the line).
+            // (no other number reaches the line).
             if !def.commands.is_empty()
                 && !def.commands.contains_key(&raw)
                 && !def.labels.contains_key(&raw)
@@ -429,8 +429,8 @@ mod tests {
         assert_eq!(w.pdu(), [0x06, 0x00, 0x69, 0x00, 0x96]);
     }
 
-    /// A command register took any number (an enumeration outside its list is
-    /// refused; commands now are too).
+    /// A command register takes its documented commands only, as an enumeration takes its
+    /// list.
     #[test]
     fn a_command_register_takes_its_documented_commands_only() {
         // MK4 holding 126 "Clear alarm log": 30 = clear the alarm log.

@@ -118,8 +118,8 @@ pub(super) fn each_row(
     guarded(path, || {
         let (mut wb, name) = open_named(path, Some(sheet))?;
         // XLSX and XLSB cell by cell: a cell at XFD1048576 costs one cell, not the dense
-        // range of 17 billion the range reader lays out (a 1.6 kB XLSX aborted the process
-        // on it). The two readers are different types with the same calls (calamine gives
+        // range of 17 billion the range reader lays out (enough to abort the process from a
+        // 1.6 kB XLSX). The two readers are different types with the same calls (calamine gives
         // them no trait).
         macro_rules! cell_by_cell {
             ($book:expr) => {{

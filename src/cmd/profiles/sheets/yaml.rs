@@ -11,8 +11,8 @@ use anyhow::Context as _;
 pub const MAX_YAML_BYTES: u64 = 32 << 20;
 
 /// A Home Assistant YAML file read into `out`, streamed twice (its nesting, then its entries),
-/// refused unread past [`MAX_YAML_BYTES`] (a 200 MB file of nested mappings was read
-/// whole before anything looked at it). Returns the device read.
+/// refused unread past [`MAX_YAML_BYTES`] (a 200 MB file of nested mappings is never read
+/// whole). Returns the device read.
 ///
 /// # Errors
 /// The file cannot be read, is too big, or is not a Home Assistant configuration.

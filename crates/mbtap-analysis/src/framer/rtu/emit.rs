@@ -167,8 +167,8 @@ impl RtuFramer {
             return Some((len, false));
         }
         // A run of `00`s after it: a frame ending in `00` and its `00` glitch are the last two
-        // readings — a sender leaves one glitch byte, not several (a vendor request
-        // ending in `00` and the master's `00` glitch was taken 1 byte short).
+        // readings — a sender leaves one glitch byte, not several (else a vendor request ending
+        // in `00` followed by the master's `00` glitch is taken 1 byte short).
         let e = if lengths.len() > 2 { lengths[lengths.len() - 2] } else { e };
         if !self.plausible_frame(&piece[..e]) || !self.looks_like_frame(&piece[e..]) {
             return None;

@@ -124,8 +124,8 @@ impl RtuFramer {
                         // the `00` is a lower bound computed with a latency that may not be learned
                         // yet or short of the adapter's: the longer frame followed by its sender's
                         // glitch outweighs it — a sender leaves one glitch byte, not a `00` and
-                        // another (a vendor answer ending in `00` and its `FF`, 1 215
-                        // bytes into a line behind a 16 ms timer, was taken 1 byte short).
+                        // another (else a vendor answer ending in `00` and its `FF`, 1 215
+                        // bytes into a line behind a 16 ms timer, is taken 1 byte short).
                         let batched = self.learner.estimate.longest_read > 1;
                         let shorter_boundary = self.boundary_at(g + l) && !(longer_glitch && batched);
                         let evidence = shorter_boundary || self.exact_frame_at(g + l) || longer_glitch;

@@ -350,8 +350,8 @@ modbus:
         check_depth(CONFIG.as_bytes()).unwrap();
     }
 
-    /// The YAML is read into entries as it goes, no tree of the document (200 000
-    /// sensors took 540 MB as a tree). What the tree gave must hold: a hub's unit given after
+    /// The YAML is read into entries as it goes, no tree of the document (200 000 sensors
+    /// take 540 MB as a tree). What a tree would give holds: a hub's unit given after
     /// its lists still names their entries; an entry that is not a mapping is a problem, not
     /// the end of the import. An alias bomb (9^9 nodes if expanded) is refused by the reader's
     /// budget, naming where, wherever it sits — serde_norway skipped one under an unread key, but

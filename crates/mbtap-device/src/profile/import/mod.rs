@@ -108,7 +108,7 @@ pub struct Imported {
     /// How the source was read, in words (`header on row 3: address=A, name=B, …`).
     pub notes: Vec<String>,
     /// The addresses taken: an overlap is found by looking up the new point's addresses, not by
-    /// scanning every point (import was quadratic in rows).
+    /// scanning every point (which is quadratic in rows).
     ledger: Ledger,
 }
 

@@ -81,7 +81,7 @@ const HEADER_SEARCH: usize = 50;
 
 /// Rows of a sheet, read from the start as often as asked: the import reads a sheet up to three
 /// times (its header, its address notation, its rows), so a CSV is streamed from its file, never
-/// held (the grid of a sheet of tiny cells was 2.5× the file).
+/// held (a grid of a sheet of tiny cells is 2.5× the file).
 pub trait SheetRows {
     /// Why the rows could not be read.
     type Error;

@@ -2,8 +2,8 @@
 //! Excel's readers (calamine 0.32 among them) find it: the first directory entry *in the
 //! directory's order* named `Workbook` (else `Book`), linked into the directory tree or not.
 //! The file is not trusted: a sector chain that loops, a length past the file, a sector number
-//! past the allocation table or a mini sector outside the mini stream is refused, said (
-//! calamine looped forever, allocated the length given, or panicked on them). The stream is not
+//! past the allocation table or a mini sector outside the mini stream is refused, said (a
+//! reader that trusts them loops forever, allocates the length given, or panics). The stream is not
 //! gathered: [`parse_xls_stream`] says which pieces of the file it lies in, and
 //! [`StreamReader`] reads them as one stream (`xls_rows.rs` reads the sheet from there), so the
 //! import never holds the stream beside the file.
