@@ -178,7 +178,7 @@ pub async fn bridge<W: Write>(
             crate::bridge::broker::start(w, Arc::clone(&routes), Arc::new(opts.server.clone()));
         }
         // One table of connections for every listener: one limit, eviction across them.
-        let connections: Arc<server::Table> = Arc::default();
+        let connections: Arc<server::Connections> = Arc::default();
         for (addr, rtu) in [(&opts.listen, false), (&opts.listen_rtu, true)] {
             let Some(addr) = addr else { continue };
             let addr = crate::io::listen::bind_addr(addr);

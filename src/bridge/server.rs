@@ -29,15 +29,15 @@ pub struct Conn {
 /// The open connections of every listener (plain, RTU over TCP, TLS) — the connection limit is
 /// theirs together, so a full table evicts a socket that never asked (a TLS handshake in
 /// progress counts as one), or its idlest member, whichever listener holds it, instead of
-/// refusing everyone new (64 idle RTU sockets locked out every Modbus TCP client).
-pub type Table = std::sync::Mutex<std::collections::HashMap<ClientId, Conn>>;
+/// refusing everyone new (64 idle RTU sockets must not lock out every Modbus TCP client).
+pub type Connections = std::sync::Mutex<std::collections::HashMap<ClientId, Conn>>;
 
 /// Ends a connection's bookkeeping however it ends — closed, failed or evicted (an aborted
 /// task runs its destructors, not its remaining code).
 struct Cleanup {
     client: ClientId,
     routes: Arc<Routes>,
-    table: Arc<Table>,
+    table: Arc<Connections>,
 }
 
 impl Drop for Cleanup {
@@ -52,7 +52,7 @@ impl Drop for Cleanup {
 
 /// Ends the connection the gateway core's [`seats`] decision names: for `ip`'s bound of silent
 /// sockets, or (None) to make room in a full table. False when none may go.
-fn evict(table: &Table, ip: Option<std::net::IpAddr>) -> bool {
+fn evict(table: &Connections, ip: Option<std::net::IpAddr>) -> bool {
     let table = table.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     // The seats as they are now: each with when its socket last brought bytes in.
     let now_seats: Vec<(ClientId, Seat)> = table
@@ -84,7 +84,7 @@ pub async fn serve(
     routes: Arc<Routes>,
     opts: Arc<ServerOptions>,
     tls: Option<super::tls::Tls>,
-    table: Arc<Table>,
+    table: Arc<Connections>,
 ) {
     loop {
         let Ok((stream, peer)) = listener.accept().await else {

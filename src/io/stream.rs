@@ -10,8 +10,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio_serial::{SerialPort, SerialStream};
 
-use mbtap_analysis::framer::{LineSettings, Parity};
-use mbtap_proto::rfc2217::{self, LineSetup, Telnet};
+use mbtap_analysis::framer::LineSettings;
+use mbtap_proto::rfc2217::Telnet;
 
 /// The most bytes one [`LineStream::clear_input`] drops before it returns: sixteen of the
 /// longest MBAP or RTU ADUs (260 bytes, Messaging on TCP/IP v1.0b §4.1).
@@ -122,19 +122,6 @@ async fn connect(addr: &str) -> Result<TcpStream, String> {
     Ok(tcp)
 }
 
-fn setup(line: LineSettings) -> LineSetup {
-    LineSetup {
-        baud: line.baud,
-        data_bits: line.data_bits,
-        parity: match line.parity {
-            Parity::None => rfc2217::Parity::None,
-            Parity::Odd => rfc2217::Parity::Odd,
-            Parity::Even => rfc2217::Parity::Even,
-        },
-        stop_bits: line.stop_bits,
-    }
-}
-
 impl LineStream {
     /// Connects to a networked transport; a Telnet server must agree to the COM port option
     /// (and is given the line's settings) before the line is taken as open.
@@ -144,7 +131,7 @@ impl LineStream {
             Transport::RtuOverTcp(addr) | Transport::ModbusTcp(addr) => Ok(Self::Tcp(connect(addr).await?)),
             Transport::Rfc2217(addr) => {
                 let mut tcp = connect(addr).await?;
-                let mut telnet = Box::new(Telnet::new(setup(line)));
+                let mut telnet = Box::new(Telnet::new(line));
                 tcp.write_all(&Telnet::greeting()).await.map_err(|e| format!("{addr}: {e}"))?;
                 let (mut pending, mut reply, mut buf) = (Vec::new(), Vec::new(), [0u8; 256]);
                 let deadline = tokio::time::Instant::now() + CONNECT_TIMEOUT;

@@ -5,13 +5,13 @@
 
 pub mod connection;
 pub mod discovery;
+pub mod expiring;
 pub mod mqtt;
 pub mod mqtt_options;
 pub mod outbox;
 pub mod spool;
 pub mod spy;
 pub mod values_from;
-pub mod watched;
 
 use std::sync::Arc;
 use std::time::Duration;

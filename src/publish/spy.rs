@@ -16,7 +16,7 @@ use mbtap_device::profile::Table;
 use mbtap_device::profile::image::{ILLEGAL_FUNCTION, RegisterImage};
 use tokio_modbus::server::tcp::Server;
 
-use super::watched::{Table as Connections, Watched};
+use super::expiring::{Connections, Expiring};
 use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 
 /// The image, its clock, and what the server did.
@@ -109,7 +109,7 @@ impl Spy {
                                 }
                             }
                             let _ = peer;
-                            let stream = Watched::new(stream, IDLE_TIMEOUT, table.open());
+                            let stream = Expiring::new(stream, IDLE_TIMEOUT, table.open());
                             std::io::Result::Ok(Some((Service { spy: Arc::clone(&spy) }, stream)))
                         }
                     };

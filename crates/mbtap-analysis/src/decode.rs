@@ -25,7 +25,7 @@ pub enum Format {
 
 /// How the run went, for the exit status.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Verdict {
+pub enum RunStatus {
     /// Every frame decoded and passed its check.
     Clean = 0,
     /// Every input was a frame, but a check failed or a PDU did not fit its function code.
@@ -106,7 +106,7 @@ pub fn run(
     format: Format,
     out: &mut dyn Write,
     err: &mut dyn Write,
-) -> io::Result<Verdict> {
+) -> io::Result<RunStatus> {
     run_with_profiles(lines, mode, format, &Profiles::new(), mbtap_device::profile::annotate::Lang::En, out, err)
 }
 
@@ -127,7 +127,7 @@ pub fn run_with_profiles(
     lang: mbtap_device::profile::annotate::Lang,
     out: &mut dyn Write,
     err: &mut dyn Write,
-) -> io::Result<Verdict> {
+) -> io::Result<RunStatus> {
     let mut d = Decoder::new(mode, format, profiles, lang);
     for line in lines {
         d.line(line, out, err)?;
@@ -144,7 +144,7 @@ pub struct Decoder<'p> {
     format: Format,
     profiles: &'p Profiles,
     lang: mbtap_device::profile::annotate::Lang,
-    outcome: Verdict,
+    status: RunStatus,
     /// Lines read so far (the next one's number is this plus one).
     read: usize,
     /// Pieces not shown yet: at most a request waiting for its answer and what came with it.
@@ -164,7 +164,7 @@ impl<'p> Decoder<'p> {
             format,
             profiles,
             lang,
-            outcome: Verdict::Clean,
+            status: RunStatus::Clean,
             read: 0,
             pending: std::collections::VecDeque::new(),
         }
@@ -220,13 +220,13 @@ impl<'p> Decoder<'p> {
         self.drain(false, out, err)
     }
 
-    /// End of input: writes what was held back; the run's outcome.
+    /// End of input: writes what was held back; the run's status.
     ///
     /// # Errors
     /// Only I/O errors writing the output.
-    pub fn finish(mut self, out: &mut dyn Write, err: &mut dyn Write) -> io::Result<Verdict> {
+    pub fn finish(mut self, out: &mut dyn Write, err: &mut dyn Write) -> io::Result<RunStatus> {
         self.drain(true, out, err)?;
-        Ok(self.outcome)
+        Ok(self.status)
     }
 
     /// Writes every piece that can be decided now: all of them at the end, otherwise all but a
@@ -249,7 +249,7 @@ impl<'p> Decoder<'p> {
     /// Bytes of a line that belong to no frame: a turnaround glitch or noise.
     fn stray(&mut self, number: usize, bytes: &[u8], glitch: bool, out: &mut dyn Write) -> io::Result<()> {
         // Not part of any frame: the line held more than its frames.
-        self.outcome = self.outcome.max(if glitch { Verdict::Problems } else { Verdict::Unreadable });
+        self.status = self.status.max(if glitch { RunStatus::Problems } else { RunStatus::Unreadable });
         let hex = crate::report::format::hex_spaced(bytes);
         match self.format {
             Format::Text if glitch => writeln!(
@@ -271,7 +271,7 @@ impl<'p> Decoder<'p> {
         let this = match entry {
             Entry::Frame(this) => this,
             Entry::Unreadable(number, shown, reason) => {
-                self.outcome = Verdict::Unreadable;
+                self.status = RunStatus::Unreadable;
                 return match format {
                     Format::Text => writeln!(err, "mbtap: input {number} ({shown:?}) is not a frame: {reason}"),
                     Format::Jsonl => writeln!(
@@ -286,14 +286,14 @@ impl<'p> Decoder<'p> {
         };
         let decode = decode_pdu(&this.adu.pdu, this.hint);
         if !this.adu.check.ok() {
-            self.outcome = self.outcome.max(Verdict::Problems);
+            self.status = self.status.max(RunStatus::Problems);
         }
         if let Some(Entry::Frame(next)) = self.pending.front()
             && let Some((req, req_decoded)) = request_reading(&decode)
             && answers(&this.adu, &req, &next.adu)
         {
             if !next.adu.check.ok() {
-                self.outcome = self.outcome.max(Verdict::Problems);
+                self.status = self.status.max(RunStatus::Problems);
             }
             let resp = decode_pdu(&next.adu.pdu, DirectionHint::Response);
             let req_decode = PduDecode::One(req_decoded.clone());
@@ -308,7 +308,7 @@ impl<'p> Decoder<'p> {
             return Ok(());
         }
         if matches!(decode, PduDecode::Malformed { .. }) {
-            self.outcome = self.outcome.max(Verdict::Problems);
+            self.status = self.status.max(RunStatus::Problems);
         }
         let view = FrameView { wire: &this.wire, adu: &this.adu, decode: &decode, request: None };
         let cut = truncated_response(&this, &decode);

@@ -109,13 +109,8 @@ pub fn transports(data: &[u8]) {
             }
         }
     } else {
-        let setup = crate::rfc2217::LineSetup {
-            baud: 19_200,
-            data_bits: 8,
-            parity: crate::rfc2217::Parity::Even,
-            stop_bits: 1,
-        };
-        let mut telnet = crate::rfc2217::Telnet::new(setup);
+        // The spec's default line: 19200 8E1 (Serial Line v1.02 §2.5.1, §3.3.1).
+        let mut telnet = crate::rfc2217::Telnet::new(mbtap_proto::serial_line::LineSettings::default());
         let (mut data, mut reply) = (Vec::new(), Vec::new());
         for read in reads {
             telnet.feed(read, &mut data, &mut reply);

@@ -6,6 +6,8 @@
 //! line's bytes and the answers Telnet requires. Bounded: a subnegotiation's content is skipped,
 //! not stored.
 
+use crate::serial_line::{LineSettings, Parity};
+
 /// Telnet commands (RFC 854).
 const IAC: u8 = 255;
 const DONT: u8 = 254;
@@ -26,22 +28,14 @@ const SET_DATASIZE: u8 = 2;
 const SET_PARITY: u8 = 3;
 const SET_STOPSIZE: u8 = 4;
 
-/// Parity as RFC 2217 numbers it (SET-PARITY: 1 none, 2 odd, 3 even).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Parity {
-    None = 1,
-    Odd = 2,
-    Even = 3,
-}
-
-/// The remote line's settings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct LineSetup {
-    pub baud: u32,
-    pub data_bits: u8,
-    pub parity: Parity,
-    /// 1 or 2 (RFC 2217 SET-STOPSIZE: 1 = one, 2 = two).
-    pub stop_bits: u8,
+/// The SET-PARITY value of `parity` (RFC 2217 §3: 1 none, 2 odd, 3 even).
+#[must_use]
+pub const fn parity_code(parity: Parity) -> u8 {
+    match parity {
+        Parity::None => 1,
+        Parity::Odd => 2,
+        Parity::Even => 3,
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,7 +55,7 @@ enum State {
 /// One Telnet session's state.
 #[derive(Debug, Clone)]
 pub struct Telnet {
-    setup: LineSetup,
+    setup: LineSettings,
     state: State,
     /// The server agreed to the COM port option and was sent the line's settings.
     pub configured: bool,
@@ -77,7 +71,7 @@ pub struct Telnet {
 
 impl Telnet {
     #[must_use]
-    pub fn new(setup: LineSetup) -> Self {
+    pub fn new(setup: LineSettings) -> Self {
         Self { setup, state: State::Data, configured: false, refused: [false; 256], nvt_in: false, nvt_out: false }
     }
 
@@ -99,7 +93,7 @@ impl Telnet {
         };
         sub(SET_BAUDRATE, &self.setup.baud.to_be_bytes());
         sub(SET_DATASIZE, &[self.setup.data_bits]);
-        sub(SET_PARITY, &[self.setup.parity as u8]);
+        sub(SET_PARITY, &[parity_code(self.setup.parity)]);
         sub(SET_STOPSIZE, &[self.setup.stop_bits]);
         out
     }
@@ -207,7 +201,7 @@ fn escape(bytes: &[u8]) -> Vec<u8> {
 mod tests {
     use super::*;
 
-    const SETUP: LineSetup = LineSetup { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
+    const SETUP: LineSettings = LineSettings { baud: 9600, data_bits: 8, parity: Parity::Even, stop_bits: 1 };
 
     #[test]
     fn the_settings_go_out_when_the_server_agrees_to_the_com_port_option() {

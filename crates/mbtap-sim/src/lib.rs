@@ -32,7 +32,7 @@ pub mod world;
 
 pub use device::Device;
 pub use recorded::RecordedDevice;
-pub use recording::Recorder;
+pub use recording::RecordedDevicesBuilder;
 pub use scan_line::scan_line;
 pub use slave::Slave;
 

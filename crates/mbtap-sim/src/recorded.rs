@@ -3,7 +3,7 @@
 //! exceptions it gave and for which requests, answers to functions that carry no registers
 //! (FC 11 Report Server ID, FC 2B/0E identity, FC 08) as they were, how long it took to
 //! answer, and — with `--replay-values` — its values in their recorded time course, looping.
-//! Built by [`super::recording::Recorder`]; pure like the rest of the core.
+//! Built by [`super::recording::RecordedDevicesBuilder`]; pure like the rest of the core.
 //!
 //! What the recording never showed is not invented: a read of an address never heard is
 //! refused with exception 02 (MAP v1.1b3 §7), a function never heard with 01, unless the

@@ -5,7 +5,7 @@
 //! takes in memory — so a recording of ever-new requests cannot grow memory without end, and
 //! every unit a recording shows keeps its values: 247 units read over their whole holding and
 //! input tables take 2 × 256 pages each (69 MB) under [`MAX_VALUE_BYTES`]. What a bound drops is
-//! counted per unit and said ([`Recorder::bounds_said`]).
+//! counted per unit and said ([`RecordedDevicesBuilder::bounds_said`]).
 
 use std::collections::BTreeMap;
 
@@ -52,7 +52,7 @@ struct UnitLog {
 
 /// Builds devices from a recording's transactions (an [`Sink`] for [`mbtap_analysis::replay::replay_into`]).
 #[derive(Debug, Default)]
-pub struct Recorder {
+pub struct RecordedDevicesBuilder {
     /// Decodes each transaction's values; emptied after each into the units' stores.
     image: RegisterImage,
     units: BTreeMap<u8, UnitLog>,
@@ -68,7 +68,7 @@ pub struct Recorder {
     pub warnings: Vec<String>,
 }
 
-impl Sink for Recorder {
+impl Sink for RecordedDevicesBuilder {
     fn event(&mut self, event: &Event<'_>) {
         if let Event::Transaction(t) = event {
             self.transaction(t);
@@ -82,7 +82,7 @@ impl Sink for Recorder {
     }
 }
 
-impl Recorder {
+impl RecordedDevicesBuilder {
     /// Takes in one transaction as the pairing gave it.
     pub fn transaction(&mut self, t: &mbtap_analysis::pairing::Transaction<'_>) {
         let Some(request) = t.request_pdu else { return };
@@ -292,7 +292,7 @@ mod tests {
     }
 
     fn recorded() -> RecordedDevice {
-        let mut r = Recorder::default();
+        let mut r = RecordedDevicesBuilder::default();
         r.transaction(&transaction(9, &READ_100_2, Some(&ANSWER_100_2), Outcome::Ok, 4_000_000));
         r.transaction(&transaction(9, &READ_INPUT_7, Some(&REFUSED_02), Outcome::Exception(2), 6_000_000));
         r.transaction(&transaction(9, &REPORT_ID, Some(&REPORT_ID_ANSWER), Outcome::Ok, 5_000_000));
@@ -314,7 +314,7 @@ mod tests {
     #[test]
     fn every_unit_of_a_full_line_keeps_its_values() {
         const SPAN: u16 = 4_500;
-        let mut r = Recorder::default();
+        let mut r = RecordedDevicesBuilder::default();
         let mut answer = Vec::with_capacity(2 + 250);
         for unit in 1..=247u8 {
             for function in [0x03u8, 0x04] {
@@ -355,7 +355,7 @@ mod tests {
     /// Past the bound in bytes, what is dropped is counted for the unit it belonged to and said.
     #[test]
     fn values_past_the_bound_are_said_per_unit() {
-        let mut r = Recorder { pages: MAX_VALUE_BYTES / PAGE_BYTES, ..Recorder::default() };
+        let mut r = RecordedDevicesBuilder { pages: MAX_VALUE_BYTES / PAGE_BYTES, ..RecordedDevicesBuilder::default() };
         r.transaction(&transaction(12, &READ_100_2, Some(&ANSWER_100_2), Outcome::Ok, 1));
         let said = r.bounds_said();
         assert!(said.len() == 1 && said[0].contains("unit 12: 2") && said[0].contains("CAPTURE@UNITS"), "{said:?}");

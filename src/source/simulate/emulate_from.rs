@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use mbtap_device::profile::Table;
-use mbtap_sim::{Device, Recorder, Slave};
+use mbtap_sim::{Device, RecordedDevicesBuilder, Slave};
 
 /// Parses `PROFILE@ADDRESS` (`mk4@1`, `./meter.toml@3`, an imported profile's name).
 ///
@@ -53,7 +53,7 @@ pub fn from_capture(
         return from_image(path, &image, wanted.as_ref(), turnaround_ms, notes);
     }
     let input = crate::output::progress::open_capture(path, false)?;
-    let mut recorder = Recorder::default();
+    let mut recorder = RecordedDevicesBuilder::default();
     mbtap_analysis::replay::replay_into(input, mbtap_analysis::line_args::LineOverrides::default(), &mut recorder)
         .with_context(|| format!("--from {}: reading the capture", path.display()))?;
     for w in &recorder.warnings {

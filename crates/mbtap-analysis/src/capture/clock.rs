@@ -14,7 +14,7 @@ const JUMP_NS: u64 = 10_000_000;
 
 /// What the clock says about one packet.
 #[derive(Debug, PartialEq, Eq)]
-pub enum Verdict {
+pub enum StampOrder {
     /// In order (or moved by the offset a past jump set).
     InOrder,
     /// Stamped `by_ns` before the previous packet: handed on at the previous time.
@@ -52,7 +52,7 @@ impl Clock {
 
     /// The time to hand on for a packet stamped `raw`, and what was wrong with it.
     #[inline]
-    pub fn stamp(&mut self, raw: u64) -> (u64, Verdict) {
+    pub fn stamp(&mut self, raw: u64) -> (u64, StampOrder) {
         // The common case, once per packet: a step forward with no offset, the last step not
         // a backward jump (only a forward step after a backward jump can end a lone one). A
         // forward jump — any pause over JUMP_NS, which a polled line has between most polls —
@@ -66,17 +66,17 @@ impl Clock {
             let out = raw.max(last.out);
             self.before_jump = (raw - last.raw > JUMP_NS).then_some(last);
             self.last = Some(Stamp { raw, out });
-            return (out, Verdict::InOrder);
+            return (out, StampOrder::InOrder);
         }
         self.stamp_after_trouble(raw)
     }
 
     /// [`Clock::stamp`] for a first packet, a jump, or any packet after one.
     #[cold]
-    fn stamp_after_trouble(&mut self, raw: u64) -> (u64, Verdict) {
+    fn stamp_after_trouble(&mut self, raw: u64) -> (u64, StampOrder) {
         let Some(last) = self.last else {
             self.last = Some(Stamp { raw, out: raw });
-            return (raw, Verdict::InOrder);
+            return (raw, StampOrder::InOrder);
         };
         let before = self.before_jump.take();
         let step = i128::from(raw) - i128::from(last.raw);
@@ -93,7 +93,7 @@ impl Clock {
             self.last = Some(Stamp { raw, out });
             let ahead = last.raw > b.raw;
             let off_ns = if ahead { last.raw - b.raw } else { b.raw - last.raw };
-            return (out, Verdict::LoneJump { off_ns, ahead });
+            return (out, StampOrder::LoneJump { off_ns, ahead });
         }
         if jump {
             self.before_jump = Some(last);
@@ -104,10 +104,10 @@ impl Clock {
             if jump {
                 self.offset = i128::from(last.out) - i128::from(raw);
             }
-            (last.out, Verdict::Backwards { by_ns: last.raw - raw })
+            (last.out, StampOrder::Backwards { by_ns: last.raw - raw })
         } else {
             let moved = (i128::from(raw) + self.offset).clamp(0, i128::from(u64::MAX));
-            (u64::try_from(moved).unwrap_or(u64::MAX).max(last.out), Verdict::InOrder)
+            (u64::try_from(moved).unwrap_or(u64::MAX).max(last.out), StampOrder::InOrder)
         };
         self.last = Some(Stamp { raw, out });
         (out, verdict)
@@ -122,7 +122,7 @@ mod tests {
     const S: u64 = 1_000_000_000;
     const MS: u64 = 1_000_000;
 
-    fn run(raws: &[u64]) -> (Vec<u64>, Vec<Verdict>) {
+    fn run(raws: &[u64]) -> (Vec<u64>, Vec<StampOrder>) {
         let mut c = Clock::default();
         raws.iter().map(|&r| c.stamp(r)).unzip()
     }
@@ -131,14 +131,14 @@ mod tests {
     fn in_order_times_pass_unchanged() {
         let (out, v) = run(&[10 * S, 10 * S + 5 * MS, 15 * S]);
         assert_eq!(out, vec![10 * S, 10 * S + 5 * MS, 15 * S]);
-        assert!(v.iter().all(|v| *v == Verdict::InOrder));
+        assert!(v.iter().all(|v| *v == StampOrder::InOrder));
     }
 
     #[test]
     fn jitter_is_held_at_the_previous_time_without_moving_later_ones() {
         let (out, v) = run(&[10 * S, 10 * S - 20_000, 10 * S + MS]);
         assert_eq!(out, vec![10 * S, 10 * S, 10 * S + MS]);
-        assert_eq!(v[1], Verdict::Backwards { by_ns: 20_000 });
+        assert_eq!(v[1], StampOrder::Backwards { by_ns: 20_000 });
     }
 
     /// One flipped bit (+4 295 s) in one stamp held every later packet at that value.
@@ -146,18 +146,18 @@ mod tests {
     fn a_lone_stamp_ahead_is_named_and_later_packets_keep_their_spacing() {
         let jumped = 10 * S + 2 * MS + 4_295 * S;
         let (out, v) = run(&[10 * S, jumped, 10 * S + 4 * MS, 10 * S + 9 * MS]);
-        assert_eq!(v[2], Verdict::LoneJump { off_ns: 4_295 * S + 2 * MS, ahead: true });
+        assert_eq!(v[2], StampOrder::LoneJump { off_ns: 4_295 * S + 2 * MS, ahead: true });
         // Timed from the packet before the bad one, but never before the bad one's time.
         assert_eq!(out[2], jumped);
         assert_eq!(out[3] - out[2], 5 * MS, "the spacing after the jump is the file's");
-        assert_eq!(v[3], Verdict::InOrder);
+        assert_eq!(v[3], StampOrder::InOrder);
     }
 
     #[test]
     fn a_lone_stamp_behind_is_held_then_named() {
         let (out, v) = run(&[10_000 * S, 10_000 * S - 3_600 * S, 10_000 * S + 4 * MS, 10_000 * S + 9 * MS]);
-        assert_eq!(v[1], Verdict::Backwards { by_ns: 3_600 * S });
-        assert_eq!(v[2], Verdict::LoneJump { off_ns: 3_600 * S, ahead: false });
+        assert_eq!(v[1], StampOrder::Backwards { by_ns: 3_600 * S });
+        assert_eq!(v[2], StampOrder::LoneJump { off_ns: 3_600 * S, ahead: false });
         assert_eq!(out, vec![10_000 * S, 10_000 * S, 10_000 * S + 4 * MS, 10_000 * S + 9 * MS]);
     }
 
@@ -166,8 +166,8 @@ mod tests {
         // Stepped back an hour for good: held once, then the file's own spacing.
         let back = 10_000 * S - 3_600 * S;
         let (out, v) = run(&[10_000 * S, back, back + 7 * MS, back + 20 * MS]);
-        assert_eq!(v[1], Verdict::Backwards { by_ns: 3_600 * S });
-        assert_eq!(v[2], Verdict::InOrder);
+        assert_eq!(v[1], StampOrder::Backwards { by_ns: 3_600 * S });
+        assert_eq!(v[2], StampOrder::InOrder);
         assert_eq!(out, vec![10_000 * S, 10_000 * S, 10_000 * S + 7 * MS, 10_000 * S + 20 * MS]);
     }
 
@@ -175,7 +175,7 @@ mod tests {
     fn a_long_silence_is_not_a_jump() {
         let (out, v) = run(&[10 * S, 70 * S, 70 * S + MS]);
         assert_eq!(out, vec![10 * S, 70 * S, 70 * S + MS]);
-        assert!(v.iter().all(|v| *v == Verdict::InOrder));
+        assert!(v.iter().all(|v| *v == StampOrder::InOrder));
     }
 
     #[test]

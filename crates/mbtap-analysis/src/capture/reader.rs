@@ -13,7 +13,7 @@ use nom::number::Endianness;
 use thiserror::Error;
 
 use super::LINKTYPE_USER0;
-use super::clock::{Clock, Verdict};
+use super::clock::{Clock, StampOrder};
 use super::format::{
     EPB, FileKind, FormatError, IDB, Interface, MAX_BLOCK, SHB, SPB, Step, parse_block, parse_file_kind,
     parse_pcap_record,
@@ -315,13 +315,13 @@ impl<R: Read> CaptureReader<R> {
         let (t, verdict) = clock.stamp(t);
         let prev_end = std::mem::replace(bad_before, self.offset);
         let w = match verdict {
-            Verdict::InOrder => None,
-            Verdict::Backwards { by_ns } => Some(format!(
+            StampOrder::InOrder => None,
+            StampOrder::Backwards { by_ns } => Some(format!(
                 "timestamp goes backwards by {} µs at offset {} (interface {i}); held at the previous value, later packets keep their own spacing",
                 by_ns / 1000,
                 self.offset
             )),
-            Verdict::LoneJump { off_ns, ahead } => Some(format!(
+            StampOrder::LoneJump { off_ns, ahead } => Some(format!(
                 "the timestamp of the packet before offset {prev_end} (interface {i}) is {}.{:03} s {} both neighbours: a lone bad timestamp, the packets after it are timed from its neighbours",
                 off_ns / 1_000_000_000,
                 off_ns / 1_000_000 % 1000,

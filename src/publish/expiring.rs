@@ -5,7 +5,7 @@
 //! refused while idle sockets hold every place. (A grace for young silent sockets would let a
 //! flood of them starve newcomers: none is given.)
 //! tokio-modbus runs each connection's request loop itself; the stream it is given
-//! ([`Watched`]) keeps the time of the last byte read and ends (EOF) when it idles out or is
+//! ([`Expiring`]) keeps the time of the last byte read and ends (EOF) when it idles out or is
 //! evicted.
 
 use std::pin::Pin;
@@ -43,18 +43,18 @@ impl Conn {
 /// The open connections (weak: a connection that ended leaves by itself), and the origin of
 /// the times the seat decision is given.
 #[derive(Debug)]
-pub struct Table {
+pub struct Connections {
     conns: Mutex<Vec<std::sync::Weak<Conn>>>,
     origin: Instant,
 }
 
-impl Default for Table {
+impl Default for Connections {
     fn default() -> Self {
         Self { conns: Mutex::new(Vec::new()), origin: Instant::now() }
     }
 }
 
-impl Table {
+impl Connections {
     /// A new connection's state, registered.
     pub fn open(&self) -> Arc<Conn> {
         let c = Arc::new(Conn {
@@ -103,20 +103,20 @@ impl Table {
 /// A stream that ends (reads EOF) after `idle` without a byte from the client, or when its
 /// connection is evicted.
 #[derive(Debug)]
-pub struct Watched<S> {
+pub struct Expiring<S> {
     inner: S,
     idle: Duration,
     deadline: Pin<Box<Sleep>>,
     conn: Arc<Conn>,
 }
 
-impl<S> Watched<S> {
+impl<S> Expiring<S> {
     pub fn new(inner: S, idle: Duration, conn: Arc<Conn>) -> Self {
         Self { inner, idle, deadline: Box::pin(tokio::time::sleep(idle)), conn }
     }
 }
 
-impl<S: AsyncRead + Unpin> AsyncRead for Watched<S> {
+impl<S: AsyncRead + Unpin> AsyncRead for Expiring<S> {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<std::io::Result<()>> {
         if self.conn.evicted.load(Ordering::SeqCst) {
             return Poll::Ready(Ok(()));
@@ -141,7 +141,7 @@ impl<S: AsyncRead + Unpin> AsyncRead for Watched<S> {
     }
 }
 
-impl<S: AsyncWrite + Unpin> AsyncWrite for Watched<S> {
+impl<S: AsyncWrite + Unpin> AsyncWrite for Expiring<S> {
     fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, data: &[u8]) -> Poll<std::io::Result<usize>> {
         Pin::new(&mut self.inner).poll_write(cx, data)
     }
@@ -161,12 +161,12 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn a_silent_socket_gives_its_place_then_the_idlest() {
-        let t = Table::default();
+        let t = Connections::default();
         let older = t.open();
         tokio::time::advance(Duration::from_millis(10)).await;
         let _young = t.open();
-        // The bridge's rule: a silent socket gives its place at once, whatever its
-        // age (a 200 ms grace let a flood of young silent sockets starve newcomers), the one
+        // The bridge's rule: a silent socket gives its place at once, whatever its age (a
+        // grace for young silent sockets would let a flood of them starve newcomers), the one
         // opened first before younger ones.
         assert!(t.evict_idlest(Instant::now()));
         assert!(older.evicted.load(Ordering::SeqCst));
@@ -182,15 +182,15 @@ mod tests {
     async fn a_stream_ends_after_its_idle_time_and_when_evicted() {
         use tokio::io::AsyncReadExt as _;
         let (client, server) = tokio::io::duplex(64);
-        let t = Table::default();
-        let mut w = Watched::new(server, Duration::from_secs(5), t.open());
+        let t = Connections::default();
+        let mut w = Expiring::new(server, Duration::from_secs(5), t.open());
         let mut buf = [0u8; 8];
         let n = w.read(&mut buf).await.unwrap_or(99);
         assert_eq!(n, 0, "EOF after the idle time");
         drop(client);
         let (_client, server) = tokio::io::duplex(64);
         let conn = t.open();
-        let mut w = Watched::new(server, Duration::from_hours(1), Arc::clone(&conn));
+        let mut w = Expiring::new(server, Duration::from_hours(1), Arc::clone(&conn));
         let reader = tokio::spawn(async move { w.read(&mut buf).await.unwrap_or(99) });
         tokio::task::yield_now().await;
         conn.evict();
