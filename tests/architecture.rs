@@ -162,9 +162,9 @@ fn no_library_holds_more_than_two_fifths_of_the_lines() {
     }
 }
 
-/// Per directory module: file → the sibling files its code names (`super::X`, `self::X` in
-/// Mod.rs, `crate::…::DIR::X`), comments left out. The top-level check did not see
-/// circles between the files of one module (`src/bridge/`, `src/tui/`).
+/// Per directory module: file → the sibling files its code names (`super::X`, `self::X` in mod.rs,
+/// `crate::…::DIR::X`), comments left out. The top-level check alone cannot see circles between the
+/// files of one module (`src/bridge/`, `src/tui/`).
 fn file_graphs(src: &Path) -> Vec<(PathBuf, BTreeMap<String, BTreeSet<String>>)> {
     let mut dirs = vec![src.to_path_buf()];
     let mut out = Vec::new();

@@ -39,7 +39,8 @@ fn zero_connections_queue_or_timeout_are_refused_on_the_command_line() {
     }
 }
 
-/// `timeout-ms = -5` in a file said `unexpected argument '-5' found`.
+/// `timeout-ms = -5` in a file is refused naming the file, the key and the value (never clap's
+/// `unexpected argument '-5' found`).
 #[test]
 fn nonsense_in_the_file_names_the_file_the_key_and_the_value() {
     let f = config("negative", "[bridge]\ntimeout-ms = -5\n");
@@ -64,8 +65,8 @@ fn an_empty_allow_list_in_the_file_refuses_to_start() {
     }
 }
 
-/// With no such serial port the bridge said only "listening", and every client got
-/// "gateway path unavailable" with no word why. It says so at once (and once a minute).
+/// With no such serial port the bridge says so at once (and once a minute), not only "listening"
+/// while every client gets "gateway path unavailable" with no word why.
 #[test]
 fn a_missing_serial_port_is_said_at_start() {
     let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
@@ -78,7 +79,7 @@ fn a_missing_serial_port_is_said_at_start() {
     assert!(err.contains("serial port /nonexistent/ttyUSB-test: cannot open it") && err.contains("0x0A"), "{err}");
 }
 
-/// `sniff` on a missing port printed an empty summary to stdout beside the error.
+/// `sniff` on a missing port says only the error: no empty summary on stdout beside it.
 #[test]
 fn sniff_on_a_missing_port_says_only_the_error() {
     let o = Command::new(env!("CARGO_BIN_EXE_mbtap"))
@@ -90,8 +91,8 @@ fn sniff_on_a_missing_port_says_only_the_error() {
     assert!(stderr(&o).contains("/nonexistent/ttyUSB-test"), "{}", stderr(&o));
 }
 
-/// `--link-type` (a capture's link type) and "or what the capture says" were listed in
-/// the help of commands that read no capture.
+/// `--link-type` (a capture's link type) and "or what the capture says" appear only in the help of
+/// commands that read a capture.
 #[test]
 fn help_lists_only_options_that_apply() {
     let help = |cmd: &str| {

@@ -137,8 +137,8 @@ fn broadcast_writes_are_refused_unless_allowed() {
     assert_eq!(call(&mut c, 1, 0, &WRITE_10), WRITE_10, "--broadcast-reply answers the write at once");
 }
 
-/// `round3/policy_probe.py`: `--read-only --allow-function 8` let an FC08/0000 with a CRC-valid
-/// write frame in its data reach the line. Refused with 03 before any line sees it.
+/// Under `--read-only --allow-function 8`, an FC08/0000 with a CRC-valid write frame in its data is
+/// refused with 03 before any line sees it.
 #[test]
 fn an_fc08_with_a_frame_hidden_in_its_data_never_reaches_the_line() {
     /// Diagnostics 0000 Return Query Data, data 1234, then `01 06 00 65 00 2C` + CRC 982C.

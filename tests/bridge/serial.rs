@@ -307,9 +307,9 @@ fn read_only_allowlists_exceptions_and_broadcasts() {
     }
 }
 
-/// `--read-only` let diagnostics (restart, listen-only — also broadcast), 2B/0D,
-/// vendor codes, 0x00, 0x7F and 0x80+ onto the line; a broadcast read went out as `00 03 …`.
-/// Each is now answered 01 and nothing reaches the line; an explicitly allowed vendor read passes.
+/// `--read-only` answers 01 to diagnostics (restart, listen-only — also broadcast), 2B/0D, vendor
+/// codes, 0x00, 0x7F and 0x80+, and to a broadcast read (never `00 03 …` on the line): nothing of
+/// them reaches the line; an explicitly allowed vendor read passes.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn read_only_refuses_everything_that_could_change_a_device() {
@@ -365,9 +365,9 @@ fn rtu_over_tcp_carries_raw_frames() {
     assert_eq!(answer[11..], crc, "a valid RTU frame back");
 }
 
-/// The idle timer reset on every byte, so connections sending one byte a second held
-/// `--max-connections` forever; and idle sockets refused every newcomer. Now a request begun
-/// must end within 2 s, and a full table evicts its idlest connection for a newcomer.
+/// Connections sending one byte a second cannot hold `--max-connections` (a request begun must end
+/// within 2 s; bytes that make no request do not reset the idle timer), and a full table evicts its
+/// idlest connection for a newcomer.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn slowloris_and_idle_sockets_lock_no_one_out() {
@@ -416,9 +416,9 @@ fn slowloris_and_idle_sockets_lock_no_one_out() {
     drop(idle);
 }
 
-/// The metrics endpoint took any number of connections and held each 2 s: a flood
-/// ran the bridge out of file descriptors. Now at most 8 scrapes are served at once, each for
-/// at most half a second, and the Modbus side is answered throughout.
+/// A flood of connections to the metrics endpoint cannot run the bridge out of file descriptors: at
+/// most 8 scrapes are served at once, each for at most half a second, and the Modbus side is
+/// answered throughout.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn a_metrics_flood_holds_few_descriptors_and_stalls_no_one() {
@@ -440,9 +440,9 @@ fn a_metrics_flood_holds_few_descriptors_and_stalls_no_one() {
     assert!(metrics(&others[0]).contains("mbtap_bridge_responses_total"), "scrapes are answered again");
 }
 
-/// Eight clients polling a unit that never answers cost the line `--timeout-ms`
-/// each, round after round; a good client got 3 answers in 8. Now the dead unit's circuit
-/// breaker answers 0x0B at once between probes, and the good client is served.
+/// Eight clients polling a unit that never answers do not cost the line `--timeout-ms` each, round
+/// after round: the dead unit's circuit breaker answers 0x0B at once between probes, and a good
+/// client is served.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn a_dead_unit_does_not_starve_the_line() {
@@ -491,10 +491,10 @@ fn a_dead_unit_does_not_starve_the_line() {
     );
 }
 
-/// `--monitor` back-dated the bridge's own requests by their transmission time
-/// ("only 316–1666 µs after previous frame" where the line showed ≥ 1.80 ms), and showed relayed
-/// vendor and exception-shaped transactions as orphan responses and no-response, answers before
-/// their requests. The monitor now shows what went over the line, in order.
+/// `--monitor` shows what went over the line, in order: the bridge's own requests at the time they
+/// went out (never back-dated by their transmission time into "only 316–1666 µs after previous
+/// frame" where the line showed ≥ 1.80 ms), and relayed vendor and exception-shaped transactions as
+/// transactions, not orphan responses before their requests.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn the_monitor_shows_the_line_in_order_with_its_real_gaps() {
@@ -527,8 +527,8 @@ fn the_monitor_shows_the_line_in_order_with_its_real_gaps() {
     assert!(outcomes.iter().all(|o| matches!(*o, "ok" | "exception")), "{outcomes:?}");
 }
 
-/// A CRC-valid request whose byte count disagrees with its quantity was dropped on
-/// `--listen-rtu` (and in reverse mode): the master timed out where the device answers 03.
+/// A CRC-valid request whose byte count disagrees with its quantity reaches the device on
+/// `--listen-rtu` (and in reverse mode), which answers 03: the master never times out on it.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn a_request_whose_byte_count_lies_reaches_the_device() {
@@ -547,10 +547,9 @@ fn a_request_whose_byte_count_lies_reaches_the_device() {
     assert_eq!(answer[..3], [0x01, 0x90, 0x03], "the device's own exception 03 (Illegal Data Value)");
 }
 
-/// An RTU-over-TCP client streaming bytes that never form a request (`0x41`, a
-/// function only silence can end, with no pause) kept the bridge rescanning its whole buffer on
-/// every read. Now the garbage is held to one frame's length, the client is cut off after 4 KiB
-/// without a request, and a good client is answered all along.
+/// An RTU-over-TCP client streaming bytes that never form a request (`0x41`, a function only
+/// silence can end, with no pause) is held to one frame's length, cut off after 4 KiB without a
+/// request, and a good client is answered all along.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn an_rtu_over_tcp_garbage_stream_is_cut_off_and_stalls_no_one() {
@@ -787,10 +786,9 @@ fn smuggle(pdu: &[u8], hidden: &[u8]) -> Vec<u8> {
 /// MK4 (unit 1) holding 105, Level 2 set point, := 42: `01 06 0069 002A`.
 const WRITE_105_42: [u8; 6] = [0x01, 0x06, 0x00, 0x69, 0x00, 0x2A];
 
-/// Under `--read-only` a Modbus TCP "read" longer than its function allows was
-/// forwarded whole, and the slave executed the write smuggled behind it (FC 03, 08/0000 and
-/// 2B/0E as carriers), with and without the cache and polling. Now each is answered 03 and
-/// nothing reaches the line.
+/// Under `--read-only` a Modbus TCP "read" longer than its function allows, with a write smuggled
+/// behind it (FC 03, 08/0000 and 2B/0E as carriers), is answered 03 and nothing reaches the line,
+/// with and without the cache and polling.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn a_write_smuggled_behind_a_read_never_reaches_the_line() {
@@ -824,9 +822,9 @@ fn a_write_smuggled_behind_a_read_never_reaches_the_line() {
     }
 }
 
-/// With a device slower than the timeout, the answer to one read was given to the
-/// next client's read (4 registers to a request for 2). Now an answer must fit its request,
-/// late bytes are flushed after a timeout, and the next client gets its own answer or 0x0B.
+/// With a device slower than the timeout, the answer to one read never reaches the next client's
+/// read (4 registers to a request for 2): an answer must fit its request, late bytes are flushed
+/// after a timeout, and the next client gets its own answer or 0x0B.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn a_late_answer_never_reaches_the_next_request() {
@@ -872,8 +870,8 @@ fn a_read_behind_its_own_write_reads_the_new_value() {
     }
 }
 
-/// The connection limit was shared but eviction looked only at the listener taking
-/// the connection: idle sockets on `--listen-rtu` locked every Modbus TCP client out.
+/// The connection limit is shared, and so is eviction: idle sockets on `--listen-rtu` cannot lock a
+/// Modbus TCP client out.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn idle_sockets_on_one_listener_lock_no_one_out_of_another() {
@@ -891,11 +889,10 @@ fn idle_sockets_on_one_listener_lock_no_one_out_of_another() {
     }
 }
 
-/// The first request after `bridge --mode ascii` started was answered about 1 s late
-/// (the answer that came in place of the echo check waited for the ASCII inter-character
-/// timeout before it was judged); a client with mbpoll's default 1 s timeout gave up. The
-/// client here gives up after 900 ms: a functional bound (a default master must be answered),
-/// not a benchmark.
+/// The first request after `bridge --mode ascii` starts is answered at once, not after the ASCII
+/// inter-character timeout (an answer in place of the echo check is judged when it is whole), so a
+/// client with mbpoll's default 1 s timeout is served. The client here gives up after 900 ms: a
+/// functional bound (a default master must be answered), not a benchmark.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn the_ascii_bridge_answers_its_first_request_at_once() {
@@ -909,9 +906,8 @@ fn the_ascii_bridge_answers_its_first_request_at_once() {
     assert_eq!(c.call(2, 17, &[0x03, 0x00, 0x32, 0x00, 0x01])[..2], [0x03, 0x02]);
 }
 
-/// With two serial lines, the server's counters (connections, refusals) were counted
-/// on the first line's metrics and exported as `line="0"`. They belong to no line: exported
-/// once without a line label, while each line's own series keep theirs.
+/// With two serial lines, the server's counters (connections, refusals) belong to no line: exported
+/// once without a line label (never as `line="0"`), while each line's own series keep theirs.
 #[test]
 #[ignore = "drives real pseudo-terminals; .ci/run runs this with --ignored"]
 fn server_refusals_belong_to_no_line() {

@@ -260,9 +260,9 @@ fn crl_setup(d: &Path) {
     openssl(d, &["ca", "-config", "ca.cnf", "-keyfile", "ca.key", "-cert", "ca.pem", "-gencrl", "-out", "crl.pem"]);
 }
 
-/// A session whose certificate a reloaded CRL revokes was still answered; a role's
-/// `units:` rule was checked before `--map-unit` (a role for units 2–20 wrote to serial unit 1
-/// through TCP unit 10); a read-only role forwarded a read with a whole write frame behind it.
+/// A session whose certificate a reloaded CRL revokes is no longer answered; a role's `units:` rule
+/// judges the unit after `--map-unit` (a role for units 2–20 cannot write to serial unit 1 through
+/// TCP unit 10); a read-only role forwards no read with a whole write frame behind it.
 #[test]
 #[ignore = "needs openssl and python3; .ci/run installs them and runs this with --ignored"]
 fn revoked_sessions_close_roles_judge_the_line_unit_and_reads_carry_no_writes() {

@@ -388,9 +388,9 @@ fn mqtts_with_a_ca_file_and_a_password_from_a_file() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--mqtt-ca"));
 }
 
-/// Discovery published `"manufacturer": null` for the MKZP (refused by Home
-/// Assistant's schema) and coils as numeric sensors. Every discovery message of a demo run is
-/// checked with Home Assistant's own MQTT discovery schemas (the `homeassistant` package).
+/// Every discovery message of a demo run passes Home Assistant's own MQTT discovery schemas (the
+/// `homeassistant` package): no `"manufacturer": null` for the MKZP, and coils as binary sensors,
+/// not numeric ones.
 #[test]
 #[ignore = "needs mosquitto and the homeassistant package; .ci/run installs them and runs this with --ignored"]
 fn every_discovery_message_passes_home_assistants_schema() {

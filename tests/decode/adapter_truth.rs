@@ -83,10 +83,10 @@ fn the_slow_unit_is_named_alone_through_a_fifo_and_a_16_ms_timer() {
     }
 }
 
-/// A unit pausing 2 characters inside its
-/// answers at 9600 8E1 (2.3 ms of silence; t1.5 is 1.72 ms), read one byte per read up to 0.2 ms
-/// late, got no finding — the resolution was the latency plus a character (1.4 ms). Where every
-/// read holds one byte only the delays' spread is uncertain: the unit is named, no other.
+/// A unit pausing 2 characters inside its answers at 9600 8E1 (2.3 ms of silence; t1.5 is 1.72 ms),
+/// read one byte per read up to 0.2 ms late, is named: where every read holds one byte only the
+/// delays' spread is uncertain, not the latency plus a character (1.4 ms, which would hide it). The
+/// unit is named, no other.
 #[test]
 fn a_two_character_pause_read_byte_by_byte_names_the_unit() {
     let cfg = TrafficConfig { slow_unit_chars: 2, ..tight_bus(L9600, 0.0, Some(17)) };
@@ -108,11 +108,11 @@ fn pauses_the_reads_cannot_resolve_are_said_once_not_blamed() {
     assert!(r.text().contains(&r.limits[0]));
 }
 
-/// The cells of the adapter matrix (`examples/findings_by_adapter.rs`, 3 000 transactions, its
-/// seeds) that still had a wrong finding on a healthy bus: `check_errors` against units whose
-/// vendor request and answer (or answer and `FE` glitch) came glued at the line's start, and
-/// lone glitch bytes reported as noise behind a 16 ms timer. A healthy bus gets no finding but
-/// its turnaround glitches (and unit 33's absence, which is true).
+/// On the adapter matrix's cells (`examples/findings_by_adapter.rs`, 3 000 transactions, its seeds)
+/// that are hardest on a healthy bus — units whose vendor request and answer (or answer and `FE`
+/// glitch) come glued at the line's start, lone glitch bytes behind a 16 ms timer — a healthy bus
+/// gets no finding but its turnaround glitches (and unit 33's absence, which is true): no
+/// `check_errors`, no noise.
 #[test]
 fn healthy_glitchy_lines_get_no_finding_but_their_glitches() {
     let l115200 = LineSettings { baud: 115_200, data_bits: 8, parity: Parity::None, stop_bits: 1 };

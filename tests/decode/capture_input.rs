@@ -237,8 +237,8 @@ fn corrupt_pcap_record_is_skipped() {
     assert!(warnings(&got)[0].contains(&format!("offset {bad_at}")), "{:?}", warnings(&got));
 }
 
-/// 200 000 packets naming an undescribed interface gave 200 000
-/// identical warnings. Now: the first, then one count at the end.
+/// 200 000 packets naming an undescribed interface give one warning, then one count at the end (not
+/// 200 000 identical warnings).
 #[test]
 fn packets_of_an_undescribed_interface_are_said_once_then_counted() {
     let mut f = shb();
@@ -255,9 +255,8 @@ fn packets_of_an_undescribed_interface_are_said_once_then_counted() {
     assert!(w[1].contains("1000 packets named interfaces never described"), "{w:?}");
 }
 
-/// One corrupt region longer than the read buffer (1 MiB) gave a
-/// "still searching" line per buffer (2 048 for 2 GB). Now one warning with where it began
-/// and how much was skipped.
+/// One corrupt region longer than the read buffer (1 MiB) is one warning with where it began and
+/// how much was skipped, not a "still searching" line per buffer (2 048 for 2 GB).
 #[test]
 fn one_corrupt_region_is_one_warning_however_long() {
     let mut f = shb();

@@ -51,9 +51,9 @@ fn jsonl_contract_on_every_capture() {
     });
 }
 
-/// `replay` did not use the `NAME.devices` file beside a capture (the tests above
-/// read it themselves). The real binary annotates the MKZP examples with no `--device`, says
-/// where the profiles came from, and `--device` still wins.
+/// `replay` uses the `NAME.devices` file beside a capture (the tests above read it themselves): the
+/// real binary annotates the MKZP examples with no `--device`, says where the profiles came from,
+/// and `--device` still wins.
 #[test]
 fn replay_uses_the_devices_file_beside_the_capture() {
     let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mkzp-examples-rtu.pcapng");
@@ -252,9 +252,9 @@ fn learn_types_every_float_of_a_three_phase_meter_by_its_blocks() {
     assert_eq!(wide.len(), floats.len(), "{learned:?}");
 }
 
-/// A single-phase meter tapped for two polls (FC03 at 0x2000 and 0x4000, floats high
-/// word first, zeros between them): the frequency 0x4248 0x3333 (50.05 Hz) at 8206/8207 was
-/// joined as 8205/8206 low word first (50.0), against every other pair of the same answer.
+/// A single-phase meter tapped for two polls (FC03 at 0x2000 and 0x4000, floats high word first,
+/// zeros between them): the frequency 0x4248 0x3333 (50.05 Hz) at 8206/8207 is joined as the rest
+/// of its answer is, never as 8205/8206 low word first (50.0).
 #[test]
 fn learn_keeps_a_blocks_word_order_and_alignment_on_two_polls() {
     let learned = learned("rtu-shape-single-phase-floats.pcapng");
@@ -267,9 +267,8 @@ fn learn_keeps_a_blocks_word_order_and_alignment_on_two_polls() {
     assert!(!learned.get(&8205).is_some_and(|t| t.contains("word first")), "{learned:?}");
 }
 
-/// `diff` of captures whose every block is corrupt said "0 differ, 0 the same" with
-/// exit 0 and dropped the reader's warning. The warning is said with the file, and "nothing to
-/// compare" exits 2.
+/// `diff` of captures whose every block is corrupt never says "0 differ, 0 the same" with exit 0:
+/// the reader's warning is said with the file, and "nothing to compare" exits 2.
 #[test]
 fn diff_of_unreadable_captures_says_so_and_does_not_claim_sameness() {
     let bin = env!("CARGO_BIN_EXE_mbtap");
@@ -290,8 +289,8 @@ fn diff_of_unreadable_captures_says_so_and_does_not_claim_sameness() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// An image file is read row by row into four numbers each, and one larger than any
-/// image of every address is refused unread (a 100 MB dump took 2.1–3.7 GB as a JSON tree).
+/// An image file is read row by row into four numbers each, and one larger than any image of every
+/// address is refused unread (as a JSON tree, a 100 MB dump takes 2.1–3.7 GB).
 #[test]
 fn diff_refuses_an_image_file_larger_than_any_image() {
     let bin = env!("CARGO_BIN_EXE_mbtap");

@@ -259,9 +259,9 @@ fn the_config_file_assigns_devices_and_the_command_line_overrides_it() {
     assert!(err.contains("config.toml:3:1: device unit \"999\""), "{err}");
 }
 
-/// `010304050001953B00` passed its CRC as a 9-byte response (byte count 4); it is a
-/// request (read 1 register from 0x0405) followed by the `00` a transceiver leaves at turnaround
-/// — CRC-16/MODBUS validates any valid frame with a `00` appended.
+/// `010304050001953B00` is a request (read 1 register from 0x0405) followed by the `00` a
+/// transceiver leaves at turnaround, not a 9-byte response with byte count 4 — CRC-16/MODBUS
+/// validates any valid frame with a `00` appended.
 #[test]
 fn decode_010304050001953b00_is_a_request_and_a_glitch() {
     let o = mbtap(&["decode", "010304050001953B00"], None);
@@ -279,8 +279,8 @@ fn decode_010304050001953b00_is_a_request_and_a_glitch() {
     assert_eq!(events[1]["hex"], "00");
 }
 
-/// Three valid frames pasted glued from a sniffer log were one frame with the CRC
-/// taken from the end of the line ("CRC FAILED"). Split as a replay splits them.
+/// Three valid frames pasted glued from a sniffer log are split as a replay splits them, not one
+/// frame with the CRC taken from the end of the line ("CRC FAILED").
 #[test]
 fn glued_frames_on_one_line_are_split_into_them() {
     // Read 3 registers from 101 (unit 1), its answer, then an exception from unit 1 to FC 03.
@@ -298,8 +298,8 @@ fn glued_frames_on_one_line_are_split_into_them() {
     assert_eq!(o.status.code(), Some(0), "{s}");
 }
 
-/// A truncated answer after its request was shown as a request with absurd
-/// quantities; `replay` calls the same bytes a bad response. Now `decode` does too.
+/// A truncated answer after its request is a bad response in `decode` as in `replay`, never a
+/// request with absurd quantities.
 #[test]
 fn a_truncated_answer_after_its_request_is_a_truncated_response() {
     let o = mbtap(&["decode", "01030065000315D4", "010306000000"], None);
@@ -310,8 +310,8 @@ fn a_truncated_answer_after_its_request_is_a_truncated_response() {
     assert_eq!(o.status.code(), Some(1));
 }
 
-/// `decode` read all of stdin before printing anything (`tail -f log | mbtap decode`
-/// printed nothing). Now each line's result comes out as the line comes in.
+/// `decode` prints each line's result as the line comes in (`tail -f log | mbtap decode` shows
+/// results), never reading all of stdin first.
 #[test]
 fn decode_streams_one_line_in_one_result_out() {
     let mut child = Command::new(env!("CARGO_BIN_EXE_mbtap"))
@@ -342,8 +342,8 @@ fn decode_streams_one_line_in_one_result_out() {
     assert_eq!(child.wait().unwrap().code(), Some(0));
 }
 
-/// One Latin-1 byte in a comment rejected the whole input ("stream did not contain
-/// valid UTF-8", no line number); a line of megabytes was held whole.
+/// One Latin-1 byte in a comment costs its line, named by number, not the whole input ("stream did
+/// not contain valid UTF-8"); a line of megabytes is cut, never held whole.
 #[test]
 fn decode_reads_bytes_names_bad_lines_and_cuts_endless_ones() {
     let mut input = b"# caf\xe9 au lait\n0183030131\n".to_vec();
@@ -368,7 +368,7 @@ fn decode_reads_bytes_names_bad_lines_and_cuts_endless_ones() {
     assert_eq!(o.status.code(), Some(2), "some input was not a frame");
 }
 
-/// `decode ":"` said "ASCII frame of 3 bytes".
+/// `decode ":"` counts the one character typed (not "ASCII frame of 3 bytes").
 #[test]
 fn a_lone_colon_counts_what_was_typed() {
     let o = mbtap(&["decode", ":"], None);
@@ -376,8 +376,8 @@ fn a_lone_colon_counts_what_was_typed() {
     assert!(err.contains("needs at least 6 characters after ':'") && err.contains("has 0"), "{err}");
 }
 
-/// Real log formats were refused; the timestamp and the tag are set aside (and
-/// shown in JSON lines), the tag read as the direction.
+/// Real log formats are read: the timestamp and the tag are set aside (and shown in JSON lines),
+/// the tag read as the direction.
 #[test]
 fn log_formats_are_read_and_what_was_stripped_is_shown() {
     let input = "2024-05-01 12:00:01.123 Tx: 01.03.00.65.00.03.15.D4\n12:00:01.140 Rx: 0x1 0x3 0x6 0x0 0x0 0x0 0x0 0x1 0x90 0x20 0x89\n";
@@ -389,8 +389,8 @@ fn log_formats_are_read_and_what_was_stripped_is_shown() {
     assert_eq!((j["timestamp"].as_str(), j["tag"].as_str()), (Some("12:00:01.123"), Some(">")));
 }
 
-/// A name with an escape sequence (`^[]0;pwned^G^[[2J`) reached the terminal raw,
-/// retitling and clearing it; an ASCII frame from the bus could do the same.
+/// A name with an escape sequence (`^[]0;pwned^G^[[2J`) never reaches the terminal raw (it would
+/// retitle and clear it); nor does an ASCII frame from the bus.
 #[test]
 fn control_characters_from_profiles_and_frames_never_reach_the_terminal() {
     let dir = std::env::temp_dir().join(format!("mbtap-escape-{}", std::process::id()));
@@ -409,9 +409,9 @@ fn control_characters_from_profiles_and_frames_never_reach_the_terminal() {
     assert!(s.contains("\\u{1b}"), "shown escaped: {s}");
 }
 
-/// A response cut short (byte count 6, the frame ends 3 bytes early) was shown only
-/// as a request with an absurd quantity, while `replay` called the same bytes a bad response.
-/// Without the request before it `decode` cannot choose: it shows both readings.
+/// A response cut short (byte count 6, the frame ends 3 bytes early) is not only a request with an
+/// absurd quantity, as `replay` calls the same bytes a bad response: without the request before it
+/// `decode` cannot choose, so it shows both readings.
 #[test]
 fn a_truncated_response_is_shown_as_both_readings() {
     // Unit 1, 03, byte count 6, registers 000A 000B and one byte of the third: 3 bytes missing
@@ -430,8 +430,8 @@ fn a_truncated_response_is_shown_as_both_readings() {
     assert!(!String::from_utf8_lossy(&o.stdout).contains("truncated"));
 }
 
-/// `decode -` took `-` for a frame instead of standard input, and Modbus Poll's log
-/// lines (`Tx:000001-…`) decoded their counter as noise.
+/// `decode -` reads standard input (`-` is no frame), and Modbus Poll's log lines (`Tx:000001-…`)
+/// decode without their counter taken for noise.
 #[test]
 fn a_dash_reads_stdin_and_modbus_poll_logs_decode() {
     let log = "Tx:000001-01 03 00 65 00 03 15 D4\nRx:000002-01 03 06 00 00 00 00 01 90 20 89\n";
@@ -441,9 +441,9 @@ fn a_dash_reads_stdin_and_modbus_poll_logs_decode() {
     assert!(out.contains("Read Holding Registers") && !out.contains("noise"), "{out}");
 }
 
-/// Pasted verbatim: a request to unit 254 and the `00` a transceiver left after it
-/// was one 9-byte "request, CRC ok (0x00C5)" with a trailing byte (units 248–255 did not get the
-/// glitch split every other unit gets).
+/// Pasted verbatim: a request to unit 254 and the `00` a transceiver left after it are a request
+/// and a glitch, as for every other unit (units 248–255 included), not one 9-byte "request, CRC ok
+/// (0x00C5)" with a trailing byte.
 #[test]
 fn a_reserved_unit_gets_its_glitch_split_like_any_other() {
     let o = mbtap(&["decode", "FE 04 00 03 00 01 D5 C5 00"], None);
@@ -453,9 +453,9 @@ fn a_reserved_unit_gets_its_glitch_split_like_any_other() {
     assert!(!out.contains("trailing"), "{out}");
 }
 
-/// Pasted verbatim: two CRC-valid 5-byte exception answers glued (a slave answering
-/// for an absent one) were one 10-byte frame with a failed CRC; the first, function 0, is shown
-/// as such with a finding.
+/// Pasted verbatim: two CRC-valid 5-byte exception answers glued (a slave answering for an absent
+/// one) are two frames, not one 10-byte frame with a failed CRC; the first, function 0, is shown as
+/// such with a finding.
 #[test]
 fn glued_exceptions_are_split_and_function_zero_is_named() {
     let o = mbtap(&["decode", "21 80 01 81 CA 21 8A 01 87 6A"], None);

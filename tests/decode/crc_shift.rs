@@ -112,10 +112,10 @@ fn tail(events: &[Seen], from: &[u8]) -> Vec<Seen> {
     events[at.expect("the frame was reported")..].to_vec()
 }
 
-/// Was: on a line whose master leaves a `00` after every request, a vendor answer whose CRC
-/// ended in `00` was cut one byte short and its last byte called a glitch — but the slave's
-/// driver never left a `00` (nor anything). The whole answer is taken; the shorter reading is
-/// shown beside it, since the master, which always glitches `00`, could have sent these bytes.
+/// On a line whose master leaves a `00` after every request, a vendor answer whose CRC ends in `00`
+/// is taken whole — the slave's driver never leaves a `00` (nor anything), so its last byte is no
+/// glitch; the shorter reading is shown beside it, since the master, which always glitches `00`,
+/// could have sent these bytes.
 #[test]
 fn a_slave_answer_ending_in_00_stays_whole_where_only_the_master_glitches_00() {
     let mut line = Line::new();
@@ -156,9 +156,9 @@ fn a_slave_answer_ending_in_00_and_its_fe_glitch_is_whole_without_doubt() {
     );
 }
 
-/// Was: a Diagnostics 0000 request whose CRC ended in `00`, on a line whose master glitches, was
-/// read as a frame with 3 data bytes and a glitch — but Diagnostics data is N × 2 bytes; and its
-/// echo the same.
+/// A Diagnostics 0000 request whose CRC ends in `00`, on a line whose master glitches, keeps its
+/// even data (Diagnostics data is N × 2 bytes), never read as 3 data bytes and a glitch; its echo
+/// likewise.
 #[test]
 fn a_diagnostics_echo_ending_in_00_keeps_its_even_data() {
     let mut line = Line::new();
@@ -237,9 +237,9 @@ fn the_other_length_is_said_in_text_and_json() {
     assert_eq!(json["or_len"], n, "{json}");
 }
 
-/// Was: on a line that never glitched, a vendor request ending in `00` that came in one read
-/// (a 16 ms USB timer) with a damaged frame after it lost its `00` — taken for a glitch because
-/// `00 01 …` looked like a frame start too.
+/// On a line that never glitches, a vendor request ending in `00` that comes in one read (a 16 ms
+/// USB timer) with a damaged frame after it keeps its `00`: `00 01 …` looking like a frame start
+/// too makes it no glitch.
 #[test]
 fn a_vendor_frame_glued_to_a_damaged_one_keeps_its_00_where_nothing_glitched() {
     let mut line = Line::new();
@@ -255,8 +255,8 @@ fn a_vendor_frame_glued_to_a_damaged_one_keeps_its_00_where_nothing_glitched() {
     assert_eq!(e[..2], [("F+", request, None), ("F-", damaged.to_vec(), None)], "{e:02X?}");
 }
 
-/// Was: `01 C0 00 70 00` — a damaged answer's first five bytes — was reported as a valid
-/// exception "00" to function 0x40; exception codes start at 01 (MAP v1.1b3 §7).
+/// `01 C0 00 70 00` — a damaged answer's first five bytes — is no valid exception "00" to function
+/// 0x40: exception codes start at 01 (MAP v1.1b3 §7).
 #[test]
 fn an_exception_with_code_00_is_no_frame() {
     let mut line = Line::new();
@@ -283,10 +283,10 @@ const VENDOR_REQUEST_247: [u8; 7] = [0xF7, 0x41, 0x87, 0x01, 0x4C, 0x75, 0xA5];
 /// Its answer: unit `F7`, function `41`, 9 data bytes, CRC `79 15`.
 const VENDOR_ANSWER_247: [u8; 13] = [0xF7, 0x41, 0x78, 0x8D, 0xBA, 0x23, 0x93, 0xAD, 0x03, 0x49, 0x32, 0x79, 0x15];
 
-/// Was: at a line's start (no unit heard yet), a vendor request and its answer delivered in one
-/// read by a FIFO or a USB timer (the 1.05 × t3.5 between them invisible) were one 20-byte frame
-/// failing its check — `check_errors` against a healthy unit. The answer starts with the
-/// request's unit and function: the CRC match before it ends the request.
+/// At a line's start (no unit heard yet), a vendor request and its answer delivered in one read by
+/// a FIFO or a USB timer (the 1.05 × t3.5 between them invisible) are two frames, not one 20-byte
+/// frame failing its check (`check_errors` against a healthy unit): the answer starts with the
+/// request's unit and function, so the CRC match before it ends the request.
 #[test]
 fn a_vendor_request_and_answer_in_one_read_at_the_line_start_are_two_frames() {
     assert_eq!(rtu(0xF7, &VENDOR_REQUEST_247[1..5]), VENDOR_REQUEST_247, "the request's CRC");
@@ -302,12 +302,12 @@ fn a_vendor_request_and_answer_in_one_read_at_the_line_start_are_two_frames() {
     );
 }
 
-/// Was: at a line's start, per-byte stamps, the master's `00` glitch after the vendor request and
-/// the slave's `FE` after the answer: the answer and its `FE` were one 14-byte frame failing its
-/// check (the `FE` before a silence was taken for a glitch only once the line was known to
-/// glitch). A CRC match followed by one byte a slave's driver leaves and a silence ends the
-/// frame. The request and its `00` check as one 8-byte frame too (CRC-16's shift property) and
-/// nothing is known yet of the master's glitches: both readings are shown.
+/// At a line's start, with per-byte stamps, the master's `00` glitch after the vendor request and
+/// the slave's `FE` after the answer: the answer and its `FE` are a frame and a glitch, not one
+/// 14-byte frame failing its check, before the line is known to glitch — a CRC match followed by
+/// one byte a slave's driver leaves and a silence ends the frame. The request and its `00` check as
+/// one 8-byte frame too (CRC-16's shift property) and nothing is known yet of the master's
+/// glitches: both readings are shown.
 #[test]
 fn a_vendor_answer_and_its_fe_glitch_at_the_line_start_are_a_frame_and_a_glitch() {
     let mut line = Line::new();

@@ -139,10 +139,10 @@ fn vendor_line_with(
     score(&wire, &run_framer(&wire, &chunks, framer))
 }
 
-/// False valid frames through a 16 ms USB timer: a vendor answer whose CRC ends in
-/// `00`, glued to noise (no silence the timer lets through), was reported valid one byte short
-/// — its learned length never asked; and a corrupted vendor request glued to the next frame
-/// checked as one long "frame" of a length its function never has. Zero now on this line.
+/// No false valid frames through a 16 ms USB timer on this line: a vendor answer whose CRC ends in
+/// `00`, glued to noise (no silence the timer lets through), takes its learned length, not one byte
+/// short; and a corrupted vendor request glued to the next frame never checks as one long "frame"
+/// of a length its function never has.
 #[test]
 fn vendor_twins_glued_to_noise_take_their_learned_length() {
     let s = vendor_line(L9600, 42, 0.0, Observation::USB_16MS);
@@ -159,13 +159,11 @@ fn a_frame_ending_in_00_and_its_00_glitch_is_the_longer_reading() {
     assert_eq!(s.false_valid, 0, "{s:?}");
 }
 
-/// Behind a 16 ms USB timer at 19200, on a bus that glitches after every frame and
-/// keeps only 1.05 × t3.5 between frames, 46 of 5 832 glitch bytes — each alone between a
-/// frame's end and the next frame's start — were reported as noise bursts (a `noise` finding
-/// on a healthy bus): the silence the reads seemed to show before them was computed with a
-/// latency learned short of the timer's. Then 5: a slave's first `FE` before its own glitch
-/// values were counted, and `00`s after requests nobody answers (a silence after them, not a
-/// frame). None now.
+/// Behind a 16 ms USB timer at 19200, on a bus that glitches after every frame and keeps only 1.05
+/// × t3.5 between frames, no glitch byte alone between a frame's end and the next frame's start is
+/// a noise burst (a `noise` finding on a healthy bus): the silence the reads seem to show before it
+/// is judged with the timer's latency, a slave's first `FE` counts before its own glitch values are
+/// known, and a `00` after a request nobody answers is followed by a silence, not a frame.
 #[test]
 fn glitches_between_frames_are_glitches_behind_a_usb_timer() {
     let t35 = L19200.t35_ns();
@@ -187,24 +185,22 @@ fn glitches_between_frames_are_glitches_behind_a_usb_timer() {
     assert_eq!(s.glitch_reported, s.glitch_total, "{s:?}");
 }
 
-/// 1 215 bytes into a glitchy line behind a 16 ms USB timer, before the observer's
-/// latency was learned, a read boundary fell right before a vendor answer's last byte, a CRC
-/// `00`: the apparent silence there made the answer one byte short, reported valid without doubt,
-/// though its `00` was followed by the slave's own `FF` glitch (a sender leaves one glitch byte).
-/// Where reads batch bytes, that silence is a lower bound and the glitch after the longer frame
-/// outweighs it.
+/// 1 215 bytes into a glitchy line behind a 16 ms USB timer, before the observer's latency is
+/// learned, a read boundary falls right before a vendor answer's last byte, a CRC `00`: the answer
+/// is taken whole, not one byte short without doubt, because its `00` is followed by the slave's
+/// own `FF` glitch (a sender leaves one glitch byte). Where reads batch bytes, that silence is a
+/// lower bound and the glitch after the longer frame outweighs it.
 #[test]
 fn a_vendor_answer_ending_in_00_and_its_ff_before_the_latency_is_learned() {
     let s = vendor_line(L19200, 43, 1.0, Observation::USB_16MS);
     assert_eq!(s.false_valid, 0, "{s:?}");
 }
 
-/// On the line (vendor functions with a quarter of their CRCs ending in `00`,
-/// 30 % turnaround glitches), 1 frame in ~3 500 transactions was shown with two lengths, the
-/// wrong one first, in every observer model: the requests to a unit that never answers were
-/// never learned from (a silence follows them, never a byte, when they go out), and a unit's
-/// first few vendor frames had only the odds. Its learned length now reads a unit's twins once
-/// one frame of it was certain, and a unit's very first vendor frames wait for that.
+/// On a line of vendor functions with a quarter of their CRCs ending in `00` and 30 % turnaround
+/// glitches, no frame is shown with two lengths, the wrong one first, in any observer model:
+/// requests to a unit that never answers are learned from (a silence follows them, never a byte), a
+/// unit's twins are read by its learned length once one frame of it is certain, and a unit's very
+/// first vendor frames wait for that.
 #[test]
 fn vendor_twins_are_read_by_what_their_unit_was_heard_sending() {
     for model in [Observation::PerByte, Observation::FIFO_16550, Observation::USB_1MS, Observation::USB_16MS] {

@@ -231,10 +231,10 @@ fn report_of_a_recorded_noisy_line() {
     insta::assert_snapshot!(String::from_utf8(out.stdout).unwrap());
 }
 
-/// Was: on the recorded line behind a 16 ms USB timer, an answer garbled in place (its address
-/// byte hit: `A7 06 00 9B B9 4A 0B C6`, "unit 167") with an apparent pause inside it made a
-/// `unit 167` row — availability 0.0 % — in the report of a bus with no unit 167. A failed
-/// frame's address byte names a unit only where that unit's answer was awaited.
+/// On the recorded line behind a 16 ms USB timer, an answer garbled in place (its address byte hit:
+/// `A7 06 00 9B B9 4A 0B C6`, "unit 167") with an apparent pause inside it makes no `unit 167` row
+/// in the report of a bus with no unit 167: a failed frame's address byte names a unit only where
+/// that unit's answer is awaited.
 #[test]
 fn a_garbled_address_makes_no_unit_row() {
     let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-9600-8e1-usb16ms.pcapng");
@@ -410,8 +410,8 @@ fn the_polling_period_is_the_time_between_identical_requests() {
     }
 }
 
-/// Regression: a failed answer to a request that overtook an unanswered one was counted as
-/// noise too (the overtaken request's timeout cleared "awaiting an answer").
+/// A failed answer to a request that overtook an unanswered one is a failed answer, not noise: the
+/// overtaken request's timeout leaves the newer one awaited.
 #[test]
 fn a_failed_answer_to_a_request_that_overtook_another_is_not_noise() {
     // Unit 9 (absent) asked, then after 200 ms unit 1, whose answer's CRC is damaged.
@@ -594,10 +594,9 @@ fn joining_the_line_mid_frame_is_not_noise() {
     assert_eq!(of_kind(&r, "noise").len(), 1, "{}", r.text());
 }
 
-/// `replay` said 8 noise bursts (67 bytes) of the recorded noisy line, `report` 29 and
-/// 278 (it counted failed frames nothing awaited as noise), and the units' failed checks added
-/// up to 16 of the bus's 37 with nothing said of the rest. One count, one meaning: the same
-/// noise in both; the failed checks are the units' and the strays, adding up.
+/// `replay` and `report` count the recorded noisy line's noise alike (one count, one meaning:
+/// failed frames nothing awaited are strays, not noise), and the units' failed checks and the
+/// strays add up to the bus's.
 #[test]
 fn report_and_replay_count_noise_and_failed_frames_alike() {
     let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/rtu-19200-8e1-usb1ms-noisy.pcapng");

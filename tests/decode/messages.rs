@@ -13,8 +13,8 @@ fn stderr_of(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// "reading the capture: reading the capture: Is a directory (os error 21): Is a directory
-/// (os error 21)" — each part said once now.
+/// Each part of a capture error is said once (never "reading the capture: reading the capture: Is a
+/// directory (os error 21): Is a directory (os error 21)").
 #[test]
 fn a_capture_error_is_said_once() {
     let dir = std::env::temp_dir();
@@ -27,7 +27,7 @@ fn a_capture_error_is_said_once() {
     assert_eq!(e.matches("not a pcap or pcapng file").count(), 1, "{e}");
 }
 
-/// `scan adir` said "opening adir at 1200 8E1".
+/// `scan adir` says it is a directory (not "opening adir at 1200 8E1").
 #[test]
 fn scanning_a_directory_says_it_is_one() {
     let dir = std::env::temp_dir();
@@ -84,8 +84,8 @@ fn replay(path: &std::path::Path, extra: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
-/// Link types 148–162 (the other user DLTs other sniffers use) were skipped silently, exit 0;
-/// an unknown link type too.
+/// Link types 148–162 (the other user DLTs other sniffers use) are read, and an unknown link type
+/// is an error, never skipped silently with exit 0.
 #[test]
 fn user_link_types_are_read_and_an_unknown_one_is_an_error() {
     let p = pcap(150, &[REQUEST, ANSWER]);
@@ -102,16 +102,16 @@ fn user_link_types_are_read_and_an_unknown_one_is_an_error() {
     assert_eq!(String::from_utf8_lossy(&o.stdout).matches("\"event\":\"frame\"").count(), 2);
 }
 
-/// `--baud 0` was accepted.
+/// `--baud 0` is refused on the command line.
 #[test]
 fn a_zero_baud_rate_is_refused_on_the_command_line() {
     let e = stderr_of(&["generate", "/tmp/never-written.pcapng", "--baud", "0"]);
     assert!(e.contains("--baud") && e.contains('0'), "{e}");
 }
 
-/// One flipped bit in one record's length field (a megabyte claimed) ended the
-/// replay — "the file ends in the middle of a block … its last 128 877 bytes are ignored",
-/// 4 of 299 transactions kept. The reader now skips to the next readable record and reads on.
+/// One flipped bit in one record's length field (a megabyte claimed) costs that record: the reader
+/// skips to the next readable record and reads on (never "the file ends in the middle of a block …
+/// its last 128 877 bytes are ignored" with 4 of 299 transactions kept).
 #[test]
 fn a_damaged_length_field_costs_one_record_not_the_rest_of_the_file() {
     let frames: Vec<&[u8]> = (0..30).map(|i| if i % 2 == 0 { REQUEST } else { ANSWER }).collect();
@@ -132,8 +132,8 @@ fn a_damaged_length_field_costs_one_record_not_the_rest_of_the_file() {
     );
 }
 
-/// An ASCII capture replayed as RTU was "16 bytes of noise" with no hint, and a
-/// capture without stored settings was read as 19200 8E1 silently.
+/// An ASCII capture replayed as RTU is not just "16 bytes of noise": the hint says what the bytes
+/// look like; and a capture without stored settings says which settings it was read at.
 #[test]
 fn a_capture_says_which_settings_it_assumed_and_what_its_bytes_look_like() {
     // Unit 1, read 3 holding registers from 101, twice (MK4 document §3.1).
@@ -152,9 +152,9 @@ fn a_capture_says_which_settings_it_assumed_and_what_its_bytes_look_like() {
     assert_eq!(String::from_utf8_lossy(&o.stdout).matches("\"check_ok\":true").count(), 2);
 }
 
-/// Binary garbage holds ':' and LF as often as anything else, and was
-/// told "the bytes look like Modbus ASCII". Only bytes that are mostly hex digits between
-/// ':' and CR LF earn that hint; garbage gets the neutral "mbtap scan" one.
+/// Binary garbage holds ':' and LF as often as anything else, so it is never told "the bytes look
+/// like Modbus ASCII": only bytes that are mostly hex digits between ':' and CR LF earn that hint;
+/// garbage gets the neutral "mbtap scan" one.
 #[test]
 fn binary_garbage_is_not_called_modbus_ascii() {
     // Every byte value 0..=250 in turn, so ':' (0x3A) and LF (0x0A) both occur.
@@ -184,11 +184,11 @@ fn polls_with_one_flipped_second(n: u32, bad: u32, bit: u32) -> std::path::PathB
     pcap_records(147, &records)
 }
 
-/// One flipped bit in one timestamp held every later packet at that
-/// value: every later answer was "less than t3.5 after the request" (357 findings in the
-/// issue's file). Now the lone jump is one warning with its offset and timing after it is the
-/// file's own. The one packet whose true time is unknown may still cost one finding. The
-/// amounts said are from the packet before (80 ms before the bad request).
+/// One flipped bit in one timestamp does not hold every later packet at that value (which would
+/// make every later answer "less than t3.5 after the request", 357 findings in this file): the lone
+/// jump is one warning with its offset, and timing after it is the file's own. The one packet whose
+/// true time is unknown may still cost one finding. The amounts said are from the packet before (80
+/// ms before the bad request).
 #[test]
 fn one_flipped_timestamp_bit_does_not_spoil_the_timing_after_it() {
     for (bit, said) in [(11, "2048.080 s ahead of"), (12, "4095.920 s behind")] {

@@ -100,11 +100,10 @@ fn an_energy_meter_sheet_with_modicon_numbers_and_floats() {
     assert!(text.contains("Phase 1 line to neutral volts = 230.5 V"), "{text}");
 }
 
-/// A sheet with no type column (the vendor says "all registers are floats" in
-/// prose), headed `Input Register Address`: it was "no header row naming an address column",
-/// and with the header fixed it came in as u16 without a word. The header is read, the u16
-/// reading is said as a warning naming --type, and `--type f32` makes floats of it. Without
-/// --table the closing hint names --table, not --columns.
+/// A sheet with no type column (the vendor says "all registers are floats" in prose), headed `Input
+/// Register Address`: the header is read as an address column, the u16 reading is said as a warning
+/// naming --type, and `--type f32` makes floats of it. Without --table the closing hint names
+/// --table, not --columns.
 #[test]
 fn a_sheet_without_a_type_column_says_so_and_takes_type() {
     let (p, err) = import("floats-no-type.csv", &["--table", "input"]);
@@ -124,10 +123,9 @@ fn a_sheet_without_a_type_column_says_so_and_takes_type() {
     assert!(!out.status.success() && err.contains("give --table holding|input"), "{err}");
 }
 
-/// After `profiles import` into the profile directory ("usable by name at once"),
-/// `profiles check NAME` failed with "No such file or directory (os error 2)" where `show` and
-/// `export` took the name; and it counted the registers a float covers (21) where import had
-/// counted entries (13). One resolver, one count.
+/// After `profiles import` into the profile directory ("usable by name at once"), `profiles check
+/// NAME` finds the name as `show` and `export` do, and counts entries as import counts them (13,
+/// not the 21 registers the floats cover). One resolver, one count.
 #[test]
 fn an_imported_profile_is_checked_by_name_with_import_s_count() {
     let name = format!("issue42-{}", std::process::id());
@@ -314,12 +312,11 @@ device = \"meter\\u2028shell_command:\\n  x: rm -rf /\\u0085external_components:
 const HOSTILE_NAMES: [&str; 9] =
     ["yes", "off", "1:20", "1_000", "2001-12-14", "<<", "=", "=HYPERLINK(\"http://x\")", "a\u{2029}b: c"];
 
-/// Every export of [`HOSTILE_PROFILE`] read back by PyYAML (YAML 1.1, as Home Assistant
-/// and ESPHome read) and tomllib has only the keys mbtap writes and every name as written; the
-/// exports pass Home Assistant's own schema and `esphome config`. Failed on the round's start: the
-/// device's line separators ended the header comment and injected top-level keys, the vertical
-/// tab made the file unreadable. Needs PyYAML, homeassistant and esphome (CI installs them): run
-/// with `--ignored`.
+/// Every export of [`HOSTILE_PROFILE`] read back by PyYAML (YAML 1.1, as Home Assistant and ESPHome
+/// read) and tomllib has only the keys mbtap writes and every name as written; the exports pass
+/// Home Assistant's own schema and `esphome config`. The device's line separators cannot end the
+/// header comment and inject top-level keys, nor the vertical tab make the file unreadable. Needs
+/// PyYAML, homeassistant and esphome (CI installs them): run with `--ignored`.
 #[test]
 #[ignore = "needs PyYAML, homeassistant and esphome (CI installs them)"]
 fn hostile_strings_stay_values_in_every_export() {
@@ -382,9 +379,9 @@ fn import_into(dir: &Path, name: &str, extra: &[&str]) -> Output {
     Command::new(MBTAP).args(&args).env("MBTAP_PROFILE_DIR", dir).output().unwrap()
 }
 
-/// An import never replaces a profile without `--force` (round start: a hand-tuned
-/// profile of the same name was overwritten without a word), and never writes through a link
-/// placed in the profile directory — with `--force` the link itself is replaced.
+/// An import never replaces a profile without `--force` (a hand-tuned profile of the same name
+/// stays), and never writes through a link placed in the profile directory — with `--force` the
+/// link itself is replaced.
 #[test]
 fn import_keeps_an_existing_profile_and_never_writes_through_a_link() {
     let dir = std::env::temp_dir().join(format!("mbtap-import-force-{}", std::process::id()));
@@ -414,8 +411,8 @@ fn import_keeps_an_existing_profile_and_never_writes_through_a_link() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// A name a built-in profile already has is written, and the user told that the
-/// built-in is what the name finds (round start: said nothing).
+/// A name a built-in profile already has is written, and the user told that the built-in is what
+/// the name finds.
 #[test]
 fn an_import_named_like_a_built_in_is_said_to_be_shadowed() {
     let dir = std::env::temp_dir().join(format!("mbtap-import-shadow-{}", std::process::id()));
@@ -456,10 +453,9 @@ fn ods_row(address: u16, name: &str) -> String {
     )
 }
 
-/// A workbook of a few hundred bytes whose repeated empty rows and cells stand for 17
-/// billion cells between two values took the import past 17 GB (ended by the kernel, or 60 s
-/// and counting); it is refused by counting them from its XML, before the reader expands them —
-/// and a plain OpenDocument sheet still imports.
+/// A workbook of a few hundred bytes whose repeated empty rows and cells stand for 17 billion cells
+/// between two values (expanded, past 17 GB) is refused by counting them from its XML, before the
+/// reader expands them — and a plain OpenDocument sheet still imports.
 #[test]
 fn an_ods_whose_repeats_expand_past_memory_is_refused_unexpanded() {
     let filler = r#"<table:table-row table:number-rows-repeated="1048000"><table:table-cell table:number-columns-repeated="16000"/></table:table-row>"#;
@@ -575,12 +571,11 @@ fn workbook_stream(globals: &[u8], cells: &[Vec<u8>]) -> Vec<u8> {
     stream
 }
 
-/// XLS workbooks of a few kilobytes — cells at A1 and IV65536 (calamine laid out the
-/// 16.7 M cells between them: 1.05 GB), a `Dimensions` record whose last row comes before its
-/// first (calamine reserved ~2³² rows and the process aborted), a `CodePage` too short to read
-/// (calamine panicked). Refused at first; now the sheet is read record by record, nothing laid
-/// out: the far cell is one cell (said skipped, no address), `Dimensions` is not needed, and a
-/// record too short to read is said, with its offset.
+/// XLS workbooks of a few kilobytes that a dense reader cannot open — cells at A1 and IV65536 (16.7
+/// M cells between them: 1.05 GB laid out), a `Dimensions` record whose last row comes before its
+/// first (~2³² rows reserved, the process aborted), a `CodePage` too short to read (a panic) — are
+/// read record by record, nothing laid out: the far cell is one cell (said skipped, no address),
+/// `Dimensions` is not needed, and a record too short to read is said, with its offset.
 #[test]
 fn xls_workbooks_the_reader_blew_up_on_are_read_cell_by_cell() {
     let (code, err, text) = import_holding(&xls("plain", &[], &[]));
@@ -655,13 +650,11 @@ fn xls_bytes(tag: &str, bytes: &[u8]) -> tempfile_path::TempProfile {
     file
 }
 
-/// The workbook reader takes the first directory entry named `Workbook` in the
-/// directory's order — linked into the tree or not — and trusts every chain and length. The
-/// check read the container with a library that walks the tree: an entry no storage links to,
-/// holding cells at A1 and IV65536, was laid out unchecked (1 GB). Now the container is read as
-/// the reader reads it — that entry is the one read (cell by cell now: its far cell is said) —
-/// and a chain that loops (the reader never ended) and a length past the file (the reader
-/// allocated it) are refused.
+/// The workbook reader takes the first directory entry named `Workbook` in the directory's order —
+/// linked into the tree or not — so the container is checked as that reader reads it, not by a
+/// library that walks the tree: an entry no storage links to, holding cells at A1 and IV65536, is
+/// the one read (cell by cell: its far cell is said), and a chain that loops and a length past the
+/// file are refused.
 #[test]
 fn an_xls_container_is_read_as_the_workbook_reader_reads_it() {
     const NOSTREAM: u32 = 0xFFFF_FFFF;
@@ -973,9 +966,9 @@ fn xlsb(tag: &str, far: Option<(u32, u32)>) -> tempfile_path::TempProfile {
     file
 }
 
-/// An 878-byte XLSB with one cell at XFD1048576 aborted the process (the reader laid
-/// out the 17 billion cells between A1 and it); XLSB sheets are now read cell by cell as XLSX
-/// ones are: the far row refused, a far column's cell counted, a plain sheet imported.
+/// An 878-byte XLSB with one cell at XFD1048576 costs one cell (laid out, the 17 billion cells
+/// between A1 and it abort the process): XLSB sheets are read cell by cell as XLSX ones are — the
+/// far row refused, a far column's cell counted, a plain sheet imported.
 #[test]
 fn an_xlsb_cell_far_away_costs_one_cell() {
     let (code, err, text) = import_holding(&xlsb("plain", None));

@@ -108,8 +108,8 @@ fn enum_without_labels_and_backwards_ranges_are_refused() {
     assert!(e.message.contains("runs backwards"), "{e}");
 }
 
-/// `profiles check` accepted `[line] baud = 0`, `framing = "9Z7"`, `mode = "tcp"`,
-/// and `scale = nan` or `inf`. Each is refused at its line and column now.
+/// `profiles check` refuses `[line] baud = 0`, `framing = "9Z7"`, `mode = "tcp"`, and `scale = nan`
+/// or `inf`, each at its line and column.
 #[test]
 fn impossible_line_settings_and_scales_are_refused_where_they_stand() {
     let head = "[profile]\nname = \"x\"\ndevice = \"y\"\n\n[line]\n";

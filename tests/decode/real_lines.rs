@@ -75,8 +75,8 @@ fn the_documented_lookalike_is_a_request_and_a_glitch_on_the_line() {
     );
 }
 
-/// One 195-byte read (a USB adapter at its 16 ms latency timer): an 89-byte answer corrupted
-/// in its middle, then two valid 53-byte answers. It was reported as one 195-byte failed frame.
+/// One 195-byte read (a USB adapter at its 16 ms latency timer): an 89-byte answer corrupted in its
+/// middle, then two valid 53-byte answers — three frames, not one 195-byte failed frame.
 #[test]
 fn a_read_with_a_corrupted_answer_then_two_valid_ones_gives_three_frames() {
     let regs = |seed: u8, n: u8| -> Vec<u8> {
@@ -96,7 +96,7 @@ fn a_read_with_a_corrupted_answer_then_two_valid_ones_gives_three_frames() {
     assert_eq!(e, [("F-".to_owned(), corrupted), ("F+".to_owned(), second), ("F+".to_owned(), third)]);
 }
 
-/// A clean capture whose first read gained a `00` in front (a glitch as the port opened) lost
+/// A clean capture whose first read gained a `00` in front (a glitch as the port opened) keeps
 /// every frame after it.
 #[test]
 fn a_zero_before_the_first_frame_hides_no_frame_after_it() {
@@ -212,7 +212,7 @@ fn report_of(chunks: &[(u64, Vec<u8>)], line: LineSettings, latency_ns: u64) -> 
     health.report()
 }
 
-/// Junk only, or nothing: the report ended "findings: none — the bus looks healthy".
+/// Junk only, or nothing, never ends the report with "findings: none — the bus looks healthy".
 #[test]
 fn nothing_that_frames_is_never_healthy() {
     // Bytes with the top bit set and no structure: what a listener at the wrong settings reads.
@@ -231,7 +231,7 @@ fn nothing_that_frames_is_never_healthy() {
     }
 }
 
-/// A failed frame starting with 02 in place of unit 1's answer was counted against unit 1.
+/// A failed frame starting with 02 in place of unit 1's answer counts against the bus, not unit 1.
 #[test]
 fn a_damaged_answer_with_another_address_counts_against_the_bus() {
     let c = L19200.char_ns();
@@ -258,8 +258,8 @@ fn a_damaged_answer_with_another_address_counts_against_the_bus() {
     assert_eq!((bus.unit, bus.count), (None, 4), "{}", r.text());
 }
 
-/// Request and answer delivered in one read (a 16 ms USB latency timer): the latency was
-/// reported as 0.000 ms and the p50 as 0.0 ms.
+/// Request and answer delivered in one read (a 16 ms USB latency timer): the latency is not
+/// measurable, never reported as 0.000 ms with a p50 of 0.0 ms.
 #[test]
 fn a_latency_no_read_can_resolve_is_not_measurable() {
     let mut chunks = Vec::new();
@@ -284,8 +284,8 @@ fn a_latency_no_read_can_resolve_is_not_measurable() {
     assert_eq!(r.units[0].latency_p50_ns, None, "{}", r.text());
 }
 
-/// `replay` flagged answers sooner than t3.5 after the request ("only N µs after previous
-/// frame"); `report` said nothing. Now it names them.
+/// `report` names answers sooner than t3.5 after the request, as `replay` flags them ("only N µs
+/// after previous frame").
 #[test]
 fn an_answer_sooner_than_t35_is_a_fast_answer() {
     let c = L19200.char_ns();
@@ -306,8 +306,8 @@ fn an_answer_sooner_than_t35_is_a_fast_answer() {
     assert_eq!((fast.unit, fast.count), (Some(5), 10));
 }
 
-/// `cat /dev/ttyUSB0 > dump.bin` starts wherever the line was: mid-frame, as a rule. `scan`
-/// of such a dump found nothing at all; the frames after the cut are found now.
+/// `cat /dev/ttyUSB0 > dump.bin` starts wherever the line was: mid-frame, as a rule. `scan` of such
+/// a dump finds the frames after the cut.
 #[test]
 fn scan_of_a_raw_dump_that_starts_mid_frame_finds_the_frames() {
     let wire = generate(&TrafficConfig { seed: 36, line: L19200, transactions: 300, ..TrafficConfig::default() });
@@ -329,9 +329,9 @@ fn mask_write(unit: u8) -> Vec<u8> {
     rtu(unit, &[0x16, 0x00, 0x4D, 0xF2, 0xF2, 0x00, 0x25])
 }
 
-/// Was (16 ms USB timer): a damaged answer (its function code hit: 0x16 → 0x58) and the
-/// damaged request after it, in one read, were one 17-byte failed frame — the request had
-/// fixed the answer's length at 10.
+/// Behind a 16 ms USB timer, a damaged answer (its function code hit: 0x16 → 0x58) and the damaged
+/// request after it, in one read, are cut where the request fixed the answer's length (10), not one
+/// 17-byte failed frame.
 #[test]
 fn a_damaged_answer_glued_to_more_damage_is_cut_at_the_length_its_request_fixed() {
     let c = L9600.char_ns();
@@ -354,9 +354,9 @@ fn a_damaged_answer_glued_to_more_damage_is_cut_at_the_length_its_request_fixed(
     assert_eq!(e[2..4], [("F+".to_owned(), request), ("F-".to_owned(), answer)], "{e:02X?}");
 }
 
-/// Was: on a line whose slaves leave `FE` after their frames, a damaged answer whose last byte
-/// the damage made `FE` lost that byte to a "glitch" — but the request fixed the answer at 10
-/// bytes, and 10 arrived.
+/// On a line whose slaves leave `FE` after their frames, a damaged answer whose last byte the
+/// damage made `FE` keeps that byte: the request fixed the answer at 10 bytes, and 10 arrived — no
+/// "glitch".
 #[test]
 fn a_damaged_answer_ending_in_fe_keeps_its_last_byte_where_slaves_glitch_fe() {
     let c = L9600.char_ns();

@@ -194,8 +194,8 @@ fn scroll_back_is_bounded_and_says_so() {
     assert_eq!(small.devices.values().map(|d| d.requests).sum::<u64>(), 40);
 }
 
-/// Regression: a replay shown in the UI gave the devices view the command line's (default)
-/// line settings, not the ones the capture was recorded with.
+/// A replay shown in the UI gives the devices view the line settings the capture was recorded with,
+/// not the command line's defaults.
 #[test]
 fn a_replay_shows_the_line_settings_the_capture_was_recorded_with() {
     let capture = concat!(env!("CARGO_MANIFEST_DIR"), "/captures/mk4-doc-examples-ascii.pcapng");

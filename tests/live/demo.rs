@@ -86,8 +86,8 @@ fn no_fault_no_finding() {
     assert!(s["transactions"].as_u64().unwrap() > 50, "{s}");
 }
 
-/// `demo --duration 2s` was refused while `--interval 1s` worked elsewhere: one
-/// duration syntax everywhere (a bare number is still seconds).
+/// One duration syntax everywhere: `demo --duration 2s` is taken as `--interval 1s` is elsewhere (a
+/// bare number is still seconds).
 #[test]
 fn durations_take_one_syntax_everywhere() {
     for d in ["1500ms", "1.5s", "1.5"] {

@@ -171,8 +171,8 @@ fn sniff_survives_the_port_disappearing_and_coming_back() {
     assert_eq!(good_frames(&replay(&rec)), want, "the recording went on");
 }
 
-/// A +1 h clock step in a capture made `play` wait an hour in silence (a corrupt
-/// timestamp near 2^64, forever). A gap is capped at `--max-gap`, and said.
+/// A +1 h clock step in a capture (or a corrupt timestamp near 2^64) never makes `play` wait in
+/// silence: a gap is capped at `--max-gap`, and said.
 #[test]
 #[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
 fn play_caps_a_clock_step_and_says_so() {
@@ -214,9 +214,8 @@ fn play_caps_a_clock_step_and_says_so() {
     assert!(err.contains("played 2 packets"), "{err}");
 }
 
-/// Found while benchmarking spy mode: `sniff --duration 8` of a port that vanished (its socat
-/// ended) waited for the port forever, past its duration. The deadline holds while the port is
-/// away, for `sniff` and `tap` alike.
+/// `sniff --duration 8` of a port that vanishes (its socat ends) ends on time: the deadline holds
+/// while the port is away, for `sniff` and `tap` alike.
 #[test]
 #[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
 fn sniff_duration_holds_while_the_port_is_gone() {

@@ -208,9 +208,8 @@ fn the_spy_server_holds_at_most_64_connections() {
     }
 }
 
-/// 64 sockets that never asked held every place of the spy server (0 of 48 clients
-/// served) until they closed themselves. As on the bridge, a socket that has not asked within
-/// its grace gives its place to a newcomer.
+/// 64 sockets that never ask cannot hold every place of the spy server until they close themselves:
+/// as on the bridge, a socket that has not asked within its grace gives its place to a newcomer.
 #[test]
 fn idle_sockets_give_their_places_to_clients_that_ask() {
     use std::io::{Read, Write};

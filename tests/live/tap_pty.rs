@@ -151,10 +151,9 @@ fn socat_pair(a: &std::path::Path, b: &std::path::Path) -> Kill {
     k
 }
 
-/// When the real port was lost, `tap` exited and the application got "device
-/// disconnected"; and it flushed its recording only when traffic came, so a SIGKILL after a
-/// quiet spell lost everything since. Now the application's side stays open while the port is
-/// reopened, and the recording is on disk within about a second, traffic or not.
+/// When the real port is lost, `tap` keeps the application's side open while the port is reopened
+/// (no "device disconnected"), and the recording is on disk within about a second, traffic or not
+/// (a SIGKILL after a quiet spell loses nothing heard).
 #[test]
 #[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
 fn tap_outlives_its_port_and_flushes_in_the_quiet() {
@@ -195,10 +194,9 @@ fn cpu_ticks(pid: u32) -> u64 {
     fields[11].parse::<u64>().unwrap() + fields[12].parse::<u64>().unwrap()
 }
 
-/// `tap` burnt a core (4.9 s of CPU in 5 s) while the application held the pty open
-/// without traffic, and after the application closed its side a SIGKILL lost the last
-/// transactions (nothing was flushed while it stayed closed). CPU is a resource, measured from
-/// the kernel's count, not a timing assert.
+/// `tap` idles without burning a core while the application holds the pty open without traffic, and
+/// flushes when the application closes its side (a SIGKILL then loses no transaction). CPU is a
+/// resource, measured from the kernel's count, not a timing assert.
 #[test]
 #[ignore = "needs socat; .ci/run installs it and runs this with --ignored"]
 fn tap_idles_without_burning_a_core_and_flushes_when_the_application_leaves() {

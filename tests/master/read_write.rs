@@ -199,8 +199,8 @@ fn profiles_show_into_a_closed_pipe_does_not_panic() {
 const HOSTILE_PROFILE: &str = "[profile]\nname = \"evil\\u001b]0;pwned\\u0007\"\ndevice = \"Pump\\u001b[2J\"\n\
     functions = [3, 4]\n\n[[input_registers]]\naddress = 430\nname = \"Volts\\u001b[31m\"\nunit = \"V\\u009b1m\"\nscale = 0.1\n";
 
-/// Control characters in profile names and units reached the terminal in
-/// `profiles show` and `read`'s text output.
+/// Control characters in profile names and units never reach the terminal in `profiles show` and
+/// `read`'s text output.
 #[test]
 fn control_characters_in_profiles_never_reach_the_terminal() {
     let (_sim, bus) = simulator("escape");
@@ -218,8 +218,8 @@ fn control_characters_in_profiles_never_reach_the_terminal() {
     assert!(text(&read).contains("Volts"), "{}", text(&read));
 }
 
-/// `write --unit 0` broadcast a profile write without --force; a command register
-/// took any number.
+/// `write --unit 0` broadcasts a profile write only with --force, and a command register takes its
+/// documented commands only.
 #[test]
 fn a_broadcast_write_or_an_undocumented_command_needs_force() {
     let (_sim, bus) = simulator("broadcast");
@@ -239,9 +239,9 @@ fn a_broadcast_write_or_an_undocumented_command_needs_force() {
     assert!(o.status.success() && text(&o).contains("broadcast holding 105"), "{}", text(&o));
 }
 
-/// `read --device mkzp holding 50` asked unit 1 (the profile's default address, where
-/// the simulated line has the MK4) and the error blamed the register. It says which unit was
-/// asked and why.
+/// `read --device mkzp holding 50` asks unit 1 (the profile's default address, where the simulated
+/// line has the MK4): the error says which unit was asked and why, rather than blaming the
+/// register.
 #[test]
 fn a_failure_at_the_default_unit_says_which_unit_was_asked() {
     let (_sim, bus) = simulator("default-unit");
