@@ -299,3 +299,37 @@ fn the_readmes_layout_names_every_crate_and_its_modules() {
         assert!(entry.contains(module), "the Layout's gateway entry does not name its module {module}");
     }
 }
+
+/// Every module's map names its modules: a file that declares `mod X;` says in its own `//!`
+/// doc what `X` holds, so a newcomer reading the map finds every room. Left out: test modules,
+/// the fuzz bodies (`fuzzing`, one per library, named in the README) and `src/cmd/mod.rs`,
+/// whose modules are the commands `mbtap --help` lists.
+#[test]
+fn every_module_map_names_its_modules() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    rust_files(&root.join("src"), &mut files);
+    for e in std::fs::read_dir(root.join("crates")).unwrap().flatten() {
+        if e.path().join("src").is_dir() {
+            rust_files(&e.path().join("src"), &mut files);
+        }
+    }
+    let mut unnamed = Vec::new();
+    for f in files.iter().filter(|f| !f.ends_with("src/cmd/mod.rs")) {
+        let text = std::fs::read_to_string(f).unwrap();
+        let doc: String = text.lines().filter(|l| l.starts_with("//!")).collect::<Vec<_>>().join("\n");
+        let mut previous = "";
+        for line in text.lines() {
+            let declared = line.trim_start_matches("pub ").trim_start_matches("pub(crate) ").strip_prefix("mod ");
+            if let Some(name) = declared.and_then(|m| m.strip_suffix(';'))
+                && !previous.contains("cfg(test)")
+                && name != "fuzzing"
+                && !doc.contains(name)
+            {
+                unnamed.push(format!("{}: {name}", f.strip_prefix(root).unwrap().display()));
+            }
+            previous = line.trim();
+        }
+    }
+    assert!(unnamed.is_empty(), "modules their file's map does not name: {unnamed:#?}");
+}

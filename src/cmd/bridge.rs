@@ -2,6 +2,9 @@
 //! TCP device). Settings come from `--config FILE` merged under the command line
 //! ([`crate::config::merge`]): an option given on the command line replaces the file's value,
 //! lists included.
+//!
+//! Its pieces: `values` (the configuration file merged under the command line, refusals naming
+//! where each came from) and `parts` (the options made into what the bridge runs with).
 
 use std::io::{self, Write};
 use std::path::PathBuf;

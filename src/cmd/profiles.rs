@@ -1,5 +1,8 @@
 //! `mbtap profiles list|check|show|import|export`: the device profiles — built in, the user's, a
 //! file; imported from register sheets and Home Assistant YAML, exported to the site's tools.
+//!
+//! The import's pieces sit beside it: `import` (the command), `sheets` (the spreadsheet and YAML
+//! readers), `profile_file` (the profile written as it is read).
 
 use mbtap_analysis::report::format::printable;
 use std::io::Write as _;

@@ -10,6 +10,9 @@
 //! Found at `$MBTAP_CONFIG`, else `$XDG_CONFIG_HOME/mbtap/config.toml`, else
 //! `~/.config/mbtap/config.toml`. Command-line options override it (`--device 1=…` replaces the
 //! file's unit 1).
+//!
+//! Modules: [`devices`] (profiles by the names users give them), [`merge`] (a command's `--config
+//! FILE` merged under its command line).
 
 pub mod devices;
 pub mod merge;

@@ -2,6 +2,10 @@
 //! The requests are planned and checked by `mbtap_device::query` (pure); this module opens the
 //! link ([`link`]: a line of the bridge's, through the gateway core), sends them ([`exec`]) and
 //! prints what came back ([`show`]).
+//!
+//! Masters of other commands go through the same link: [`sunspec`] (`--device sunspec`: the model
+//! chain discovered), [`remote`] (writes from the broker), [`mirror`] (`simulate --mirror`'s reads
+//! of the source device), [`confirm`] (`learn --confirm`'s reads).
 
 pub mod confirm;
 pub mod exec;

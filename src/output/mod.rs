@@ -3,6 +3,9 @@
 //! report at the end or every so often; and a capture replayed into it. Beside it, the files
 //! mbtap keeps as it runs: the audit of writes ([`audit`]), `learn`'s drafts, whole files
 //! written safely.
+//!
+//! Modules: [`audit`], [`learn_draft`] (drafts written while listening), [`progress`] (reading a
+//! capture file, on a terminal), [`whole_file`] (the one writer of whole files).
 
 pub mod audit;
 pub mod learn_draft;

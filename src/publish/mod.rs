@@ -2,6 +2,11 @@
 //! answering from the register image ([`spy`], `--serve`) and MQTT ([`mqtt`], `--mqtt`). Both
 //! are [`crate::output::Tap`]s fed by the analysing thread; neither ever writes to the serial
 //! line, and neither can slow the analysis down.
+//!
+//! MQTT's pieces: [`mqtt_options`] (the options and their rules), [`discovery`] (Home Assistant
+//! discovery), [`outbox`] (where every message goes), [`connection`] (the connection's thread),
+//! [`spool`] (store and forward on disk), [`values_from`] (`simulate --values-from`); the spy
+//! server's [`expiring`] connections.
 
 pub mod connection;
 pub mod discovery;

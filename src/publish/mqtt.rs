@@ -7,6 +7,8 @@
 //! `try_publish`; when the queue is full (a slow or absent broker) the message is dropped and
 //! counted, and the count is published. The connection runs on its own thread and runtime and
 //! reconnects every second while the broker is away.
+//!
+//! Its `rows` module turns the analysed rows into those messages.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};

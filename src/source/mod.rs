@@ -3,6 +3,9 @@
 //! through the one [`session`] driver (or, for `play`, writes bytes a peer reads); and
 //! `simulate` in one place ([`simulate`]): its pseudo-terminal, what it emulates and the devices
 //! every front serves.
+//!
+//! Beside the loops: [`record`] (`--record FILE`) and [`image_file`] (register images kept in
+//! files, read for `diff` and `simulate --from`).
 
 pub mod demo;
 pub mod image_file;

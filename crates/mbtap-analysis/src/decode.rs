@@ -6,6 +6,8 @@
 //! `replay` splits the same bytes: by the RTU framer, which knows each function's structure and
 //! the CRC's look-alikes. A failed frame right after a request from the same unit is read as that
 //! request's (damaged or truncated) answer.
+//!
+//! Its `pairs` module reads a pasted request and the response after it as one transaction.
 
 use std::io::{self, Write};
 

@@ -10,6 +10,9 @@
 //! CR LF (ASCII), a damaged answer (retried), a late answer to an earlier request (dropped: it
 //! must reach no one), and after a timeout a unit whose next answer is not trusted for the
 //! cache and whose late words are listened for and dropped once its client has its 0x0B.
+//!
+//! Its modules: `steps` (what the machine is configured with and says) and `master` (the serial
+//! master's memory between requests).
 
 use std::time::Duration;
 

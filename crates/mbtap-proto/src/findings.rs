@@ -1,6 +1,8 @@
 //! Findings: things a user wants flagged on a frame that still decodes — a quantity outside the
 //! spec's limits, a byte count that disagrees, a coil value other than FF00/0000, trailing bytes,
 //! a reserved address. They are data on the decoded frame, never errors.
+//!
+//! Its `pair` module judges a request and its response together (MAP v1.1b3 §6).
 
 use std::fmt;
 

@@ -15,6 +15,10 @@
 //!
 //! This crate depends on `nom` and `thiserror` only: every parser here is fuzzed from
 //! `fuzz/` without compiling the analysis, the terminal or an async runtime.
+//!
+//! Beside the layers: [`adu`] (one owned view over a frame of any mode, for frames users give),
+//! [`duration`] (durations as people type them), [`rfc2217`] (the Telnet COM-port codec of serial
+//! servers).
 
 pub mod adu;
 pub mod answer_end;

@@ -13,6 +13,8 @@
 //! - The line: [`bus`] (the virtual bus: master, devices, faults), [`world`] (what the devices measure),
 //!   [`poll_list`], [`uart`] (what a receiver at other settings hears), [`scan_line`].
 //! - [`traffic`] — synthetic traffic with ground truth, observation models, scoring.
+//! - Values: [`meters`] (the built-in energy meters' moving values), [`store`] (a device's
+//!   register values as a recording or an image gave them).
 
 pub mod answers;
 pub mod bus;

@@ -1,6 +1,9 @@
 //! The bridge's numbers: requests, responses, exceptions by code, timeouts, CRC errors, queue
 //! depth and a latency histogram, per unit; connections and refusals for the server. Their
 //! Prometheus text is written in [`exposition`].
+//!
+//! Beside them: [`endpoint`] (`--metrics`: the Prometheus endpoint) and [`snapshot`] (the line's
+//! figures as the web view shows them).
 
 pub(crate) mod endpoint;
 mod exposition;

@@ -4,6 +4,9 @@
 //! A master opens PATH as its serial port. Requests are framed from what it writes (the serial
 //! fronts' one framer, [`mbtap_proto::request_frames`]), handed to every simulated slave, and
 //! the one that answers is heard after a turnaround delay. Values move with the host clock ([`mbtap_sim::world`]).
+//!
+//! Its pieces: [`emulate_from`] (what is emulated, from what the user names) and [`emulated`] (the
+//! one set of devices every front serves).
 
 pub mod emulate_from;
 pub mod emulated;

@@ -1,5 +1,9 @@
 //! Captures: reading pcap/pcapng line captures (link type 147, one packet per received chunk)
 //! and writing them, with the timing kept; and the Wireshark export.
+//!
+//! Modules: `format` (zero-copy parsers of pcap and pcapng blocks), `reader` (a capture as a stream
+//! of chunks, memory bounded by the largest block), `clock` (one interface's times made safe for
+//! the framer), `writer` (pcapng out, line settings in each interface).
 
 pub mod clock;
 pub mod export;

@@ -6,6 +6,8 @@
 //! truncated file ends with a warning; packets of other link types are skipped with one
 //! warning per interface; timestamps that go backwards or jump are reported, and the times
 //! handed on never run backwards (see [`super::clock`]).
+//!
+//! Its `blocks` module holds the two formats' blocks as the reader walks them.
 
 use std::io::{self, Read};
 

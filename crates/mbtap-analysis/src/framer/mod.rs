@@ -1,5 +1,9 @@
 //! Framers: turn [`Chunk`](crate::chunk::Chunk)s — bytes as reads delivered them, with the time
 //! each read returned — into frames and noise. Pure: time is an input, never read.
+//!
+//! Modules: `event` (what the framers produce), `rtu` (the RTU framer), `ascii` (the ASCII framer),
+//! `observer` (how late this observer's reads deliver bytes), `lengths` (frame lengths learned per
+//! unit, function and direction), `glitch` (how often each side leaves a turnaround glitch).
 
 pub mod ascii;
 pub mod event;

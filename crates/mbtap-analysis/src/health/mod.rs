@@ -15,6 +15,9 @@
 //! request), `no_valid_frames` (nothing heard, or nothing that frames: never "healthy").
 //! Check errors say whether they come in bursts or steadily; a damaged answer counts against a
 //! unit only when its address byte is the unit's.
+//!
+//! Modules: `margins` (timing evidence with its margin), `findings` (from the figures to the
+//! findings and per-unit figures), `html` (the report as one self-contained page).
 
 mod findings;
 pub mod html;

@@ -5,6 +5,13 @@
 //! report and a draft profile out. Memory grows with the registers heard, never with the
 //! length of the capture ([`stats`]), and the registers kept are bounded too
 //! ([`MAX_REGISTERS`], [`MAX_OTHER`]): a capture naming more is learned in part, and says so.
+//!
+//! Modules: `kind` (what a guess says a register holds), `series` (measures of a pair's series;
+//! confidence), `infer` and `layout` (types pair by pair and block by block), `still_words` (32-bit
+//! integers whose high word never moved), `few_samples` (typing from one or two samples),
+//! `sunspec_map` (a SunSpec device typed by its models), `hint` (`--hint` values read off a
+//! display), `confirm` (what `--confirm` asks again), `probe` (active read-only discovery), `diff`
+//! (two register images compared), `truth` (the device `learn` is measured against).
 
 pub mod confirm;
 pub mod diff;

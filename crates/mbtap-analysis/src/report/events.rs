@@ -1,6 +1,8 @@
 //! Rendering analyzer events (frames, noise, transactions) as text lines and JSON lines, and
 //! the statistics sink. JSON keys follow the contract in ARCHITECTURE.md: every frame event
 //! has `event`, `hex`, `check_ok` and `t_ns` (estimated start, ns since the epoch).
+//!
+//! Its `stats` module counts what went by (the statistics sink and the summary).
 
 use std::fmt::Write as _;
 

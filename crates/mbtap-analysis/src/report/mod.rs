@@ -1,5 +1,9 @@
 //! Rendering decoded frames and transactions for people (text) and programs (JSON lines).
 //! Both renderers read the same [`FrameView`] and the same field list ([`fields`]).
+//!
+//! Modules: `fields` (the field list both renderers read), `format` (times and hex dumps every
+//! output shares), `events` (analyzer events as text and JSON lines), `jsonl` (JSON lines with
+//! stable keys), `annotations` (profile annotations as JSON).
 
 pub mod annotations;
 pub mod events;

@@ -2,6 +2,9 @@
 //! labels, set bits, strings, 32-bit pairs — and findings: values outside the document's
 //! range, reserved or undocumented addresses, writes to read-only registers, half of a 32-bit
 //! pair read alone, writes the device will clamp.
+//!
+//! Its `value_text` module shows one value: scaled, signed, a date or an enumeration's text, with
+//! its notes.
 
 use std::fmt;
 

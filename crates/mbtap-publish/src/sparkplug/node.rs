@@ -3,6 +3,8 @@
 //! hear. The shell tells it when the session starts and ends, the values heard (with bus time)
 //! and the commands received; it answers with the messages to publish or the updates to store.
 //! No clock, no broker here.
+//!
+//! Its `over_time` module holds the node as time passes and the host speaks.
 
 use std::collections::{BTreeMap, VecDeque};
 

@@ -7,6 +7,8 @@
 //! CRC look-alikes (answers whose CRC high byte is `00`, so one byte shorter also passes the
 //! CRC). The output is the wire: every byte with the time its last bit left, plus what each
 //! stretch of bytes really was.
+//!
+//! Its `pdus` module holds what the generated master asks and its slaves answer.
 
 use super::rng::Rng;
 use mbtap_analysis::framer::LineSettings;

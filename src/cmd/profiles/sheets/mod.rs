@@ -7,6 +7,8 @@
 //! that unpacks to more than [`MAX_UNPACKED_BYTES`] is refused unread; every sheet is streamed
 //! row by row at each of the sheet reader's passes, nothing laid out, so a cell placed at
 //! XFD1048576 costs one cell, not a dense range of 17 billion.
+//!
+//! `encoding` tells a text file's encoding as spreadsheets save it.
 
 mod calamine_cells;
 mod csv;

@@ -28,6 +28,11 @@
 //! `FE`/`FF` after a slave), within a character of the frame's last byte. A lone byte right
 //! after a frame that begins no frame is reported as a [`FrameEvent::Glitch`], never as part of
 //! the frame, a frame of its own, or noise.
+//!
+//! Modules: `state` (the framer's state), `buffer` (the timed buffer of undecided bytes),
+//! `candidates` (the frames a position allows), `emit` (what goes out), `twins` and `hold` (CRC
+//! twins: which length, and holding them until the line tells), `unknown_length` (frames their
+//! structure does not fix), `learning` (what each valid frame teaches).
 
 mod buffer;
 mod candidates;

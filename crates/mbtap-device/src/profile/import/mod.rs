@@ -5,6 +5,15 @@
 //! command's writes each point out as it comes, [`Imported`] collects (tests, SunSpec).
 //! [`header`] and [`entry`] write the profile (`docs/profiles.md`), which the loader then checks
 //! like any hand-written one ([`load_back()`]).
+//!
+//! Modules — sheets: `fields` (the columns and the header texts naming them), `notation`
+//! (addresses, tables, types as vendors write them), `sheet` (the sheet reader and its passes),
+//! `grid` and `cell_rows` (cells held compactly, handed on row by row), `ods_size` and `ods_rows`
+//! (OpenDocument: its expanded size counted, its rows streamed), `xls_container`, `xls_stream`,
+//! `xls_records` and `xls_rows` (XLS: the compound file, the workbook stream, its records, its
+//! rows); Home Assistant: `ha_yaml` (the YAML read as it goes), `ha_entry` (one entry and its
+//! point), `home_assistant` (hubs to points); every sink: `ledger` (the addresses taken),
+//! `load_back` (the written profile loaded back).
 
 pub mod cell_rows;
 mod fields;
