@@ -251,8 +251,8 @@ mod tests {
         assert!(parse_roles(&["admin=all".into()]).unwrap()["admin"].allows(1, &[0x06, 0, 0, 0, 1]));
     }
 
-    /// `--role admin=` let a client do everything; a second `--role admin=…` silently
-    /// replaced the first.
+    /// `--role admin=` (a role that would let a client do everything) is refused, and so is a
+    /// second `--role admin=…` (never silently replacing the first).
     #[test]
     fn an_empty_or_repeated_role_is_refused() {
         for empty in ["admin=", "admin= ; ;", "=read-only"] {

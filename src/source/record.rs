@@ -186,7 +186,7 @@ mod tests {
     }
 
     /// What the framer learned about a port's reads goes into the file, for replay to read back;
-    /// nothing is written before anything was learned.
+    /// nothing is written before anything is learned.
     #[test]
     fn the_learned_latency_is_written_at_the_end_of_the_recording() {
         let path = std::env::temp_dir().join(format!("mbtap-observer-{}.pcapng", std::process::id()));

@@ -332,10 +332,10 @@ mod declared_length_tests {
         assert_eq!(frames(&[]), [(7, true), (15, true)]);
     }
 
-    /// The answer, a twin nothing decides, is held (see `framer::rtu::hold`); a live
-    /// session's ticks go on meanwhile. They called the request unanswered at its timeout, and
-    /// the held answer an orphan when it came out — where a replay of the same bytes, which
-    /// ticks only as frames come, pairs them.
+    /// The answer, a twin nothing decides, is held (see `framer::rtu::hold`); a live session's
+    /// ticks go on meanwhile. They never call the request unanswered at its timeout, nor the held
+    /// answer an orphan when it comes out: live as in a replay of the same bytes, which ticks only
+    /// as frames come, the two pair.
     #[test]
     fn a_request_is_not_given_up_while_its_answer_is_held() {
         use crate::pairing::Outcome;

@@ -326,9 +326,9 @@ fn clean(pdu: &[u8], hint: DirectionHint) -> bool {
 #[cfg(test)]
 mod tests {
 
-    /// "latency 0.000 ms" was shown beside rows saying "not measurable"; a latency is
-    /// shown only where it is above zero and at least what the reads resolve, else its bound or
-    /// "not measurable" — one rule for text, JSON and the terminal UI.
+    /// A latency is shown only where it is above zero and at least what the reads resolve, else its
+    /// bound or "not measurable" — never "latency 0.000 ms" beside "not measurable"; one rule for
+    /// text, JSON and the terminal UI.
     #[test]
     fn a_latency_is_shown_only_where_the_reads_resolve_it() {
         const RESPONSE: &[u8] = &[0x01, 0x03, 0x02, 0x00, 0x07];

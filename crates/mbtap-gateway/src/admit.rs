@@ -484,9 +484,8 @@ mod tests {
         assert_eq!(p.admit(ask(0, &WRITE_ONE), None, Duration::ZERO).map(|a| a.target), Ok(0));
     }
 
-    /// A broker client's write to unit
-    /// 0 went out as a broadcast, "ok": true. Unit 0 is refused from every front unless
-    /// `--allow-broadcast`, the broker's writes included, and a unit mapped to 0 as well.
+    /// Unit 0 is refused from every front unless `--allow-broadcast`, the broker's writes included
+    /// (never a broadcast reported `"ok": true`), and a unit mapped to 0 as well.
     #[test]
     fn broker_broadcast_writes_are_refused_unless_allowed() {
         let mut p = policy();
@@ -504,9 +503,8 @@ mod tests {
         assert_eq!(p.admit(viewer, None, Duration::ZERO), Err(Refusal::Role));
     }
 
-    /// `--read-only --allow-function 8` let an FC08/0000
-    /// with a CRC-valid write frame in its data reach the line, where a slave framing by
-    /// structure executed the write.
+    /// Under `--read-only --allow-function 8`, an FC08/0000 with a CRC-valid write frame in its
+    /// data never reaches the line, where a slave framing by structure would execute the write.
     #[test]
     fn an_fc08_longer_than_one_data_word_is_refused_under_every_policy() {
         /// Diagnostics 0000 Return Query Data, data 1234, then `01 06 00 65 00 2C` + CRC: a

@@ -97,7 +97,8 @@ mod tests {
         assert_eq!(check(1, &WRITE_10, 1, &WRITE_10), Ok(()));
     }
 
-    /// `tcp://` handed these to the client; the serial path dropped them.
+    /// Each misfit of a `tcp://` device's answer is named and dropped, as on the serial path: none
+    /// reaches the client.
     #[test]
     fn tcp_device_misfits_are_named() {
         assert_eq!(check(1, &READ_TWO, 2, &ANSWER_TWO), Err(Misfit::Unit), "another unit's answer");

@@ -52,9 +52,9 @@ impl Breaker {
 mod tests {
     use super::*;
 
-    /// Eight clients polling a dead unit cost the line a timeout each; a good unit's
-    /// client got 3 answers in 8. The breaker opens after three failures, probes once per
-    /// backoff (doubling to 30 s), and closes on the first answer.
+    /// Eight clients polling a dead unit do not cost the line a timeout each (a good unit's client
+    /// would get 3 answers in 8): the breaker opens after three failures, probes once per backoff
+    /// (doubling to 30 s), and closes on the first answer.
     #[test]
     fn a_dead_unit_is_answered_at_once_between_probes() {
         let t0 = Duration::from_secs(100);

@@ -256,8 +256,8 @@ mod tests {
         assert_eq!(q.len(), 3);
     }
 
-    /// Every source port a client with its own 32, no bound
-    /// for them together. The line now has one; a client leaving gives its room back.
+    /// A client per source port gets its own 32 and the line bounds them all together; a client
+    /// leaving gives its room back.
     #[test]
     fn udp_flood_the_line_bounds_all_clients_together() {
         let mut q = FairQueue::bounded(32, 100);

@@ -90,9 +90,9 @@ mod tests {
         Seat { ip: ip.parse().unwrap(), opened: ms(opened), last_request: last.map(ms), last_byte: None }
     }
 
-    /// (One address for the flood and the good clients.) A TLS
-    /// client mid-handshake was now and then the oldest silent socket and was reset. A socket
-    /// that is still talking outlasts those that stalled, whatever their ages.
+    /// (One address for the flood and the good clients.) A socket that is still talking — a TLS
+    /// client mid-handshake — outlasts those that stalled, whatever their ages, never reset as the
+    /// oldest silent socket.
     #[test]
     fn a_handshake_under_way_outlasts_sockets_that_stalled() {
         let handshaking = Seat { last_byte: Some(ms(99)), ..seat("127.0.0.1", 10, None) };
@@ -111,8 +111,8 @@ mod tests {
         assert_eq!(for_address(flood.iter().enumerate(), ip, ms(150)), Some(1));
     }
 
-    /// Silent sockets younger than 200 ms filled the table and every
-    /// newcomer was refused. The oldest silent one makes room, whatever its age.
+    /// Silent sockets younger than any grace cannot fill the table against every newcomer: the
+    /// oldest silent one makes room, whatever its age.
     #[test]
     fn starve_the_oldest_silent_seat_makes_room_whatever_its_age() {
         let seats = [seat("10.0.0.1", 5, None), seat("10.0.0.1", 1, None), seat("10.0.0.2", 0, Some(9))];

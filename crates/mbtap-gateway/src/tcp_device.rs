@@ -158,9 +158,8 @@ mod tests {
         u16::from_be_bytes([adu[0], adu[1]])
     }
 
-    /// Ids counted from 0, one by one; a device answering
-    /// ahead under id + 1 had that answer taken for the next request's. Ids now come from the
-    /// shell's seed, and the next is not the last + 1.
+    /// Ids come from the shell's seed, and the next is not the last + 1: a device answering ahead
+    /// under id + 1 cannot have that answer taken for the next request's.
     #[test]
     fn ahead_ids_are_not_predictable_from_the_last() {
         let mut d = TcpDevice::seeded(0x5EED);
@@ -198,8 +197,8 @@ mod tests {
         assert_eq!(dropped.late, 1);
     }
 
-    /// Answers under the awaited
-    /// id that do not fit its request reached the client; now dropped, and the right one taken.
+    /// Answers under the awaited id that do not fit its request are dropped, never handed to the
+    /// client, and the right one is taken.
     #[test]
     fn tcp_device_answers_that_do_not_fit_the_request_are_dropped() {
         let mut d = TcpDevice::seeded(7);

@@ -483,7 +483,8 @@ mod tests {
         assert!(notes.contains(&Note::UnitTimeout(TIMEOUT)));
     }
 
-    /// An answer behind a transceiver's turnaround glitch (FE) got 0x0B.
+    /// An answer behind a transceiver's turnaround glitch (FE), arriving in two reads, is taken:
+    /// the glitch is set aside, never a 0x0B.
     #[test]
     fn a_turnaround_glitch_before_an_answer_in_two_reads_is_set_aside() {
         let mut m = master(SerialMode::Rtu, EchoMode::Off, 0);
@@ -532,7 +533,7 @@ mod tests {
         assert_eq!(count(&notes, &Note::Timeout), 3);
     }
 
-    /// A slow unit's late answer to h150 went to the client asking h160.
+    /// A slow unit's late answer to h150 never reaches the client asking h160.
     #[test]
     fn a_late_answer_to_another_request_reaches_no_one() {
         let mut m = master(SerialMode::Rtu, EchoMode::Off, 0);
@@ -646,8 +647,8 @@ mod tests {
         assert_eq!(noisy.wait_until(), ms(200));
     }
 
-    /// A serial server streaming garbage held the line twice the
-    /// window after every timeout. More bytes than the longest answer end the listening.
+    /// A serial server streaming garbage does not hold the line twice the window after every
+    /// timeout: more bytes than the longest answer end the listening.
     #[test]
     fn garbage_stream_ends_the_late_listener_at_once() {
         let m = master(SerialMode::Rtu, EchoMode::Off, 0);
@@ -683,10 +684,9 @@ mod tests {
         assert_eq!(t.outcome().map(|o| o.reply.clone()), Some(Reply::Gateway(GATEWAY_TARGET_FAILED)));
     }
 
-    /// Regression (found by the `gateway` fuzz target): bytes that stay pending after
-    /// their silence — an answer to a two-register read whose byte count says 5 — made the
-    /// machine ask to wait until a moment already past, and the shell spun on it until the
-    /// deadline. Now the wait after the silence runs to the deadline.
+    /// Bytes that stay pending after their silence — an answer to a two-register read whose byte
+    /// count says 5 — wait for the deadline: the machine never asks to wait until a moment already
+    /// past (the shell would spin on it). Found by the `gateway` fuzz target.
     #[test]
     fn bytes_still_pending_after_their_silence_wait_for_the_deadline_not_the_past() {
         // Unit 1, function 03, byte count 05, then four bytes of values and one more.

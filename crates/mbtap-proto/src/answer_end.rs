@@ -119,8 +119,8 @@ mod tests {
         assert_eq!(judge_rtu(&bad, 1, 0x03, true), Verdict::BadCheck);
     }
 
-    /// Regression: a USB adapter (or a relay) delivering an answer in bursts with pauses
-    /// longer than t3.5 made the bridge call half an answer a CRC error.
+    /// A USB adapter (or a relay) delivering an answer in bursts with pauses longer than t3.5: an
+    /// answer whose length is known is waited out, never half of it called a CRC error.
     #[test]
     fn a_pause_inside_a_known_length_answer_is_waited_out() {
         let resp = rtu(&[0x01, 0x04, 0x08, 0x08, 0xF7, 0x09, 0x07, 0x08, 0xF6, 0x08, 0xFC]);

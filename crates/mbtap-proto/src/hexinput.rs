@@ -258,7 +258,8 @@ mod tests {
         assert!(matches!(parse_frame_text("010"), Err(HexInputError::OddDigits { column: 1, .. })));
     }
 
-    /// Real log formats were rejected ("'.' is not a hex digit").
+    /// Real log formats are read: the bytes kept, the timestamp and tag set aside (never "'.' is
+    /// not a hex digit").
     #[test]
     fn log_lines_keep_their_bytes_and_set_aside_timestamp_and_tag() {
         let want = vec![0x01, 0x03, 0x00, 0x65, 0x00, 0x03, 0x15, 0xD4];

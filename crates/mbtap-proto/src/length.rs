@@ -279,7 +279,8 @@ mod tests {
         assert_eq!(response_len(&pdu), PduLength::Exact(pdu.len()));
         assert_eq!(response_len(&pdu[..8]), PduLength::AtLeast(9));
     }
-    /// A read with a whole write frame behind it reached the line as two frames.
+    /// A read with a whole write frame behind it is named too long for its function, never sent on
+    /// as two frames.
     #[test]
     fn a_request_longer_than_its_function_allows_is_named() {
         // FC 03, address 0x0064, quantity 1 — then `01 06 00 65 00 2A` + CRC smuggled behind.
@@ -296,7 +297,8 @@ mod tests {
         assert_eq!(request_len_problem(&[0x41, 1, 2, 3]), None, "a vendor code fixes no length");
     }
 
-    /// A late answer to another request was handed to the next client.
+    /// An answer must fit its request: a late answer to another request is never handed to the next
+    /// client.
     #[test]
     fn an_answer_must_fit_its_request() {
         let read2 = [0x03, 0x00, 0xA0, 0x00, 0x02];

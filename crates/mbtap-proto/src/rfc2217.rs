@@ -236,8 +236,8 @@ mod tests {
         assert!(reply.is_empty());
     }
 
-    /// A server refusing BINARY sends a CR as
-    /// CR NUL; the NUL was taken for a line byte and answers holding 0D failed.
+    /// A server refusing BINARY sends a CR as CR NUL: the NUL is padding, not a line byte, so
+    /// answers holding 0D still check.
     #[test]
     fn a_server_refusing_binary_is_read_and_written_as_nvt() {
         let mut t = Telnet::new(SETUP);

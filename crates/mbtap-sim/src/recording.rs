@@ -306,11 +306,11 @@ mod tests {
         devices.remove(0)
     }
 
-    /// 247 units, each read over 4 500 holding and 4 500 input registers in blocks of 125 (the
-    /// most FC 03/04 carries, MAP v1.1b3 §6.3) — 2.2 M values, twice what one store shared by
-    /// all units held: every unit keeps every value, none loses its values to the units before
-    /// it. (247 units over their whole tables: `BENCHMARKS.md`, the release binary's peak RSS;
-    /// their pages fit the bound, `a_full_line_over_whole_tables_fits_the_bound`.)
+    /// 247 units, each read over 4 500 holding and 4 500 input registers in blocks of 125 (the most
+    /// FC 03/04 carries, MAP v1.1b3 §6.3) — 2.2 M values, twice what one store shared by all units
+    /// could hold: every unit keeps every value, none loses its values to the units before it. (247
+    /// units over their whole tables: `BENCHMARKS.md`, the release binary's peak RSS; their pages
+    /// fit the bound, `a_full_line_over_whole_tables_fits_the_bound`.)
     #[test]
     fn every_unit_of_a_full_line_keeps_its_values() {
         const SPAN: u16 = 4_500;

@@ -141,7 +141,8 @@ mod tests {
         assert_eq!(v[1], StampOrder::Backwards { by_ns: 20_000 });
     }
 
-    /// One flipped bit (+4 295 s) in one stamp held every later packet at that value.
+    /// One flipped bit (+4 295 s) in one stamp is named, and the packets after it keep their
+    /// spacing (never all held at that value).
     #[test]
     fn a_lone_stamp_ahead_is_named_and_later_packets_keep_their_spacing() {
         let jumped = 10 * S + 2 * MS + 4_295 * S;
@@ -184,9 +185,8 @@ mod tests {
         assert!(out.windows(2).all(|w| w[0] <= w[1]), "{out:?}");
     }
 
-    /// The fast path now takes forward jumps too (a polled line's pauses); it must
-    /// hand on what the general path does, verdict for verdict, on any mix of jitter, pauses,
-    /// jumps either way and lone jumps.
+    /// The fast path takes forward jumps too (a polled line's pauses); it hands on what the general
+    /// path does, stamp for stamp, on any mix of jitter, pauses, jumps either way and lone jumps.
     #[test]
     fn the_fast_path_agrees_with_the_general_one_on_every_kind_of_step() {
         let mut seed = 0x9E37_79B9_7F4A_7C15u64;

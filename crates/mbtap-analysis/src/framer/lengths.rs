@@ -353,10 +353,10 @@ mod tests {
         assert_eq!(l.lean(5, 0x41, Sender::Master, 6), None);
     }
 
-    /// After a corrupted request the framer still expects one, and the answer that
-    /// follows was weighed as the master's: its twin read against the requests' length (which
-    /// fits neither reading), then the odds of the master's `00` glitch — one byte short. The
-    /// answers' length decides where the guessed direction's firm length fits neither.
+    /// After a corrupted request the framer still expects one, so the answer that follows is
+    /// guessed to be the master's: where that direction's firm length fits neither of its twin
+    /// readings, the answers' length decides — not the odds of the master's `00` glitch, which
+    /// would read it one byte short.
     #[test]
     fn a_frame_whose_guessed_direction_fits_neither_twin_takes_the_other_s() {
         let mut l = LearnedLengths::new(true);

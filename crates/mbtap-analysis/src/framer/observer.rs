@@ -297,8 +297,8 @@ mod tests {
         assert_eq!(l.estimate.effective_latency_ns(), learned);
     }
 
-    /// A unit pausing 30 characters inside every answer made a fifth of the samples,
-    /// raised the one 90th percentile and hid its own pauses.
+    /// A unit pausing 30 characters inside every answer, a fifth of the samples, does not raise the
+    /// port's learned latency (one 90th percentile over all would), so its own pauses stay visible.
     #[test]
     fn a_slow_units_pauses_do_not_raise_the_ports_latency() {
         // As on a bus: the master sends every request, each unit answers its share.

@@ -410,10 +410,10 @@ mod tests {
         assert!(matches!(p.next(250_000_000), Step::Read { .. }));
     }
 
-    /// A device that answers and then closes
-    /// its connection lost the next read, and the probe stopped at its second read. The read
-    /// goes again on the new connection and the probe maps what the open one maps, each read
-    /// tried at most twice; one that closes without ever answering stops it, said as such.
+    /// A device that answers and then closes its connection is probed over new connections: a read
+    /// whose connection closed goes again on a new one, so the probe maps what the open one maps,
+    /// each read tried at most twice; one that closes without ever answering stops it, said as
+    /// such.
     #[test]
     fn a_device_closing_after_each_request_is_probed_over_new_connections() {
         let mut open = Probe::new(&[Table::HoldingRegisters], 0, 199, 20.0);

@@ -304,8 +304,8 @@ mod tests {
         assert!(toml.contains("type = \"f32\"") && toml.contains("word_order = \"low_first\""), "{toml}");
     }
 
-    /// `--hint`: the display showed a tenth of the raw value: scale 0.1 in the draft, which
-    /// still loads and shows the hinted value.
+    /// `--hint`: the display shows a tenth of the raw value: scale 0.1 in the draft, which still
+    /// loads and shows the hinted value.
     #[test]
     fn a_hint_fixes_the_scale() {
         let (_, _, _, l) = learn(7, 40, 200);

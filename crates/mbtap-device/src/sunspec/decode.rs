@@ -279,8 +279,7 @@ mod tests {
         assert_eq!(get("VA").shown, None);
     }
 
-    /// (`ss_sfwild`): a scale factor outside SunSpec's −10…10 (here W_SF = 32767) is
-    /// not applied — the round's start showed "inf W".
+    /// A scale factor outside SunSpec's −10…10 (here W_SF = 32767) is not applied: no "inf W".
     #[test]
     fn a_scale_factor_outside_ten_is_no_scale() {
         let (found, mut block) = inverter_block();

@@ -386,9 +386,9 @@ impl RtuFramer {
 mod tests {
     use super::*;
 
-    /// Random bytes with no silence the framer can know (64 KiB reads 1 ms apart, a
-    /// 16 ms adapter latency) stay bounded in what is held — the round's start held every byte
-    /// (~25 bytes of memory per byte) — and every byte still comes out exactly once.
+    /// Random bytes with no silence the framer can know (64 KiB reads 1 ms apart, a 16 ms adapter
+    /// latency) stay bounded in what is held (holding every byte would cost ~25 bytes of memory per
+    /// byte), and every byte still comes out exactly once.
     #[test]
     fn a_line_that_never_falls_silent_is_held_bounded() {
         let mut framer = RtuFramer::new(PortId(0), FramerConfig::new(LineSettings::default(), 16_000_000));

@@ -197,8 +197,8 @@ fn address_like(n: &str) -> bool {
 mod tests {
     use super::*;
 
-    /// `Input Register Address` was not an address column ("no header row naming an
-    /// address column"); other wordings of the register's address are, a device's is not.
+    /// `Input Register Address` and other wordings of the register's address name an address
+    /// column; a device's address does not.
     #[test]
     fn headers_naming_a_registers_address_in_other_words() {
         for h in [

@@ -329,8 +329,8 @@ modbus:
         assert!(matches!(parse_home_assistant("sensor: []", None), Err(HaError::NoHubs)));
     }
 
-    /// (deep sequences and mappings): 100 000 nested `[` took 30 s, 20 000 nested
-    /// mappings 210 MB; both are refused before the YAML reader, naming the line.
+    /// Nesting deeper than any Home Assistant file (100 000 nested `[`: 30 s to read; 20 000 nested
+    /// mappings: 210 MB) is refused before the YAML reader, naming the line.
     #[test]
     fn nesting_deeper_than_any_home_assistant_file_is_refused_at_once() {
         let deep_seq = format!("modbus: {}{}\n", "[".repeat(100_000), "]".repeat(100_000));
@@ -350,12 +350,12 @@ modbus:
         check_depth(CONFIG.as_bytes()).unwrap();
     }
 
-    /// The YAML is read into entries as it goes, no tree of the document (200 000 sensors
-    /// take 540 MB as a tree). What a tree would give holds: a hub's unit given after
-    /// its lists still names their entries; an entry that is not a mapping is a problem, not
-    /// the end of the import. An alias bomb (9^9 nodes if expanded) is refused by the reader's
-    /// budget, naming where, wherever it sits — serde_norway skipped one under an unread key, but
-    /// held every event of the file (201 MB for 200 000 sensors).
+    /// The YAML is read into entries as it goes, no tree of the document (200 000 sensors take 540
+    /// MB as a tree). What a tree would give holds: a hub's unit given after its lists still names
+    /// their entries; an entry that is not a mapping is a problem, not the end of the import. An
+    /// alias bomb (9^9 nodes if expanded) is refused by the reader's budget, naming where, wherever
+    /// it sits — even under an unread key, without holding every event of the file (201 MB for 200
+    /// 000 sensors).
     #[test]
     fn the_yaml_is_read_without_a_tree_as_the_tree_read_it() {
         let late_unit =
@@ -393,10 +393,9 @@ modbus:
       - !include other.yaml
 ";
 
-    /// (the probe's `tags.yaml`): the typed reader refused the whole file — "invalid
-    /// type: enum, expected a scalar" — over one tagged name, where the tree it replaced took a
-    /// tagged node as no value. Tags are read past as plain data, nothing resolved or run; the
-    /// `!include`d entry names no device, so it neither counts as one nor is lost.
+    /// A tagged node (`!include`, `!secret`) is read past as plain data, nothing resolved or run,
+    /// never refusing the whole file ("invalid type: enum, expected a scalar"); the `!include`d
+    /// entry names no device, so it neither counts as one nor is lost.
     #[test]
     fn tagged_nodes_are_read_past_as_no_value() {
         let (r, unit) = parse_home_assistant(TAGGED, None).unwrap();

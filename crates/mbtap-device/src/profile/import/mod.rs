@@ -278,7 +278,7 @@ mod tests {
         test_point(table, address, value_type, None)
     }
 
-    /// 200 000 rows' profile read back whole took 300 MB; in parts it loads the same.
+    /// A profile of 200 000 rows loads back in parts the same as whole (whole, it takes 300 MB).
     #[test]
     fn a_big_profile_loads_back_in_parts() {
         let mut all = Imported::default();

@@ -279,9 +279,9 @@ mod tests {
         assert!(e.is_some_and(|e| e.to_string().starts_with("content.xml, byte ")));
     }
 
-    /// Any end tag inside a table ended it — the column
-    /// declarations spreadsheet programs write before the rows, or a header-row group, hid every
-    /// row after them from the count. Rows end at their own end tag, tables at theirs.
+    /// The column declarations spreadsheet programs write before the rows, or a header-row group,
+    /// do not end a table's count: rows end at their own end tag, tables at theirs, so no row after
+    /// them is hidden from the count.
     #[test]
     fn column_declarations_and_row_groups_do_not_end_the_count() {
         let rows = format!(
