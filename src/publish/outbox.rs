@@ -168,7 +168,7 @@ impl Outbox {
         ok
     }
 
-    /// One plain message: out now, held, or (no buffer) queued for rumqttc as before.
+    /// One plain message: out now, held, or (no buffer) queued for rumqttc.
     pub fn send(&mut self, topic: &str, qos: QoS, retain: bool, payload: Vec<u8>) {
         if self.live || self.spool.is_none() {
             self.publish_now(topic, qos, retain, payload);

@@ -293,7 +293,7 @@ mod tests {
         let rx = parse_log_line("Rx:000002-01 03 06 00 00 00 00 01 90 20 89").unwrap();
         assert_eq!(rx.bytes.len(), 11);
         assert_eq!(rx.tag.unwrap().1, Tagged::Response);
-        // Without a tag, digits and a dash are bytes as before.
+        // Without a tag, digits and a dash are bytes.
         assert_eq!(parse_log_line("01-03-00-65-00-03-15-D4").unwrap().bytes.len(), 8);
     }
 

@@ -373,7 +373,7 @@ mod tests {
         // Requests 7 bytes, answers 12: a "request" that checks at 11 and 12 is an answer.
         assert_eq!(l.choose(5, 0x41, Sender::Master, 11), Some(12));
         assert_eq!(l.choose(5, 0x41, Sender::Slave, 11), Some(12));
-        // Where the guessed direction's length is one of the two, it decides as before.
+        // Where the guessed direction's length is one of the two, it decides.
         assert_eq!(l.choose(5, 0x41, Sender::Master, 6), Some(7));
     }
 }

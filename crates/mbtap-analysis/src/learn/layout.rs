@@ -8,7 +8,7 @@
 //! alignment is then the one whose pairs read as floats in that order.
 //!
 //! A table whose votes disagree (a device mixing word orders, or no float at all) gets no
-//! layout, and its pairs are judged one by one as before ([`super::infer`]). Where it has one,
+//! layout, and its pairs are judged one by one ([`super::infer`]). Where it has one,
 //! [`laid_out`] types the pair at each of its starts.
 
 use std::collections::BTreeMap;

@@ -491,7 +491,7 @@ mod tests {
         assert_eq!(encode_number(123_456.78, &number_def(ValueType::U64, Some(0.01))), Ok(vec![0, 0, 0x00BC, 0x614E]));
         // A float register's scale applies as it does when read: 230 V at scale 0.1 is 2300.0.
         assert_eq!(encode_number(230.0, &number_def(ValueType::F32, Some(0.1))), Ok(vec![0x450F, 0xC000]));
-        // In range: held exactly as before.
+        // In range: held exactly.
         assert_eq!(encode_number(229.5, &number_def(ValueType::U16, Some(0.1))), Ok(vec![2295]));
         assert_eq!(encode_number(-81.0, &number_def(ValueType::I16, None)), Ok(vec![0xFFAF]));
     }

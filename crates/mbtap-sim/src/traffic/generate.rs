@@ -100,7 +100,7 @@ pub struct TrafficConfig {
     /// characters. A master that waits 1.05 × t3.5 is within the spec, barely.
     pub min_idle_ns: Option<u64>,
     /// Each unit sends its vendor function (`VENDOR_FC`) with the same request and answer
-    /// lengths all day, as devices do (off: random lengths per transaction, as before).
+    /// lengths all day, as devices do (off: random lengths per transaction).
     pub vendor_fixed: bool,
     /// Share of vendor frames (requests and answers) whose CRC ends in `00`: made so by their
     /// last data byte (by chance, 1 in 256 do).

@@ -93,7 +93,7 @@ impl TimedBuffer {
             }
             self.buf.extend_from_slice(bytes);
             // The run of end times, by addition (this is per byte of every read: the
-            // replay speed); saturating as before, so a clock at its end cannot wrap.
+            // replay speed); saturating, so a clock at its end cannot wrap.
             let mut e = e0;
             self.end.reserve(n);
             for _ in 0..n {

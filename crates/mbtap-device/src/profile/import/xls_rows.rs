@@ -8,8 +8,8 @@
 //! long for one is carried on in `Continue` records (2.4.58). The globals run to their first
 //! `EOF`; each `BoundSheet8` there names a sheet and the offset of its records in the stream,
 //! which run to the sheet's own `EOF`. Cells read as calamine 0.32 reads them, so a sheet imports
-//! as it did: numbers (`Number`, `RK`, `MulRk`, a formula's cached number) as the sheet shows
-//! them, whole ones without `.0` (a date is its serial number, as before); text from `LabelSst`
+//! as it does through calamine: numbers (`Number`, `RK`, `MulRk`, a formula's cached number) as the sheet shows
+//! them, whole ones without `.0` (a date is its serial number); text from `LabelSst`
 //! (a shared string), `Label` and a formula's `String`; `BoolErr` as `true`/`false` or `#Div0`…
 //! Where calamine went wrong it is not followed: BIFF8 text is Unicode whatever the `CodePage`
 //! record says ([MS-XLS] 2.5.294), BIFF5 text is read in the file's code page.
