@@ -1,5 +1,6 @@
-//! May this client do this? The admission policy every listener (TCP, TLS, UDP, RTU over TCP)
-//! and reverse mode put each request through before it may reach a line: the request's length,
+//! May this client do this? The admission policy every front (TCP, TLS, UDP, RTU over TCP, the
+//! serial front and reverse mode, the MQTT broker's writes, the emulator's fronts) and mbtap's own
+//! masters put each request through before it may reach a line: the request's length,
 //! the client's role (MODBUS/TCP Security), read-only and function allow-lists, the rate limit,
 //! the broadcast rule and the route. The answer is the serial address and route to queue on, or
 //! a typed [`Refusal`] carrying the exception the client gets and the reason it is counted
