@@ -77,7 +77,7 @@ pub fn transaction(data: &[u8]) {
 
 /// Any bytes as what a networked line delivers: the first byte picks the transport — even, a
 /// Modbus TCP device's stream ([`crate::tcp_device`]); odd, a Telnet/RFC 2217 server's
-/// ([`crate::rfc2217`]) — the rest arrives in reads of 1 to 16 bytes. Neither may panic, nor
+/// ([`mbtap_proto::rfc2217`]) — the rest arrives in reads of 1 to 16 bytes. Neither may panic, nor
 /// buffer without bound, nor make more line bytes than it received. The same bytes as a request
 /// go through the audit's reading of it ([`crate::audit::change`]).
 ///
@@ -110,7 +110,7 @@ pub fn transports(data: &[u8]) {
         }
     } else {
         // The spec's default line: 19200 8E1 (Serial Line v1.02 §2.5.1, §3.3.1).
-        let mut telnet = crate::rfc2217::Telnet::new(mbtap_proto::serial_line::LineSettings::default());
+        let mut telnet = mbtap_proto::rfc2217::Telnet::new(mbtap_proto::serial_line::LineSettings::default());
         let (mut data, mut reply) = (Vec::new(), Vec::new());
         for read in reads {
             telnet.feed(read, &mut data, &mut reply);

@@ -26,8 +26,6 @@
 //! - [`rules`]: the read-only allow-list and the exceptions the gateway answers with.
 //! - [`audit`]: what a request changes (the audit of writes records it) and its ending in words.
 //! - [`tcp_device`]: a Modbus TCP device as a line's back — its transaction ids and framing.
-//! - [`rfc2217`]: the Telnet COM-port control codec of a serial server (RFC 2217), the protocol
-//!   crate's, named here for the transports' fuzz body.
 //! - [`fuzzing`]: the fuzz targets' bodies.
 //!
 //! Specs: MODBUS Application Protocol v1.1b3 (MAP), MODBUS over Serial Line v1.02, MODBUS
@@ -44,8 +42,6 @@ pub mod lifetime;
 pub mod line;
 pub mod parse;
 pub mod queue;
-/// The RFC 2217 codec, the protocol crate's (every command that reaches a serial server uses it).
-pub use mbtap_proto::rfc2217;
 pub mod rules;
 pub mod seats;
 pub mod tcp_device;
