@@ -17,7 +17,8 @@ use mbtap_proto::{encode_ascii, encode_rtu};
 #[derive(Debug)]
 pub struct Requests {
     framer: RequestFramer,
-    line: LineSettings,
+    /// The silence that ends an RTU request on this port's line ([`end_silence`]).
+    silence: Duration,
     buf: Vec<u8>,
 }
 
@@ -25,7 +26,7 @@ impl Requests {
     /// Requests framed in `mode` on `line`.
     #[must_use]
     pub fn new(mode: SerialMode, line: LineSettings) -> Self {
-        Self { framer: RequestFramer::new(mode), line, buf: Vec::new() }
+        Self { framer: RequestFramer::new(mode), silence: end_silence(line), buf: Vec::new() }
     }
 
     /// Waits for bytes (or, with an RTU frame begun, the silence that ends it); the requests
@@ -34,7 +35,7 @@ impl Requests {
     /// # Errors
     /// The port failed or closed.
     pub async fn next(&mut self, port: &mut SerialStream) -> std::io::Result<(Vec<RequestFrame>, Vec<u8>)> {
-        let wait = if self.framer.waits_for_silence() { end_silence(self.line) } else { Duration::from_hours(1) };
+        let wait = if self.framer.waits_for_silence() { self.silence } else { Duration::from_hours(1) };
         self.buf.resize(512, 0);
         let mut requests = Vec::new();
         match tokio::time::timeout(wait, port.read(&mut self.buf)).await {

@@ -60,6 +60,13 @@ impl Input {
     pub const fn arrives_early(self) -> bool {
         matches!(self, Self::Recording)
     }
+
+    /// Once the input has ended, its register image is served until Ctrl-C (`--serve`): a
+    /// recording ends in a moment, and its image is what was asked for.
+    #[must_use]
+    pub const fn serves_after_end(self) -> bool {
+        matches!(self, Self::Recording)
+    }
 }
 
 /// What an analyzing command shows, publishes and says at the end.
@@ -80,9 +87,6 @@ pub struct Runner {
     pub publishing: Publishing,
     /// The recording this session writes: where it went and how much, said at the end.
     pub recording: Option<PathBuf>,
-    /// Once the input has ended, its register image is served until Ctrl-C (a replay with
-    /// `--serve`: it ends in a moment, the image is what was asked for).
-    pub serve_after_end: bool,
 }
 
 impl Runner {
@@ -106,7 +110,6 @@ impl Runner {
             input,
             publishing: Publishing::default(),
             recording: None,
-            serve_after_end: false,
         }
     }
 
@@ -130,7 +133,7 @@ impl Runner {
     /// # Errors
     /// The job's error, or the output's.
     pub fn run(self, job: impl EventSource) -> anyhow::Result<ExitCode> {
-        let Self { title, format, profiles, lang, line, output, input, publishing, recording, serve_after_end } = self;
+        let Self { title, format, profiles, lang, line, output, input, publishing, recording } = self;
         let taps = publishing.taps();
         let ended = if format == EventFormatArg::Tui {
             let ui = TuiSource { profiles, lang, line, pacing: input.keeps_own_time() };
@@ -152,7 +155,7 @@ impl Runner {
         if let Some(note) = recording.as_deref().and_then(crate::source::record::ended_note) {
             eprintln!("mbtap: {note}");
         }
-        if ended.is_ok() && serve_after_end && publishing.spy.is_some() {
+        if ended.is_ok() && input.serves_after_end() && publishing.spy.is_some() {
             eprintln!("mbtap: the capture is replayed; serving its register image until Ctrl-C");
             crate::runtime()?.block_on(crate::io::signals::shutdown_signal());
         }

@@ -42,9 +42,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     output.devices = [crate::config::devices::devices_beside(&file)?, output.devices].concat();
     let input = crate::output::progress::open_capture(&file, output.format != EventFormatArg::Tui)?;
     let (_, settings, _) = line.overrides().resolve();
-    let mut runner = Runner::from_output(file.display().to_string(), Input::Recording, output, settings)?;
-    runner.serve_after_end = true;
-    runner.run(Replay { input, line, file, image, force })
+    Runner::from_output(file.display().to_string(), Input::Recording, output, settings)?.run(Replay {
+        input,
+        line,
+        file,
+        image,
+        force,
+    })
 }
 
 /// A capture as the runner's source, and the register image it leaves (`--image`).

@@ -67,8 +67,8 @@ impl RequestFramer {
     /// The line went quiet: RTU ends a begun frame by silence; ASCII waits for CR LF.
     pub fn silence(&mut self) -> Option<RequestFrame> {
         match self {
-            Self::Rtu(f) if f.pending() > 0 => f.silence(),
-            _ => None,
+            Self::Rtu(f) => f.silence(),
+            Self::Ascii(_) => None,
         }
     }
 
